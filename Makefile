@@ -1,0 +1,30 @@
+# Two commands do everything on a fresh machine: `make demo` and `make test`.
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+export DRJIT_LIBLLVM_PATH ?= $(shell cat $(VENV)/llvm-path 2>/dev/null)
+RUN    = DRJIT_LIBLLVM_PATH=$$(cat $(VENV)/llvm-path) 
+
+.PHONY: demo test test-slow bench setup clean
+
+$(STAMP): pyproject.toml scripts/setup.sh
+	bash scripts/setup.sh
+
+setup: $(STAMP)
+
+demo: $(STAMP)
+	$(RUN) $(VENV)/bin/foveated-mi render voxel-city --size 512 512 --compare-full --out out/demo.exr --stats out/demo.json
+
+test: $(STAMP)
+	$(RUN) $(PY) -m pytest -q
+
+test-slow: $(STAMP)
+	$(RUN) $(PY) -m pytest -q -m slow
+
+bench: $(STAMP)
+	$(RUN) $(PY) benchmarks/bench_reorder.py
+	$(RUN) $(PY) benchmarks/bench_reconstruct.py
+	$(RUN) $(PY) benchmarks/bench_temporal.py
+
+clean:
+	rm -rf $(VENV) out .pytest_cache

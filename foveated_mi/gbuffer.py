@@ -1,0 +1,58 @@
+"""Geometry pass (Kwon et al. 2019, Fig. 1): a full-resolution G-buffer.
+
+One primary ray per pixel centre ``((x + 0.5) / W, (y + 0.5) / H)`` with no jitter, so the
+buffers are deterministic and the reprojection of a static camera is the identity.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import drjit as dr
+import mitsuba as mi
+
+
+class GBuffer(NamedTuple):
+    """Named outputs of the geometry pass, one entry per pixel."""
+    position: mi.Point3f   #: world-space hit point (0 on a miss)
+    normal: mi.Normal3f    #: shading normal (0 on a miss)
+    depth: mi.Float        #: distance from the camera along the primary ray (+inf on a miss)
+    hit: mi.Bool           #: whether the primary ray hit a surface
+
+
+def pixel_coords(width: int, height: int) -> tuple[mi.UInt32, mi.UInt32, mi.UInt32]:
+    """Pixel index ``i = y * W + x`` and its ``(x, y)`` for the whole film."""
+    idx = dr.arange(mi.UInt32, width * height)
+    y = idx // width
+    x = idx - y * width
+    return idx, x, y
+
+
+def film_size(sensor: mi.Sensor) -> tuple[int, int]:
+    size = sensor.film().crop_size()
+    return int(size[0]), int(size[1])
+
+
+def primary_rays(sensor: mi.Sensor, x: mi.UInt32, y: mi.UInt32,
+                 width: int, height: int) -> mi.RayDifferential3f:
+    """Rays through the pixel centres of ``(x, y)``."""
+    pos = mi.Point2f((mi.Float(x) + 0.5) / width, (mi.Float(y) + 0.5) / height)
+    ray, _ = sensor.sample_ray_differential(
+        time=sensor.shutter_open(), sample1=0.0, sample2=pos, sample3=mi.Point2f(0.5))
+    return ray
+
+
+def render_gbuffer(scene: mi.Scene, sensor: mi.Sensor) -> GBuffer:
+    """Intersect one ray per pixel centre and return the G-buffer.
+
+    Discrete by nature (visibility), so it runs without gradient tracking.
+    """
+    width, height = film_size(sensor)
+    with dr.suspend_grad():
+        _, x, y = pixel_coords(width, height)
+        ray = primary_rays(sensor, x, y, width, height)
+        si = scene.ray_intersect(mi.Ray3f(ray), ray_flags=mi.RayFlags.All, coherent=True)
+        hit = si.is_valid()
+        position = dr.select(hit, si.p, mi.Point3f(0.0))
+        normal = dr.select(hit, si.sh_frame.n, mi.Normal3f(0.0))
+        depth = dr.select(hit, si.t, dr.inf)
+    return GBuffer(position=position, normal=normal, depth=depth, hit=hit)

@@ -1,0 +1,137 @@
+r"""Sampling pass (Kwon et al. 2019, §3.1): the gaze-dependent sampling map.
+
+The probability of tracing a ray at pixel :math:`i` is
+
+.. math::
+
+    P(d_i) = \frac{1}{w\,d_i^2 + 1}, \qquad w(\theta, \sigma_p) = \frac{1/\sigma_p - 1}{\theta^2},
+
+with :math:`d_i` the distance from the pixel centre to the gaze divided by half the film
+diagonal. This :math:`w` gives :math:`P(0) = 1` and :math:`P(\theta) = \sigma_p`.
+
+The paper prints Eq. (2) as :math:`w = (\sigma_p - 1)/\theta^2`. For :math:`\sigma_p < 1`
+that :math:`w` is negative, so :math:`P > 1` near the gaze and :math:`P` is infinite at
+:math:`d = 1/\sqrt{|w|}`. The form above keeps :math:`P \in (0, 1]` and is the one the
+authors' public implementation computes.
+
+The sampling map is one uniform draw per pixel per frame (:math:`u_i < P(d_i)`), plus rays
+forced on depth discontinuities (the Voronoi fill would otherwise smear silhouettes), plus
+the pixel under the gaze (clamped to the film), so a frame never has an empty wavefront.
+"""
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+
+from .gbuffer import pixel_coords
+from .validate import check_range
+
+#: Parameter ranges; the README's table of extremes is generated from the same numbers.
+THETA_RANGE = (0.0, math.inf)      # open at 0
+SIGMA_P_RANGE = (0.0, 1.0)         # open at 0, closed at 1
+
+
+def sampling_weight(theta: float, sigma_p: float) -> float:
+    """:math:`w = (1/\\sigma_p - 1) / \\theta^2`, computed in double precision.
+
+    Very small θ makes ``w`` overflow to ``inf``; :func:`sampling_probability` maps that to
+    ``P = 0`` away from the gaze and ``P = 1`` at it, without NaN.
+    """
+    theta = check_range("theta", theta, 0.0, None, lo_open=True)
+    sigma_p = check_range("sigma_p", sigma_p, 0.0, 1.0, lo_open=True)
+    try:
+        return (1.0 / sigma_p - 1.0) / (theta * theta)
+    except (OverflowError, ZeroDivisionError):
+        return math.inf
+
+
+def normalized_distance(x: mi.Float, y: mi.Float, gaze: mi.Point2f,
+                        width: int, height: int) -> mi.Float:
+    """Distance of film points ``(x, y)`` (pixels) to the gaze (normalised film coordinates,
+    origin top-left) divided by half the film diagonal."""
+    half_diag = 0.5 * math.sqrt(width * width + height * height)
+    dx = x - gaze.x * width
+    dy = y - gaze.y * height
+    return dr.sqrt(dx * dx + dy * dy) / half_diag
+
+
+def sampling_probability(d: mi.Float, w: mi.Float) -> mi.Float:
+    """:math:`P(d) = 1 / (w d^2 + 1)` in [0, 1], NaN-free for ``w`` in [0, inf].
+
+    ``w d^2`` is formed as ``(sqrt(w) d)^2`` to delay overflow; ``inf * 0`` (gaze pixel with
+    infinite ``w``) is defined as 0, i.e. ``P = 1``.
+    """
+    s = dr.sqrt(w) * d
+    s = dr.select(d == 0, 0.0, s)
+    return dr.clip(dr.rcp(dr.fma(s, s, 1.0)), 0.0, 1.0)
+
+
+def depth_edges(depth: mi.Float, hit: mi.Bool, width: int, height: int,
+                threshold: float) -> mi.Bool:
+    """Pixels on a depth discontinuity: relative depth difference to a 4-neighbour above
+    ``threshold``, or a hit next to a miss (background, depth = inf).
+
+    Both sides of the discontinuity are marked. Infinite depths are never subtracted, so no
+    NaN arises against the background.
+    """
+    _, x, y = pixel_coords(width, height)
+    thr = dr.opaque(mi.Float, threshold)
+    edge = dr.zeros(mi.Bool, width * height)
+    d0 = dr.select(hit, depth, 0.0)
+    for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        inside = mi.Bool(True)
+        if dx:
+            inside = (x < width - 1) if dx > 0 else (x > 0)
+        if dy:
+            inside = (y < height - 1) if dy > 0 else (y > 0)
+        nidx = mi.UInt32(mi.Int32(x) + dx) + mi.UInt32(mi.Int32(y) + dy) * width
+        nhit = dr.gather(mi.Bool, hit, nidx, inside)
+        nd = dr.gather(mi.Float, d0, nidx, inside & nhit)
+        both = hit & nhit & inside
+        rel = dr.abs(d0 - nd) > thr * dr.minimum(d0, nd)
+        edge |= (both & rel) | (inside & (hit != nhit))
+    return edge
+
+
+def gaze_pixel(gaze: mi.Point2f, width: int, height: int) -> mi.UInt32:
+    """Index of the pixel under the gaze, clamped to the film (off-screen gaze -> border)."""
+    gx = mi.Int32(dr.floor(dr.clip(gaze.x * width, 0.0, width - 1.0)))
+    gy = mi.Int32(dr.floor(dr.clip(gaze.y * height, 0.0, height - 1.0)))
+    return mi.UInt32(gy * width + gx)
+
+
+def sampling_map(width: int, height: int, *, gaze: tuple[float, float], theta: float,
+                 sigma_p: float, seed: int, edges: mi.Bool | None = None
+                 ) -> tuple[mi.Bool, mi.Float]:
+    """The sampling map of §3.1 (True where a ray is traced) and the probability P per pixel.
+
+    ``gaze``, ``θ``, ``σp`` and ``seed`` enter the kernel as opaque values: changing them
+    from frame to frame compiles nothing new.
+    """
+    w = sampling_weight(theta, sigma_p)
+    idx, x, y = pixel_coords(width, height)
+    g = mi.Point2f(dr.opaque(mi.Float, gaze[0]), dr.opaque(mi.Float, gaze[1]))
+    d = normalized_distance(mi.Float(x) + 0.5, mi.Float(y) + 0.5, g, width, height)
+    prob = sampling_probability(d, dr.opaque(mi.Float, w))
+    u = mi.sample_tea_float32(idx, dr.opaque(mi.UInt32, seed & 0xFFFFFFFF))
+    smap = u < prob
+    if edges is not None:
+        smap |= edges
+    smap |= idx == gaze_pixel(g, width, height)
+    return smap, prob
+
+
+def expected_fraction(width: int, height: int, *, gaze: tuple[float, float], theta: float,
+                      sigma_p: float) -> float:
+    """Analytic mean of P over the film (no edges): the expected ray fraction."""
+    import numpy as np
+    w = sampling_weight(theta, sigma_p)
+    ys, xs = np.mgrid[0:height, 0:width] + 0.5
+    half_diag = 0.5 * math.hypot(width, height)
+    d = np.hypot(xs - gaze[0] * width, ys - gaze[1] * height) / half_diag
+    with np.errstate(over="ignore", invalid="ignore"):
+        s = np.where(d == 0, 0.0, math.sqrt(w) * d)
+        p = 1.0 / (s * s + 1.0)
+    return float(np.mean(p))

@@ -1,0 +1,94 @@
+"""Argument validation shared by every pass, the integrator, the CLI and the configs.
+
+Every failure is one line naming the input, its value and what is allowed, e.g.::
+
+    theta = -1.0 is invalid: expected a finite number > 0
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Iterable
+
+
+class ParameterError(ValueError):
+    """Bad user input. The message is a single line: name, value, what is allowed."""
+
+    def __init__(self, name: str, value: Any, allowed: str):
+        self.name, self.value, self.allowed = name, value, allowed
+        super().__init__(f"{name} = {value!r} is invalid: expected {allowed}")
+
+
+def _as_float(name: str, value: Any, allowed: str) -> float:
+    if isinstance(value, bool):
+        raise ParameterError(name, value, allowed)
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(name, value, allowed) from None
+
+
+def check_finite(name: str, value: Any) -> float:
+    allowed = "a finite number"
+    v = _as_float(name, value, allowed)
+    if not math.isfinite(v):
+        raise ParameterError(name, value, allowed)
+    return v
+
+
+def check_range(name: str, value: Any, lo: float | None = None, hi: float | None = None,
+                lo_open: bool = False, hi_open: bool = False) -> float:
+    """A finite float inside [lo, hi] (or open ends)."""
+    parts = []
+    if lo is not None:
+        parts.append(f"{'>' if lo_open else '>='} {lo:g}")
+    if hi is not None:
+        parts.append(f"{'<' if hi_open else '<='} {hi:g}")
+    allowed = "a finite number" + (" " + " and ".join(parts) if parts else "")
+    v = _as_float(name, value, allowed)
+    ok = math.isfinite(v)
+    if ok and lo is not None:
+        ok = v > lo if lo_open else v >= lo
+    if ok and hi is not None:
+        ok = v < hi if hi_open else v <= hi
+    if not ok:
+        raise ParameterError(name, value, allowed)
+    return v
+
+
+def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = None) -> int:
+    parts = []
+    if lo is not None:
+        parts.append(f">= {lo}")
+    if hi is not None:
+        parts.append(f"<= {hi}")
+    allowed = "an integer" + (" " + " and ".join(parts) if parts else "")
+    if isinstance(value, bool):
+        raise ParameterError(name, value, allowed)
+    try:
+        v = int(value)
+    except (TypeError, ValueError, OverflowError):
+        raise ParameterError(name, value, allowed) from None
+    if isinstance(value, float) and value != v:
+        raise ParameterError(name, value, allowed)
+    if (lo is not None and v < lo) or (hi is not None and v > hi):
+        raise ParameterError(name, value, allowed)
+    return v
+
+
+def check_choice(name: str, value: Any, choices: Iterable[str]) -> str:
+    choices = list(choices)
+    if not isinstance(value, str) or value not in choices:
+        raise ParameterError(name, value, "one of " + ", ".join(repr(c) for c in choices))
+    return value
+
+
+def check_point2(name: str, value: Any) -> tuple[float, float]:
+    """Two finite numbers (a gaze may lie outside [0, 1]^2: the viewer looks off-screen)."""
+    allowed = "two finite numbers (x, y)"
+    try:
+        x, y = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ParameterError(name, value, allowed) from None
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise ParameterError(name, value, allowed)
+    return x, y
