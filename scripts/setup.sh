@@ -49,7 +49,7 @@ if [ ! -x "$VENV/bin/python" ]; then
   "$PY" -m venv "$VENV" || { echo "foveated_mi setup: '$PY -m venv' failed; install python3-venv." >&2; exit 1; }
 fi
 "$VENV/bin/python" -m pip install -q --upgrade pip
-"$VENV/bin/python" -m pip install -q -e '.[test]'
+"$VENV/bin/python" -m pip install -q -e '.[test]' --config-settings editable_mode=compat
 echo "$LLVM" > "$VENV/llvm-path"
 touch "$VENV/.installed"
 echo "foveated_mi setup: ready ($VENV, DRJIT_LIBLLVM_PATH=$LLVM)"

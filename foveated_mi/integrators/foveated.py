@@ -1,0 +1,449 @@
+r"""The ``foveated`` integrator: Kwon et al. 2019's pipeline around any sampling integrator.
+
+Per frame (Fig. 1 of the paper), each stage a pass of its own module:
+
+1. **Geometry** (:mod:`foveated_mi.gbuffer`): full-resolution G-buffer.
+2. **Sampling** (:mod:`foveated_mi.sampling`, §3.1): sampling map from
+   :math:`P(d) = 1/(w d^2 + 1)`, :math:`w = (1/\sigma_p - 1)/\theta^2`, plus depth edges;
+   reprojection map into the history (:mod:`foveated_mi.reproject`).
+3. **Reorder** (:mod:`foveated_mi.reorder`, §3.2): dense trace wavefront.
+4. **Sparse shading** (:mod:`foveated_mi.shading`, §3.3): the nested integrator traces
+   ``rays * spp`` lanes only; other pixels resample the history.
+5. **Reconstruction** (:mod:`foveated_mi.reconstruct`, §3.4): Jump Flooding Voronoi fill and
+   (approximate) Sibson interpolation.
+6. **Post-processing** (:mod:`foveated_mi.postprocess`, §3.5): tone mapping, edge-avoiding
+   à-trous filter in the tone-mapped domain, mapped back to linear radiance.
+
+``mi.render(scene)`` returns linear radiance (H, W, 3) like any Mitsuba integrator. After a
+render, :attr:`buffers` holds the intermediate buffers and :attr:`stats` the frame's stats.
+
+Stages a frame does not need cost nothing: no edge pass when ``edge_threshold = 0``, no
+reprojection when ``history`` is off or on the first frame, no Jump Flooding or interpolation
+when ``sigma_p = 1`` (every pixel is traced), no filter when ``atrous_iterations = 0``, no tone
+mapping round trip when neither the filter nor the PNG needs it.
+
+.. pluginparameters::
+
+ * - theta
+   - |float|
+   - Foveal radius θ in units of half the film diagonal, > 0 (default 0.1)
+ * - sigma_p
+   - |float|
+   - Probability :math:`P(\theta)`, in (0, 1] (default 0.8); 1 traces every pixel
+ * - gaze
+   - |point|
+   - Gaze in normalised film coordinates, origin top-left (default 0.5, 0.5); outside
+     [0, 1]^2 is legal (the viewer looks off-screen). Mitsuba's XML ``<point>`` needs a ``z``
+     attribute, which is ignored.
+ * - reorder
+   - |string|
+   - ``none`` | ``rows`` | ``rows_blocks`` | ``compact`` (default)
+ * - block_height
+   - |int|
+   - Rows per block of Strategy 2 (default 8)
+ * - edge_threshold
+   - |float|
+   - Relative depth jump that forces a ray, >= 0; 0 disables forced edge rays (default 0.1)
+ * - reconstruction
+   - |string|
+   - ``voronoi`` | ``sibson`` (default) | ``discrete_sibson`` | ``fast_sibson``
+ * - max_radius
+   - |int|
+   - Bound on the interpolation radius in pixels (default 32)
+ * - jfa
+   - |string|
+   - Jump Flooding variant: ``jfa`` | ``1+jfa`` | ``jfa+1`` (default) | ``jfa+2``
+ * - atrous_iterations, sigma_color, sigma_normal, sigma_position
+   - |int|, |float|
+   - Edge-avoiding à-trous filter (Dammertz et al. 2010); 0 iterations turns it off
+ * - tonemap, exposure
+   - |string|, |float|
+   - Tone-mapping operator and exposure in stops (filter domain and PNG output)
+ * - history
+   - |bool|
+   - Temporal reuse through reverse reprojection (default true)
+ * - max_history
+   - |float|
+   - Cap on the history sample count, >= 1 (default 32)
+ * - reprojection_tolerance
+   - |float|
+   - Relative depth tolerance of the reprojection test (default 0.02)
+ * - clamp
+   - |float|
+   - Largest accepted sample component; larger samples are scaled down (default 1e4)
+ * - timing
+   - |bool|
+   - Synchronise at stage boundaries and report wall time per stage (default false)
+ * - (nested)
+   - |integrator|
+   - Any sampling integrator (default ``path``); XML allows it unnamed
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import drjit as dr
+import mitsuba as mi
+
+from .. import gbuffer as _gbuffer
+from .. import reorder as _reorder
+from .. import reproject as _reproject
+from .. import sampling as _sampling
+from .. import shading as _shading
+from ..postprocess.inverse import inverse_tonemap
+from ..timing import StageTimer
+from ..validate import (ParameterError, check_choice, check_int, check_point2, check_range)
+
+#: name -> (default, kind); kinds are validated in :meth:`FoveatedIntegrator.configure`.
+DEFAULTS: dict[str, Any] = {
+    "theta": 0.1,
+    "sigma_p": 0.8,
+    "gaze": (0.5, 0.5),
+    "reorder": "compact",
+    "block_height": 8,
+    "edge_threshold": 0.1,
+    "reconstruction": "sibson",
+    "max_radius": 32,
+    "jfa": "jfa+1",
+    "atrous_iterations": 5,
+    "sigma_color": 0.5,
+    "sigma_normal": 0.1,
+    "sigma_position": 0.5,
+    "tonemap": "reinhard",
+    "exposure": 0.0,
+    "history": True,
+    "max_history": 32.0,
+    "reprojection_tolerance": 0.02,
+    "clamp": 1e4,
+    "timing": False,
+}
+
+
+def _reconstruct_module():
+    from .. import reconstruct
+    return reconstruct
+
+
+def _postprocess_module():
+    from .. import postprocess
+    return postprocess
+
+
+def validate_options(options: dict[str, Any]) -> dict[str, Any]:
+    """Check every option and return them normalised. Raises :class:`ParameterError`."""
+    unknown = set(options) - set(DEFAULTS)
+    if unknown:
+        name = sorted(unknown)[0]
+        raise ParameterError(name, options[name], "one of " + ", ".join(sorted(DEFAULTS)))
+    o = {**DEFAULTS, **options}
+    rec, post = _reconstruct_module(), _postprocess_module()
+    out = {
+        "theta": check_range("theta", o["theta"], 0.0, None, lo_open=True),
+        "sigma_p": check_range("sigma_p", o["sigma_p"], 0.0, 1.0, lo_open=True),
+        "gaze": check_point2("gaze", o["gaze"]),
+        "reorder": check_choice("reorder", o["reorder"], _reorder.REORDER_MODES),
+        "block_height": check_int("block_height", o["block_height"], 1),
+        "edge_threshold": check_range("edge_threshold", o["edge_threshold"], 0.0),
+        "reconstruction": check_choice("reconstruction", o["reconstruction"],
+                                       list(rec.RECONSTRUCTIONS)),
+        "max_radius": check_int("max_radius", o["max_radius"], 1, 4096),
+        "jfa": check_choice("jfa", o["jfa"], rec.JFA_VARIANTS),
+        "atrous_iterations": check_int("atrous_iterations", o["atrous_iterations"], 0, 16),
+        "sigma_color": _check_sigma("sigma_color", o["sigma_color"]),
+        "sigma_normal": _check_sigma("sigma_normal", o["sigma_normal"]),
+        "sigma_position": _check_sigma("sigma_position", o["sigma_position"]),
+        "tonemap": check_choice("tonemap", o["tonemap"], list(post.TONEMAPPERS)),
+        "exposure": check_range("exposure", o["exposure"], -64.0, 64.0),
+        "history": _check_bool("history", o["history"]),
+        "max_history": check_range("max_history", o["max_history"], 1.0, 1e9),
+        "reprojection_tolerance": check_range("reprojection_tolerance",
+                                              o["reprojection_tolerance"], 0.0, 1.0),
+        "clamp": check_range("clamp", o["clamp"], 0.0, 3e38, lo_open=True),
+        "timing": _check_bool("timing", o["timing"]),
+    }
+    return out
+
+
+def _check_sigma(name: str, value: Any) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(name, value, "a number > 0, or inf to disable this weight") from None
+    if not (v > 0) or math.isnan(v):
+        raise ParameterError(name, value, "a number > 0, or inf to disable this weight")
+    return v
+
+
+def _check_bool(name: str, value: Any) -> bool:
+    if isinstance(value, bool):
+        return value
+    raise ParameterError(name, value, "true or false")
+
+
+class FoveatedIntegrator(mi.SamplingIntegrator):
+    """Foveated ray tracing with ray reordering and approximate Sibson interpolation
+    (Kwon et al. 2019). See the module docstring for the stages and parameters."""
+
+    def __init__(self, props: mi.Properties | None = None, *,
+                 nested: mi.SamplingIntegrator | None = None, **options):
+        super().__init__(props if props is not None else mi.Properties())
+        if nested is not None and not isinstance(nested, mi.SamplingIntegrator):
+            raise ParameterError("nested integrator", type(nested).__name__,
+                                 "a sampling integrator such as 'path'")
+        if props is not None:
+            for name in props.keys():
+                if props.type(name) == mi.Properties.Type.Object:
+                    obj = props.get(name)
+                    if not isinstance(obj, mi.SamplingIntegrator):
+                        raise ParameterError(f"nested integrator {name!r}", type(obj).__name__,
+                                             "a sampling integrator such as 'path'")
+                    if nested is not None:
+                        raise ParameterError(f"nested integrator {name!r}", type(obj).__name__,
+                                             "a single nested integrator")
+                    nested = obj
+                elif name in DEFAULTS:
+                    v = props.get(name)
+                    if name == "gaze":
+                        v = (float(v[0]), float(v[1]))
+                    options[name] = v
+                else:
+                    raise ParameterError(name, props.get(name),
+                                         "a parameter of the foveated integrator: "
+                                         + ", ".join(sorted(DEFAULTS)))
+        if nested is None:
+            nested = mi.load_dict({"type": "path"})
+        self.nested: mi.SamplingIntegrator = nested
+        self._options = validate_options(options)
+        self._history: _reproject.History | None = None
+        self._scene_ref = None
+        self._frame = 0
+        self._grad_pass = False
+        self.buffers: dict[str, Any] = {}
+        self._stats_raw: dict[str, Any] = {}
+        self._stats_cache: dict[str, Any] | None = None
+
+    # -- options --------------------------------------------------------------------------
+    @property
+    def options(self) -> dict[str, Any]:
+        """A copy of the current, validated options."""
+        return dict(self._options)
+
+    def set_options(self, **options) -> None:
+        """Change options between frames (validated as a whole; nothing changes on error)."""
+        self._options = validate_options({**self._options, **options})
+
+    def __getattr__(self, name):
+        opts = self.__dict__.get("_options")
+        if opts is not None and name in opts:
+            return opts[name]
+        raise AttributeError(name)
+
+    def __setattr__(self, name, value):
+        if name in DEFAULTS and "_options" in self.__dict__:
+            self.set_options(**{name: value})
+        else:
+            super().__setattr__(name, value)
+
+    def to_string(self) -> str:
+        opts = ", ".join(f"{k}={v!r}" for k, v in self._options.items())
+        return f"FoveatedIntegrator[{opts}, nested={type(self.nested).__name__}]"
+
+    # -- history --------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Forget the history (next frame starts fresh, as frame 0)."""
+        self._history = None
+        self._frame = 0
+
+    @property
+    def frame(self) -> int:
+        """Number of frames rendered since the last reset."""
+        return self._frame
+
+    @property
+    def history(self) -> _reproject.History | None:
+        return self._history
+
+    def _check_reset(self, scene: mi.Scene, width: int, height: int) -> None:
+        # Scenes take no weak references, and a strong one would make a scene <-> integrator
+        # cycle; the id is enough (a reused id still passes through the depth test).
+        h = self._history
+        if self._scene_ref != id(scene) or (h is not None and (h.width, h.height) != (width, height)):
+            self.reset()
+            self._scene_ref = id(scene)
+
+    # -- differentiation ------------------------------------------------------------------
+    def render_forward(self, scene, params, sensor=0, seed=0, spp=0):
+        self._grad_pass = True
+        try:
+            return super().render_forward(scene, params, sensor, seed, spp)
+        finally:
+            self._grad_pass = False
+
+    def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
+        self._grad_pass = True
+        try:
+            return super().render_backward(scene, params, grad_in, sensor, seed, spp)
+        finally:
+            self._grad_pass = False
+
+    # -- the frame ------------------------------------------------------------------------
+    def render(self, scene: mi.Scene, sensor: int | mi.Sensor = 0, seed: int = 0,
+               spp: int = 0, develop: bool = True, evaluate: bool = True) -> mi.TensorXf:
+        if not develop:
+            raise ParameterError("develop", develop, "True (the foveated integrator develops "
+                                 "its own image)")
+        if isinstance(sensor, int):
+            sensor = scene.sensors()[sensor]
+        o = self._options
+        width, height = _gbuffer.film_size(sensor)
+        n = width * height
+        spp = check_int("spp", spp if spp else sensor.sampler().sample_count(), 1)
+        grad_pass = self._grad_pass
+        if not grad_pass:
+            self._check_reset(scene, width, height)
+        history = self._history if (o["history"] and not grad_pass) else None
+        if grad_pass and o["history"]:
+            history = getattr(self, "_history_in", None)
+        # Frame 0 uses the caller's seed as is (so sigma_p = 1 reproduces a plain render);
+        # later frames decorrelate so that the history converges under a fixed seed.
+        seed = int(seed) & 0xFFFFFFFF
+        frame_seed = seed if self._frame == 0 else \
+            int(mi.sample_tea_32(seed, self._frame)[0])
+        timer = StageTimer(o["timing"])
+        rec, post = _reconstruct_module(), _postprocess_module()
+
+        with dr.suspend_grad():
+            gb = _gbuffer.render_gbuffer(scene, sensor)
+            timer.mark("gbuffer", gb.position, gb.normal, gb.depth, gb.hit)
+
+            edges = None
+            if o["edge_threshold"] > 0:
+                edges = _sampling.depth_edges(gb.depth, gb.hit, width, height, o["edge_threshold"])
+            smap, prob = _sampling.sampling_map(width, height, gaze=o["gaze"], theta=o["theta"],
+                                                sigma_p=o["sigma_p"], seed=frame_seed,
+                                                edges=edges)
+            reproj = _reproject.reprojection_map(gb.position, gb.hit, history, width, height,
+                                                 tolerance=o["reprojection_tolerance"])
+            timer.mark("sampling", smap, prob, reproj.hit)
+
+            ro = _reorder.reorder(smap, width, height, o["reorder"], o["block_height"])
+            timer.mark("reorder", ro.wavefront)
+
+        shade = _shading.trace_wavefront(scene, sensor, self.nested, ro.wavefront, width, height,
+                                         spp=spp, seed=frame_seed, active=ro.active,
+                                         clamp=o["clamp"])
+        valid = shade.valid if ro.active is None else shade.valid & ro.active
+        new, traced = _shading.scatter_to_film(shade.radiance, valid, ro.wavefront, n)
+        resolved = _reproject.resolve(new, traced, spp, reproj, history, o["max_history"])
+        timer.mark("trace", resolved.shading, resolved.mask)
+
+        every_pixel = o["sigma_p"] >= 1.0 and history is None
+        with dr.suspend_grad():
+            if every_pixel:
+                nearest = dr.arange(mi.UInt32, n)
+            else:
+                nearest = rec.jump_flood(resolved.mask, width, height, variant=o["jfa"])
+        if every_pixel:
+            filled = interpolated = resolved.shading
+        else:
+            filled = rec.voronoi_fill(resolved.shading, nearest)
+            if o["reconstruction"] == "voronoi":
+                interpolated = filled
+            else:
+                interpolated = rec.reconstruct(o["reconstruction"], resolved.shading,
+                                               resolved.mask, nearest, width, height,
+                                               max_radius=o["max_radius"])
+        timer.mark("reconstruct", nearest, filled, interpolated)
+
+        tonemapped = filtered = None
+        image = interpolated
+        if o["atrous_iterations"] > 0:
+            tonemapped = post.tonemap(interpolated, o["tonemap"], o["exposure"])
+            filtered = post.atrous(tonemapped, gb.normal, gb.position, width, height,
+                                   iterations=o["atrous_iterations"],
+                                   sigma_color=o["sigma_color"], sigma_normal=o["sigma_normal"],
+                                   sigma_position=o["sigma_position"], valid=gb.hit)
+            image = inverse_tonemap(filtered, o["tonemap"], o["exposure"])
+        timer.mark("post", image)
+
+        if not grad_pass:
+            self._history_in = history
+            if o["history"]:
+                self._history = _reproject.History(
+                    mean=resolved.shading, count=resolved.count, depth=gb.depth,
+                    camera=_reproject.camera_state(sensor), width=width, height=height)
+            self._frame += 1
+            self.buffers = {
+                "position": gb.position, "normal": gb.normal, "depth": gb.depth, "hit": gb.hit,
+                "probability": prob, "edges": edges, "sampling_map": smap,
+                "reprojection_map": reproj, "wavefront": ro.wavefront,
+                "reordered_map": ro.reordered_map, "row_counts": ro.row_counts,
+                "traced": traced, "shading": resolved.shading, "shading_mask": resolved.mask,
+                "history_count": resolved.count, "nearest": nearest, "filled": filled,
+                "interpolated": interpolated, "tonemapped": tonemapped, "filtered": filtered,
+                "image": image,
+            }
+            rays = dr.width(ro.wavefront) if ro.active is None else dr.count(smap)
+            self._stats_raw = {
+                "width": width, "height": height, "pixels": n, "rays": rays, "spp": spp,
+                "lanes": dr.width(ro.wavefront) * spp, "frame": self._frame - 1,
+                "history_hits": dr.count(reproj.hit), "resampled": dr.count(resolved.resampled),
+                "holes": dr.count(~resolved.mask), "rejected_samples": shade.rejected,
+                "clamped_samples": shade.clamped, "timings_ms": timer.finish(),
+                "variant": mi.variant(), "reorder": o["reorder"], "theta": o["theta"],
+                "sigma_p": o["sigma_p"], "gaze": list(o["gaze"]),
+                "reconstruction": o["reconstruction"],
+                "atrous_iterations": o["atrous_iterations"],
+            }
+            self._stats_cache = None
+
+        return mi.TensorXf(dr.ravel(image), shape=(height, width, 3))
+
+    # -- results --------------------------------------------------------------------------
+    @property
+    def stats(self) -> dict[str, Any]:
+        """Stats of the last frame as plain Python values (reading them synchronises)."""
+        if self._stats_cache is None:
+            s = {}
+            for k, v in self._stats_raw.items():
+                if isinstance(v, (mi.UInt32, mi.Int32, mi.Float, mi.Bool)) or dr.is_array_v(v):
+                    v = v[0] if dr.width(v) == 1 else v
+                    v = int(v) if not isinstance(v, float) else float(v)
+                s[k] = v
+            if s:
+                s["ray_fraction"] = s["rays"] / s["pixels"]
+                s["history_hit_rate"] = s["history_hits"] / s["pixels"]
+            self._stats_cache = s
+        return dict(self._stats_cache)
+
+    def buffer(self, name: str):
+        """A buffer of the last frame as a NumPy array (H, W, C) (or (H, W) for scalars).
+
+        ``nearest`` comes back as the (x, y) pixel coordinates of each pixel's site (-1 where
+        there is none); ``reprojection_map`` as (x, y, hit).
+        """
+        import numpy as np
+        if name not in self.buffers:
+            raise ParameterError("buffer", name, "one of " + ", ".join(sorted(self.buffers)))
+        v = self.buffers[name]
+        w, h = self._stats_raw["width"], self._stats_raw["height"]
+        if v is None:
+            return None
+        if name == "nearest":
+            idx = v.numpy().astype(np.int64)
+            none = idx == _reconstruct_module().NO_SITE
+            out = np.stack([idx % w, idx // w], -1).astype(np.float32)
+            out[none] = -1
+            return out.reshape(h, w, 2)
+        if name == "reprojection_map":
+            c = v.coords.numpy() if hasattr(v.coords, "numpy") else np.array(v.coords)
+            return np.concatenate([np.asarray(c).T.reshape(h, w, 2),
+                                   v.hit.numpy().reshape(h, w, 1).astype(np.float32)], -1)
+        if name in ("wavefront", "row_counts"):
+            return v.numpy()
+        arr = v.numpy() if hasattr(v, "numpy") else np.asarray(v)
+        arr = np.asarray(arr)
+        if arr.ndim == 2 and arr.shape[0] in (2, 3):
+            return arr.T.reshape(h, w, arr.shape[0])
+        return arr.reshape(h, w)

@@ -1,0 +1,134 @@
+r"""Reverse reprojection and the history cache (Kwon et al. 2019, §3.1 and §3.3;
+Nehab et al. 2007).
+
+**Reprojection map.** A pixel's G-buffer world position :math:`p` is projected with the
+previous frame's camera, :math:`q = M_{t-1} (p, 1)`, :math:`u = (q_x/q_w)\,W`,
+:math:`v = (q_y/q_w)\,H` (pixels), where :math:`M` is the perspective sensor's
+``projection_transform() @ world_transform()^{-1}``. The history is fetched at the *nearest*
+previous pixel ``(floor(u), floor(v))`` (no bilinear mixing, so one history texel never blends
+across a silhouette). It is a hit when that pixel lies inside the film, held history, and its
+stored depth agrees with the distance from the previous camera to :math:`p` within a
+relative tolerance; otherwise it is a miss (disocclusion, off-screen, or no history).
+
+**Shading with history** (Fig. 4). Per pixel, with history mean :math:`h`, count :math:`n`
+(capped at ``max_history``) and this frame's mean :math:`L` over ``spp`` samples:
+
+- traced and hit: :math:`(n h + s L)/(n + s)`, count :math:`\min(n + s, N_{max})`;
+- traced, miss: :math:`L`, count :math:`s`;
+- not traced, hit: :math:`h` (a *resample* thread), count :math:`n`;
+- neither: a hole for the reconstruction.
+
+Capping :math:`n` turns the running mean into an exponential moving average with weight
+:math:`s/N_{max}`, so lighting changes are not smeared over hundreds of frames.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import drjit as dr
+import mitsuba as mi
+
+from .gbuffer import pixel_coords
+
+
+@dataclass
+class CameraState:
+    """What the next frame needs of this frame's camera (1-wide, opaque JIT arrays)."""
+    matrix: mi.Matrix4f   #: world -> film [0,1]^2 (homogeneous)
+    origin: mi.Point3f    #: camera centre in world space
+
+
+@dataclass
+class History:
+    """The history cache carried between frames."""
+    mean: mi.Color3f
+    count: mi.Float
+    depth: mi.Float
+    camera: CameraState
+    width: int
+    height: int
+
+
+class ReprojectionMap(NamedTuple):
+    coords: mi.Point2f   #: previous-frame pixel coordinates (continuous, in pixels)
+    hit: mi.Bool         #: cache hit (Tr.z of the paper)
+    index: mi.UInt32     #: previous pixel index (valid where ``hit``)
+
+
+def camera_state(sensor: mi.Sensor) -> CameraState:
+    """Capture the camera of a perspective sensor for the next frame's reprojection.
+
+    The arrays are made opaque: a moving camera changes their values, never the kernels."""
+    world = sensor.world_transform().matrix
+    matrix = sensor.projection_transform().matrix @ dr.rcp(world)
+    origin = mi.Point3f(world[0][3], world[1][3], world[2][3])
+    matrix, origin = mi.Matrix4f(matrix), mi.Point3f(origin)
+    dr.make_opaque(matrix, origin)
+    return CameraState(matrix=matrix, origin=origin)
+
+
+def project(camera: CameraState, p: mi.Point3f, width: int, height: int
+            ) -> tuple[mi.Point2f, mi.Float]:
+    """World points to pixel coordinates of ``camera`` and their distance to its centre."""
+    q = camera.matrix @ mi.Vector4f(p.x, p.y, p.z, 1.0)
+    inv_w = dr.rcp(q.w)
+    uv = mi.Point2f(q.x * inv_w * width, q.y * inv_w * height)
+    return uv, dr.norm(p - camera.origin)
+
+
+def reprojection_map(position: mi.Point3f, hit: mi.Bool, history: History | None,
+                     width: int, height: int, *, tolerance: float = 0.02) -> ReprojectionMap:
+    """Reverse-reproject the current G-buffer into the history (see the module docstring)."""
+    n = width * height
+    if history is None:
+        return ReprojectionMap(dr.zeros(mi.Point2f, n), dr.zeros(mi.Bool, n), dr.zeros(mi.UInt32, n))
+    uv, dist = project(history.camera, position, width, height)
+    finite = dr.isfinite(uv.x) & dr.isfinite(uv.y)
+    px = dr.floor(uv.x)
+    py = dr.floor(uv.y)
+    inside = hit & finite & (px >= 0) & (py >= 0) & (px < width) & (py < height)
+    prev = mi.UInt32(mi.Int32(dr.select(inside, py, 0.0))) * width + \
+        mi.UInt32(mi.Int32(dr.select(inside, px, 0.0)))
+    prev_depth = dr.gather(mi.Float, history.depth, prev, inside)
+    prev_count = dr.gather(mi.Float, history.count, prev, inside)
+    tol = dr.opaque(mi.Float, tolerance)
+    # Misses store depth = inf: the comparison is then False without forming inf - inf.
+    same_surface = dr.abs(prev_depth - dist) <= tol * dist
+    ok = inside & dr.isfinite(prev_depth) & same_surface & (prev_count > 0)
+    return ReprojectionMap(uv, ok, prev)
+
+
+class Resolved(NamedTuple):
+    shading: mi.Color3f     #: shading buffer (value per pixel, see ``mask``)
+    mask: mi.Bool           #: pixel holds a value (traced or resampled)
+    count: mi.Float         #: history sample count after this frame
+    resampled: mi.Bool      #: pixel took its value from history only
+
+
+def resolve(new: mi.Color3f, traced: mi.Bool, spp: int, reproj: ReprojectionMap,
+            history: History | None, max_history: float) -> Resolved:
+    """Merge this frame's sparse samples with the reprojected history (Fig. 4)."""
+    s = mi.Float(spp)
+    if history is None:
+        return Resolved(dr.select(traced, new, 0.0), mi.Bool(traced), dr.select(traced, s, 0.0),
+                        dr.zeros(mi.Bool, dr.width(traced)))
+    hit = reproj.hit
+    h = dr.gather(mi.Color3f, history.mean, reproj.index, hit)
+    cap = dr.opaque(mi.Float, max_history)
+    n = dr.select(hit, dr.minimum(dr.gather(mi.Float, history.count, reproj.index, hit),
+                                  dr.maximum(cap - s, 0.0)), 0.0)
+    blended = (h * n + new * s) / (n + s)
+    shading = dr.select(traced, blended, dr.select(hit, h, 0.0))
+    count = dr.select(traced, dr.minimum(n + s, dr.maximum(cap, s)), n)
+    resampled = hit & ~traced
+    return Resolved(shading, traced | hit, count, resampled)
+
+
+def roundtrip_error(sensor: mi.Sensor, width: int, height: int, position: mi.Point3f,
+                    hit: mi.Bool) -> mi.Float:
+    """Pixel -> world -> pixel error (pixels) for the G-buffer of ``sensor`` (diagnostics)."""
+    _, x, y = pixel_coords(width, height)
+    uv, _ = project(camera_state(sensor), position, width, height)
+    err = dr.sqrt(dr.square(uv.x - (mi.Float(x) + 0.5)) + dr.square(uv.y - (mi.Float(y) + 0.5)))
+    return dr.select(hit, err, 0.0)
