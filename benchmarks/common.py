@@ -1,0 +1,66 @@
+"""Helpers shared by the benchmark scripts (not part of the package API)."""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import statistics
+import time
+
+import drjit as dr
+import mitsuba as mi
+
+
+def timed(fn, *args, **kw):
+    dr.sync_thread()
+    t0 = time.perf_counter()
+    out = fn(*args, **kw)
+    dr.eval(out)
+    dr.sync_thread()
+    return out, (time.perf_counter() - t0) * 1e3
+
+
+def median(xs):
+    return statistics.median(xs) if xs else float("nan")
+
+
+def machine() -> dict:
+    info = {"variant": mi.variant(), "python": platform.python_version(),
+            "mitsuba": mi.__version__, "drjit": dr.__version__,
+            "cpu_count": os.cpu_count(), "machine": platform.machine()}
+    if mi.variant().startswith("cuda"):
+        try:
+            import subprocess
+            info["gpu"] = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"],
+                                         capture_output=True, text=True).stdout.strip()
+        except OSError:
+            pass
+    return info
+
+
+def write_json(path: str | None, payload: dict) -> None:
+    if not path:
+        return
+    from foveated_mi.io import atomic_write
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    with atomic_write(path, "w") as f:
+        json.dump(payload, f, indent=2)
+
+
+def md_table(header, rows) -> str:
+    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    out += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return "\n".join(out)
+
+
+def calibrate_theta(width, height, target, *, sigma_p, gaze=(0.5, 0.5), edges=None, seed=0):
+    """θ whose sampling map (with ``edges``) traces about ``target`` of the pixels."""
+    from foveated_mi.sampling import sampling_map
+    lo, hi = 1e-4, 10.0
+    for _ in range(30):
+        mid = (lo * hi) ** 0.5
+        smap, _ = sampling_map(width, height, gaze=gaze, theta=mid, sigma_p=sigma_p, seed=seed,
+                               edges=edges)
+        frac = dr.count(smap)[0] / (width * height)
+        lo, hi = (mid, hi) if frac < target else (lo, mid)
+    return (lo * hi) ** 0.5

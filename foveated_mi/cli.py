@@ -1,0 +1,187 @@
+"""``foveated-mi``: render a foveated frame or a sequence from the command line.
+
+Bad input prints one line (``foveated-mi: error: <name> = <value> is invalid: expected ...``)
+and exits with status 2; no traceback, no half-written output.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from typing import Any, Sequence
+
+EXIT_USAGE = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, exit 2
+        sys.stderr.write(f"foveated-mi: error: {message}\n")
+        sys.exit(EXIT_USAGE)
+
+
+def _add_frame_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--theta", type=float, help="foveal radius (fraction of half the diagonal)")
+    p.add_argument("--sigma-p", type=float, dest="sigma_p", help="P(theta), in (0, 1]")
+    p.add_argument("--gaze", type=float, nargs=2, metavar=("X", "Y"),
+                   help="gaze in normalised film coordinates, origin top-left")
+    p.add_argument("--reorder", help="none | rows | rows_blocks | compact")
+    p.add_argument("--block-height", type=int, dest="block_height")
+    p.add_argument("--edge-threshold", type=float, dest="edge_threshold")
+    p.add_argument("--reconstruction", help="voronoi | sibson | discrete_sibson | fast_sibson")
+    p.add_argument("--max-radius", type=int, dest="max_radius")
+    p.add_argument("--jfa", help="jfa | 1+jfa | jfa+1 | jfa+2")
+    p.add_argument("--atrous-iterations", type=int, dest="atrous_iterations")
+    p.add_argument("--sigma-color", type=float, dest="sigma_color")
+    p.add_argument("--sigma-normal", type=float, dest="sigma_normal")
+    p.add_argument("--sigma-position", type=float, dest="sigma_position")
+    p.add_argument("--tonemap", help="none | reinhard | aces")
+    p.add_argument("--exposure", type=float, help="exposure in stops")
+    p.add_argument("--clamp", type=float, help="largest accepted sample component")
+
+
+FRAME_OPTIONS = ("theta", "sigma_p", "gaze", "reorder", "block_height", "edge_threshold",
+                 "reconstruction", "max_radius", "jfa", "atrous_iterations", "sigma_color",
+                 "sigma_normal", "sigma_position", "tonemap", "exposure", "clamp")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="foveated-mi", description=__doc__.splitlines()[0])
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    r = sub.add_parser("render", help="render one foveated frame")
+    r.add_argument("scene", help="Mitsuba XML path or built-in scene "
+                   "(cornell-box, voxel-city, eye-exam)")
+    _add_frame_options(r)
+    r.add_argument("--spp", type=int, default=1)
+    r.add_argument("--size", type=int, nargs=2, metavar=("W", "H"))
+    r.add_argument("--variant", help="Mitsuba variant (default: cuda_ad_rgb if usable, "
+                   "else llvm_ad_rgb; or $FOVEATED_MI_VARIANT)")
+    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--max-depth", type=int, dest="max_depth",
+                   help="max_depth of the nested path tracer (built-in scenes)")
+    r.add_argument("--out", default="out/frame.exr", help="OpenEXR output (a PNG preview is "
+                   "written next to it)")
+    r.add_argument("--stats", help="write the frame's stats as JSON here")
+    r.add_argument("--compare-full", action="store_true", dest="compare_full",
+                   help="also render the full frame and report PSNR, SSIM and speed-up")
+    r.add_argument("--warmup", type=int, default=1,
+                   help="untimed frames first, so the timed frame excludes JIT compilation")
+    r.add_argument("--quiet", action="store_true")
+
+    s = sub.add_parser("sequence", help="render a sequence from a TOML config")
+    s.add_argument("config", help="sequence config (see configs/)")
+    s.add_argument("--variant")
+    s.add_argument("--out", help="output folder (overrides output.dir)")
+    s.add_argument("--frames", type=int, help="override the frame count")
+    s.add_argument("--compare-full", action="store_true", dest="compare_full")
+    s.add_argument("--no-progress", action="store_true", dest="no_progress")
+    return p
+
+
+def frame_options(args: argparse.Namespace) -> dict[str, Any]:
+    return {k: getattr(args, k) for k in FRAME_OPTIONS if getattr(args, k, None) is not None}
+
+
+def format_table(rows: list[tuple[str, ...]]) -> str:
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = []
+    for j, r in enumerate(rows):
+        lines.append("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in
+                               enumerate(zip(r, widths))))
+        if j == 0:
+            lines.append("  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+def timing_table(stats: dict, full_ms: float | None = None) -> str:
+    from .timing import STAGES
+    rows = [("stage", "foveated ms") + (("full ms",) if full_ms is not None else ())]
+    for k in STAGES:
+        v = stats["timings_ms"].get(k)
+        row = (k, "-" if v is None else f"{v:.2f}")
+        if full_ms is not None:
+            row += (f"{full_ms:.2f}" if k in ("trace", "total") else "-",)
+        rows.append(row)
+    return format_table(rows)
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    import foveated_mi
+    from .validate import ParameterError, check_int
+    from .integrators.foveated import validate_options
+
+    opts = validate_options(frame_options(args))      # fail fast, before any loading
+    spp = check_int("--spp", args.spp, 1)
+    check_int("--warmup", args.warmup, 0)
+    if args.size is not None:
+        check_int("--size W", args.size[0], 1, 16384)
+        check_int("--size H", args.size[1], 1, 16384)
+    if not str(args.out).lower().endswith(".exr"):
+        raise ParameterError("--out", args.out, "a path ending in .exr")
+    foveated_mi.set_variant(args.variant)
+
+    from .render import FrameRenderer
+    from .scenes import load_scene
+    size = tuple(args.size) if args.size else (None, None)
+    extra = {"max_depth": args.max_depth} if args.max_depth is not None else {}
+    scene = load_scene(args.scene, width=size[0], height=size[1], spp=spp, **extra)
+    fr = FrameRenderer(scene, {**frame_options(args), "timing": True}, spp=spp)
+    result = fr.render_frame(seed=args.seed, warmup=args.warmup,
+                             compare_full=args.compare_full)
+    stats = result.stats
+    stats.update({"size": [stats["width"], stats["height"]], "spp": spp,
+                  "theta": opts["theta"], "sigma_p": opts["sigma_p"], "gaze": list(opts["gaze"])})
+    result.write(args.out)
+    if args.stats:
+        from .io import atomic_write
+        with atomic_write(args.stats, "w") as f:
+            json.dump(stats, f, indent=2)
+    if not args.quiet:
+        print(f"{args.scene}: {stats['width']}x{stats['height']}, {stats['variant']}, "
+              f"spp {spp}, reorder {stats['reorder']}, reconstruction {stats['reconstruction']}")
+        print(f"rays {stats['rays']} / {stats['pixels']} ({100 * stats['ray_fraction']:.2f} %)")
+        print(timing_table(stats, stats.get("full_ms")))
+        if args.compare_full:
+            print(f"full render {stats['full_ms']:.2f} ms, speed-up x{stats['speedup']:.2f}, "
+                  f"PSNR {stats['psnr']:.2f} dB, SSIM {stats['ssim']:.4f}")
+        print(f"wrote {args.out} and {os.path.splitext(args.out)[0] + '.png'}"
+              + (f" and {args.stats}" if args.stats else ""))
+    return 0
+
+
+def cmd_sequence(args: argparse.Namespace) -> int:
+    import foveated_mi
+    from .config import load_config
+    from .validate import check_int
+    cfg = load_config(args.config)
+    if args.frames is not None:
+        cfg.frames = check_int("--frames", args.frames, 1)
+    foveated_mi.set_variant(args.variant)
+    from .sequence import run_sequence
+    run_sequence(cfg, out_dir=args.out, compare_full=args.compare_full,
+                 progress=not args.no_progress)
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    from .validate import ParameterError
+    try:
+        if args.command == "render":
+            return cmd_render(args)
+        return cmd_sequence(args)
+    except ParameterError as e:
+        sys.stderr.write(f"foveated-mi: error: {e}\n")
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        sys.stderr.write("foveated-mi: interrupted; outputs already written are kept\n")
+        return 130
+    except OSError as e:
+        sys.stderr.write(f"foveated-mi: error: {e}\n")
+        return 1
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

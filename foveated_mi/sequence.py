@@ -1,0 +1,116 @@
+"""``foveated-mi sequence``: render a camera/gaze sequence with temporal reuse.
+
+Per frame the runner moves the camera (:func:`foveated_mi.scenes.apply_camera`, in place, so
+no kernel is recompiled), sets the gaze, renders with the history of the previous frames,
+writes ``frame_NNNN.exr`` / ``.png`` atomically and appends one JSON line to
+``stats.jsonl``. A camera cut in the config resets the history, so the frame after a cut is
+exactly a fresh first frame. At the end (or on Ctrl-C, with the frames done so far) it
+writes ``sequence.mp4`` or ``sequence.gif``.
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+from typing import Any
+
+import numpy as np
+
+from .config import SequenceConfig
+
+
+def _video_path(out_dir: str, fmt: str) -> str | None:
+    return None if fmt == "none" else os.path.join(out_dir, f"sequence.{fmt}")
+
+
+def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
+    """MP4 (libx264 through imageio-ffmpeg) or GIF (Pillow), written atomically."""
+    import imageio.v2 as iio2
+    import imageio.v3 as iio
+    from .io import atomic_write
+    if not frames:
+        return
+    with atomic_write(path) as tmp:
+        if path.endswith(".gif"):
+            iio.imwrite(tmp, np.stack(frames), duration=1000.0 / fps, loop=0)
+            return
+        h, w = frames[0].shape[:2]
+        pad = ((0, h % 2), (0, w % 2), (0, 0))   # yuv420p needs even sizes
+        with iio2.get_writer(tmp, format="FFMPEG", fps=fps, codec="libx264",
+                             macro_block_size=1, ffmpeg_log_level="error") as wr:
+            for f in frames:
+                wr.append_data(np.pad(f[..., :3], pad, mode="edge"))
+
+
+def run_sequence(cfg: SequenceConfig, *, out_dir: str | None = None, compare_full: bool = False,
+                 progress: bool = True) -> list[dict[str, Any]]:
+    """Render ``cfg`` and return the per-frame stats. Ctrl-C keeps what is written."""
+    from .io import atomic_write, encode_srgb8
+    from .render import FrameRenderer
+    from .scenes import apply_camera, load_scene
+
+    out_dir = out_dir or cfg.output.dir
+    os.makedirs(out_dir, exist_ok=True)
+    scene = load_scene(cfg.scene, width=cfg.width, height=cfg.height, spp=cfg.spp,
+                       integrator=cfg.integrator, camera=cfg.camera_at(0), **cfg.scene_params)
+    fr = FrameRenderer(scene, {**cfg.foveated, "timing": True}, spp=cfg.spp)
+    integ = fr.integrator
+    stats_path = os.path.join(out_dir, "stats.jsonl")
+    tmp_stats = stats_path + ".partial"
+    video, all_stats = [], []
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=cfg.frames, unit="frame", desc=os.path.basename(out_dir) or "sequence")
+    interrupted = False
+    try:
+        with open(tmp_stats, "w") as log:
+            for i in range(cfg.frames):
+                cam = cfg.camera_at(i)
+                if cam is not None and i > 0:
+                    apply_camera(scene, cam)
+                if cfg.cut_before(i):
+                    integ.reset()
+                integ.gaze = cfg.gaze_at(i)
+                t0 = time.perf_counter()
+                res = fr.render_frame(seed=cfg.seed, compare_full=compare_full)
+                stats = {"frame": i, "time_s": cfg.time(i), "gaze": list(integ.gaze),
+                         **{k: v for k, v in res.stats.items() if k not in ("frame", "gaze")}}
+                stats["wall_ms"] = (time.perf_counter() - t0) * 1e3
+                name = os.path.join(out_dir, f"frame_{i:04d}")
+                if cfg.output.exr:
+                    res.write(name + ".exr") if cfg.output.png else _write_exr_only(res, name)
+                elif cfg.output.png:
+                    from .io import write_png
+                    write_png(name + ".png", res.image, exposure=res.exposure, tonemap=res.tonemap)
+                log.write(json.dumps(stats) + "\n")
+                log.flush()
+                all_stats.append(stats)
+                if cfg.output.video != "none":
+                    video.append(encode_srgb8(res.image, exposure=res.exposure,
+                                              tonemap=res.tonemap))
+                if bar is not None:
+                    bar.set_postfix(ms=f"{stats['timings_ms']['total']:.0f}",
+                                    hit=f"{stats['history_hit_rate']:.2f}")
+                    bar.update(1)
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        if bar is not None:
+            bar.close()
+        if os.path.exists(tmp_stats):
+            os.replace(tmp_stats, stats_path)
+        path = _video_path(out_dir, cfg.output.video)
+        if path and video:
+            write_video(path, video, cfg.fps)
+    if interrupted:
+        raise KeyboardInterrupt
+    return all_stats
+
+
+def _write_exr_only(res, name: str) -> None:
+    from .io import write_exr
+    layers = dict(res.layers)
+    if res.full is not None:
+        layers["full"] = res.full
+    write_exr(name + ".exr", layers)

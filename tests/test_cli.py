@@ -1,0 +1,89 @@
+"""The `foveated-mi` command line end to end, in-process (same interpreter, same JIT cache)."""
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from foveated_mi.cli import main
+from foveated_mi.io import read_exr
+
+
+def run(args, capsys):
+    code = main(args)
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_render_writes_exr_layers_png_and_stats(tmp_path, capsys):
+    exr = tmp_path / "f.exr"
+    stats = tmp_path / "s.json"
+    code, out, err = run(["render", "cornell-box", "--size", "40", "32", "--theta", "0.15",
+                          "--sigma-p", "0.6", "--gaze", "0.4", "0.6", "--reorder", "rows_blocks",
+                          "--atrous-iterations", "1", "--compare-full", "--warmup", "0",
+                          "--out", str(exr), "--stats", str(stats)], capsys)
+    assert code == 0, err
+    assert "trace" in out and "PSNR" in out
+    layers = read_exr(exr)
+    for name, c in [("image", 3), ("sampling_map", 1), ("shading", 4), ("nearest", 2),
+                    ("filled", 3), ("interpolated", 3), ("tonemapped", 3), ("filtered", 3)]:
+        assert layers[name].shape == (32, 40, c), name
+    s = json.loads(stats.read_text())
+    for key in ("pixels", "rays", "ray_fraction", "timings_ms", "variant", "size", "spp",
+                "theta", "sigma_p", "gaze", "reorder", "full_ms", "speedup", "psnr", "ssim"):
+        assert key in s, key
+    assert set(s["timings_ms"]) == {"gbuffer", "sampling", "reorder", "trace", "reconstruct",
+                                    "post", "total"}
+    assert s["reorder"] == "rows_blocks" and s["gaze"] == [0.4, 0.6] and s["size"] == [40, 32]
+    smap = layers["sampling_map"][..., 0]
+    assert smap.sum() == s["rays"]
+    # The shading layer's alpha marks exactly the traced pixels on this first frame.
+    np.testing.assert_array_equal(layers["shading"][..., 3] > 0, smap > 0)
+    # nearest holds (x, y) of a traced pixel for every pixel.
+    xy = layers["nearest"].astype(int)
+    assert smap[xy[..., 1], xy[..., 0]].all()
+    assert (tmp_path / "f.png").exists()
+    assert np.all(np.isfinite(layers["image"]))
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["--theta", "0"], "theta = 0.0 is invalid"),
+    (["--theta", "nan"], "theta = nan is invalid"),
+    (["--sigma-p", "1.5"], "sigma_p = 1.5 is invalid"),
+    (["--gaze", "nan", "0.5"], "gaze"),
+    (["--spp", "0"], "--spp = 0 is invalid"),
+    (["--reorder", "diagonal"], "reorder = 'diagonal' is invalid"),
+    (["--reconstruction", "cubic"], "reconstruction = 'cubic' is invalid"),
+])
+def test_bad_flags_one_line_exit_2(args, needle, capsys, tmp_path):
+    out = tmp_path / "x.exr"
+    code, _, err = run(["render", "cornell-box", "--size", "8", "8", "--out", str(out)] + args,
+                       capsys)
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and needle in lines[0], err
+    assert not out.exists()
+
+
+def test_missing_scene_file(capsys, tmp_path):
+    code, _, err = run(["render", str(tmp_path / "nope.xml")], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "nope.xml" in err
+
+
+def test_failed_run_keeps_previous_output(tmp_path, capsys):
+    exr = tmp_path / "keep.exr"
+    exr.write_bytes(b"previous good file")
+    code, _, _ = run(["render", "cornell-box", "--size", "8", "8", "--sigma-p", "2",
+                      "--out", str(exr)], capsys)
+    assert code == 2 and exr.read_bytes() == b"previous good file"
+
+
+def test_console_script_installed():
+    exe = os.path.join(os.path.dirname(sys.executable), "foveated-mi")
+    r = subprocess.run([exe, "render", "cornell-box", "--theta", "-3"], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 2
+    assert r.stderr.strip() == ("foveated-mi: error: theta = -3.0 is invalid: expected a finite "
+                                "number > 0")

@@ -1,0 +1,230 @@
+"""The `foveated` integrator end to end: loading, wavefront size, equality at sigma_p = 1,
+reorder modes, buffers and stats, kernel reuse, determinism, gradients."""
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import foveated_mi
+from foveated_mi.integrators.foveated import FoveatedIntegrator
+from foveated_mi.validate import ParameterError
+
+
+def cornell(w=48, h=40, integrator=None):
+    d = mi.cornell_box()
+    d["sensor"]["film"].update(width=w, height=h, rfilter={"type": "box"})
+    d["sensor"]["sampler"]["sample_count"] = 1
+    if integrator is not None:
+        d["integrator"] = integrator
+    return mi.load_dict(d)
+
+
+class RecordingPath(mi.SamplingIntegrator):
+    """Delegates to `path` and records the width of every wavefront it is given."""
+
+    def __init__(self, props=mi.Properties()):
+        super().__init__(props)
+        self.inner = mi.load_dict({"type": "path", "max_depth": 3})
+        self.widths = []
+
+    def sample(self, scene, sampler, ray, medium=None, active=True):
+        self.widths.append(dr.width(ray.o.x))
+        return self.inner.sample(scene, sampler, ray, medium, active)
+
+    def to_string(self):
+        return "RecordingPath"
+
+
+class DirectionColor(mi.SamplingIntegrator):
+    """Deterministic: radiance is a smooth function of the ray direction only."""
+
+    def sample(self, scene, sampler, ray, medium=None, active=True):
+        d = ray.d
+        return mi.Spectrum(0.5 + 0.5 * d.x, 0.5 + 0.5 * d.y, 0.5 + 0.5 * d.z), mi.Bool(active), []
+
+    def to_string(self):
+        return "DirectionColor"
+
+
+def test_xml_loading_with_unnamed_nested_path():
+    scene = mi.load_string("""
+    <scene version="3.0.0">
+      <integrator type="foveated">
+        <float name="theta" value="0.15"/>
+        <float name="sigma_p" value="0.7"/>
+        <point name="gaze" x="0.25" y="0.75" z="0"/>
+        <string name="reorder" value="rows_blocks"/>
+        <integrator type="path"><integer name="max_depth" value="3"/></integrator>
+      </integrator>
+      <sensor type="perspective"><film type="hdrfilm"><integer name="width" value="32"/>
+        <integer name="height" value="24"/></film></sensor>
+      <shape type="sphere"><bsdf type="diffuse"/></shape>
+      <emitter type="constant"/>
+    </scene>""")
+    integ = scene.integrator()
+    assert isinstance(integ, FoveatedIntegrator)
+    assert integ.theta == 0.15 and integ.sigma_p == 0.7 and integ.gaze == (0.25, 0.75)
+    assert integ.reorder == "rows_blocks"
+    assert "max_depth = 3" in str(integ.nested)
+    img = mi.render(scene)
+    assert img.shape == (24, 32, 3)
+    assert np.all(np.isfinite(np.array(img)))
+
+
+def test_dict_loading_any_nested_key():
+    integ = mi.load_dict({"type": "foveated", "theta": 0.2,
+                          "whatever_name": {"type": "path", "max_depth": 2}})
+    assert "max_depth = 2" in str(integ.nested)
+    default = mi.load_dict({"type": "foveated"})
+    assert "PathIntegrator" in str(default.nested) or "max_depth" in str(default.nested)
+
+
+@pytest.mark.parametrize("bad,match", [
+    ({"theta": -1.0}, "theta = -1.0 is invalid"),
+    ({"sigma_p": 1.5}, "sigma_p = 1.5 is invalid"),
+    ({"reorder": "zigzag"}, "reorder = 'zigzag' is invalid"),
+    ({"nested": {"type": "depth"}}, "nested integrator"),
+    ({"thetaa": 0.1}, "thetaa"),
+])
+def test_bad_properties_name_the_parameter(bad, match):
+    with pytest.raises(Exception, match=match):
+        mi.load_dict({"type": "foveated", **bad})
+
+
+def test_bad_python_options_one_line():
+    with pytest.raises(ParameterError) as e:
+        FoveatedIntegrator(gaze=(float("nan"), 0.5))
+    assert "gaze" in str(e.value) and "\n" not in str(e.value)
+    integ = FoveatedIntegrator()
+    with pytest.raises(ParameterError):
+        integ.theta = 0.0
+    assert integ.theta == 0.1, "a rejected change must leave the options untouched"
+
+
+@pytest.mark.parametrize("mode", ["rows", "rows_blocks", "compact"])
+def test_nested_sees_rays_times_spp_lanes(mode):
+    scene = cornell()
+    rec = RecordingPath()
+    integ = FoveatedIntegrator(nested=rec, theta=0.1, sigma_p=0.3, reorder=mode,
+                               atrous_iterations=0)
+    mi.render(scene, integrator=integ, spp=3)
+    rays = integ.stats["rays"]
+    assert rec.widths == [rays * 3]
+    assert rays < 48 * 40 // 2
+
+
+def test_unoptimised_mode_launches_full_frame():
+    rec = RecordingPath()
+    integ = FoveatedIntegrator(nested=rec, sigma_p=0.3, reorder="none", atrous_iterations=0)
+    mi.render(cornell(), integrator=integ, spp=2)
+    assert rec.widths == [48 * 40 * 2]
+
+
+@pytest.mark.parametrize("spp", [1, 4])
+@pytest.mark.parametrize("mode", ["none", "rows", "rows_blocks", "compact"])
+def test_every_pixel_traced_equals_plain_render(spp, mode):
+    scene = cornell(integrator={"type": "path", "max_depth": 4})
+    plain = np.array(mi.render(scene, spp=spp, seed=7))
+    integ = FoveatedIntegrator(nested=scene.integrator(), sigma_p=1.0, reorder=mode,
+                               atrous_iterations=0, history=False)
+    fov = np.array(mi.render(scene, integrator=integ, spp=spp, seed=7))
+    assert integ.stats["rays"] == 48 * 40
+    if spp == 1:
+        np.testing.assert_array_equal(fov, plain)
+    else:  # same random numbers; only the order of the per-pixel sum differs
+        np.testing.assert_allclose(fov, plain, rtol=1e-5, atol=1e-6)
+
+
+def test_reorder_modes_same_image_with_deterministic_nested():
+    scene = cornell()
+    imgs = {}
+    for mode in ("none", "rows", "rows_blocks", "compact"):
+        integ = FoveatedIntegrator(nested=DirectionColor(mi.Properties()), theta=0.1,
+                                   sigma_p=0.4, reorder=mode, atrous_iterations=0,
+                                   reconstruction="voronoi")
+        imgs[mode] = np.array(mi.render(scene, integrator=integ, seed=3))
+        maps = integ.buffer("sampling_map")
+        imgs[mode + "_map"] = maps
+    for mode in ("rows", "rows_blocks", "compact"):
+        np.testing.assert_array_equal(imgs[mode + "_map"], imgs["none_map"])
+        # Same pixels, jitter may differ by lane order: direction varies < 1 px apart.
+        assert np.abs(imgs[mode] - imgs["none"]).max() < 0.05
+
+
+def test_buffers_and_stats_after_render():
+    integ = FoveatedIntegrator(theta=0.1, sigma_p=0.5, timing=True)
+    img = np.array(mi.render(cornell(), integrator=integ, spp=1))
+    s = integ.stats
+    for key in ("pixels", "rays", "ray_fraction", "timings_ms", "history_hits",
+                "history_hit_rate", "resampled", "rejected_samples", "clamped_samples"):
+        assert key in s
+    assert s["pixels"] == 48 * 40 and 0 < s["ray_fraction"] < 1
+    assert set(s["timings_ms"]) == {"gbuffer", "sampling", "reorder", "trace", "reconstruct",
+                                   "post", "total"}
+    assert all(v >= 0 for v in s["timings_ms"].values())
+    smap = integ.buffer("sampling_map")
+    assert smap.shape == (40, 48) and smap.sum() == s["rays"]
+    near = integ.buffer("nearest")
+    assert near.shape == (40, 48, 2)
+    # Each pixel's site is a traced pixel.
+    xs, ys = near[..., 0].astype(int), near[..., 1].astype(int)
+    assert integ.buffer("shading_mask")[ys, xs].all()
+    assert np.all(np.isfinite(img)) and img.shape == (40, 48, 3)
+    assert not np.any(np.all(img == 0, axis=-1)[integ.buffer("hit").astype(bool)]), "holes left"
+
+
+def test_per_frame_scalars_compile_nothing_new():
+    scene = cornell()
+    integ = FoveatedIntegrator(theta=0.1, sigma_p=0.6)
+    gazes = [(0.5, 0.5), (0.3, 0.6), (0.7, 0.2), (0.1, 0.9), (0.55, 0.45)]
+    thetas = [0.1, 0.12, 0.08, 0.2, 0.15]
+    for k in range(2):  # warm-up: first frame and first frame with history
+        integ.set_options(gaze=gazes[k], theta=thetas[k])
+        dr.eval(mi.render(scene, integrator=integ, seed=k))
+    dr.sync_thread()
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+        dr.kernel_history_clear()
+        for k in range(2, 5):
+            integ.set_options(gaze=gazes[k], theta=thetas[k])
+            dr.eval(mi.render(scene, integrator=integ, seed=k))
+        dr.sync_thread()
+        hist = dr.kernel_history([dr.KernelType.JIT])
+    misses = [h for h in hist if not h.get("cache_hit", True)]
+    assert hist, "kernel history must record the frames"
+    assert not misses, f"{len(misses)} kernels compiled after warm-up"
+
+
+def test_same_seed_is_bit_identical():
+    scene = cornell()
+    out = []
+    for _ in range(2):
+        integ = FoveatedIntegrator(theta=0.1, sigma_p=0.5)
+        frames = [np.array(mi.render(scene, integrator=integ, seed=5)) for _ in range(3)]
+        out.append(frames)
+    for a, b in zip(*out):
+        np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(out[0][0], out[0][1]), "frames must differ over time"
+
+
+def test_gradient_pass_leaves_history_unchanged():
+    d = mi.cornell_box()
+    d["sensor"]["film"].update(width=24, height=20, rfilter={"type": "box"})
+    d["integrator"] = {"type": "foveated", "sigma_p": 0.6, "atrous_iterations": 0,
+                       "nested": {"type": "path", "max_depth": 2}}
+    scene = mi.load_dict(d)
+    integ = scene.integrator()
+    params = mi.traverse(scene)
+    key = "red.reflectance.value"
+    mi.render(scene, params, spp=1, seed=0)            # frame 0
+    dr.enable_grad(params[key])
+    params.update()
+    img = mi.render(scene, params, spp=1, seed=1)      # frame 1, primal
+    h = integ.history
+    snap = (h.mean.numpy().copy(), h.count.numpy().copy(), integ.frame)
+    dr.backward(dr.mean(img))                          # gradient pass re-renders
+    h2 = integ.history
+    assert integ.frame == snap[2] == 2
+    np.testing.assert_array_equal(h2.mean.numpy(), snap[0])
+    np.testing.assert_array_equal(h2.count.numpy(), snap[1])
+    g = dr.grad(params[key])
+    assert np.all(np.isfinite(np.array(g))) and np.abs(np.array(g)).sum() > 0

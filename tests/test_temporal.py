@@ -1,0 +1,153 @@
+"""Temporal reuse (Kwon et al. 2019, §3.1/§3.3; Nehab et al. 2007): reprojection, history,
+convergence, disocclusion, camera cuts."""
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from foveated_mi import sampling
+from foveated_mi.gbuffer import render_gbuffer
+from foveated_mi.integrators.foveated import FoveatedIntegrator
+from foveated_mi.metrics import psnr
+from foveated_mi.reproject import roundtrip_error
+from foveated_mi.scenes import apply_camera, load_scene, scene_camera
+
+
+def small_cornell(w=40, h=32):
+    d = mi.cornell_box()
+    d["sensor"]["film"].update(width=w, height=h, rfilter={"type": "box"})
+    d["sensor"]["sampler"]["sample_count"] = 1
+    d["integrator"] = {"type": "path", "max_depth": 3}
+    return mi.load_dict(d)
+
+
+def test_reprojection_roundtrip_within_1e3_px():
+    scene = small_cornell(48, 36)
+    sensor = scene.sensors()[0]
+    gb = render_gbuffer(scene, sensor)
+    err = roundtrip_error(sensor, 48, 36, gb.position, gb.hit).numpy()
+    assert gb.hit.numpy().sum() > 1000
+    assert err.max() < 1e-3
+
+
+def test_static_camera_converges():
+    scene = small_cornell()
+    nested = scene.integrator()
+    ref = np.array(mi.render(scene, integrator=nested, spp=256, seed=99))
+    integ = FoveatedIntegrator(nested=nested, theta=0.1, sigma_p=0.5, max_history=64,
+                               atrous_iterations=0)
+    scores = []
+    for k in range(32):
+        img = np.array(mi.render(scene, integrator=integ, spp=1, seed=0))
+        if k in (0, 3, 15, 31):
+            scores.append(psnr(ref, img, data_range=float(ref.max())))
+    assert scores == sorted(scores), scores
+    assert scores[-1] - scores[0] >= 6.0, scores
+
+
+def test_every_pixel_traced_within_predicted_frames():
+    W, H = 40, 32
+    theta, sigma_p = 0.15, 0.5
+    # P at the farthest pixel bounds the per-frame probability from below.
+    p_min = sampling.sampling_probability(mi.Float([math.hypot(W, H) / (0.5 * math.hypot(W, H))]),
+                                          mi.Float([sampling.sampling_weight(theta, sigma_p)]))[0]
+    # Frames after which a pixel with p_min is missed with probability 1e-3 / pixels.
+    n = math.ceil(math.log(1e-3 / (W * H)) / math.log(1.0 - p_min))
+    integ = FoveatedIntegrator(theta=theta, sigma_p=sigma_p, atrous_iterations=0,
+                               edge_threshold=0.0, reconstruction="voronoi")
+    scene = small_cornell(W, H)
+    seen = np.zeros((H, W), bool)
+    for k in range(n):
+        mi.render(scene, integrator=integ, seed=1)
+        seen |= integ.buffer("sampling_map").astype(bool)
+    assert seen.all(), f"{(~seen).sum()} pixels never traced in {n} frames"
+
+
+def test_small_translation_hits_history():
+    scene = load_scene("eye-exam", width=48, height=48, integrator={"type": "path", "max_depth": 2})
+    cam = scene_camera("eye-exam")
+    integ = FoveatedIntegrator(theta=0.3, sigma_p=1.0, atrous_iterations=0,
+                               reconstruction="voronoi")
+    mi.render(scene, integrator=integ, seed=0)   # every pixel traced: full history
+    integ.sigma_p = 0.5
+    moved = dict(cam)
+    o = np.array(cam["origin"], float)
+    t = np.array(cam["target"], float)
+    shift = 0.002 * np.linalg.norm(t - o) * np.array([1.0, 0.0, 0.0])
+    moved["origin"] = list(o + shift)
+    moved["target"] = list(t + shift)
+    apply_camera(scene, moved)
+    mi.render(scene, integrator=integ, seed=0)
+    hit = integ.buffer("reprojection_map")[..., 2].astype(bool)
+    had = integ.buffer("hit").astype(bool)
+    rate = hit[had].mean()
+    assert rate >= 0.95, rate
+
+
+def moving_sphere_scene():
+    return mi.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 40,
+                   "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 5], target=[0, 0, 0],
+                                                              up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 40, "height": 32,
+                            "rfilter": {"type": "box"}},
+                   "sampler": {"type": "independent", "sample_count": 1}},
+        "wall": {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate([0, 0, -1])
+                 .scale(5), "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb",
+                                                                         "value": [0.1, 0.1, 0.9]}}},
+        "ball": {"type": "sphere", "to_world": ball_at(-0.8),
+                 "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.9, 0.1, 0.1]}}},
+        "light": {"type": "constant"},
+        "integrator": {"type": "path", "max_depth": 2},
+    })
+
+
+def ball_at(x):
+    return mi.ScalarTransform4f().translate([x, 0, 0.5]).scale(0.6)
+
+
+def test_moving_object_leaves_no_ghost():
+    scene = moving_sphere_scene()
+    integ = FoveatedIntegrator(nested=scene.integrator(), theta=0.3, sigma_p=0.7,
+                               atrous_iterations=0, reconstruction="voronoi")
+    for _ in range(4):
+        mi.render(scene, integrator=integ, seed=0)
+    before = integ.buffer("depth")
+    params = mi.traverse(scene)
+    params["ball.to_world"] = ball_at(0.8)
+    params.update()
+    img = np.array(mi.render(scene, integrator=integ, seed=0))
+    after = integ.buffer("depth")
+    ref = np.array(mi.render(scene, integrator=scene.integrator(), spp=64, seed=1))
+    uncovered = (before < 4.0) & (after > 5.5)   # ball was there, now the wall shows
+    assert uncovered.sum() > 20
+    assert not integ.buffer("reprojection_map")[..., 2][uncovered].any()
+    red_ghost = img[uncovered][:, 0] > img[uncovered][:, 2]
+    assert red_ghost.mean() < 0.02, red_ghost.mean()
+    assert (ref[uncovered][:, 2] > ref[uncovered][:, 0]).all()
+
+
+def test_camera_teleport_rejects_history():
+    look = lambda x: mi.ScalarTransform4f().look_at(origin=[x, 0, 5], target=[x, 0, 0],
+                                                    up=[0, 1, 0])
+    scene = mi.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 40, "to_world": look(-10),
+                   "film": {"type": "hdrfilm", "width": 32, "height": 24,
+                            "rfilter": {"type": "box"}}},
+        "a": {"type": "sphere", "center": [-10, 0, 0], "bsdf": {"type": "diffuse"}},
+        "b": {"type": "sphere", "center": [10, 0, 0], "bsdf": {"type": "diffuse"}},
+        "light": {"type": "constant"}})
+    integ = FoveatedIntegrator(theta=0.2, sigma_p=0.8, atrous_iterations=0)
+    for _ in range(3):
+        mi.render(scene, integrator=integ, seed=0)
+    assert integ.stats["history_hit_rate"] > 0.2
+    params = mi.traverse(scene)
+    params["sensor.to_world"] = look(10)
+    params.update()
+    mi.render(scene, integrator=integ, seed=0)
+    assert integ.stats["history_hits"] == 0
+    assert integ.stats["resampled"] == 0
