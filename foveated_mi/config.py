@@ -1,0 +1,350 @@
+"""Sequence configuration: a TOML file -> a validated :class:`SequenceConfig`.
+
+Layout (every key optional except ``scene``)::
+
+    scene = "voxel-city"          # built-in name, or XML path relative to this file
+    description = "..."
+    frames = 32                   # >= 1
+    fps = 30                      # > 0
+    size = [256, 256]             # width, height (or one integer for a square)
+    spp = 1
+    seed = 0
+    [scene_params]                # built-in scene parameters, e.g. size = 128 (voxel-city),
+    size = 128                    # or an XML file's <default> parameters
+    [integrator]                  # the nested integrator (default: path, max_depth 6)
+    type = "path"
+    max_depth = 6
+    [foveated]                    # options of the foveated integrator (theta, sigma_p, ...)
+    theta = 0.1
+    [camera]                      # absent: the scene's own camera, static
+    interpolation = "catmull_rom" # linear | catmull_rom | step
+    [[camera.keyframes]]          # t plus any of origin, target, up, fov, cut; missing
+    t = 0.0                       # values come from the scene's camera
+    origin = [-60, 30, -60]
+    [gaze]                        # absent: fixed at the centre
+    type = "fixed"                # fixed (x, y) | keyframes (keyframes, interpolation) |
+    x = 0.5                       # saccades (targets, dwell, duration, loop) |
+    y = 0.5                       # csv (path relative to this file, interpolation, relative)
+    [output]
+    dir = "out/seq"               # relative to the working directory; default out/<stem>
+    video = "mp4"                 # mp4 | gif | none
+    exr = true
+    png = true
+
+A static camera can also be written without keyframes (``[camera]`` with ``origin``,
+``target``, ...). Every error is a :class:`~foveated_mi.validate.ParameterError` of one line
+naming the file and the dotted key (e.g. ``configs/x.toml: gaze.type``), the value and what
+is allowed; its ``key`` attribute holds the dotted key.
+"""
+from __future__ import annotations
+
+import inspect
+import math
+import os
+import sys
+from dataclasses import dataclass, field
+from typing import Any
+
+from .paths import (CameraPath, FixedGaze, GazeCSV, GazeKeyframes, GazePath,
+                    Saccades)
+from .validate import ParameterError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+__all__ = ["SequenceConfig", "OutputConfig", "load_config", "parse_config", "VIDEO_FORMATS",
+           "FOVEATED_KEYS"]
+
+VIDEO_FORMATS = ("mp4", "gif", "none")
+GAZE_TYPES = ("fixed", "keyframes", "saccades", "csv")
+
+#: Options of the ``foveated`` integrator a config may set, with their TOML types
+#: (value ranges are checked by the integrator's own validation when it is importable).
+FOVEATED_KEYS: dict[str, tuple[type, ...]] = {
+    "theta": (int, float), "sigma_p": (int, float), "reorder": (str,),
+    "block_height": (int,), "edge_threshold": (int, float), "reconstruction": (str,),
+    "max_radius": (int,), "jfa": (str,), "atrous_iterations": (int,),
+    "sigma_color": (int, float), "sigma_normal": (int, float), "sigma_position": (int, float),
+    "tonemap": (str,), "exposure": (int, float), "history": (bool,),
+    "max_history": (int, float), "reprojection_tolerance": (int, float),
+    "clamp": (int, float), "timing": (bool,),
+}
+
+_TOP_KEYS = ("scene", "description", "frames", "fps", "size", "spp", "seed", "scene_params",
+             "integrator", "foveated", "camera", "gaze", "output")
+
+
+@dataclass(frozen=True)
+class OutputConfig:
+    """Where and what a sequence run writes."""
+    dir: str
+    video: str = "mp4"
+    exr: bool = True
+    png: bool = True
+
+
+@dataclass
+class SequenceConfig:
+    """A validated sequence: scene, timing, film, integrator options, camera, gaze, output."""
+    scene: str                              # built-in name or absolute XML path
+    frames: int = 1
+    fps: float = 30.0
+    size: tuple[int, int] = (256, 256)      # (width, height)
+    spp: int = 1
+    seed: int = 0
+    scene_params: dict = field(default_factory=dict)
+    integrator: dict | None = None          # nested integrator dict; None: path, max_depth 6
+    foveated: dict = field(default_factory=dict)
+    camera: CameraPath | None = None        # None: the scene's own camera
+    gaze: GazePath = field(default_factory=FixedGaze)
+    output: OutputConfig = field(default_factory=lambda: OutputConfig(dir="out/sequence"))
+    description: str = ""
+    source: str | None = None               # the TOML file
+
+    @property
+    def width(self) -> int:
+        return self.size[0]
+
+    @property
+    def height(self) -> int:
+        return self.size[1]
+
+    def time(self, index: int) -> float:
+        """Time in seconds of frame ``index``."""
+        return index / self.fps
+
+    def camera_at(self, index: int) -> dict | None:
+        """Camera dict of frame ``index`` (None when the scene's own camera is used)."""
+        return None if self.camera is None else self.camera.at(self.time(index))
+
+    def gaze_at(self, index: int) -> tuple[float, float]:
+        return self.gaze.at(self.time(index))
+
+    def cut_before(self, index: int) -> bool:
+        """Whether the camera cuts between frame ``index - 1`` and frame ``index``."""
+        if self.camera is None or index <= 0:
+            return False
+        return self.camera.cut_between(self.time(index - 1), self.time(index))
+
+
+class _Ctx:
+    """Error helper: every message names the file and the dotted key."""
+
+    def __init__(self, source: str):
+        self.source = source
+
+    def error(self, key: str, value: Any, allowed: str) -> ParameterError:
+        e = ParameterError(f"{self.source}: {key}", value, allowed)
+        e.key = key
+        return e
+
+    def rename(self, e: ParameterError, prefix: str | None = None) -> ParameterError:
+        """Re-issue an error raised by a path or integrator check under the file's name."""
+        key = e.name if prefix is None or e.name.startswith(prefix) else f"{prefix}.{e.name}"
+        return self.error(key, e.value, e.allowed)
+
+    def table(self, key: str, value: Any) -> dict:
+        if not isinstance(value, dict):
+            raise self.error(key, value, "a table")
+        return value
+
+    def known(self, key: str, table: dict, allowed: tuple[str, ...] | list[str]) -> None:
+        for k, v in table.items():
+            if k not in allowed:
+                name = f"{key}.{k}" if key else k
+                raise self.error(name, v, "a known key (unknown key; allowed here: "
+                                 + ", ".join(allowed) + ")")
+
+    def integer(self, key: str, value: Any, lo: int, hi: int | None = None) -> int:
+        allowed = f"an integer >= {lo}" + (f" and <= {hi}" if hi is not None else "")
+        if isinstance(value, bool) or not isinstance(value, int) or value < lo or \
+                (hi is not None and value > hi):
+            raise self.error(key, value, allowed)
+        return value
+
+    def number(self, key: str, value: Any, lo: float, lo_open: bool = False) -> float:
+        allowed = f"a finite number {'>' if lo_open else '>='} {lo:g}"
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+                not math.isfinite(value) or value < lo or (lo_open and value == lo):
+            raise self.error(key, value, allowed)
+        return float(value)
+
+    def boolean(self, key: str, value: Any) -> bool:
+        if not isinstance(value, bool):
+            raise self.error(key, value, "true or false")
+        return value
+
+    def string(self, key: str, value: Any, choices: tuple[str, ...] | None = None) -> str:
+        if choices is not None:
+            if not isinstance(value, str) or value not in choices:
+                raise self.error(key, value, "one of " + ", ".join(repr(c) for c in choices))
+        elif not isinstance(value, str):
+            raise self.error(key, value, "a string")
+        return value
+
+
+def load_config(path: str | os.PathLike) -> SequenceConfig:
+    """Read and validate a sequence TOML file (see the module docs for the layout)."""
+    if not isinstance(path, (str, os.PathLike)) or not os.path.isfile(path):
+        raise ParameterError("config", path if isinstance(path, str) else str(path),
+                             "an existing TOML file")
+    path = os.fspath(path)
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except tomllib.TOMLDecodeError as e:
+        raise ParameterError("config", path, f"valid TOML ({e})") from None
+    stem = os.path.splitext(os.path.basename(path))[0]
+    return parse_config(data, base_dir=os.path.dirname(os.path.abspath(path)), source=path,
+                        default_output=os.path.join("out", stem))
+
+
+def parse_config(data: dict, *, base_dir: str = ".", source: str = "<config>",
+                 default_output: str = os.path.join("out", "sequence")) -> SequenceConfig:
+    """Validate an already-parsed TOML table; relative paths resolve against ``base_dir``."""
+    from . import scenes
+
+    ctx = _Ctx(source)
+    ctx.table("", data)
+    ctx.known("", data, _TOP_KEYS)
+    if "scene" not in data:
+        raise ctx.error("scene", None, "a built-in scene name ("
+                        + ", ".join(repr(n) for n in scenes.SCENES) + ") or an XML path")
+    scene = data["scene"]
+    if not isinstance(scene, str):
+        raise ctx.error("scene", scene, "a string")
+    if scene not in scenes.SCENES:
+        xml = scene if os.path.isabs(scene) else os.path.join(base_dir, scene)
+        if not os.path.isfile(xml):
+            raise ctx.error("scene", scene, "one of " + ", ".join(repr(n) for n in scenes.SCENES)
+                            + " or an existing XML file (relative to the config file)")
+        scene = os.path.abspath(xml)
+
+    frames = ctx.integer("frames", data.get("frames", 1), 1)
+    fps = ctx.number("fps", data.get("fps", 30.0), 0.0, lo_open=True)
+    size = data.get("size", [256, 256])
+    if isinstance(size, int) and not isinstance(size, bool):
+        size = [size, size]
+    if not isinstance(size, list) or len(size) != 2:
+        raise ctx.error("size", size, "[width, height] with integers in [1, 16384]")
+    size = (ctx.integer("size[0]", size[0], 1, 16384), ctx.integer("size[1]", size[1], 1, 16384))
+    spp = ctx.integer("spp", data.get("spp", 1), 1, 1 << 20)
+    seed = ctx.integer("seed", data.get("seed", 0), 0, (1 << 32) - 1)
+    description = ctx.string("description", data.get("description", ""))
+
+    scene_params = dict(ctx.table("scene_params", data.get("scene_params", {})))
+    if scene in scenes.SCENES:
+        accepted = list(inspect.signature(scenes.SCENES[scene]).parameters)
+        ctx.known("scene_params", scene_params, accepted)
+
+    integrator = None
+    if "integrator" in data:
+        integrator = dict(ctx.table("integrator", data["integrator"]))
+        ctx.string("integrator.type", integrator.get("type"))
+
+    foveated = _foveated(ctx, data.get("foveated", {}))
+    camera = _camera(ctx, data.get("camera"), scene)
+    gaze = _gaze(ctx, data.get("gaze", {"type": "fixed"}), base_dir)
+    output = _output(ctx, data.get("output", {}), default_output)
+    return SequenceConfig(scene=scene, frames=frames, fps=fps, size=size, spp=spp, seed=seed,
+                          scene_params=scene_params, integrator=integrator, foveated=foveated,
+                          camera=camera, gaze=gaze, output=output, description=description,
+                          source=source)
+
+
+def _foveated(ctx: _Ctx, table: Any) -> dict:
+    table = dict(ctx.table("foveated", table))
+    if "gaze" in table:
+        raise ctx.error("foveated.gaze", table["gaze"], "no gaze here: set it in the [gaze] table")
+    ctx.known("foveated", table, list(FOVEATED_KEYS))
+    for key, value in table.items():
+        types = FOVEATED_KEYS[key]
+        if isinstance(value, bool) and bool not in types or not isinstance(value, types):
+            names = {int: "an integer", float: "a number", str: "a string", bool: "true or false"}
+            allowed = " or ".join(dict.fromkeys(names[t] for t in types))
+            raise ctx.error(f"foveated.{key}", value, allowed)
+    try:   # the integrator's own range checks, when its module is importable
+        from .integrators.foveated import validate_options
+    except Exception:  # pragma: no cover - integrator under construction
+        validate_options = None
+    if validate_options is not None:
+        try:
+            validate_options(dict(table))
+        except ParameterError as e:
+            raise ctx.rename(e, "foveated") from None
+    return table
+
+
+def _camera(ctx: _Ctx, table: Any, scene: str) -> CameraPath | None:
+    if table is None:
+        return None
+    from .scenes import scene_camera
+    table = dict(ctx.table("camera", table))
+    pose_keys = ("origin", "target", "up", "fov")
+    ctx.known("camera", table, ("interpolation", "keyframes", "cut_threshold") + pose_keys)
+    try:
+        defaults = scene_camera(scene)
+    except ParameterError as e:
+        raise ctx.rename(e) from None
+    interpolation = table.pop("interpolation", "linear")
+    cut_threshold = table.pop("cut_threshold", 1e-3)
+    if "keyframes" in table:
+        extra = [k for k in table if k != "keyframes"]
+        if extra:
+            raise ctx.error(f"camera.{extra[0]}", table[extra[0]],
+                            "no pose keys beside camera.keyframes (put them in a keyframe)")
+        keyframes = table["keyframes"]
+    else:
+        keyframes = [{"t": 0.0, **table}]
+    try:
+        return CameraPath(keyframes, interpolation, defaults=defaults,
+                          cut_threshold=cut_threshold, name="camera")
+    except ParameterError as e:
+        raise ctx.rename(e, "camera") from None
+
+
+def _gaze(ctx: _Ctx, table: Any, base_dir: str) -> GazePath:
+    table = dict(ctx.table("gaze", table))
+    kind = ctx.string("gaze.type", table.pop("type", "fixed"), GAZE_TYPES)
+    keys = {"fixed": ("x", "y"), "keyframes": ("keyframes", "interpolation"),
+            "saccades": ("targets", "dwell", "duration", "loop"),
+            "csv": ("path", "interpolation", "relative")}[kind]
+    ctx.known("gaze", table, ("type",) + keys)
+    try:
+        if kind == "fixed":
+            return FixedGaze(table.get("x", 0.5), table.get("y", 0.5), name="gaze")
+        if kind == "keyframes":
+            if "keyframes" not in table:
+                raise ctx.error("gaze.keyframes", None, "a list of {t, x, y} keyframes")
+            return GazeKeyframes(table["keyframes"], table.get("interpolation", "linear"),
+                                 name="gaze")
+        if kind == "saccades":
+            if "targets" not in table:
+                raise ctx.error("gaze.targets", None, "a list of [x, y] points")
+            return Saccades(table["targets"], table.get("dwell", 0.3),
+                            table.get("duration", 0.05), table.get("loop", True), name="gaze")
+        path = ctx.string("gaze.path", table.get("path"))
+        full = path if os.path.isabs(path) else os.path.join(base_dir, path)
+        if not os.path.isfile(full):
+            raise ctx.error("gaze.path", path, "an existing CSV file (relative to the config "
+                            "file)")
+        return GazeCSV(full, table.get("interpolation", "linear"),
+                       relative=table.get("relative", False), name="gaze")
+    except ParameterError as e:
+        if getattr(e, "key", None) is not None or e.name.startswith(ctx.source):
+            raise
+        if e.name.startswith("gaze"):
+            raise ctx.rename(e) from None
+        raise   # a CSV error: already names file:line
+
+
+def _output(ctx: _Ctx, table: Any, default_dir: str) -> OutputConfig:
+    table = ctx.table("output", table)
+    ctx.known("output", table, ("dir", "video", "exr", "png"))
+    return OutputConfig(dir=ctx.string("output.dir", table.get("dir", default_dir)),
+                        video=ctx.string("output.video", table.get("video", "mp4"),
+                                         VIDEO_FORMATS),
+                        exr=ctx.boolean("output.exr", table.get("exr", True)),
+                        png=ctx.boolean("output.png", table.get("png", True)))

@@ -1,0 +1,449 @@
+"""Camera and gaze paths of a frame sequence, evaluated at a time ``t`` in seconds.
+
+Every path has ``at(t)`` and ``at_frame(index, fps) = at(index / fps)``. Before the first and
+after the last keyframe a path holds its end value.
+
+Camera (:class:`CameraPath`): keyframes ``{"t", "origin", "target", "up", "fov"}``
+interpolated component-wise (``up`` re-normalised) with
+
+* ``"linear"``: :math:`p(t) = (1 - s) p_i + s p_{i+1}`, :math:`s = (t - t_i)/(t_{i+1} - t_i)`;
+* ``"catmull_rom"``: cubic Hermite segments with finite-difference (Catmull-Rom) tangents
+  for non-uniform keyframe times, :math:`m_k = (p_{k+1} - p_{k-1}) / (t_{k+1} - t_{k-1})`,
+  one-sided differences at the ends of a shot (Catmull & Rom 1974; the "finite
+  difference" tangents of cubic Hermite splines). The path passes through every keyframe
+  and its velocity is continuous inside a shot;
+* ``"step"``: the value of the last keyframe at or before ``t`` (every keyframe is a cut).
+
+A **cut** (the camera jumps, the runner should drop the temporal history) is a segment whose
+second keyframe has ``"cut": true``, or whose two keyframes are less than ``cut_threshold``
+seconds apart (default 1 ms; two keyframes at the same time are always a cut), or any
+segment under ``"step"``. From the cut's time on, the second keyframe's value holds.
+:meth:`CameraPath.cut_between` tells whether a cut lies in ``(t0, t1]``.
+
+Gaze, in normalised film coordinates (origin top-left, x right, y down; values outside
+[0, 1] mean the viewer looks off-screen): :class:`FixedGaze`, :class:`GazeKeyframes` (the
+same three interpolations), :class:`Saccades` (fixations of ``dwell`` seconds joined by
+saccades of ``duration`` seconds with a minimum-jerk profile, Flash & Hogan 1985, a fair
+model of the bell-shaped velocity of a saccade) and :class:`GazeCSV` (``t,x,y`` samples as an
+eye tracker writes them, linearly interpolated).
+"""
+from __future__ import annotations
+
+import math
+import os
+from typing import Any, Sequence
+
+import numpy as np
+
+from .validate import ParameterError, check_choice, check_finite, check_range
+
+__all__ = ["INTERPOLATIONS", "CameraPath", "GazePath", "FixedGaze", "GazeKeyframes",
+           "Saccades", "GazeCSV"]
+
+INTERPOLATIONS = ("linear", "catmull_rom", "step")
+_CAMERA_KEYS = ("origin", "target", "up", "fov")
+
+
+# ---------------------------------------------------------------------------------------------
+# Piecewise interpolation shared by camera and gaze keyframes
+# ---------------------------------------------------------------------------------------------
+
+class _Keyframes:
+    """Values ``v[k]`` (K, D) at non-decreasing times ``t[k]`` with cuts before some keys.
+
+    ``cut[k]`` (k >= 1) means no interpolation from key k-1 to key k: the value jumps at
+    ``t[k]``. Tangents for Catmull-Rom never reach across a cut.
+    """
+
+    def __init__(self, times: np.ndarray, values: np.ndarray, cut: np.ndarray,
+                 interpolation: str):
+        self.t, self.v = times, values
+        self.cut = cut.copy()
+        self.cut[0] = False
+        if interpolation == "step":
+            self.cut[1:] = True
+        self.interpolation = interpolation
+        self.m = self._tangents() if interpolation == "catmull_rom" else None
+
+    def _tangents(self) -> np.ndarray:
+        t, v, cut = self.t, self.v, self.cut
+        k_count = len(t)
+        m = np.zeros_like(v)
+        for k in range(k_count):
+            has_prev = k > 0 and not cut[k]
+            has_next = k + 1 < k_count and not cut[k + 1]
+            if has_prev and has_next:
+                m[k] = (v[k + 1] - v[k - 1]) / (t[k + 1] - t[k - 1])
+            elif has_next:
+                m[k] = (v[k + 1] - v[k]) / (t[k + 1] - t[k])
+            elif has_prev:
+                m[k] = (v[k] - v[k - 1]) / (t[k] - t[k - 1])
+        return m
+
+    def cut_times(self) -> list[float]:
+        return [float(self.t[k]) for k in range(1, len(self.t)) if self.cut[k]]
+
+    def __call__(self, time: float) -> np.ndarray:
+        t, v = self.t, self.v
+        k = int(np.searchsorted(t, time, side="right"))   # keys at or before ``time``
+        if k == 0:
+            return v[0].copy()
+        if k == len(t):
+            return v[-1].copy()
+        i, j = k - 1, k
+        if self.cut[j]:
+            return v[i].copy()
+        dt = t[j] - t[i]
+        s = (time - t[i]) / dt
+        if self.interpolation == "linear":
+            return (1.0 - s) * v[i] + s * v[j]
+        # Cubic Hermite basis.
+        s2, s3 = s * s, s * s * s
+        h00 = 2 * s3 - 3 * s2 + 1
+        h10 = s3 - 2 * s2 + s
+        h01 = -2 * s3 + 3 * s2
+        h11 = s3 - s2
+        return h00 * v[i] + h10 * dt * self.m[i] + h01 * v[j] + h11 * dt * self.m[j]
+
+
+def _check_time(name: str, value: Any) -> float:
+    return check_finite(name, value)
+
+
+def _check_times(name: str, times: list[float]) -> None:
+    for k in range(1, len(times)):
+        if times[k] < times[k - 1]:
+            raise ParameterError(f"{name}[{k}].t", times[k],
+                                 f"a time >= {times[k - 1]:g} (keyframes in time order)")
+
+
+def _check_vec(name: str, value: Any, n: int) -> list[float]:
+    allowed = f"{n} finite numbers"
+    if isinstance(value, (str, bytes, dict)):
+        raise ParameterError(name, value, allowed)
+    try:
+        v = [float(c) for c in value]
+    except (TypeError, ValueError):
+        raise ParameterError(name, value, allowed) from None
+    if len(v) != n or not all(math.isfinite(c) for c in v):
+        raise ParameterError(name, value, allowed)
+    return v
+
+
+def _check_bool(name: str, value: Any) -> bool:
+    if not isinstance(value, bool):
+        raise ParameterError(name, value, "true or false")
+    return value
+
+
+class _Path:
+    """Base of camera and gaze paths: ``at(t)`` and ``at_frame(index, fps)``."""
+
+    def at(self, t: float):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def at_frame(self, index: int, fps: float):
+        """Value at frame ``index`` of a sequence at ``fps`` frames per second."""
+        fps = check_range("fps", fps, 0.0, None, lo_open=True)
+        return self.at(index / fps)
+
+
+# ---------------------------------------------------------------------------------------------
+# Camera
+# ---------------------------------------------------------------------------------------------
+
+class CameraPath(_Path):
+    """Camera keyframes, interpolated (see the module docs).
+
+    ``keyframes``: a list of dicts with ``t`` (seconds) and any of ``origin``, ``target``,
+    ``up`` (3 numbers each), ``fov`` (degrees along x) and ``cut`` (bool); keys left out are
+    taken from ``defaults`` (a camera dict, e.g. :func:`foveated_mi.scenes.scene_camera`),
+    and are required when there are no defaults. ``name`` prefixes error messages.
+    """
+
+    def __init__(self, keyframes: Sequence[dict], interpolation: str = "linear", *,
+                 defaults: dict | None = None, cut_threshold: float = 1e-3,
+                 name: str = "camera"):
+        self.name = name
+        self.interpolation = check_choice(f"{name}.interpolation", interpolation,
+                                          INTERPOLATIONS)
+        self.cut_threshold = check_range(f"{name}.cut_threshold", cut_threshold, 0.0)
+        kname = f"{name}.keyframes"
+        if isinstance(keyframes, (str, bytes, dict)) or not hasattr(keyframes, "__len__") \
+                or len(keyframes) == 0:
+            raise ParameterError(kname, keyframes, "a non-empty list of keyframe tables")
+        if defaults is not None:
+            from .scenes import check_camera
+            defaults = check_camera(defaults, f"{name}.defaults")
+        self.keyframes: list[dict] = []
+        for k, kf in enumerate(keyframes):
+            self.keyframes.append(self._check_keyframe(f"{kname}[{k}]", kf, defaults))
+        times = [kf["t"] for kf in self.keyframes]
+        _check_times(kname, times)
+        t = np.array(times, dtype=np.float64)
+        values = np.array([kf["origin"] + kf["target"] + kf["up"] + [kf["fov"]]
+                           for kf in self.keyframes], dtype=np.float64)
+        cut = np.array([False] + [self.keyframes[k]["cut"]
+                                  or t[k] - t[k - 1] < max(self.cut_threshold, 1e-12)
+                                  for k in range(1, len(t))], dtype=bool)
+        self._keys = _Keyframes(t, values, cut, self.interpolation)
+
+    @staticmethod
+    def _check_keyframe(name: str, kf: Any, defaults: dict | None) -> dict:
+        if not isinstance(kf, dict):
+            raise ParameterError(name, kf, "a table with t, origin, target, up, fov")
+        allowed = ("t", "cut") + _CAMERA_KEYS
+        for key in kf:
+            if key not in allowed:
+                raise ParameterError(f"{name}.{key}", kf[key],
+                                     "a keyframe key among " + ", ".join(allowed))
+        if "t" not in kf:
+            raise ParameterError(f"{name}.t", None, "a time in seconds (required)")
+        out: dict[str, Any] = {"t": _check_time(f"{name}.t", kf["t"]),
+                               "cut": _check_bool(f"{name}.cut", kf.get("cut", False))}
+        for key in _CAMERA_KEYS:
+            if key in kf:
+                value = kf[key]
+            elif defaults is not None:
+                value = defaults[key]
+            else:
+                raise ParameterError(f"{name}.{key}", None,
+                                     "a value (required: the scene's camera is unknown)")
+            if key == "fov":
+                out[key] = check_range(f"{name}.fov", value, 0.0, 180.0, lo_open=True,
+                                       hi_open=True)
+            else:
+                out[key] = _check_vec(f"{name}.{key}", value, 3)
+        from .scenes import check_camera
+        check_camera({k: out[k] for k in _CAMERA_KEYS}, name)
+        return out
+
+    @classmethod
+    def static(cls, camera: dict, name: str = "camera") -> "CameraPath":
+        """A camera that never moves."""
+        return cls([{"t": 0.0, **{k: camera[k] for k in _CAMERA_KEYS if k in camera}}],
+                   name=name)
+
+    @property
+    def duration(self) -> float:
+        """Time of the last keyframe."""
+        return float(self._keys.t[-1])
+
+    @property
+    def cut_times(self) -> list[float]:
+        """Times at which the camera jumps."""
+        return self._keys.cut_times()
+
+    def cut_between(self, t0: float, t1: float) -> bool:
+        """Whether a cut lies in the half-open interval ``(t0, t1]``."""
+        return any(t0 < c <= t1 for c in self.cut_times)
+
+    def at(self, t: float) -> dict[str, Any]:
+        """``dict(origin, target, up, fov)`` at time ``t`` (lists of floats, fov a float)."""
+        t = _check_time("t", t)
+        v = self._keys(t)
+        origin, target, up = v[0:3], v[3:6], v[6:9]
+        n = float(np.linalg.norm(up))
+        if n > 0:
+            up = up / n
+        return dict(origin=[float(c) for c in origin], target=[float(c) for c in target],
+                    up=[float(c) for c in up], fov=float(v[9]))
+
+
+# ---------------------------------------------------------------------------------------------
+# Gaze
+# ---------------------------------------------------------------------------------------------
+
+class GazePath(_Path):
+    """Base class of gaze paths: ``at(t) -> (x, y)`` in normalised film coordinates."""
+
+    def at(self, t: float) -> tuple[float, float]:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+class FixedGaze(GazePath):
+    """The viewer looks at ``(x, y)`` all the time."""
+
+    def __init__(self, x: float = 0.5, y: float = 0.5, *, name: str = "gaze"):
+        self.x = check_finite(f"{name}.x", x)
+        self.y = check_finite(f"{name}.y", y)
+
+    def at(self, t: float) -> tuple[float, float]:
+        _check_time("t", t)
+        return (self.x, self.y)
+
+
+class GazeKeyframes(GazePath):
+    """Gaze keyframes ``{"t", "x", "y"}`` (or ``[t, x, y]``), interpolated like the camera."""
+
+    def __init__(self, keyframes: Sequence[Any], interpolation: str = "linear", *,
+                 name: str = "gaze"):
+        self.interpolation = check_choice(f"{name}.interpolation", interpolation,
+                                          INTERPOLATIONS)
+        kname = f"{name}.keyframes"
+        if isinstance(keyframes, (str, bytes, dict)) or not hasattr(keyframes, "__len__") \
+                or len(keyframes) == 0:
+            raise ParameterError(kname, keyframes, "a non-empty list of {t, x, y} keyframes")
+        rows = []
+        for k, kf in enumerate(keyframes):
+            kn = f"{kname}[{k}]"
+            if isinstance(kf, dict):
+                for key in kf:
+                    if key not in ("t", "x", "y"):
+                        raise ParameterError(f"{kn}.{key}", kf[key], "one of the keys t, x, y")
+                for key in ("t", "x", "y"):
+                    if key not in kf:
+                        raise ParameterError(f"{kn}.{key}", None, "a finite number (required)")
+                rows.append([check_finite(f"{kn}.{key}", kf[key]) for key in ("t", "x", "y")])
+            else:
+                rows.append(_check_vec(kn, kf, 3))
+        times = [r[0] for r in rows]
+        _check_times(kname, times)
+        t = np.array(times, dtype=np.float64)
+        cut = np.concatenate([[False], np.diff(t) <= 0.0])
+        self._keys = _Keyframes(t, np.array([r[1:] for r in rows], dtype=np.float64), cut,
+                                self.interpolation)
+
+    def at(self, t: float) -> tuple[float, float]:
+        v = self._keys(_check_time("t", t))
+        return (float(v[0]), float(v[1]))
+
+
+def _minimum_jerk(s: float) -> float:
+    """Position profile 10 s^3 - 15 s^4 + 6 s^5 of a minimum-jerk movement (Flash & Hogan)."""
+    return s * s * s * (10.0 + s * (-15.0 + 6.0 * s))
+
+
+class Saccades(GazePath):
+    """Fixations on ``targets`` in turn, ``dwell`` seconds each, joined by saccades.
+
+    Fixation ``k`` covers ``[k P, k P + dwell)`` with period ``P = dwell + duration``; the
+    saccade to the next target takes ``duration`` seconds (0: an instant jump) along a
+    straight line with the minimum-jerk profile. After the last target the gaze returns to
+    the first (``loop=True``) or stays (``loop=False``). Real saccades last 20-100 ms and
+    fixations 200-400 ms (Rayner 1998), hence the defaults.
+    """
+
+    def __init__(self, targets: Sequence[Any], dwell: float = 0.3, duration: float = 0.05,
+                 loop: bool = True, *, name: str = "gaze"):
+        if isinstance(targets, (str, bytes, dict)) or not hasattr(targets, "__len__") \
+                or len(targets) == 0:
+            raise ParameterError(f"{name}.targets", targets, "a non-empty list of [x, y] points")
+        self.targets = [tuple(_check_vec(f"{name}.targets[{k}]", p, 2))
+                        for k, p in enumerate(targets)]
+        self.dwell = check_range(f"{name}.dwell", dwell, 0.0, None, lo_open=True)
+        self.duration = check_range(f"{name}.duration", duration, 0.0)
+        self.loop = _check_bool(f"{name}.loop", loop)
+
+    @property
+    def period(self) -> float:
+        return self.dwell + self.duration
+
+    def phase(self, t: float) -> tuple[str, int]:
+        """``("fixation", k)`` while fixating target ``k``, ``("saccade", k)`` on the way
+        from target ``k`` to the next."""
+        t = max(_check_time("t", t), 0.0)
+        n = len(self.targets)
+        k = int(t // self.period)
+        if not self.loop and k >= n - 1:
+            return ("fixation", n - 1)
+        k_target = k % n
+        if t - k * self.period < self.dwell:
+            return ("fixation", k_target)
+        return ("saccade", k_target)
+
+    def at(self, t: float) -> tuple[float, float]:
+        t = max(_check_time("t", t), 0.0)
+        state, k = self.phase(t)
+        a = self.targets[k]
+        if state == "fixation":
+            return (float(a[0]), float(a[1]))
+        b = self.targets[(k + 1) % len(self.targets)]
+        s = (t - (t // self.period) * self.period - self.dwell) / self.duration
+        w = _minimum_jerk(min(max(s, 0.0), 1.0))
+        return (float(a[0] + w * (b[0] - a[0])), float(a[1] + w * (b[1] - a[1])))
+
+
+class GazeCSV(GazePath):
+    """Gaze samples from a CSV file of ``t,x,y`` lines (seconds, normalised film coordinates).
+
+    An optional header line (any first line that is not three numbers) is skipped, as are
+    blank lines and lines starting with ``#``. Timestamps must increase strictly; every value
+    must be finite (an eye tracker's lost samples must be removed, not written as NaN).
+    ``relative=True`` subtracts the first timestamp (for trackers writing absolute times).
+    Between samples the gaze is interpolated (``"linear"``, or ``"step"`` for the raw
+    samples); before the first and after the last it holds.
+    """
+
+    ALLOWED_LINE = "a line 't,x,y' of three comma-separated finite numbers"
+
+    def __init__(self, path: str | os.PathLike, interpolation: str = "linear", *,
+                 relative: bool = False, name: str = "gaze"):
+        self.interpolation = check_choice(f"{name}.interpolation", interpolation,
+                                          ("linear", "step"))
+        self.relative = _check_bool(f"{name}.relative", relative)
+        if not isinstance(path, (str, os.PathLike)) or not os.path.isfile(path):
+            raise ParameterError(f"{name}.path", path if isinstance(path, str) else str(path),
+                                 "an existing CSV file of t,x,y lines")
+        self.path = os.fspath(path)
+        rows, lines = self._read()
+        t = np.array([r[0] for r in rows], dtype=np.float64)
+        if self.relative:
+            t = t - t[0]
+        self.times = t
+        self.samples = np.array([r[1:] for r in rows], dtype=np.float64)
+        self.lines = lines
+        self._keys = _Keyframes(t, self.samples, np.zeros(len(t), dtype=bool),
+                                self.interpolation)
+
+    def _read(self) -> tuple[list[list[float]], list[int]]:
+        rows: list[list[float]] = []
+        lines: list[int] = []
+        first_content = True
+        last_line = 0
+        try:
+            with open(self.path, encoding="utf-8-sig") as f:
+                text = f.read()
+        except (OSError, UnicodeDecodeError) as e:
+            raise ParameterError(self.path, type(e).__name__,
+                                 "a readable UTF-8 CSV file of t,x,y lines") from None
+        for lineno, raw in enumerate(text.splitlines(), start=1):
+            last_line = lineno
+            line = raw.strip()
+            if not line or line.startswith("#"):
+                continue
+            where = f"{self.path}:{lineno}"
+            fields = [p.strip() for p in line.split(",")]
+            values = []
+            for p in fields:
+                try:
+                    values.append(float(p))
+                except ValueError:
+                    values = None
+                    break
+            if values is None or len(fields) != 3:
+                if first_content and values is None:
+                    first_content = False        # a header line
+                    continue
+                raise ParameterError(where, line, self.ALLOWED_LINE)
+            first_content = False
+            if not all(math.isfinite(v) for v in values):
+                raise ParameterError(where, line, "finite numbers t,x,y (no NaN or inf)")
+            if rows and values[0] <= rows[-1][0]:
+                raise ParameterError(where, line, f"a timestamp > {rows[-1][0]:g} "
+                                     f"(line {lines[-1]}): timestamps must increase")
+            rows.append(values)
+            lines.append(lineno)
+        if not rows:
+            raise ParameterError(f"{self.path}:{max(last_line, 1)}", text[:40] if text else "",
+                                 "at least one " + self.ALLOWED_LINE + " (the file has no "
+                                 "samples)")
+        return rows, lines
+
+    @property
+    def duration(self) -> float:
+        return float(self.times[-1])
+
+    def at(self, t: float) -> tuple[float, float]:
+        v = self._keys(_check_time("t", t))
+        return (float(v[0]), float(v[1]))
