@@ -1,0 +1,25 @@
+"""Long-run checks (issue 5), marked slow: `make test-slow`."""
+import os
+import subprocess
+import sys
+
+import pytest
+
+ROOT = os.path.join(os.path.dirname(__file__), "..")
+
+
+@pytest.mark.slow
+def test_500_frames_memory_kernels_stats():
+    r = subprocess.run([sys.executable, os.path.join(ROOT, "benchmarks", "long_run.py"),
+                        "--frames", "500", "--size", "48", "48", "--variant", "llvm_ad_rgb"],
+                       capture_output=True, text=True, timeout=3600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "all checks met" in r.stdout
+
+
+@pytest.mark.slow
+def test_2048_frame_fits_in_memory():
+    r = subprocess.run([sys.executable, os.path.join(ROOT, "benchmarks", "peak_memory.py"),
+                        "--size", "2048", "2048", "--variant", "llvm_ad_rgb"],
+                       capture_output=True, text=True, timeout=3600)
+    assert r.returncode == 0, r.stdout + r.stderr
