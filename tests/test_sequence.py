@@ -1,0 +1,106 @@
+"""`foveated-mi sequence`: a config runs end to end and writes frames, stats and a video; a
+camera cut resets the history so the next frame equals a fresh first frame."""
+import json
+
+import numpy as np
+import pytest
+
+from foveated_mi.cli import main
+from foveated_mi.config import load_config
+from foveated_mi.io import read_exr
+from foveated_mi.render import FrameRenderer
+from foveated_mi.scenes import load_scene
+
+CONFIG = """
+scene = "voxel-city"
+frames = 5
+fps = 10
+size = [32, 24]
+spp = 1
+seed = 3
+
+[scene_params]
+size = 16
+
+[integrator]
+type = "path"
+max_depth = 2
+
+[foveated]
+theta = 0.15
+sigma_p = 0.6
+atrous_iterations = 1
+
+[camera]
+interpolation = "linear"
+
+[[camera.keyframes]]
+t = 0.0
+origin = [-40.0, 30.0, -40.0]
+target = [4.0, 6.0, 4.0]
+
+[[camera.keyframes]]
+t = 0.25
+origin = [-38.0, 29.0, -40.0]
+target = [4.0, 6.0, 4.0]
+
+[[camera.keyframes]]
+t = 0.25
+cut = true
+origin = [40.0, 20.0, 30.0]
+target = [-4.0, 8.0, -2.0]
+
+[[camera.keyframes]]
+t = 1.0
+origin = [38.0, 20.0, 32.0]
+target = [-4.0, 8.0, -2.0]
+
+[gaze]
+type = "saccades"
+targets = [[0.3, 0.3], [0.7, 0.6]]
+dwell = 0.1
+duration = 0.05
+
+[output]
+dir = "unused"
+video = "gif"
+"""
+
+
+def test_sequence_end_to_end_with_cut(tmp_path, capsys):
+    cfg_path = tmp_path / "seq.toml"
+    cfg_path.write_text(CONFIG)
+    out = tmp_path / "out"
+    code = main(["sequence", str(cfg_path), "--out", str(out), "--no-progress"])
+    assert code == 0, capsys.readouterr().err
+    frames = sorted(out.glob("frame_*.exr"))
+    assert len(frames) == 5 and len(list(out.glob("frame_*.png"))) == 5
+    stats = [json.loads(line) for line in (out / "stats.jsonl").read_text().splitlines()]
+    assert [s["frame"] for s in stats] == list(range(5))
+    for s in stats:
+        assert np.isfinite(s["timings_ms"]["total"]) and 0 < s["ray_fraction"] <= 1
+    assert (out / "sequence.gif").stat().st_size > 0
+    cfg = load_config(cfg_path)
+    cut = next(i for i in range(5) if cfg.cut_before(i))
+    assert cut == 3
+    assert stats[cut - 1]["history_hit_rate"] > 0.2
+    assert stats[cut]["history_hit_rate"] == 0.0
+    # The frame after the cut is a fresh first frame at that camera.
+    scene = load_scene(cfg.scene, width=32, height=24, spp=1, integrator=cfg.integrator,
+                       camera=cfg.camera_at(cut), **cfg.scene_params)
+    fr = FrameRenderer(scene, dict(cfg.foveated), spp=1)
+    fr.integrator.gaze = cfg.gaze_at(cut)
+    fresh = fr.render_frame(seed=cfg.seed)
+    np.testing.assert_array_equal(read_exr(frames[cut])["image"], fresh.image)
+
+
+def test_bad_config_one_line_exit_2(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(CONFIG.replace("frames = 5", "frames = 0"))
+    code = main(["sequence", str(bad), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "frames" in err[0]
+    bad.write_text(CONFIG.replace("theta = 0.15", "theta = -0.15"))
+    code = main(["sequence", str(bad), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "theta" in err[0]
