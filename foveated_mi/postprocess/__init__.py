@@ -1,0 +1,15 @@
+"""Post-processing (Kwon et al. 2019, §3.5): tone mapping, then an edge-avoiding à-trous
+wavelet filter guided by the G-buffer (Dammertz et al. 2010).
+
+Pipeline order, as in the paper::
+
+    tonemapped = tonemap(interpolated, operator, exposure)
+    filtered   = atrous(tonemapped, normal, position, width, height, valid=hit)
+"""
+from __future__ import annotations
+
+from .atrous import B3_SPLINE, atrous, check_sigma
+from .tonemap import MAX_EXPOSURE, TONEMAPPERS, check_exposure, tonemap
+
+__all__ = ["B3_SPLINE", "MAX_EXPOSURE", "TONEMAPPERS", "atrous", "check_exposure", "check_sigma",
+           "tonemap"]

@@ -1,0 +1,225 @@
+"""Edge-avoiding à-trous wavelet filter (Kwon et al. 2019, §3.5; Dammertz et al. 2010).
+
+H. Dammertz, D. Sewtz, J. Hanika, H. P. A. Lensch, "Edge-Avoiding À-Trous Wavelet
+Transform for Fast Global Illumination Filtering", HPG 2010. Kwon et al. apply it after
+tone mapping, steered by the G-buffer of the geometry pass.
+
+Iteration ``i = 0 .. iterations-1`` smooths the previous result ``c_i`` (``c_0`` = input)
+with the 5x5 B3-spline kernel ``h(dx, dy) = h1[dx] h1[dy]``,
+``h1 = [1/16, 1/4, 3/8, 1/4, 1/16]``, whose taps are spread ``s = 2^i`` pixels apart
+("à trous": with holes)::
+
+    c_{i+1}(p) = sum_q h(q) w_i(p, q) c_i(q) / sum_q h(q) w_i(p, q),   q = p + s (dx, dy)
+
+with the edge-stopping weight ``w_i = w_rt * w_n * w_x`` of the paper (its equations and
+its GLSL listing)::
+
+    w_rt = exp(-|c_i(p) - c_i(q)|^2 / sigma_rt_i^2),  sigma_rt_i = 2^-i sigma_color
+    w_n  = exp(-|N(p) - N(q)|^2 / (s^2 sigma_normal^2))
+    w_x  = exp(-|X(p) - X(q)|^2 / sigma_position^2)
+
+The colour sigma halves every iteration, as Dammertz et al. propose: each level removes
+noise, so the colour distances that still indicate noise shrink. The normal distance is
+divided by ``s^2`` as in the paper's listing. ``sigma = inf`` means weight 1 for that term,
+whatever the distance (no ``inf / inf`` or ``0 * inf`` is ever formed).
+
+Rules beyond the paper, so that no NaN can appear or spread:
+
+* **Borders**: taps outside the image are dropped and the weights renormalised by their
+  sum (the normalisation above already does this).
+* **Background** (``valid`` false: the primary ray missed, position/normal are inf or 0):
+  a miss only mixes with misses, using the colour term only; a hit only mixes with hits.
+  A pixel marked valid whose position or normal is not finite counts as a miss. With
+  ``valid=None`` a pixel is valid when its position and normal are finite and the normal is
+  non-zero.
+* **Non-finite colour** (any channel NaN or +-inf): such a sample gets weight 0 as a
+  neighbour, so it never spreads. A non-finite centre pixel skips the colour term and is
+  replaced by the weighted mean of its finite neighbours; when it has none it is returned
+  unchanged.
+
+``iterations = 0`` returns the input. Each level is one kernel: a symbolic loop over the
+25 taps (``dr.while_loop`` with ``max_iterations=25``); the tap spacing and sigmas are
+opaque, so all levels and all sigma values share one compiled kernel. The filter is
+differentiable with respect to the colour, forward and reverse mode (gathers, exponentials
+and one division per level; checked against the transposed filter in the tests).
+"""
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+
+from ..validate import ParameterError, check_int
+from .tonemap import as_color3f
+
+#: One-dimensional B3-spline taps (the 5x5 kernel is their outer product).
+B3_SPLINE = (1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0)
+
+
+def check_sigma(name: str, value) -> float:
+    """A sigma: a number > 0, where ``inf`` is allowed and disables that weight."""
+    allowed = "a number > 0 (inf disables the weight)"
+    if isinstance(value, bool):
+        raise ParameterError(name, value, allowed)
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(name, value, allowed) from None
+    if math.isnan(v) or v <= 0.0:
+        raise ParameterError(name, value, allowed)
+    return v
+
+
+def _inv_sq(sigma: float) -> float:
+    """1 / sigma^2, with 0 for sigma = inf (and for sigmas so large it underflows)."""
+    return 0.0 if math.isinf(sigma) else 1.0 / (sigma * sigma)
+
+
+def _exponent(d2: mi.Float, inv_sq: mi.Float) -> mi.Float:
+    """``d2 / sigma^2`` as ``d2 * inv_sq``; exactly 0 when ``inv_sq == 0`` (sigma = inf) even
+    for ``d2 = inf``. The select sits before the exponential so the unused product
+    (``inf * 0 = NaN``) never reaches a value or, in the backward pass, a gradient.
+    """
+    return dr.select(inv_sq > 0.0, d2 * inv_sq, 0.0)
+
+
+def _all_finite(v) -> mi.Bool:
+    return dr.isfinite(v.x) & dr.isfinite(v.y) & dr.isfinite(v.z)
+
+
+def _check_buffer(name: str, value, n: int, kind: str):
+    if not (dr.is_array_v(value) and dr.width(value) == n):
+        got = f"{type(value).__name__} of width {dr.width(value)}" if dr.is_array_v(value) \
+            else type(value).__name__
+        raise ParameterError(name, got, f"{kind} with width*height = {n} entries")
+
+
+def atrous(color: mi.Color3f, normal: mi.Array3f, position: mi.Array3f, width: int, height: int,
+           *, iterations: int = 5, sigma_color: float = 0.5, sigma_normal: float = 0.5,
+           sigma_position: float = 0.5, valid: mi.Bool | None = None) -> mi.Color3f:
+    """Edge-avoiding à-trous filter of a colour buffer guided by a G-buffer.
+
+    Args:
+        color: colour to filter (the tone-mapped image in the paper's pipeline), one entry
+            per pixel ``i = y * width + x``.
+        normal: shading normals, same layout.
+        position: world-space positions, same layout (sigma_position is in world units).
+        width, height: film size in pixels.
+        iterations: number of à-trous levels, 0..16; level ``i`` uses tap spacing ``2^i``.
+        sigma_color: colour sigma of the first level (halved every level); inf disables it.
+            The default 0.5 suits display-referred colour in [0, 1].
+        sigma_normal: normal sigma (unit normals: distance in [0, 2]); inf disables it.
+        sigma_position: position sigma in scene units; inf disables it.
+        valid: per-pixel G-buffer hit mask, or None to derive it from finite positions and
+            non-zero finite normals.
+
+    Returns:
+        The filtered colour (``color`` itself for ``iterations = 0``).
+    """
+    width = check_int("width", width, lo=1)
+    height = check_int("height", height, lo=1)
+    iterations = check_int("iterations", iterations, lo=0, hi=16)
+    sigma_color = check_sigma("sigma_color", sigma_color)
+    sigma_normal = check_sigma("sigma_normal", sigma_normal)
+    sigma_position = check_sigma("sigma_position", sigma_position)
+    n = width * height
+    color = as_color3f("color", color)
+    _check_buffer("color", color, n, "an mi.Color3f")
+    _check_buffer("normal", normal, n, "an mi.Array3f")
+    _check_buffer("position", position, n, "an mi.Array3f")
+    if valid is not None and not isinstance(valid, mi.Bool):
+        raise ParameterError("valid", type(valid).__name__, "an mi.Bool or None")
+    if valid is not None:
+        _check_buffer("valid", valid, n, "an mi.Bool")
+    if iterations == 0:
+        return color
+
+    normal = mi.Array3f(normal)
+    position = mi.Array3f(position)
+    geo_ok = _all_finite(position) & _all_finite(normal)
+    if valid is None:
+        valid = geo_ok & (dr.squared_norm(normal) > 0.0)
+    else:
+        valid = valid & geo_ok
+    # Misses carry zeros so that G-buffer distances are finite; they are never used
+    # for a hit/miss pair anyway.
+    normal = dr.select(valid, normal, 0.0)
+    position = dr.select(valid, position, 0.0)
+    # The taps gather from these arrays, which evaluates them; scheduling them together
+    # makes that one kernel instead of one per component (no synchronisation is added).
+    dr.schedule(valid, normal, position)
+
+    # Sigmas and the tap spacing enter as opaque scalars: every level, and every change
+    # of a sigma, reuses one compiled kernel.
+    inv_c0 = _inv_sq(sigma_color)
+    inv_n0 = _inv_sq(sigma_normal)
+    inv_x = dr.opaque(mi.Float, _inv_sq(sigma_position))
+
+    c = color
+    for level in range(iterations):
+        step = 1 << level
+        c = _atrous_level(
+            c, normal, position, valid, width, height,
+            step=dr.opaque(mi.Int32, step),
+            inv_c=dr.opaque(mi.Float, inv_c0 * 4.0 ** level),        # sigma_rt_i = 2^-i sigma
+            inv_n=dr.opaque(mi.Float, inv_n0 / float(step * step)),  # |dN|^2 / s^2 (listing)
+            inv_x=inv_x)
+    return c
+
+
+def _b3(d: mi.Int32) -> mi.Float:
+    """B3-spline tap h1[d + 2] for d in -2..2."""
+    a = dr.abs(d)
+    return dr.select(a == 0, B3_SPLINE[2], dr.select(a == 1, B3_SPLINE[1], B3_SPLINE[0]))
+
+
+def _atrous_level(c: mi.Color3f, normal: mi.Array3f, position: mi.Array3f, valid: mi.Bool,
+                  width: int, height: int, *, step: mi.Int32, inv_c: mi.Float, inv_n: mi.Float,
+                  inv_x: mi.Float) -> mi.Color3f:
+    """One à-trous level: a symbolic loop over the 25 taps (one small kernel, not 25
+    unrolled copies, which LLVM needs seconds to compile)."""
+    n = width * height
+    dr.schedule(c)   # gathered by every tap: evaluated once, in one kernel
+    finite = _all_finite(c)
+    c_safe = dr.select(finite, c, 0.0)
+
+    idx = dr.arange(mi.UInt32, n)
+    py = idx // width
+    px = mi.Int32(idx - py * width)
+    py = mi.Int32(py)
+
+    def body(k, w_sum, c_sum):
+        ty = k // 5
+        tx = k - ty * 5
+        dx, dy = mi.Int32(tx) - 2, mi.Int32(ty) - 2
+        qx = px + dx * step
+        qy = py + dy * step
+        inside = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
+        q = mi.UInt32(dr.select(inside, qy * width + qx, 0))
+
+        cq = dr.gather(mi.Color3f, c, q, inside)
+        fq = _all_finite(cq)
+        cq = dr.select(fq, cq, 0.0)
+        vq = dr.gather(mi.Bool, valid, q, inside)
+        nq = dr.gather(mi.Array3f, normal, q, inside)
+        xq = dr.gather(mi.Array3f, position, q, inside)
+
+        # w_rt * w_n * w_x = exp(-(e_rt + e_n + e_x)): one exponential per tap. Every
+        # term is >= 0 (possibly inf), so the sum never forms inf - inf.
+        e_rt = dr.select(finite, _exponent(dr.squared_norm(c_safe - cq), inv_c), 0.0)
+        e_geo = _exponent(dr.squared_norm(normal - nq), inv_n) \
+            + _exponent(dr.squared_norm(position - xq), inv_x)
+        e_geo = dr.select(valid & vq, e_geo, 0.0)       # miss-miss: colour only
+        use = inside & fq & ~(valid ^ vq)                # hit-miss pairs never mix
+        w = dr.select(use, _b3(dx) * _b3(dy) * dr.exp(-(e_rt + e_geo)), 0.0)
+        return k + 1, w_sum + w, c_sum + cq * w
+
+    _, w_sum, c_sum = dr.while_loop(
+        state=(mi.UInt32(0), dr.zeros(mi.Float, n), dr.zeros(mi.Color3f, n)),
+        cond=lambda k, w_sum, c_sum: k < 25,
+        body=body, labels=("k", "w_sum", "c_sum"), label="atrous_taps",
+        max_iterations=25)
+
+    has = w_sum > 0.0
+    return dr.select(has, c_sum / dr.select(has, w_sum, 1.0), c)

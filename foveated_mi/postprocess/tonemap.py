@@ -1,0 +1,115 @@
+"""Tone mapping (Kwon et al. 2019, §3.5: "First, tone mapping is performed ...").
+
+Every operator maps a linear, scene-referred ``mi.Color3f`` to a display-referred one:
+
+    y = f(x * 2^exposure)
+
+with the exposure in photographic stops. The operators act on each channel on its own:
+
+``"none"``
+    ``f(x) = x``: the exposed linear colour, not clamped and not sanitised (NaN, inf and
+    negative values pass through; an 8-bit writer clips later).
+``"reinhard"``
+    ``f(x) = x / (1 + x)`` per channel (Reinhard et al. 2002, eq. 3, applied to each RGB
+    channel rather than to luminance). The per-channel form is bounded in [0, 1) by
+    construction and monotone in every channel; its price is that saturated highlights drift
+    towards white, which the luminance form avoids at the cost of channels above 1.
+``"aces"``
+    ``f(x) = clip(x (2.51 x + 0.03) / (x (2.43 x + 0.59) + 0.14), 0, 1)``, the fit of the
+    ACES reference rendering transform by K. Narkowicz, "ACES Filmic Tone Mapping Curve"
+    (2015). Narkowicz notes that the fit matches ACES when the input is first scaled by 0.6;
+    that factor is *not* applied here: pass ``exposure = log2(0.6) ≈ -0.737`` for it.
+    The curve reaches 1 at x ≈ 7.24 and is monotone on [0, 7.24].
+
+Non-finite and negative input, for ``"reinhard"`` and ``"aces"``: NaN -> 0, negative
+values (``-inf`` included) -> 0, ``+inf`` -> 1. The output is then always finite and in
+[0, 1]. The rules are applied to the exposed value, per channel.
+
+All operators are plain Dr.Jit arithmetic, so they are differentiable where the curve is
+(the clamps have zero derivative outside their range; NaN lanes get a zero gradient).
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from ..validate import ParameterError, check_choice, check_range
+
+#: Largest |exposure| accepted, in stops: 2^±64 stays a normal float32, so a finite
+#: input never becomes 0 * inf = NaN through the exposure scale.
+MAX_EXPOSURE = 64.0
+
+# Inputs are capped before the rational curves: beyond these both curves are exactly 1
+# in float32 (Reinhard: x / (1 + x) rounds to 1 once x > 2^24; ACES: clipped above 7.24),
+# and the cap keeps inf / inf and x^2 overflow from producing NaN.
+_REINHARD_CAP = 1e30
+_ACES_CAP = 1e4
+
+
+def _sanitize(x):
+    """NaN -> 0 and negatives (-inf included) -> 0. A select rather than ``fmax`` so that
+    the derivative at x = 0 is the right-hand one (1): black pixels keep a gradient."""
+    return dr.select(x >= 0.0, x, 0.0)     # NaN compares false
+
+
+def tonemap_none(x: mi.Color3f) -> mi.Color3f:
+    """Identity: the exposed linear colour."""
+    return x
+
+
+def tonemap_reinhard(x: mi.Color3f) -> mi.Color3f:
+    """Per-channel Reinhard ``x / (1 + x)``; NaN/negative -> 0, +inf -> 1."""
+    x = dr.minimum(_sanitize(x), _REINHARD_CAP)
+    # Already in [0, 1] for x in [0, cap]; a clamp would tie at 0 and zero the derivative
+    # of black pixels.
+    return x / (1.0 + x)
+
+
+def tonemap_aces(x: mi.Color3f) -> mi.Color3f:
+    """Narkowicz (2015) ACES fit; NaN/negative -> 0, +inf -> 1."""
+    x = dr.minimum(_sanitize(x), _ACES_CAP)
+    y = (x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)
+    return dr.minimum(y, 1.0)   # y >= 0 for x >= 0: only the top needs the clamp
+
+
+def as_color3f(name: str, value) -> mi.Color3f:
+    """``value`` as an ``mi.Color3f`` (any 3-component Dr.Jit array is converted)."""
+    if isinstance(value, mi.Color3f):
+        return value
+    if dr.is_array_v(value) and dr.size_v(value) == 3 and dr.depth_v(value) == 2:
+        return mi.Color3f(value)
+    raise ParameterError(name, type(value).__name__, "an mi.Color3f (3 x N Dr.Jit array)")
+
+
+#: Operator name -> function of the exposed linear colour. A new operator is one function
+#: plus one line here.
+TONEMAPPERS = {
+    "none": tonemap_none,
+    "reinhard": tonemap_reinhard,
+    "aces": tonemap_aces,
+}
+
+
+def check_exposure(exposure) -> float:
+    """A finite exposure in stops, |exposure| <= :data:`MAX_EXPOSURE`."""
+    return check_range("exposure", exposure, -MAX_EXPOSURE, MAX_EXPOSURE)
+
+
+def tonemap(color: mi.Color3f, operator: str = "reinhard", exposure: float = 0.0) -> mi.Color3f:
+    """Tone-map a linear colour buffer: ``TONEMAPPERS[operator](color * 2^exposure)``.
+
+    Args:
+        color: linear RGB, one entry per pixel.
+        operator: a key of :data:`TONEMAPPERS` (``"none"``, ``"reinhard"``, ``"aces"``).
+        exposure: exposure in stops; enters the kernel through ``dr.opaque`` so a new value
+            per frame compiles no new kernel.
+
+    Returns:
+        The display-referred colour; in [0, 1] and finite for ``"reinhard"`` and ``"aces"``
+        whatever the input (see the module docstring for the NaN/inf rule).
+    """
+    check_choice("operator", operator, TONEMAPPERS)
+    exposure = check_exposure(exposure)
+    color = as_color3f("color", color)
+    scale = dr.opaque(mi.Float, 2.0 ** exposure)
+    return TONEMAPPERS[operator](color * scale)
