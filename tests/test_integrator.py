@@ -83,7 +83,8 @@ def test_dict_loading_any_nested_key():
     ({"theta": -1.0}, "theta = -1.0 is invalid"),
     ({"sigma_p": 1.5}, "sigma_p = 1.5 is invalid"),
     ({"reorder": "zigzag"}, "reorder = 'zigzag' is invalid"),
-    ({"nested": {"type": "depth"}}, "nested integrator"),
+    ({"nested": {"type": "ptracer"}}, "nested integrator"),
+    ({"nested": {"type": "diffuse"}}, "nested integrator"),
     ({"thetaa": 0.1}, "thetaa"),
 ])
 def test_bad_properties_name_the_parameter(bad, match):

@@ -11,7 +11,6 @@ NB = os.path.join(os.path.dirname(__file__), "..", "notebooks", "quickstart.ipyn
 def test_quickstart_notebook_executes(tmp_path, monkeypatch):
     monkeypatch.setenv("FOVEATED_MI_NB_SIZE", "32")
     monkeypatch.setenv("FOVEATED_MI_VARIANT", "llvm_ad_rgb")
-    monkeypatch.setenv("MPLBACKEND", "Agg")
     nb = nbformat.read(NB, as_version=4)
     client = NotebookClient(nb, timeout=600, kernel_name="python3",
                             resources={"metadata": {"path": str(tmp_path)}})

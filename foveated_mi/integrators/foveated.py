@@ -307,7 +307,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             history = getattr(self, "_history_in", None)
         # Frame 0 uses the caller's seed as is (so sigma_p = 1 reproduces a plain render);
         # later frames decorrelate so that the history converges under a fixed seed.
-        seed = int(seed) & 0xFFFFFFFF
+        seed = (int(seed) if not dr.is_array_v(seed) else int(dr.slice(seed))) & 0xFFFFFFFF
         frame_seed = seed if self._frame == 0 else \
             int(mi.sample_tea_32(seed, self._frame)[0])
         timer = StageTimer(o["timing"])
