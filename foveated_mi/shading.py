@@ -69,14 +69,18 @@ def trace_wavefront(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingI
     L = dr.select(too_big, L * (limit / peak), L)
     L = dr.select(ok, L, 0.0)
 
-    rejected = dr.count(lane_active & ~finite)
-    clamped = dr.count(too_big)
     if spp > 1:
         total = dr.block_sum(L, spp)
         accepted = dr.block_sum(mi.Float(ok), spp)
     else:
         total, accepted = L, mi.Float(ok)
     radiance = total / dr.maximum(accepted, 1.0)
+    # The counters are reduced from stored per-lane flags: reducing the expressions directly
+    # would trace every path again inside each reduction kernel.
+    bad = mi.UInt32(lane_active & ~finite)
+    big = mi.UInt32(too_big)
+    dr.schedule(radiance, accepted, bad, big)
+    rejected, clamped = dr.sum(bad), dr.sum(big)
     return ShadingResult(radiance, accepted > 0, mi.UInt32(rejected), mi.UInt32(clamped))
 
 

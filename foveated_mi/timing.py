@@ -1,7 +1,9 @@
-"""Per-stage wall-clock timing, only when asked for.
+"""Stage boundaries: per-stage wall-clock timing when asked for, scheduling otherwise.
 
 Timing a Dr.Jit stage needs ``dr.eval`` of its outputs and ``dr.sync_thread``; with timing off
-no synchronisation is added to the frame and the stage times are reported as ``None``.
+no synchronisation is added to the frame and the stage times are reported as ``None``. Either
+way a stage's outputs are materialised once (``dr.schedule``: lazily, with the next kernel),
+so later stages that read them load stored values instead of re-tracing the rays behind them.
 """
 from __future__ import annotations
 
@@ -23,6 +25,7 @@ class StageTimer:
     def mark(self, stage: str, *outputs) -> None:
         """Close ``stage``: evaluate its outputs and add the elapsed time (ms)."""
         if not self.enabled:
+            dr.schedule(*[o for o in outputs if o is not None])
             return
         if outputs:
             dr.eval(*[o for o in outputs if o is not None])

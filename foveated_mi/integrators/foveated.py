@@ -325,7 +325,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                                 edges=edges)
             reproj = _reproject.reprojection_map(gb.position, gb.hit, history, width, height,
                                                  tolerance=o["reprojection_tolerance"])
-            timer.mark("sampling", smap, prob, reproj.hit)
+            timer.mark("sampling", smap, prob, reproj.hit, reproj.index, edges)
 
             ro = _reorder.reorder(smap, width, height, o["reorder"], o["block_height"])
             timer.mark("reorder", ro.wavefront)
@@ -336,7 +336,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         valid = shade.valid if ro.active is None else shade.valid & ro.active
         new, traced = _shading.scatter_to_film(shade.radiance, valid, ro.wavefront, n)
         resolved = _reproject.resolve(new, traced, spp, reproj, history, o["max_history"])
-        timer.mark("trace", resolved.shading, resolved.mask)
+        timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
 
         every_pixel = o["sigma_p"] >= 1.0 and history is None
         with dr.suspend_grad():
@@ -384,6 +384,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                 "interpolated": interpolated, "tonemapped": tonemapped, "filtered": filtered,
                 "image": image,
             }
+            dr.schedule(reproj.hit, resolved.resampled, resolved.mask)
             rays = dr.width(ro.wavefront) if ro.active is None else dr.count(smap)
             self._stats_raw = {
                 "width": width, "height": height, "pixels": n, "rays": rays, "spp": spp,
