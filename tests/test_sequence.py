@@ -104,3 +104,26 @@ def test_bad_config_one_line_exit_2(tmp_path, capsys):
     code = main(["sequence", str(bad), "--out", str(tmp_path / "o")])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "theta" in err[0]
+
+
+def test_ctrl_c_keeps_frames_already_written(tmp_path, capsys, monkeypatch):
+    cfg_path = tmp_path / "seq.toml"
+    cfg_path.write_text(CONFIG)
+    out = tmp_path / "out"
+    real = FrameRenderer.render_frame
+    calls = {"n": 0}
+
+    def interrupting(self, *a, **kw):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt
+        return real(self, *a, **kw)
+
+    monkeypatch.setattr(FrameRenderer, "render_frame", interrupting)
+    code = main(["sequence", str(cfg_path), "--out", str(out), "--no-progress"])
+    assert code == 130
+    assert "interrupted" in capsys.readouterr().err
+    assert len(list(out.glob("frame_*.exr"))) == 2
+    assert len((out / "stats.jsonl").read_text().splitlines()) == 2
+    assert (out / "sequence.gif").stat().st_size > 0
+    assert not list(out.glob("*.partial")) and not list(out.glob("*.tmp*"))

@@ -151,3 +151,31 @@ def test_camera_teleport_rejects_history():
     mi.render(scene, integrator=integ, seed=0)
     assert integ.stats["history_hits"] == 0
     assert integ.stats["resampled"] == 0
+
+
+from hypothesis import given, settings, strategies as st  # noqa: E402
+
+from foveated_mi.reproject import camera_state, reprojection_map, History  # noqa: E402
+
+
+@settings(max_examples=12, deadline=None)
+@given(ox=st.floats(-2, 2), oy=st.floats(-2, 2), oz=st.floats(2.5, 6), fov=st.floats(20, 80),
+       tx=st.floats(-0.5, 0.5), ty=st.floats(-0.5, 0.5))
+def test_reprojection_is_identity_for_a_static_camera(ox, oy, oz, fov, tx, ty):
+    scene = mi.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": fov,
+                   "to_world": mi.ScalarTransform4f().look_at(origin=[ox, oy, oz],
+                                                              target=[tx, ty, 0], up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 23, "height": 17}},
+        "s": {"type": "sphere", "radius": 0.8},
+        "w": {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate([0, 0, -1]).scale(4)}})
+    sensor = scene.sensors()[0]
+    gb = render_gbuffer(scene, sensor)
+    n = 23 * 17
+    hist = History(mean=dr.zeros(mi.Color3f, n), count=dr.full(mi.Float, 1.0, n), depth=gb.depth,
+                   camera=camera_state(sensor), width=23, height=17)
+    rm = reprojection_map(gb.position, gb.hit, hist, 23, 17)
+    hit = gb.hit.numpy()
+    np.testing.assert_array_equal(rm.hit.numpy(), hit)
+    np.testing.assert_array_equal(rm.index.numpy()[hit], np.arange(n)[hit])

@@ -392,10 +392,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                 "history_hits": dr.count(reproj.hit), "resampled": dr.count(resolved.resampled),
                 "holes": dr.count(~resolved.mask), "rejected_samples": shade.rejected,
                 "clamped_samples": shade.clamped, "timings_ms": timer.finish(),
-                "variant": mi.variant(), "reorder": o["reorder"], "theta": o["theta"],
-                "sigma_p": o["sigma_p"], "gaze": list(o["gaze"]),
-                "reconstruction": o["reconstruction"],
-                "atrous_iterations": o["atrous_iterations"],
+                "variant": mi.variant(),
+                **{k: (list(v) if k == "gaze" else v) for k, v in o.items() if k != "timing"},
             }
             self._stats_cache = None
 
