@@ -24,6 +24,7 @@ test-slow: $(STAMP)
 bench: $(STAMP)
 	$(RUN) $(PY) benchmarks/bench_reorder.py
 	$(RUN) $(PY) benchmarks/bench_reconstruct.py
+	$(RUN) $(PY) benchmarks/bench_quality.py
 	$(RUN) $(PY) benchmarks/bench_temporal.py
 
 clean:
