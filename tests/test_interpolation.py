@@ -1,0 +1,395 @@
+"""Interpolation methods (foveated_mi.reconstruct.interpolate / .sat) against NumPy references.
+
+Every reference below is written from the definitions in the module docstrings with a
+different loop structure (a loop over window offsets, vectorised over pixels, in Float64),
+never by calling the code under test.
+"""
+import math
+import time
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from foveated_mi.reconstruct import (NO_SITE, RECONSTRUCTIONS, box_mean, interleave_rgb0, jump_flood,
+                                     reconstruct, summed_area_table)
+from foveated_mi.validate import ParameterError
+
+METHODS = list(RECONSTRUCTIONS)
+SIZES = [(1, 1), (1, 13), (13, 1), (17, 11), (24, 24), (97, 61)]
+
+
+# ----------------------------------------------------------------------------- NumPy references
+def exact_nearest(mask, w, h):
+    """Nearest site by brute force (ties -> smallest index), NO_SITE without sites."""
+    n = w * h
+    sites = np.flatnonzero(mask)
+    if sites.size == 0:
+        return np.full(n, NO_SITE, np.int64)
+    px, py = np.arange(n) % w, np.arange(n) // w
+    d2 = (px[:, None] - sites[None] % w) ** 2 + (py[:, None] - sites[None] // w) ** 2
+    return sites[d2.argmin(axis=1)]
+
+
+def geometry(nearest, w, h, max_radius):
+    """Voronoi fill index, pixel coordinates and r^2 = min(|p - s(p)|^2, R^2)."""
+    n = w * h
+    px, py = np.arange(n) % w, np.arange(n) // w
+    has = nearest != NO_SITE
+    s = np.where(has, nearest, 0)
+    r2 = np.where(has, (px - s % w) ** 2 + (py - s // w) ** 2, 0)
+    return px, py, np.minimum(r2, max_radius ** 2), has, s
+
+
+def fill(shading, nearest):
+    """F(q) in Float64, (n, 3); zero without a site."""
+    has = nearest != NO_SITE
+    out = shading.T[np.where(has, nearest, 0)].astype(np.float64)
+    out[~has] = 0
+    return out
+
+
+def offsets(radius):
+    r = np.arange(-radius, radius + 1)
+    return [(dx, dy) for dy in r for dx in r if dx * dx + dy * dy <= radius * radius]
+
+
+def ref_sibson(shading, nearest, w, h, max_radius):
+    """mean of F(q) over {q in film : |q - p|^2 <= r_p^2}."""
+    px, py, r2, _, _ = geometry(nearest, w, h, max_radius)
+    F = fill(shading, nearest)
+    acc, cnt = np.zeros_like(F), np.zeros(w * h)
+    for dx, dy in offsets(min(max_radius, w + h)):
+        qx, qy = px + dx, py + dy
+        ok = (dx * dx + dy * dy <= r2) & (qx >= 0) & (qx < w) & (qy >= 0) & (qy < h)
+        q = np.where(ok, qy * w + qx, 0)
+        acc += np.where(ok[:, None], F[q], 0)
+        cnt += ok
+    return (acc / cnt[:, None]).T
+
+
+def ref_discrete_sibson(shading, nearest, w, h, max_radius):
+    """p receives F(q) from every q with |p - q|^2 <= r_q^2; output = mean received."""
+    px, py, r2, _, _ = geometry(nearest, w, h, max_radius)
+    F = fill(shading, nearest)
+    acc, cnt = np.zeros_like(F), np.zeros(w * h)
+    for dx, dy in offsets(min(max_radius, w + h)):
+        qx, qy = px - dx, py - dy  # p = q + (dx, dy)
+        inside = (qx >= 0) & (qx < w) & (qy >= 0) & (qy < h)
+        q = np.where(inside, qy * w + qx, 0)
+        ok = inside & (dx * dx + dy * dy <= r2[q])
+        acc += np.where(ok[:, None], F[q], 0)
+        cnt += ok
+    return (acc / cnt[:, None]).T
+
+
+def ref_box_mean(F, w, h, k):
+    """Mean of F (n, 3) over the (2k+1)^2 square around each pixel, clipped; k per pixel."""
+    img = F.reshape(h, w, 3)
+    out = np.zeros((w * h, 3))
+    px, py = np.arange(w * h) % w, np.arange(w * h) // w
+    for i in range(w * h):
+        x0, x1 = max(px[i] - k[i], 0), min(px[i] + k[i], w - 1)
+        y0, y1 = max(py[i] - k[i], 0), min(py[i] + k[i], h - 1)
+        out[i] = img[y0:y1 + 1, x0:x1 + 1].reshape(-1, 3).mean(axis=0)
+    return out
+
+
+def gauss_count(r2):
+    """#{(i, j) : i^2 + j^2 <= r2} by brute force."""
+    r = int(math.isqrt(int(r2)))
+    i = np.arange(-r, r + 1)
+    return int(np.count_nonzero(i[:, None] ** 2 + i[None] ** 2 <= r2))
+
+
+def ref_fast_sibson(shading, nearest, w, h, max_radius):
+    """Square (2k+1)^2 with k = round((sqrt(N) - 1) / 2), N = pixels of the disk; the 5-pixel plus
+    exactly at r^2 = 1; clamp to the range of F; sites keep their colour."""
+    px, py, r2, _, _ = geometry(nearest, w, h, max_radius)
+    F = fill(shading, nearest)
+    def half_size(q):
+        if q <= 64 * 64:
+            return math.floor((math.sqrt(gauss_count(q)) - 1) / 2 + 0.5)
+        # documented approximation N = pi r^2 beyond 64 px, in Float32 like the kernel
+        f = np.float32
+        return int(np.floor((np.sqrt(f(math.pi) * f(q)) - f(1)) * f(0.5) + f(0.5)))
+
+    ks = {q: half_size(q) for q in np.unique(r2)}
+    k = np.array([ks[q] for q in r2])
+    out = ref_box_mean(F, w, h, k)
+    img = F.reshape(h, w, 3)
+    for i in np.flatnonzero(r2 == 1):
+        x, y = px[i], py[i]
+        plus = [img[y + dy, x + dx] for dx, dy in ((0, 0), (1, 0), (-1, 0), (0, 1), (0, -1))
+                if 0 <= x + dx < w and 0 <= y + dy < h]
+        out[i] = np.mean(plus, axis=0)
+    out = np.clip(out, F.min(axis=0), F.max(axis=0))
+    return np.where((r2 == 0)[:, None], F, out).T
+
+
+REFERENCES = {
+    "voronoi": lambda s, nr, w, h, r: fill(s, nr).T,
+    "sibson": ref_sibson,
+    "discrete_sibson": ref_discrete_sibson,
+    "fast_sibson": ref_fast_sibson,
+}
+
+
+# ----------------------------------------------------------------------------- helpers
+def run(method, shading, mask, nearest, w, h, max_radius=32):
+    out = reconstruct(method, mi.Color3f(shading), mi.Bool(mask), mi.UInt32(nearest.astype(np.uint32)),
+                      w, h, max_radius=max_radius)
+    return out.numpy()
+
+
+def random_case(seed, w, h, density):
+    rng = np.random.default_rng(seed)
+    mask = rng.random(w * h) < density
+    if not mask.any():
+        mask[rng.integers(w * h)] = True
+    shading = rng.random((3, w * h)).astype(np.float32)
+    shading[:, ~mask] = np.nan  # never read outside the sites
+    return mask, shading, exact_nearest(mask, w, h)
+
+
+# ----------------------------------------------------------------------------- against references
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("size,density,max_radius", [((24, 17), 0.03, 32), ((24, 17), 0.01, 3),
+                                                     ((40, 29), 0.1, 32)])
+def test_matches_reference(method, size, density, max_radius):
+    w, h = size
+    for seed in range(2):
+        mask, shading, nearest = random_case(seed, w, h, density)
+        out = run(method, shading, mask, nearest, w, h, max_radius)
+        ref = REFERENCES[method](shading, nearest, w, h, max_radius)
+        np.testing.assert_allclose(out, ref, rtol=2e-6, atol=1e-7)
+
+
+def test_radius_beyond_table():
+    """fast_sibson tabulates disk pixel counts up to r = 64 and uses pi r^2 beyond: two sites at
+    the ends of a 160 x 5 film with max_radius 100 give radii up to ~80 px."""
+    method = "fast_sibson"
+    w, h = 160, 5
+    mask = np.zeros(w * h, bool)
+    mask[[0, w * h - 1]] = True
+    shading = np.zeros((3, w * h), np.float32)
+    shading[:, 0], shading[:, -1] = [1.0, 0.0, 5.0], [0.0, 2.0, 1.0]
+    nearest = exact_nearest(mask, w, h)
+    out = run(method, shading, mask, nearest, w, h, 100)
+    np.testing.assert_allclose(out, REFERENCES[method](shading, nearest, w, h, 100), rtol=2e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("size", SIZES)
+def test_film_sizes(size):
+    w, h = size
+    mask, shading, nearest = random_case(w * 131 + h, w, h, 0.05)
+    jfa = jump_flood(mi.Bool(mask), w, h).numpy().astype(np.int64)
+    for method in METHODS:
+        out = run(method, shading, mask, jfa, w, h, 8)
+        ref = REFERENCES[method](shading, jfa, w, h, 8)
+        np.testing.assert_allclose(out, ref, rtol=2e-6, atol=1e-7)
+
+
+# ----------------------------------------------------------------------------- properties
+case = st.tuples(st.sampled_from([(1, 1), (1, 9), (9, 1), (16, 12), (23, 17)]),
+                 st.integers(0, 2**32 - 1), st.sampled_from([0.005, 0.03, 0.1, 0.4]))
+
+
+@settings(max_examples=25, deadline=None)
+@given(case=case, colour=st.tuples(*[st.floats(-1e4, 1e4, width=32, allow_subnormal=False)] * 3),
+       method=st.sampled_from(METHODS))
+def test_constant_stays_constant(case, colour, method):
+    """Exactly constant. (Subnormal colours are excluded: Dr.Jit's LLVM kernels flush them to 0.)"""
+    (w, h), seed, density = case
+    mask, shading, nearest = random_case(seed, w, h, density)
+    shading[:, mask] = np.array(colour, np.float32)[:, None]
+    out = run(method, shading, mask, nearest, w, h)
+    np.testing.assert_array_equal(out, np.broadcast_to(np.array(colour, np.float32)[:, None], out.shape))
+
+
+@settings(max_examples=40, deadline=None)
+@given(case=case, scale=st.sampled_from([1.0, 1e4]), offset=st.sampled_from([0.0, -0.5]),
+       method=st.sampled_from(METHODS))
+def test_inside_site_range(case, scale, offset, method):
+    (w, h), seed, density = case
+    mask, shading, nearest = random_case(seed, w, h, density)
+    shading = ((shading + np.float32(offset)) * np.float32(scale)).astype(np.float32)
+    out = run(method, shading, mask, nearest, w, h)
+    lo = shading[:, mask].min(axis=1, keepdims=True)
+    hi = shading[:, mask].max(axis=1, keepdims=True)
+    assert np.all(out >= lo) and np.all(out <= hi)
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("size", [(1, 1), (1, 7), (7, 1), (19, 13)])
+def test_all_sites_is_identity(method, size):
+    w, h = size
+    rng = np.random.default_rng(5)
+    shading = (rng.random((3, w * h)) * 1e3).astype(np.float32)
+    mask = np.ones(w * h, bool)
+    out = run(method, shading, mask, np.arange(w * h), w, h)
+    np.testing.assert_array_equal(out, shading)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_no_site_gives_zeros(method):
+    w, h = 13, 9
+    shading = np.full((3, w * h), np.nan, np.float32)
+    out = run(method, shading, np.zeros(w * h, bool), np.full(w * h, NO_SITE), w, h)
+    assert np.all(out == 0)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_non_finite_sites(method):
+    """A NaN and an inf site count as 0 (as Mitsuba's ImageBlock does with invalid samples)."""
+    w, h = 24, 17
+    mask, shading, nearest = random_case(4, w, h, 0.1)
+    sites = np.flatnonzero(mask)
+    shading[0, sites[0]], shading[1, sites[len(sites) // 2]] = np.nan, np.inf
+    out = run(method, shading, mask, nearest, w, h, 8)
+    clean = np.where(np.isfinite(shading) | ~mask, shading, 0).astype(np.float32)
+    np.testing.assert_allclose(out, REFERENCES[method](clean, nearest, w, h, 8), rtol=2e-6, atol=1e-7)
+    assert np.all(np.isfinite(out))
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_one_site(method):
+    """One site: the output is its colour everywhere; the radius bound keeps it quick."""
+    w, h = 64, 48
+    mask = np.zeros(w * h, bool)
+    mask[5 * w + 40] = True
+    shading = np.zeros((3, w * h), np.float32)
+    shading[:, mask] = np.array([[0.25], [2.0], [7.5]], np.float32)
+    nearest = jump_flood(mi.Bool(mask), w, h)
+    t0 = time.perf_counter()
+    out = reconstruct(method, mi.Color3f(shading), mi.Bool(mask), nearest, w, h, max_radius=32)
+    dr.eval(out)
+    dr.sync_thread()
+    elapsed = time.perf_counter() - t0
+    print(f"{method}: one site, {w}x{h}, max_radius 32: {elapsed * 1e3:.0f} ms (incl. compile)")
+    np.testing.assert_array_equal(out.numpy(), np.broadcast_to(shading[:, mask], (3, w * h)))
+    assert elapsed < 30
+
+
+# ----------------------------------------------------------------------------- summed-area table
+def test_sat_precision_hdr_1024():
+    """3x3 window means of a 1024^2 HDR frame (up to 1e4) with a dim quadrant (1e-3..1e-2) in the
+    bottom right, where the table holds its largest sums: relative error < 1e-3 vs Float64
+    direct sums. A float32 table fails the same check (shown, so the case is a real hazard)."""
+    w = h = 1024
+    rng = np.random.default_rng(1)
+    img = 10.0 ** rng.uniform(-1, 4, (3, h, w))
+    img[:, h // 2:, w // 2:] = 10.0 ** rng.uniform(-3, -2, (3, h // 2, w // 2))
+    img = img.astype(np.float32)
+    table, lo, hi = summed_area_table(interleave_rgb0(mi.Color3f(img.reshape(3, -1))), w, h)
+    np.testing.assert_array_equal(lo.numpy(), img.reshape(3, -1).min(axis=1))
+    np.testing.assert_array_equal(hi.numpy(), img.reshape(3, -1).max(axis=1))
+    x = dr.arange(mi.Int32, w * h) % w
+    y = dr.arange(mi.Int32, w * h) // w
+    got = box_mean(table, x, y, mi.Int32(1), w, h).numpy().reshape(3, h, w)[:, 1:-1, 1:-1]
+    ref = sum(img[:, 1 + dy:h - 1 + dy, 1 + dx:w - 1 + dx].astype(np.float64)
+              for dy in (-1, 0, 1) for dx in (-1, 0, 1)) / 9
+    err = np.abs(got - ref) / ref
+    sat32 = np.cumsum(np.cumsum(img, axis=1, dtype=np.float32), axis=2, dtype=np.float32)
+    box32 = (sat32[:, 2:, 2:] - sat32[:, :-2, 2:] - sat32[:, 2:, :-2] + sat32[:, :-2, :-2])[:, 1:, 1:] / 9
+    err32 = np.abs(box32 - ref[:, 1:, 1:]) / ref[:, 1:, 1:]
+    print(f"SAT 1024^2, 3x3 means: max relative error Float64 table {err.max():.2e}, "
+          f"float32 table {err32.max():.2e}")
+    assert err.max() < 1e-3
+    assert err32.max() > 1e-3
+
+
+# ----------------------------------------------------------------------------- quality
+def psnr(a, b):
+    return 10 * np.log10(np.max(b) ** 2 / np.mean((a - b) ** 2))
+
+
+@pytest.mark.parametrize("theta", [0.3, 0.1])
+def test_fast_sibson_close_to_sibson_on_smooth_image(theta):
+    """Smooth image, foveated random sites (P(d) = 1 / (w d^2 + 1), sigma_p 0.8): fast_sibson
+    within 1 dB of sibson, and both interpolations beat the Voronoi fill. (At theta 0.3, ~57 %
+    sites, discrete Sibson is barely better than Voronoi: with r = 1 almost everywhere a pixel
+    mostly receives Voronoi-filled neighbours, sites contribute only to themselves.)"""
+    w, h = 96, 80
+    px, py = np.arange(w * h) % w, np.arange(w * h) // w
+    truth = np.stack([0.5 + 0.4 * np.sin(px / 7.0) * np.cos(py / 9.0),
+                      0.5 + 0.4 * np.sin((px + py) / 11.0),
+                      0.2 + 0.1 * np.cos(px / 5.0)]).astype(np.float32)
+    d = np.hypot(px + 0.5 - w / 2, py + 0.5 - h / 2) / np.hypot(w / 2, h / 2)
+    weight = (1 / 0.8 - 1) / theta ** 2
+    mask = np.random.default_rng(2).random(w * h) < 1 / (weight * d ** 2 + 1)
+    nearest = jump_flood(mi.Bool(mask), w, h).numpy().astype(np.int64)
+    scores = {m: psnr(run(m, truth, mask, nearest, w, h), truth) for m in METHODS}
+    print(f"theta {theta}, sites {mask.mean():.1%}; PSNR dB: "
+          + ", ".join(f"{m} {v:.2f}" for m, v in scores.items()))
+    assert scores["fast_sibson"] >= scores["sibson"] - 1.0
+    assert scores["sibson"] > scores["voronoi"] + 1.0
+    assert scores["fast_sibson"] > scores["voronoi"] + 1.0
+    assert scores["discrete_sibson"] >= scores["voronoi"]
+
+
+# ----------------------------------------------------------------------------- gradients
+@pytest.mark.parametrize("method", METHODS)
+def test_gradients(method):
+    """Every method is linear in the site colours: the reverse-mode gradient of <g, out> and the
+    forward-mode derivative along v equal the same products computed from two evaluations."""
+    w, h = 14, 11
+    mask, shading, nearest = random_case(3, w, h, 0.08)
+    shading = np.nan_to_num(shading, nan=0.0)
+    rng = np.random.default_rng(9)
+    g = rng.standard_normal((3, w * h)).astype(np.float32)
+    v = np.where(mask, rng.standard_normal((3, w * h)), 0).astype(np.float32)
+    near = mi.UInt32(nearest.astype(np.uint32))
+
+    def f(s):
+        return reconstruct(method, s, mi.Bool(mask), near, w, h, max_radius=6)
+
+    s = mi.Color3f(shading)
+    dr.enable_grad(s)
+    dr.backward(dr.sum(dr.sum(f(s) * mi.Color3f(g))))
+    rev = dr.grad(s).numpy()
+    s = mi.Color3f(shading)
+    dr.enable_grad(s)
+    out = f(s)
+    dr.set_grad(s, mi.Color3f(v))
+    fwd = dr.forward_to(out).numpy()
+    # Linearity: f(s + v) - f(s) = J v (the range clamp of fast_sibson moves with the extremes).
+    jv = run(method, shading + v, mask, nearest, w, h, 6) - run(method, shading, mask, nearest, w, h, 6)
+    np.testing.assert_allclose(fwd, jv, atol=1e-5)
+    # <g, J v> = <J^T g, v>
+    np.testing.assert_allclose(np.sum(rev * v), np.sum(g * jv), rtol=1e-4)
+    assert np.all(rev[:, ~mask] == 0)  # gradients only reach the sites
+
+
+# ----------------------------------------------------------------------------- API
+def test_validation():
+    n = 12
+    args = (dr.zeros(mi.Color3f, n), dr.zeros(mi.Bool, n), dr.zeros(mi.UInt32, n), 4, 3)
+    with pytest.raises(ParameterError, match="method"):
+        reconstruct("bilinear", *args)
+    for bad in (0, -2, 2.5, True, "x"):
+        with pytest.raises(ParameterError, match="max_radius"):
+            reconstruct("sibson", *args, max_radius=bad)
+    with pytest.raises(ParameterError, match="shading"):
+        reconstruct("voronoi", dr.zeros(mi.Color3f, 5), *args[1:])
+    with pytest.raises(ParameterError, match="width"):
+        reconstruct("fast_sibson", *args[:3], 0, 3)
+    assert set(RECONSTRUCTIONS) == {"voronoi", "sibson", "discrete_sibson", "fast_sibson"}
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_kernels_reused_across_frames(method):
+    """A second frame with other sites and colours compiles no new kernel."""
+    w, h = 29, 23
+    for frame in range(2):
+        mask, shading, _ = random_case(100 + frame, w, h, 0.05 + 0.1 * frame)
+        shading = np.nan_to_num(shading)
+        with dr.scoped_set_flag(dr.JitFlag.KernelHistory, frame == 1):
+            nearest = jump_flood(mi.Bool(mask), w, h)
+            dr.eval(reconstruct(method, mi.Color3f(shading), mi.Bool(mask), nearest, w, h))
+            dr.sync_thread()
+            if frame == 1:
+                hist = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
+    assert hist and all(k["cache_hit"] for k in hist)
