@@ -49,20 +49,23 @@ def test_static_camera_converges():
 
 def test_every_pixel_traced_within_predicted_frames():
     W, H = 40, 32
-    theta, sigma_p = 0.15, 0.5
-    # P at the farthest pixel bounds the per-frame probability from below.
-    p_min = sampling.sampling_probability(mi.Float([math.hypot(W, H) / (0.5 * math.hypot(W, H))]),
-                                          mi.Float([sampling.sampling_weight(theta, sigma_p)]))[0]
-    # Frames after which a pixel with p_min is missed with probability 1e-3 / pixels.
+    kw = dict(theta=0.3, sigma_p=0.5)
+    _, prob = sampling.sampling_map(W, H, gaze=(0.5, 0.5), seed=0, **kw)
+    p_min = float(np.min(prob.numpy()))
+    # Frames after which the least likely pixel is still missed with probability 1e-3 / pixels.
     n = math.ceil(math.log(1e-3 / (W * H)) / math.log(1.0 - p_min))
-    integ = FoveatedIntegrator(theta=theta, sigma_p=sigma_p, atrous_iterations=0,
-                               edge_threshold=0.0, reconstruction="voronoi")
+    integ = FoveatedIntegrator(atrous_iterations=0, edge_threshold=0.0,
+                               reconstruction="voronoi", **kw)
     scene = small_cornell(W, H)
     seen = np.zeros((H, W), bool)
+    first_full = None
     for k in range(n):
         mi.render(scene, integrator=integ, seed=1)
         seen |= integ.buffer("sampling_map").astype(bool)
+        if first_full is None and seen.all():
+            first_full = k + 1
     assert seen.all(), f"{(~seen).sum()} pixels never traced in {n} frames"
+    assert first_full < n
 
 
 def test_small_translation_hits_history():
