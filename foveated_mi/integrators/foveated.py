@@ -338,7 +338,9 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         resolved = _reproject.resolve(new, traced, spp, reproj, history, o["max_history"])
         timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
 
-        every_pixel = o["sigma_p"] >= 1.0 and history is None
+        # sigma_p = 1 traces every pixel: the reconstruction is the identity (a pixel whose
+        # samples were all rejected stays 0, or keeps its history).
+        every_pixel = o["sigma_p"] >= 1.0
         with dr.suspend_grad():
             if every_pixel:
                 nearest = dr.arange(mi.UInt32, n)
