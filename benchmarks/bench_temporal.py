@@ -49,12 +49,15 @@ def main(argv=None):
     t_with, t_without, rows, curve = [], [], [], {}
     checkpoints = {1, 4, 16, 64, a.frames}
     for f in range(a.frames):
-        img, _ = timed(mi.render, scene, integrator=with_h, seed=0)
+        img, _ = timed(mi.render, scene, integrator=with_h, spp=1, seed=0)
         if f >= 2:
             t_with.append(with_h.stats["timings_ms"]["total"])
-        timed(mi.render, scene, integrator=without, seed=f)
+        timed(mi.render, scene, integrator=without, spp=1, seed=f)
         if f >= 2:
             t_without.append(without.stats["timings_ms"]["total"])
+        print(f"frame {f + 1}/{a.frames}: with {with_h.stats['timings_ms']['total']:.0f} ms, "
+              f"without {without.stats['timings_ms']['total']:.0f} ms", file=sys.stderr,
+              flush=True)
         if f + 1 in checkpoints:
             d = to_display(np.array(img))
             curve[f + 1] = {"psnr": float(psnr(ref_d, d, data_range=1.0)),
