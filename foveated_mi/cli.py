@@ -60,7 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "else llvm_ad_rgb; or $FOVEATED_MI_VARIANT)")
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--max-depth", type=int, dest="max_depth",
-                   help="max_depth of the nested path tracer (built-in scenes)")
+                   help="use a path tracer of this max_depth as the nested integrator")
     r.add_argument("--out", default="out/frame.exr", help="OpenEXR output (a PNG preview is "
                    "written next to it)")
     r.add_argument("--stats", help="write the frame's stats as JSON here")
@@ -115,6 +115,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     opts = validate_options(frame_options(args))      # fail fast, before any loading
     spp = check_int("--spp", args.spp, 1)
     check_int("--warmup", args.warmup, 0)
+    check_int("--seed", args.seed, 0, 2**32 - 1)
+    max_depth = None if args.max_depth is None else check_int("--max-depth", args.max_depth, -1)
     if args.size is not None:
         check_int("--size W", args.size[0], 1, 16384)
         check_int("--size H", args.size[1], 1, 16384)
@@ -125,8 +127,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     from .render import FrameRenderer
     from .scenes import load_scene
     size = tuple(args.size) if args.size else (None, None)
-    extra = {"max_depth": args.max_depth} if args.max_depth is not None else {}
-    scene = load_scene(args.scene, width=size[0], height=size[1], spp=spp, **extra)
+    nested = None if max_depth is None else {"type": "path", "max_depth": max_depth}
+    scene = load_scene(args.scene, width=size[0], height=size[1], spp=spp, integrator=nested)
     fr = FrameRenderer(scene, {**frame_options(args), "timing": True}, spp=spp)
     result = fr.render_frame(seed=args.seed, warmup=args.warmup,
                              compare_full=args.compare_full)

@@ -15,7 +15,7 @@ class GBuffer(NamedTuple):
     """Named outputs of the geometry pass, one entry per pixel."""
     position: mi.Point3f   #: world-space hit point (0 on a miss)
     normal: mi.Normal3f    #: shading normal (0 on a miss)
-    depth: mi.Float        #: distance from the camera along the primary ray (+inf on a miss)
+    depth: mi.Float        #: distance from the camera centre to the hit (+inf on a miss)
     hit: mi.Bool           #: whether the primary ray hit a surface
 
 
@@ -54,5 +54,9 @@ def render_gbuffer(scene: mi.Scene, sensor: mi.Sensor) -> GBuffer:
         hit = si.is_valid()
         position = dr.select(hit, si.p, mi.Point3f(0.0))
         normal = dr.select(hit, si.sh_frame.n, mi.Normal3f(0.0))
-        depth = dr.select(hit, si.t, dr.inf)
+        # Not si.t: perspective rays start on the near-clip plane, while the reprojection
+        # measures from the camera centre.
+        world = sensor.world_transform().matrix
+        centre = mi.Point3f(world[0][3], world[1][3], world[2][3])
+        depth = dr.select(hit, dr.norm(si.p - centre), dr.inf)
     return GBuffer(position=position, normal=normal, depth=depth, hit=hit)

@@ -62,7 +62,7 @@ def run_sequence(cfg: SequenceConfig, *, out_dir: str | None = None, compare_ful
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=cfg.frames, unit="frame", desc=os.path.basename(out_dir) or "sequence")
-    interrupted = False
+    interrupted = failed = False
     try:
         with open(tmp_stats, "w") as log:
             for i in range(cfg.frames):
@@ -95,14 +95,21 @@ def run_sequence(cfg: SequenceConfig, *, out_dir: str | None = None, compare_ful
                     bar.update(1)
     except KeyboardInterrupt:
         interrupted = True
+    except BaseException:
+        failed = True
+        raise
     finally:
         if bar is not None:
             bar.close()
-        if os.path.exists(tmp_stats):
-            os.replace(tmp_stats, stats_path)
-        path = _video_path(out_dir, cfg.output.video)
-        if path and video:
-            write_video(path, video, cfg.fps)
+        if failed:   # an error: keep the previous stats and video, drop the partial log
+            if os.path.exists(tmp_stats):
+                os.remove(tmp_stats)
+        else:
+            if os.path.exists(tmp_stats):
+                os.replace(tmp_stats, stats_path)
+            path = _video_path(out_dir, cfg.output.video)
+            if path and video:
+                write_video(path, video, cfg.fps)
     if interrupted:
         raise KeyboardInterrupt
     return all_stats

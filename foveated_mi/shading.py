@@ -68,6 +68,8 @@ def trace_wavefront(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingI
     too_big = ok & (peak > limit)
     L = dr.select(too_big, L * (limit / peak), L)
     L = dr.select(ok, L, 0.0)
+    # Store the traced values once: every reduction below would otherwise re-trace the paths.
+    dr.schedule(L, ok, too_big)
 
     if spp > 1:
         total = dr.block_sum(L, spp)

@@ -82,13 +82,14 @@ def check_choice(name: str, value: Any, choices: Iterable[str]) -> str:
     return value
 
 
-def check_point2(name: str, value: Any) -> tuple[float, float]:
-    """Two finite numbers (a gaze may lie outside [0, 1]^2: the viewer looks off-screen)."""
-    allowed = "two finite numbers (x, y)"
+def check_point2(name: str, value: Any, bound: float = 1e6) -> tuple[float, float]:
+    """Two finite numbers of magnitude <= ``bound`` (a gaze may lie outside [0, 1]^2: the
+    viewer looks off-screen; the bound keeps ``gaze * width`` finite in float32)."""
+    allowed = f"two finite numbers (x, y) with |x|, |y| <= {bound:g}"
     try:
         x, y = (float(v) for v in value)
     except (TypeError, ValueError):
         raise ParameterError(name, value, allowed) from None
-    if not (math.isfinite(x) and math.isfinite(y)):
+    if not (math.isfinite(x) and math.isfinite(y)) or abs(x) > bound or abs(y) > bound:
         raise ParameterError(name, value, allowed)
     return x, y

@@ -87,3 +87,14 @@ def test_console_script_installed():
     assert r.returncode == 2
     assert r.stderr.strip() == ("foveated-mi: error: theta = -3.0 is invalid: expected a finite "
                                 "number > 0")
+
+
+def test_max_depth_and_seed_flags(tmp_path, capsys):
+    exr = tmp_path / "d.exr"
+    code, _, err = run(["render", "cornell-box", "--size", "16", "16", "--max-depth", "2",
+                        "--seed", "7", "--warmup", "0", "--out", str(exr), "--quiet"], capsys)
+    assert code == 0, err
+    code, _, err = run(["render", "cornell-box", "--size", "16", "16", "--seed", "-1",
+                        "--out", str(exr)], capsys)
+    assert code == 2 and err.strip() == ("foveated-mi: error: --seed = -1 is invalid: expected "
+                                         "an integer >= 0 and <= 4294967295")

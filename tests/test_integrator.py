@@ -229,3 +229,34 @@ def test_gradient_pass_leaves_history_unchanged():
     np.testing.assert_array_equal(h2.count.numpy(), snap[1])
     g = dr.grad(params[key])
     assert np.all(np.isfinite(np.array(g))) and np.abs(np.array(g)).sum() > 0
+
+
+@pytest.mark.parametrize("spp", [1, 4])
+def test_paths_are_traced_by_one_kernel(spp):
+    scene = cornell()
+    integ = FoveatedIntegrator(sigma_p=0.5, atrous_iterations=0, history=False)
+    dr.eval(mi.render(scene, integrator=integ, spp=spp))
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+        dr.kernel_history_clear()
+        dr.eval(mi.render(scene, integrator=integ, spp=spp))
+        dr.sync_thread()
+        hist = dr.kernel_history([dr.KernelType.JIT])
+    lanes = integ.stats["lanes"]
+    heavy = [h for h in hist if h["size"] == lanes and h["operation_count"] > 500]
+    assert len(heavy) == 1, [(h["size"], h["operation_count"]) for h in hist]
+
+
+def test_toggling_history_drops_the_old_history():
+    scene = cornell()
+    integ = FoveatedIntegrator(sigma_p=0.5, atrous_iterations=0)
+    for _ in range(2):
+        mi.render(scene, integrator=integ)
+    assert integ.history is not None and integ.frame == 2
+    integ.history = False
+    integ.history = True
+    assert integ.history is None and integ.frame == 0
+
+
+def test_gaze_bound_one_line():
+    with pytest.raises(ParameterError, match=r"gaze = .* is invalid: expected two finite"):
+        FoveatedIntegrator(gaze=(1e30, 0.5))

@@ -127,3 +127,27 @@ def test_ctrl_c_keeps_frames_already_written(tmp_path, capsys, monkeypatch):
     assert len((out / "stats.jsonl").read_text().splitlines()) == 2
     assert (out / "sequence.gif").stat().st_size > 0
     assert not list(out.glob("*.partial")) and not list(out.glob("*.tmp*"))
+
+
+def test_failed_sequence_keeps_previous_stats_and_video(tmp_path, capsys, monkeypatch):
+    cfg_path = tmp_path / "seq.toml"
+    cfg_path.write_text(CONFIG)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "stats.jsonl").write_text("good\n")
+    (out / "sequence.gif").write_bytes(b"good")
+    real = FrameRenderer.render_frame
+    calls = {"n": 0}
+
+    def failing(self, *a, **kw):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise OSError("disk full")
+        return real(self, *a, **kw)
+
+    monkeypatch.setattr(FrameRenderer, "render_frame", failing)
+    code = main(["sequence", str(cfg_path), "--out", str(out), "--no-progress"])
+    assert code == 1 and "disk full" in capsys.readouterr().err
+    assert (out / "stats.jsonl").read_text() == "good\n"
+    assert (out / "sequence.gif").read_bytes() == b"good"
+    assert not list(out.glob("*.partial"))

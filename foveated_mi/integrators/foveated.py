@@ -231,7 +231,10 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
 
     def set_options(self, **options) -> None:
         """Change options between frames (validated as a whole; nothing changes on error)."""
-        self._options = validate_options({**self._options, **options})
+        new = validate_options({**self._options, **options})
+        if new["history"] != self._options["history"]:
+            self.reset()   # a history from frames ago would be stale
+        self._options = new
 
     def __getattr__(self, name):
         opts = self.__dict__.get("_options")
@@ -310,6 +313,9 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         seed = (int(seed) if not dr.is_array_v(seed) else int(dr.slice(seed))) & 0xFFFFFFFF
         frame_seed = seed if self._frame == 0 else \
             int(mi.sample_tea_32(seed, self._frame)[0])
+        # The gradient pass differentiates the frame just rendered: same sampling map, fresh
+        # Monte Carlo samples (mi.render hands it a decorrelated seed).
+        map_seed = getattr(self, "_map_seed", frame_seed) if grad_pass else frame_seed
         timer = StageTimer(o["timing"])
         rec, post = _reconstruct_module(), _postprocess_module()
 
@@ -321,7 +327,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             if o["edge_threshold"] > 0:
                 edges = _sampling.depth_edges(gb.depth, gb.hit, width, height, o["edge_threshold"])
             smap, prob = _sampling.sampling_map(width, height, gaze=o["gaze"], theta=o["theta"],
-                                                sigma_p=o["sigma_p"], seed=frame_seed,
+                                                sigma_p=o["sigma_p"], seed=map_seed,
                                                 edges=edges)
             reproj = _reproject.reprojection_map(gb.position, gb.hit, history, width, height,
                                                  tolerance=o["reprojection_tolerance"])
@@ -371,6 +377,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
 
         if not grad_pass:
             self._history_in = history
+            self._map_seed = map_seed
             if o["history"]:
                 self._history = _reproject.History(
                     mean=resolved.shading, count=resolved.count, depth=gb.depth,
