@@ -151,3 +151,15 @@ def test_failed_sequence_keeps_previous_stats_and_video(tmp_path, capsys, monkey
     assert (out / "stats.jsonl").read_text() == "good\n"
     assert (out / "sequence.gif").read_bytes() == b"good"
     assert not list(out.glob("*.partial"))
+
+
+def test_mp4_video_reads_back(tmp_path):
+    import imageio.v2 as iio2
+    from foveated_mi.sequence import write_video
+    frames = [np.full((23, 31, 3), 40 * k, np.uint8) for k in range(5)]
+    path = str(tmp_path / "v.mp4")
+    write_video(path, frames, fps=10)
+    with iio2.get_reader(path, format="FFMPEG") as r:
+        got = [f for f in r]
+    assert len(got) == 5 and got[0].shape[:2] == (24, 32)   # padded to even size
+    assert abs(float(got[4].mean()) - 160) < 8
