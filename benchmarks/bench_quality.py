@@ -19,7 +19,7 @@ import mitsuba as mi
 import numpy as np
 
 import foveated_mi
-from common import machine, md_table, timed, write_json
+from common import machine, md_table, scene_with_reference, timed, write_json
 
 
 def main(argv=None):
@@ -44,15 +44,12 @@ def main(argv=None):
     from foveated_mi.postprocess.inverse import inverse_tonemap
     from foveated_mi.render import to_display
     from foveated_mi.sampling import depth_edges, sampling_map
-    from foveated_mi.scenes import load_scene
 
     W, H = a.size
-    scene = load_scene(a.scene, width=W, height=H, spp=1,
-                       integrator={"type": "path", "max_depth": a.max_depth})
-    ref = mi.render(scene, spp=a.ref_spp, seed=7)
-    ref_np = np.array(ref)
+    scene, ref_np = scene_with_reference(a.scene, W, H, max_depth=a.max_depth,
+                                         ref_spp=a.ref_spp, seed=7)
     ref_d = to_display(ref_np)
-    ref_c = mi.Color3f(dr.unravel(mi.Color3f, dr.ravel(ref.array)))
+    ref_c = mi.Color3f(ref_np.reshape(-1, 3).T)
     gb = render_gbuffer(scene, scene.sensors()[0])
     edges = depth_edges(gb.depth, gb.hit, W, H, 0.1)
     rows, out = [], {}

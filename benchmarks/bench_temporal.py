@@ -15,7 +15,7 @@ import drjit as dr
 import mitsuba as mi
 
 import foveated_mi
-from common import machine, md_table, median, timed, write_json
+from common import machine, md_table, median, scene_with_reference, timed, write_json
 
 
 def main(argv=None):
@@ -35,13 +35,10 @@ def main(argv=None):
     from foveated_mi.integrators.foveated import FoveatedIntegrator
     from foveated_mi.metrics import psnr, ssim
     from foveated_mi.render import to_display
-    from foveated_mi.scenes import load_scene
 
     W, H = a.size
-    scene = load_scene(a.scene, width=W, height=H, spp=1,
-                       integrator={"type": "path", "max_depth": a.max_depth})
+    scene, ref = scene_with_reference(a.scene, W, H, max_depth=a.max_depth, ref_spp=a.ref_spp)
     nested = scene.integrator()
-    ref = np.array(mi.render(scene, integrator=nested, spp=a.ref_spp, seed=12345))
     ref_d = to_display(ref)
     kw = dict(nested=nested, theta=a.theta, sigma_p=a.sigma_p, timing=True)
     with_h = FoveatedIntegrator(history=True, **kw)

@@ -64,3 +64,16 @@ def calibrate_theta(width, height, target, *, sigma_p, gaze=(0.5, 0.5), edges=No
         frac = dr.count(smap)[0] / (width * height)
         lo, hi = (mid, hi) if frac < target else (lo, mid)
     return (lo * hi) ** 0.5
+
+
+def scene_with_reference(name, width, height, *, max_depth, ref_spp, seed=12345):
+    """Built-in or XML scene with a path tracer, and its converged reference (linear, NumPy).
+
+    The reference is rendered with an explicit spp; callers must pass ``spp`` explicitly too,
+    since ``mi.render(spp=N)`` leaves N as the sensor's sample count."""
+    import numpy as np
+    from foveated_mi.scenes import load_scene
+    scene = load_scene(name, width=width, height=height, spp=1,
+                       integrator={"type": "path", "max_depth": max_depth})
+    ref = np.array(mi.render(scene, integrator=scene.integrator(), spp=ref_spp, seed=seed))
+    return scene, ref

@@ -217,6 +217,9 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._options = validate_options(options)
         self._history: _reproject.History | None = None
         self._scene_ref = None
+        # What the primal frame used, for its gradient pass to reuse.
+        self._history_in: _reproject.History | None = None
+        self._map_seed = 0
         self._frame = 0
         self._grad_pass = False
         self.buffers: dict[str, Any] = {}
@@ -307,7 +310,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             self._check_reset(scene, width, height)
         history = self._history if (o["history"] and not grad_pass) else None
         if grad_pass and o["history"]:
-            history = getattr(self, "_history_in", None)
+            history = self._history_in
         # Frame 0 uses the caller's seed as is (so sigma_p = 1 reproduces a plain render);
         # later frames decorrelate so that the history converges under a fixed seed.
         seed = (int(seed) if not dr.is_array_v(seed) else int(dr.slice(seed))) & 0xFFFFFFFF
@@ -315,7 +318,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             int(mi.sample_tea_32(seed, self._frame)[0])
         # The gradient pass differentiates the frame just rendered: same sampling map, fresh
         # Monte Carlo samples (mi.render hands it a decorrelated seed).
-        map_seed = getattr(self, "_map_seed", frame_seed) if grad_pass else frame_seed
+        map_seed = self._map_seed if grad_pass else frame_seed
         timer = StageTimer(o["timing"])
         rec, post = _reconstruct_module(), _postprocess_module()
 
