@@ -27,6 +27,8 @@ def _add_frame_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--gaze", type=float, nargs=2, metavar=("X", "Y"),
                    help="gaze in normalised film coordinates, origin top-left")
     p.add_argument("--reorder", help="none | rows | rows_blocks | compact")
+    p.add_argument("--pixel-filter", dest="pixel_filter",
+                   help="splat | importance: how samples honour the film's filter")
     p.add_argument("--block-height", type=int, dest="block_height")
     p.add_argument("--edge-threshold", type=float, dest="edge_threshold")
     p.add_argument("--reconstruction", help="voronoi | sibson | discrete_sibson | fast_sibson")
@@ -41,7 +43,7 @@ def _add_frame_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--clamp", type=float, help="largest accepted sample component")
 
 
-FRAME_OPTIONS = ("theta", "sigma_p", "gaze", "reorder", "block_height", "edge_threshold",
+FRAME_OPTIONS = ("theta", "sigma_p", "gaze", "reorder", "pixel_filter", "block_height", "edge_threshold",
                  "reconstruction", "max_radius", "jfa", "atrous_iterations", "sigma_color",
                  "sigma_normal", "sigma_position", "tonemap", "exposure", "clamp")
 

@@ -63,7 +63,7 @@ GAZE_TYPES = ("fixed", "keyframes", "saccades", "csv")
 #: Options of the ``foveated`` integrator a config may set, with their TOML types
 #: (value ranges are checked by the integrator's own validation when it is importable).
 FOVEATED_KEYS: dict[str, tuple[type, ...]] = {
-    "theta": (int, float), "sigma_p": (int, float), "reorder": (str,),
+    "theta": (int, float), "sigma_p": (int, float), "reorder": (str,), "pixel_filter": (str,),
     "block_height": (int,), "edge_threshold": (int, float), "reconstruction": (str,),
     "max_radius": (int,), "jfa": (str,), "atrous_iterations": (int,),
     "sigma_color": (int, float), "sigma_normal": (int, float), "sigma_position": (int, float),

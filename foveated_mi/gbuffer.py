@@ -17,6 +17,7 @@ class GBuffer(NamedTuple):
     normal: mi.Normal3f    #: shading normal (0 on a miss)
     depth: mi.Float        #: distance from the camera centre to the hit (+inf on a miss)
     hit: mi.Bool           #: whether the primary ray hit a surface
+    direction: mi.Vector3f  #: unit direction of the primary ray (reprojects the background)
 
 
 def pixel_coords(width: int, height: int) -> tuple[mi.UInt32, mi.UInt32, mi.UInt32]:
@@ -59,4 +60,5 @@ def render_gbuffer(scene: mi.Scene, sensor: mi.Sensor) -> GBuffer:
         world = sensor.world_transform().matrix
         centre = mi.Point3f(world[0][3], world[1][3], world[2][3])
         depth = dr.select(hit, dr.norm(si.p - centre), dr.inf)
-    return GBuffer(position=position, normal=normal, depth=depth, hit=hit)
+    return GBuffer(position=position, normal=normal, depth=depth, hit=hit,
+                   direction=mi.Vector3f(ray.d))

@@ -10,6 +10,11 @@ across a silhouette). It is a hit when that pixel lies inside the film, held his
 stored depth agrees with the distance from the previous camera to :math:`p` within a
 relative tolerance; otherwise it is a miss (disocclusion, off-screen, or no history).
 
+A background pixel (the primary ray escapes) reprojects by its direction, the point at
+infinity :math:`q = M_{t-1} (d, 0)`, as in temporal anti-aliasing; it is a hit when the
+previous pixel was background too. Without this, a background pixel next to a silhouette,
+whose filter footprint still covers the object, would never accumulate samples.
+
 **Shading with history** (Fig. 4). Per pixel, with history mean :math:`h`, count :math:`n`
 (capped at ``max_history``) and this frame's mean :math:`L` over ``spp`` samples:
 
@@ -78,24 +83,36 @@ def project(camera: CameraState, p: mi.Point3f, width: int, height: int
 
 
 def reprojection_map(position: mi.Point3f, hit: mi.Bool, history: History | None,
-                     width: int, height: int, *, tolerance: float = 0.02) -> ReprojectionMap:
-    """Reverse-reproject the current G-buffer into the history (see the module docstring)."""
+                     width: int, height: int, *, tolerance: float = 0.02,
+                     direction: mi.Vector3f | None = None) -> ReprojectionMap:
+    """Reverse-reproject the current G-buffer into the history (see the module docstring).
+
+    ``direction`` (the primary rays' directions) lets background pixels reproject; without
+    it they always miss."""
     n = width * height
     if history is None:
         return ReprojectionMap(dr.zeros(mi.Point2f, n), dr.zeros(mi.Bool, n), dr.zeros(mi.UInt32, n))
     uv, dist = project(history.camera, position, width, height)
+    background = ~hit
+    if direction is not None:
+        q = history.camera.matrix @ mi.Vector4f(direction.x, direction.y, direction.z, 0.0)
+        inv_w = dr.rcp(q.w)
+        uv = dr.select(hit, uv, mi.Point2f(q.x * inv_w * width, q.y * inv_w * height))
+    else:
+        background = mi.Bool(False)
     finite = dr.isfinite(uv.x) & dr.isfinite(uv.y)
     px = dr.floor(uv.x)
     py = dr.floor(uv.y)
-    inside = hit & finite & (px >= 0) & (py >= 0) & (px < width) & (py < height)
+    inside = (hit | background) & finite & (px >= 0) & (py >= 0) & (px < width) & (py < height)
     prev = mi.UInt32(mi.Int32(dr.select(inside, py, 0.0))) * width + \
         mi.UInt32(mi.Int32(dr.select(inside, px, 0.0)))
     prev_depth = dr.gather(mi.Float, history.depth, prev, inside)
     prev_count = dr.gather(mi.Float, history.count, prev, inside)
     tol = dr.opaque(mi.Float, tolerance)
     # Misses store depth = inf: the comparison is then False without forming inf - inf.
-    same_surface = dr.abs(prev_depth - dist) <= tol * dist
-    ok = inside & dr.isfinite(prev_depth) & same_surface & (prev_count > 0)
+    same_surface = hit & dr.isfinite(prev_depth) & (dr.abs(prev_depth - dist) <= tol * dist)
+    same_background = background & ~dr.isfinite(prev_depth)
+    ok = inside & (same_surface | same_background) & (prev_count > 0)
     return ReprojectionMap(uv, ok, prev)
 
 

@@ -6,6 +6,32 @@ the nested integrator's ``sample()`` as one wavefront of ``rays * spp`` lanes. T
 ``SamplingIntegrator::render``, so with every pixel traced in ``compact`` order the random
 numbers are those of a plain ``mi.render`` of the nested integrator.
 
+**The film's filter** (``pixel_filter`` option). The traced samples become the sparse
+shading buffer in one of two ways, both converging to the image the nested integrator renders
+on the same film (Mitsuba's default filter is ``gaussian``), never to a box-filtered one:
+
+``splat`` (:func:`develop_splat`, default)
+    Mitsuba's own estimator: uniformly jittered samples are splatted with the film's filter
+    into an ``mi.ImageBlock`` and a traced pixel holds :math:`\sum f L / \sum f` over the
+    samples that reach it. Neighbouring traced pixels share samples, as in ``mi.render``, so
+    with every pixel traced the frame *is* the nested integrator's render, noise included.
+    A traced pixel without traced neighbours sees only its own samples: its footprint is
+    the filter clipped to its neighbourhood (a slightly sharper kernel).
+``importance`` (:func:`develop_mean`)
+    Filter importance sampling (:mod:`foveated_mi.pixel_filter`): each sample's offset is
+    drawn from the filter and a traced pixel holds the (signed-)weighted mean of its own
+    samples. Every pixel is an unbiased estimate of the filtered image and independent of
+    its neighbours, at a higher variance than splatting when neighbours are traced (their
+    samples are not shared).
+
+For the ``box`` filter both are the plain per-pixel mean.
+
+**Nested integrators.** A C++ integrator (``path``, ...) is called as
+``sample(scene, sampler, ray, medium, active)``; a Python ``mi.ad.common.ADIntegrator``
+(``prb``, ``prb_basic``, ``direct_projective``, ``prb_projective``, ...) as
+``sample(mode=Primal, scene, sampler, ray, depth, δL, δaovs, state_in, active)``. A result
+of width 1 (an integrator returning a constant) is broadcast to the wavefront.
+
 Sample hygiene: a sample with a NaN or infinite component is rejected (weight 0); a finite
 sample whose largest component exceeds ``clamp`` is scaled down to that maximum (hue kept).
 Both are counted. A pixel whose samples are all rejected holds no value (a hole that the
@@ -18,20 +44,76 @@ from typing import NamedTuple
 import drjit as dr
 import mitsuba as mi
 
+from .pixel_filter import FilterSample, FilterSampler
+
+
+PIXEL_FILTERS = ("splat", "importance")
+
 
 class ShadingResult(NamedTuple):
-    radiance: mi.Color3f   #: mean accepted radiance per wavefront ray
-    valid: mi.Bool         #: ray has at least one accepted sample
+    """The traced samples, one lane per sample (``rays * spp`` lanes, pixel-major)."""
+    radiance: mi.Color3f   #: accepted radiance of each sample (0 where rejected), weighted
+    ok: mi.Bool            #: sample accepted (finite, active)
+    position: mi.Point2f   #: film position of the sample (crop-relative pixels)
     rejected: mi.UInt32    #: number of rejected (non-finite) samples, a 1-element array
     clamped: mi.UInt32     #: number of clamped samples, a 1-element array
 
 
+def is_ad_integrator(integrator) -> bool:
+    """Whether ``integrator`` is a Python ``mi.ad.common.ADIntegrator`` (``prb``, ...).
+
+    Checked by class name along the MRO: Mitsuba re-imports its AD integrator modules on
+    every ``mi.set_variant``, so the class object itself changes."""
+    return any(c.__name__ == "ADIntegrator" and c.__module__.endswith("integrators.common")
+               for c in type(integrator).__mro__)
+
+
+def sample_nested(integrator: mi.SamplingIntegrator, scene: mi.Scene, sampler: mi.Sampler,
+                  ray: mi.RayDifferential3f, active: mi.Bool) -> tuple[mi.Spectrum, mi.Bool]:
+    """Primal radiance and validity of ``ray`` from any nested integrator (see the module
+    docstring for the two calling conventions)."""
+    if is_ad_integrator(integrator):
+        with dr.suspend_grad():
+            L, valid, _, _ = integrator.sample(
+                mode=dr.ADMode.Primal, scene=scene, sampler=sampler, ray=ray,
+                depth=mi.UInt32(0), δL=None, δaovs=None, state_in=None, active=active)
+        return L, valid
+    L, valid = integrator.sample(scene, sampler, ray, None, active)[:2]
+    return L, valid
+
+
+def camera_rays(sensor: mi.Sensor, sampler: mi.Sampler, pixels: mi.UInt32, width: int,
+                filter_sampler: FilterSampler, active: mi.Bool
+                ) -> tuple[mi.RayDifferential3f, mi.Spectrum, FilterSample]:
+    """One camera ray per lane through pixel ``pixels`` (flat index ``y * W + x``), at a
+    position inside the pixel's footprint from ``filter_sampler``. Returns the ray, the
+    sensor's importance weight and the filter sample (film position and weight).
+
+    Same draw order as ``SamplingIntegrator::render_sample``: position, aperture, time,
+    wavelength.
+    """
+    y = pixels // width
+    x = pixels - y * width
+    fs = filter_sampler.sample(sampler.next_2d(active), x, y)
+    pos = mi.Point2f(fs.position.x / filter_sampler.width, fs.position.y / filter_sampler.height)
+    aperture = sampler.next_2d(active) if sensor.needs_aperture_sample() else mi.Point2f(0.5)
+    time = mi.Float(sensor.shutter_open())
+    if sensor.shutter_open_time() > 0:
+        time += sampler.next_1d(active) * sensor.shutter_open_time()
+    wav_sample = sampler.next_1d(active) if mi.is_spectral else mi.Float(0.0)
+    ray, weight = sensor.sample_ray_differential(time, wav_sample, pos, aperture, active)
+    return ray, weight, fs
+
+
 def trace_wavefront(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingIntegrator,
                     pixels: mi.UInt32, width: int, height: int, *, spp: int, seed,
-                    active: mi.Bool | None = None, clamp: float = 1e4) -> ShadingResult:
+                    active: mi.Bool | None = None, clamp: float = 1e4,
+                    filter_sampler: FilterSampler | None = None) -> ShadingResult:
     """Trace ``spp`` camera rays through each pixel of ``pixels`` with ``integrator``.
 
     ``active`` (``reorder='none'``) masks lanes of a full-frame wavefront instead.
+    ``filter_sampler`` is built from the sensor's film when not given (build it once per
+    film and pass it in: tabulating a filter costs a host round trip).
     """
     n = dr.width(pixels)
     lanes = n * spp
@@ -44,22 +126,18 @@ def trace_wavefront(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingI
     ray_id = lane // spp if spp > 1 else lane
     pix = dr.gather(mi.UInt32, pixels, ray_id)
     lane_active = mi.Bool(True) if active is None else dr.gather(mi.Bool, active, ray_id)
-    y = pix // width
-    x = pix - y * width
-
-    # Same draw order as SamplingIntegrator::render_sample: position, aperture, time, wavelength.
-    offset = sampler.next_2d(lane_active)
-    pos = mi.Point2f((mi.Float(x) + offset.x) / width, (mi.Float(y) + offset.y) / height)
-    aperture = sampler.next_2d(lane_active) if sensor.needs_aperture_sample() else mi.Point2f(0.5)
-    time = mi.Float(sensor.shutter_open())
-    if sensor.shutter_open_time() > 0:
-        time += sampler.next_1d(lane_active) * sensor.shutter_open_time()
-    wav_sample = sampler.next_1d(lane_active) if mi.is_spectral else mi.Float(0.0)
-    ray, weight = sensor.sample_ray_differential(time, wav_sample, pos, aperture, lane_active)
+    if filter_sampler is None:
+        filter_sampler = FilterSampler(sensor.film())
+    ray, weight, fs = camera_rays(sensor, sampler, pix, width, filter_sampler, lane_active)
     ray.scale_differential(dr.rsqrt(spp))
 
-    L, valid, _ = integrator.sample(scene, sampler, ray, None, lane_active)[:3]
+    L, _ = sample_nested(integrator, scene, sampler, ray, lane_active)
     L = mi.Color3f(L) * mi.Color3f(weight)
+    if filter_sampler.signed:
+        L *= fs.weight
+    if dr.width(L) != lanes:
+        # A constant-returning integrator gives a literal of width 1.
+        L = L + dr.zeros(mi.Color3f, lanes)
 
     finite = dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z)
     ok = finite & lane_active
@@ -70,20 +148,71 @@ def trace_wavefront(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingI
     L = dr.select(ok, L, 0.0)
     # Store the traced values once: every reduction below would otherwise re-trace the paths.
     dr.schedule(L, ok, too_big)
-
-    if spp > 1:
-        total = dr.block_sum(L, spp)
-        accepted = dr.block_sum(mi.Float(ok), spp)
-    else:
-        total, accepted = L, mi.Float(ok)
-    radiance = total / dr.maximum(accepted, 1.0)
     # The counters are reduced from stored per-lane flags: reducing the expressions directly
     # would trace every path again inside each reduction kernel.
     bad = mi.UInt32(lane_active & ~finite)
     big = mi.UInt32(too_big)
-    dr.schedule(radiance, accepted, bad, big)
+    dr.schedule(bad, big)
     rejected, clamped = dr.sum(bad), dr.sum(big)
-    return ShadingResult(radiance, accepted > 0, mi.UInt32(rejected), mi.UInt32(clamped))
+    return ShadingResult(L, ok, fs.position, mi.UInt32(rejected), mi.UInt32(clamped))
+
+
+def develop_mean(samples: ShadingResult, pixels: mi.UInt32, spp: int, n_pixels: int
+                 ) -> tuple[mi.Color3f, mi.Bool]:
+    """``importance`` mode: each traced pixel holds the mean of its accepted samples.
+
+    Returns the sparse shading buffer (``n_pixels`` entries) and the mask of pixels that hold
+    a value. Linear in ``samples.radiance`` (the mask and counts are fixed)."""
+    ok = mi.Float(samples.ok)
+    if spp > 1:
+        total = dr.block_sum(samples.radiance, spp)
+        accepted = dr.block_sum(ok, spp)
+    else:
+        total, accepted = samples.radiance, ok
+    mean = total / dr.maximum(dr.detach(accepted), 1.0)
+    return scatter_to_film(mean, accepted > 0, pixels, n_pixels)
+
+
+def develop_splat(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.Film
+                  ) -> tuple[mi.Color3f, mi.Bool]:
+    """``splat`` mode: Mitsuba's film estimator :math:`\\sum f L / \\sum f` at the traced pixels.
+
+    The samples are splatted with the film's filter into an ``mi.ImageBlock`` of the film's
+    crop (the block Mitsuba's ``hdrfilm`` would create); a traced pixel with any weight
+    holds the ratio, every other pixel holds nothing. Linear in ``samples.radiance`` (the
+    weights depend only on the sample positions)."""
+    width, height = (int(v) for v in film.crop_size())
+    n = width * height
+    rfilter = film.rfilter()
+    border = bool(film.sample_border())
+    block = mi.ImageBlock(size=film.crop_size(), offset=film.crop_offset(), channel_count=4,
+                          rfilter=rfilter, border=border, coalesce=spp >= 4)
+    off = film.crop_offset()
+    pos = mi.Point2f(samples.position.x + float(off[0]), samples.position.y + float(off[1]))
+    L = samples.radiance
+    block.put(pos, [L.x, L.y, L.z, mi.Float(1.0)], samples.ok)
+    data = block.tensor()
+    if border:
+        b = int(rfilter.border_size())
+        data = data[b:b + height, b:b + width]
+    flat = data.array
+    idx = dr.arange(mi.UInt32, n) * 4
+    acc = mi.Color3f(dr.gather(mi.Float, flat, idx), dr.gather(mi.Float, flat, idx + 1),
+                     dr.gather(mi.Float, flat, idx + 2))
+    wsum = dr.detach(dr.gather(mi.Float, flat, idx + 3))
+    ray_ok = dr.block_sum(mi.Float(samples.ok), spp) > 0 if spp > 1 else samples.ok
+    _, traced = scatter_to_film(dr.zeros(mi.Color3f, dr.width(pixels)), ray_ok, pixels, n)
+    holds = traced & (wsum > 0)
+    return dr.select(holds, acc / dr.select(holds, wsum, 1.0), 0.0), holds
+
+
+def develop(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.Film,
+            mode: str) -> tuple[mi.Color3f, mi.Bool]:
+    """The sparse shading buffer of a frame's samples (``mode`` in :data:`PIXEL_FILTERS`)."""
+    if mode == "splat" and not film.rfilter().is_box_filter():
+        return develop_splat(samples, pixels, spp, film)
+    width, height = (int(v) for v in film.crop_size())
+    return develop_mean(samples, pixels, spp, width * height)
 
 
 def scatter_to_film(values: mi.Color3f, valid: mi.Bool, pixels: mi.UInt32,

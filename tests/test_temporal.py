@@ -152,8 +152,11 @@ def test_camera_teleport_rejects_history():
     params["sensor.to_world"] = look(10)
     params.update()
     mi.render(scene, integrator=integ, seed=0)
-    assert integ.stats["history_hits"] == 0
-    assert integ.stats["resampled"] == 0
+    # No surface keeps its history; the constant environment (background, reprojected by
+    # direction) legitimately does: a translation does not change it.
+    hit = np.isfinite(integ.buffer("depth"))
+    assert hit.any() and not integ.buffer("reprojection_map")[..., 2][hit].any()
+    assert integ.stats["history_hits"] <= np.count_nonzero(~hit)
 
 
 from hypothesis import given, settings, strategies as st  # noqa: E402

@@ -38,6 +38,12 @@ mapping round trip when neither the filter nor the PNG needs it.
  * - reorder
    - |string|
    - ``none`` | ``rows`` | ``rows_blocks`` | ``compact`` (default)
+ * - pixel_filter
+   - |string|
+   - How samples honour the film's reconstruction filter: ``splat`` (default, Mitsuba's
+     own estimator, identical to the nested integrator at sigma_p = 1) or ``importance``
+     (filter importance sampling: independent, unbiased pixels); see
+     :mod:`foveated_mi.shading`
  * - block_height
    - |int|
    - Rows per block of Strategy 2 (default 8)
@@ -81,6 +87,7 @@ mapping round trip when neither the filter nor the PNG needs it.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import drjit as dr
@@ -92,6 +99,7 @@ from .. import reproject as _reproject
 from .. import sampling as _sampling
 from .. import shading as _shading
 from ..postprocess.inverse import inverse_tonemap
+from ..pixel_filter import FilterSampler
 from ..timing import StageTimer
 from ..validate import (ParameterError, check_choice, check_int, check_point2, check_range)
 
@@ -101,6 +109,7 @@ DEFAULTS: dict[str, Any] = {
     "sigma_p": 0.8,
     "gaze": (0.5, 0.5),
     "reorder": "compact",
+    "pixel_filter": "splat",
     "block_height": 8,
     "edge_threshold": 0.1,
     "reconstruction": "sibson",
@@ -118,6 +127,27 @@ DEFAULTS: dict[str, Any] = {
     "clamp": 1e4,
     "timing": False,
 }
+
+
+@dataclass
+class Frame:
+    """What a frame decided before tracing (the passes of :meth:`FoveatedIntegrator._prepare`).
+
+    A gradient pass reuses the primal frame's: same sampling map, sites and history."""
+    sensor: mi.Sensor
+    width: int
+    height: int
+    spp: int
+    seed: int                                  #: Monte Carlo seed of the shading pass
+    map_seed: int                              #: seed of the sampling map
+    gbuffer: _gbuffer.GBuffer
+    edges: mi.Bool | None
+    sampling_map: mi.Bool
+    probability: mi.Float
+    reprojection: _reproject.ReprojectionMap
+    reordered: _reorder.Reordered
+    history: _reproject.History | None         #: history this frame read (a constant)
+    filter_sampler: FilterSampler
 
 
 def _reconstruct_module():
@@ -143,6 +173,7 @@ def validate_options(options: dict[str, Any]) -> dict[str, Any]:
         "sigma_p": check_range("sigma_p", o["sigma_p"], 0.0, 1.0, lo_open=True),
         "gaze": check_point2("gaze", o["gaze"]),
         "reorder": check_choice("reorder", o["reorder"], _reorder.REORDER_MODES),
+        "pixel_filter": check_choice("pixel_filter", o["pixel_filter"], _shading.PIXEL_FILTERS),
         "block_height": check_int("block_height", o["block_height"], 1),
         "edge_threshold": check_range("edge_threshold", o["edge_threshold"], 0.0),
         "reconstruction": check_choice("reconstruction", o["reconstruction"],
@@ -225,6 +256,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self.buffers: dict[str, Any] = {}
         self._stats_raw: dict[str, Any] = {}
         self._stats_cache: dict[str, Any] | None = None
+        self._filter_samplers: dict[tuple, FilterSampler] = {}
 
     # -- options --------------------------------------------------------------------------
     @property
@@ -301,26 +333,36 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                  "its own image)")
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
+        grad_pass = self._grad_pass
+        timer = StageTimer(self._options["timing"])
+        frame = self._prepare(scene, sensor, seed, spp, grad_pass, timer)
+        shade = self._shade(scene, frame)
+        image, buffers = self._form_image(frame, shade, timer)
+        if not grad_pass:
+            self._finish_frame(frame, shade, buffers, timer)
+        return mi.TensorXf(dr.ravel(image), shape=(frame.height, frame.width, 3))
+
+    def _prepare(self, scene: mi.Scene, sensor: mi.Sensor, seed, spp: int, grad_pass: bool,
+                 timer: StageTimer) -> Frame:
+        """Geometry, sampling, reprojection and reorder passes: everything a frame decides
+        before it traces. None of it is differentiable (visibility and random choices)."""
         o = self._options
         width, height = _gbuffer.film_size(sensor)
-        n = width * height
         spp = check_int("spp", spp if spp else sensor.sampler().sample_count(), 1)
-        grad_pass = self._grad_pass
         if not grad_pass:
             self._check_reset(scene, width, height)
         history = self._history if (o["history"] and not grad_pass) else None
         if grad_pass and o["history"]:
             history = self._history_in
-        # Frame 0 uses the caller's seed as is (so sigma_p = 1 reproduces a plain render);
-        # later frames decorrelate so that the history converges under a fixed seed.
+        # Without history a frame is a pure function of (scene, seed). With history, frame 0
+        # uses the caller's seed as is (so sigma_p = 1 reproduces a plain render) and later
+        # frames decorrelate, so that the history converges under a fixed seed.
         seed = (int(seed) if not dr.is_array_v(seed) else int(dr.slice(seed))) & 0xFFFFFFFF
-        frame_seed = seed if self._frame == 0 else \
+        frame_seed = seed if (self._frame == 0 or not o["history"]) else \
             int(mi.sample_tea_32(seed, self._frame)[0])
         # The gradient pass differentiates the frame just rendered: same sampling map, fresh
         # Monte Carlo samples (mi.render hands it a decorrelated seed).
         map_seed = self._map_seed if grad_pass else frame_seed
-        timer = StageTimer(o["timing"])
-        rec, post = _reconstruct_module(), _postprocess_module()
 
         with dr.suspend_grad():
             gb = _gbuffer.render_gbuffer(scene, sensor)
@@ -333,18 +375,55 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                                 sigma_p=o["sigma_p"], seed=map_seed,
                                                 edges=edges)
             reproj = _reproject.reprojection_map(gb.position, gb.hit, history, width, height,
-                                                 tolerance=o["reprojection_tolerance"])
+                                                 tolerance=o["reprojection_tolerance"],
+                                                 direction=gb.direction)
             timer.mark("sampling", smap, prob, reproj.hit, reproj.index, edges)
 
             ro = _reorder.reorder(smap, width, height, o["reorder"], o["block_height"])
             timer.mark("reorder", ro.wavefront)
+        return Frame(sensor=sensor, width=width, height=height, spp=spp, seed=frame_seed,
+                     map_seed=map_seed, gbuffer=gb, edges=edges, sampling_map=smap,
+                     probability=prob, reprojection=reproj, reordered=ro, history=history,
+                     filter_sampler=self._filter_sampler(sensor, o["pixel_filter"]))
 
-        shade = _shading.trace_wavefront(scene, sensor, self.nested, ro.wavefront, width, height,
-                                         spp=spp, seed=frame_seed, active=ro.active,
-                                         clamp=o["clamp"])
-        valid = shade.valid if ro.active is None else shade.valid & ro.active
-        new, traced = _shading.scatter_to_film(shade.radiance, valid, ro.wavefront, n)
-        resolved = _reproject.resolve(new, traced, spp, reproj, history, o["max_history"])
+    def _filter_sampler(self, sensor: mi.Sensor, mode: str) -> FilterSampler:
+        film = sensor.film()
+        key = (id(film), tuple(film.crop_size()), tuple(film.crop_offset()), mode)
+        fs = self._filter_samplers.get(key)
+        if fs is None:
+            fs = self._filter_samplers[key] = FilterSampler(film, importance=mode == "importance")
+        return fs
+
+    def _shade(self, scene: mi.Scene, frame: Frame) -> _shading.ShadingResult:
+        """Sparse shading: the nested integrator traces the wavefront (rays x spp lanes)."""
+        ro = frame.reordered
+        return _shading.trace_wavefront(scene, frame.sensor, self.nested, ro.wavefront,
+                                        frame.width, frame.height, spp=frame.spp,
+                                        seed=frame.seed, active=ro.active,
+                                        clamp=self._options["clamp"],
+                                        filter_sampler=frame.filter_sampler)
+
+    def _form_image(self, frame: Frame, samples: _shading.ShadingResult,
+                    timer: StageTimer) -> tuple[mi.Color3f, dict[str, Any]]:
+        """Everything after tracing: develop, history resolve, reconstruction and
+        post-processing.
+
+        ``samples.radiance`` holds one value per traced sample. Every weight below (sites,
+        filter footprints, interpolation windows, edge-stopping weights) is decided from
+        the frame's G-buffer, its sampling map and detached values, so the image is a fixed
+        function of ``samples.radiance``: a gradient pass runs this again on the primal
+        frame's state.
+        """
+        o = self._options
+        width, height = frame.width, frame.height
+        n = width * height
+        rec, post = _reconstruct_module(), _postprocess_module()
+        ro = frame.reordered
+        gb = frame.gbuffer
+        new, traced = _shading.develop(samples, ro.wavefront, frame.spp, frame.sensor.film(),
+                                       o["pixel_filter"])
+        resolved = _reproject.resolve(new, traced, frame.spp, frame.reprojection,
+                                      frame.history, o["max_history"])
         timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
 
         # sigma_p = 1 traces every pixel: the reconstruction is the identity (a pixel whose
@@ -377,39 +456,50 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                    sigma_position=o["sigma_position"], valid=gb.hit)
             image = inverse_tonemap(filtered, o["tonemap"], o["exposure"])
         timer.mark("post", image)
+        buffers = {"traced": traced, "resolved": resolved, "nearest": nearest,
+                   "filled": filled, "interpolated": interpolated, "tonemapped": tonemapped,
+                   "filtered": filtered, "image": image}
+        return image, buffers
 
-        if not grad_pass:
-            self._history_in = history
-            self._map_seed = map_seed
-            if o["history"]:
-                self._history = _reproject.History(
-                    mean=resolved.shading, count=resolved.count, depth=gb.depth,
-                    camera=_reproject.camera_state(sensor), width=width, height=height)
-            self._frame += 1
-            self.buffers = {
-                "position": gb.position, "normal": gb.normal, "depth": gb.depth, "hit": gb.hit,
-                "probability": prob, "edges": edges, "sampling_map": smap,
-                "reprojection_map": reproj, "wavefront": ro.wavefront,
-                "reordered_map": ro.reordered_map, "row_counts": ro.row_counts,
-                "traced": traced, "shading": resolved.shading, "shading_mask": resolved.mask,
-                "history_count": resolved.count, "nearest": nearest, "filled": filled,
-                "interpolated": interpolated, "tonemapped": tonemapped, "filtered": filtered,
-                "image": image,
-            }
-            dr.schedule(reproj.hit, resolved.resampled, resolved.mask)
-            rays = dr.width(ro.wavefront) if ro.active is None else dr.count(smap)
-            self._stats_raw = {
-                "width": width, "height": height, "pixels": n, "rays": rays, "spp": spp,
-                "lanes": dr.width(ro.wavefront) * spp, "frame": self._frame - 1,
-                "history_hits": dr.count(reproj.hit), "resampled": dr.count(resolved.resampled),
-                "holes": dr.count(~resolved.mask), "rejected_samples": shade.rejected,
-                "clamped_samples": shade.clamped, "timings_ms": timer.finish(),
-                "variant": mi.variant(),
-                **{k: (list(v) if k == "gaze" else v) for k, v in o.items() if k != "timing"},
-            }
-            self._stats_cache = None
-
-        return mi.TensorXf(dr.ravel(image), shape=(height, width, 3))
+    def _finish_frame(self, frame: Frame, shade: _shading.ShadingResult,
+                      buffers: dict[str, Any], timer: StageTimer) -> None:
+        """Primal-frame bookkeeping: history, buffers, stats (never in a gradient pass)."""
+        o = self._options
+        gb, ro, reproj = frame.gbuffer, frame.reordered, frame.reprojection
+        resolved = buffers["resolved"]
+        self._history_in = frame.history
+        self._map_seed = frame.map_seed
+        if o["history"]:
+            self._history = _reproject.History(
+                mean=resolved.shading, count=resolved.count, depth=gb.depth,
+                camera=_reproject.camera_state(frame.sensor), width=frame.width,
+                height=frame.height)
+        self._frame += 1
+        self.buffers = {
+            "position": gb.position, "normal": gb.normal, "depth": gb.depth, "hit": gb.hit,
+            "probability": frame.probability, "edges": frame.edges,
+            "sampling_map": frame.sampling_map, "reprojection_map": reproj,
+            "wavefront": ro.wavefront, "reordered_map": ro.reordered_map,
+            "row_counts": ro.row_counts, "traced": buffers["traced"],
+            "shading": resolved.shading, "shading_mask": resolved.mask,
+            "history_count": resolved.count, "nearest": buffers["nearest"],
+            "filled": buffers["filled"], "interpolated": buffers["interpolated"],
+            "tonemapped": buffers["tonemapped"], "filtered": buffers["filtered"],
+            "image": buffers["image"],
+        }
+        dr.schedule(reproj.hit, resolved.resampled, resolved.mask)
+        rays = dr.width(ro.wavefront) if ro.active is None else dr.count(frame.sampling_map)
+        self._stats_raw = {
+            "width": frame.width, "height": frame.height, "pixels": frame.width * frame.height,
+            "rays": rays, "spp": frame.spp, "lanes": dr.width(ro.wavefront) * frame.spp,
+            "frame": self._frame - 1,
+            "history_hits": dr.count(reproj.hit), "resampled": dr.count(resolved.resampled),
+            "holes": dr.count(~resolved.mask), "rejected_samples": shade.rejected,
+            "clamped_samples": shade.clamped, "timings_ms": timer.finish(),
+            "variant": mi.variant(),
+            **{k: (list(v) if k == "gaze" else v) for k, v in o.items() if k != "timing"},
+        }
+        self._stats_cache = None
 
     # -- results --------------------------------------------------------------------------
     @property
