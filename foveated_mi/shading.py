@@ -50,6 +50,12 @@ from .pixel_filter import FilterSample, FilterSampler
 PIXEL_FILTERS = ("splat", "importance")
 
 
+class ShadingBuffer(NamedTuple):
+    """The sparse shading buffer of §3.3 before the history: one entry per pixel."""
+    value: mi.Color3f   #: radiance estimate of a traced pixel (0 elsewhere)
+    mask: mi.Bool       #: pixel was traced and holds a value
+
+
 class ShadingResult(NamedTuple):
     """The traced samples, one lane per sample (``rays * spp`` lanes, pixel-major)."""
     radiance: mi.Color3f   #: accepted radiance of each sample (0 where rejected), weighted
@@ -158,7 +164,7 @@ def trace_wavefront(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingI
 
 
 def develop_mean(samples: ShadingResult, pixels: mi.UInt32, spp: int, n_pixels: int
-                 ) -> tuple[mi.Color3f, mi.Bool]:
+                 ) -> ShadingBuffer:
     """``importance`` mode: each traced pixel holds the mean of its accepted samples.
 
     Returns the sparse shading buffer (``n_pixels`` entries) and the mask of pixels that hold
@@ -170,11 +176,11 @@ def develop_mean(samples: ShadingResult, pixels: mi.UInt32, spp: int, n_pixels: 
     else:
         total, accepted = samples.radiance, ok
     mean = total / dr.maximum(dr.detach(accepted), 1.0)
-    return scatter_to_film(mean, accepted > 0, pixels, n_pixels)
+    return ShadingBuffer(*scatter_to_film(mean, accepted > 0, pixels, n_pixels))
 
 
 def develop_splat(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.Film
-                  ) -> tuple[mi.Color3f, mi.Bool]:
+                  ) -> ShadingBuffer:
     """``splat`` mode: Mitsuba's film estimator :math:`\\sum f L / \\sum f` at the traced pixels.
 
     The samples are splatted with the film's filter into an ``mi.ImageBlock`` of the film's
@@ -203,11 +209,11 @@ def develop_splat(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.
     ray_ok = dr.block_sum(mi.Float(samples.ok), spp) > 0 if spp > 1 else samples.ok
     _, traced = scatter_to_film(dr.zeros(mi.Color3f, dr.width(pixels)), ray_ok, pixels, n)
     holds = traced & (wsum > 0)
-    return dr.select(holds, acc / dr.select(holds, wsum, 1.0), 0.0), holds
+    return ShadingBuffer(dr.select(holds, acc / dr.select(holds, wsum, 1.0), 0.0), holds)
 
 
 def develop(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.Film,
-            mode: str) -> tuple[mi.Color3f, mi.Bool]:
+            mode: str) -> ShadingBuffer:
     """The sparse shading buffer of a frame's samples (``mode`` in :data:`PIXEL_FILTERS`)."""
     if mode == "splat" and not film.rfilter().is_box_filter():
         return develop_splat(samples, pixels, spp, film)

@@ -337,7 +337,9 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         timer = StageTimer(self._options["timing"])
         frame = self._prepare(scene, sensor, seed, spp, grad_pass, timer)
         shade = self._shade(scene, frame)
-        image, buffers = self._form_image(frame, shade, timer)
+        shading = _shading.develop(shade, frame.reordered.wavefront, frame.spp,
+                                   sensor.film(), self._options["pixel_filter"])
+        image, buffers = self._form_image(frame, shading, timer)
         if not grad_pass:
             self._finish_frame(frame, shade, buffers, timer)
         return mi.TensorXf(dr.ravel(image), shape=(frame.height, frame.width, 3))
@@ -403,25 +405,23 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                         clamp=self._options["clamp"],
                                         filter_sampler=frame.filter_sampler)
 
-    def _form_image(self, frame: Frame, samples: _shading.ShadingResult,
+    def _form_image(self, frame: Frame, shading: _shading.ShadingBuffer,
                     timer: StageTimer) -> tuple[mi.Color3f, dict[str, Any]]:
-        """Everything after tracing: develop, history resolve, reconstruction and
+        """Everything after the shading buffer: history resolve, reconstruction and
         post-processing.
 
-        ``samples.radiance`` holds one value per traced sample. Every weight below (sites,
-        filter footprints, interpolation windows, edge-stopping weights) is decided from
-        the frame's G-buffer, its sampling map and detached values, so the image is a fixed
-        function of ``samples.radiance``: a gradient pass runs this again on the primal
-        frame's state.
+        ``shading.value`` holds the radiance estimate of each traced pixel. Every weight
+        below (sites, interpolation windows, edge-stopping weights) is decided from the
+        frame's G-buffer, its sampling map and detached values, so the image is a fixed
+        function of ``shading.value``: a gradient pass runs this again on the primal frame's
+        state, with the primal values carrying the gradient.
         """
         o = self._options
         width, height = frame.width, frame.height
         n = width * height
         rec, post = _reconstruct_module(), _postprocess_module()
-        ro = frame.reordered
         gb = frame.gbuffer
-        new, traced = _shading.develop(samples, ro.wavefront, frame.spp, frame.sensor.film(),
-                                       o["pixel_filter"])
+        new, traced = shading.value, shading.mask
         resolved = _reproject.resolve(new, traced, frame.spp, frame.reprojection,
                                       frame.history, o["max_history"])
         timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
