@@ -2,6 +2,12 @@
 
 One primary ray per pixel centre ``((x + 0.5) / W, (y + 0.5) / H)`` with no jitter, so the
 buffers are deterministic and the reprojection of a static camera is the identity.
+
+With ``materials=True`` the pass also evaluates, at the primary hit, the diffuse albedo of the
+BSDF (``bsdf.eval_diffuse_reflectance``, as Mitsuba's ``aov`` integrator does) and the
+radiance emitted towards the camera (an area emitter at the hit, or the environment on a
+miss). Demodulation (:mod:`foveated_mi.demodulate`) divides the traced radiance by the
+albedo so that textures come from this full-resolution buffer, not from sparse samples.
 """
 from __future__ import annotations
 
@@ -18,6 +24,8 @@ class GBuffer(NamedTuple):
     depth: mi.Float        #: distance from the camera centre to the hit (+inf on a miss)
     hit: mi.Bool           #: whether the primary ray hit a surface
     direction: mi.Vector3f  #: unit direction of the primary ray (reprojects the background)
+    albedo: mi.Color3f | None = None    #: diffuse albedo at the hit (0 on a miss)
+    emission: mi.Color3f | None = None  #: emitted radiance towards the camera
 
 
 def pixel_coords(width: int, height: int) -> tuple[mi.UInt32, mi.UInt32, mi.UInt32]:
@@ -42,10 +50,12 @@ def primary_rays(sensor: mi.Sensor, x: mi.UInt32, y: mi.UInt32,
     return ray
 
 
-def render_gbuffer(scene: mi.Scene, sensor: mi.Sensor) -> GBuffer:
-    """Intersect one ray per pixel centre and return the G-buffer.
+def render_gbuffer(scene: mi.Scene, sensor: mi.Sensor, *, materials: bool = False) -> GBuffer:
+    """Intersect one ray per pixel centre and return the G-buffer (``albedo`` and
+    ``emission`` only with ``materials=True``).
 
-    Discrete by nature (visibility), so it runs without gradient tracking.
+    Runs without gradient tracking: visibility is discrete, and the albedo and emission are
+    used as fixed weights of the image formation (see :mod:`foveated_mi.demodulate`).
     """
     width, height = film_size(sensor)
     with dr.suspend_grad():
@@ -60,5 +70,24 @@ def render_gbuffer(scene: mi.Scene, sensor: mi.Sensor) -> GBuffer:
         world = sensor.world_transform().matrix
         centre = mi.Point3f(world[0][3], world[1][3], world[2][3])
         depth = dr.select(hit, dr.norm(si.p - centre), dr.inf)
+        albedo = emission = None
+        if materials:
+            albedo, emission = surface_radiometry(scene, si, hit)
     return GBuffer(position=position, normal=normal, depth=depth, hit=hit,
-                   direction=mi.Vector3f(ray.d))
+                   direction=mi.Vector3f(ray.d), albedo=albedo, emission=emission)
+
+
+def surface_radiometry(scene: mi.Scene, si: mi.SurfaceInteraction3f, hit: mi.Bool
+                       ) -> tuple[mi.Color3f, mi.Color3f]:
+    """Diffuse albedo and emitted radiance of primary intersections ``si``.
+
+    Both are made finite and non-negative: a NaN from a broken texture or emitter would
+    otherwise spread through the demodulated reconstruction."""
+    albedo = dr.zeros(mi.Color3f, dr.width(hit))
+    bsdf = si.bsdf()
+    albedo = dr.select(hit, mi.Color3f(bsdf.eval_diffuse_reflectance(si, hit)), albedo)
+    emitter = si.emitter(scene)
+    emission = mi.Color3f(emitter.eval(si)) if scene.emitters() else mi.Color3f(0.0)
+    emission = emission + dr.zeros(mi.Color3f, dr.width(hit))
+    clean = lambda c: dr.select(dr.isfinite(c) & (c > 0.0), c, 0.0)  # noqa: E731
+    return clean(albedo), clean(emission)

@@ -98,6 +98,7 @@ from .. import reorder as _reorder
 from .. import reproject as _reproject
 from .. import sampling as _sampling
 from .. import shading as _shading
+from ..demodulate import demodulate, remodulate
 from ..postprocess.inverse import inverse_tonemap
 from ..pixel_filter import FilterSampler
 from ..timing import StageTimer
@@ -114,6 +115,11 @@ DEFAULTS: dict[str, Any] = {
     "edge_threshold": 0.1,
     "reconstruction": "sibson",
     "max_radius": 32,
+    "demodulate": False,
+    "target_samples": 32.0,
+    "guided_levels": 5,
+    "stochastic_jitter": 4.0,
+    "stochastic_tries": 3,
     "jfa": "jfa+1",
     "atrous_iterations": 5,
     "sigma_color": 0.5,
@@ -179,6 +185,12 @@ def validate_options(options: dict[str, Any]) -> dict[str, Any]:
         "reconstruction": check_choice("reconstruction", o["reconstruction"],
                                        list(rec.RECONSTRUCTIONS)),
         "max_radius": check_int("max_radius", o["max_radius"], 1, 4096),
+        "demodulate": _check_bool("demodulate", o["demodulate"]),
+        "target_samples": check_range("target_samples", o["target_samples"], 0.0, 1e9,
+                                      lo_open=True),
+        "guided_levels": check_int("guided_levels", o["guided_levels"], 1, 12),
+        "stochastic_jitter": check_range("stochastic_jitter", o["stochastic_jitter"], 0.0, 1e4),
+        "stochastic_tries": check_int("stochastic_tries", o["stochastic_tries"], 0, 64),
         "jfa": check_choice("jfa", o["jfa"], rec.JFA_VARIANTS),
         "atrous_iterations": check_int("atrous_iterations", o["atrous_iterations"], 0, 16),
         "sigma_color": _check_sigma("sigma_color", o["sigma_color"]),
@@ -367,7 +379,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         map_seed = self._map_seed if grad_pass else frame_seed
 
         with dr.suspend_grad():
-            gb = _gbuffer.render_gbuffer(scene, sensor)
+            gb = _gbuffer.render_gbuffer(scene, sensor, materials=o["demodulate"])
             timer.mark("gbuffer", gb.position, gb.normal, gb.depth, gb.hit)
 
             edges = None
@@ -426,24 +438,37 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                       frame.history, o["max_history"])
         timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
 
-        # sigma_p = 1 traces every pixel: the reconstruction is the identity (a pixel whose
-        # samples were all rejected stays 0, or keeps its history).
-        every_pixel = o["sigma_p"] >= 1.0
+        radiance = resolved.shading
+        if o["demodulate"]:
+            radiance = demodulate(radiance, gb.albedo, gb.emission)
+        guided = rec.uses_guide(o["reconstruction"])
+        # sigma_p = 1 traces every pixel: a paper interpolation is then the identity (a pixel
+        # whose samples were all rejected stays 0, or keeps its history); a guided
+        # reconstruction still averages noisy samples.
+        every_pixel = o["sigma_p"] >= 1.0 and not guided
         with dr.suspend_grad():
             if every_pixel:
                 nearest = dr.arange(mi.UInt32, n)
             else:
                 nearest = rec.jump_flood(resolved.mask, width, height, variant=o["jfa"])
         if every_pixel:
-            filled = interpolated = resolved.shading
+            filled = interpolated = radiance
         else:
-            filled = rec.voronoi_fill(resolved.shading, nearest)
+            filled = rec.voronoi_fill(radiance, nearest)
             if o["reconstruction"] == "voronoi":
                 interpolated = filled
             else:
-                interpolated = rec.reconstruct(o["reconstruction"], resolved.shading,
-                                               resolved.mask, nearest, width, height,
-                                               max_radius=o["max_radius"])
+                guide = rec.Guide(normal=gb.normal, position=gb.position, hit=gb.hit,
+                                  weight=resolved.count) if guided else None
+                interpolated = rec.reconstruct(
+                    o["reconstruction"], radiance, resolved.mask, nearest, width, height,
+                    max_radius=o["max_radius"], guide=guide, levels=o["guided_levels"],
+                    target_samples=o["target_samples"], jitter=o["stochastic_jitter"],
+                    tries=o["stochastic_tries"],
+                    seed=dr.opaque(mi.UInt32, (frame.seed ^ 0x6A09E667) & 0xFFFFFFFF))
+        if o["demodulate"]:
+            filled = remodulate(filled, gb.albedo, gb.emission)
+            interpolated = remodulate(interpolated, gb.albedo, gb.emission)
         timer.mark("reconstruct", nearest, filled, interpolated)
 
         tonemapped = filtered = None

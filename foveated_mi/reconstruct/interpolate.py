@@ -38,7 +38,7 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-from ..validate import check_choice, check_int
+from ..validate import check_int
 from .jfa import check_buffer, check_film, site_distance2, voronoi_fill
 from .sat import box_sum, interleave_rgb0, summed_area_table
 
@@ -314,20 +314,3 @@ def fast_sibson(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, wid
     hi = dr.gather(mi.Color3f, hi, mi.UInt32(0))
     out = dr.replace_grad(dr.minimum(dr.maximum(dr.detach(out), lo), hi), out)
     return dr.select(r2 == 0, mi.Color3f(centre.x, centre.y, centre.z), out)
-
-
-#: Registry: method name -> interpolation function (docs/ARCHITECTURE.md).
-RECONSTRUCTIONS = {
-    "voronoi": voronoi,
-    "sibson": sibson,
-    "discrete_sibson": discrete_sibson,
-    "fast_sibson": fast_sibson,
-}
-
-
-def reconstruct(method: str, shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32,
-                width: int, height: int, *, max_radius: int = 32) -> mi.Color3f:
-    """Interpolate with the method named ``method`` (a key of :data:`RECONSTRUCTIONS`)."""
-    check_choice("method", method, RECONSTRUCTIONS)
-    max_radius = check_int("max_radius", max_radius, 1)
-    return RECONSTRUCTIONS[method](shading, site_mask, nearest, width, height, max_radius=max_radius)

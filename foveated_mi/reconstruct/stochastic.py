@@ -1,0 +1,102 @@
+r"""Stochastic, surface-aware fill of the sparse frame (``reconstruction = "stochastic"``).
+
+A learned denoiser such as Intel Open Image Denoise is trained on images whose noise is
+independent from pixel to pixel. The paper's interpolations turn each noisy site into a smooth
+blotch a few pixels wide, which such a denoiser keeps. This method instead gives every
+untraced pixel :math:`p` the value of *one randomly chosen* nearby site on the same surface,
+so the filled frame looks like a low-sample render whose noise the denoiser removes:
+
+1. :math:`r_p` is the distance from :math:`p` to its nearest site (Jump Flooding).
+2. Up to ``tries`` times, a point :math:`p + \rho\,(\cos\phi, \sin\phi)` is drawn uniformly
+   in the disc of radius :math:`k\,(r_p + \tfrac12)` (:math:`k` = ``jitter``) and its nearest
+   site :math:`c` is a candidate. The first candidate on the same surface as :math:`p`
+   (both hit or both miss; for hits :math:`n_p \cdot n_c > 0.9` and
+   :math:`|n_p \cdot (x_c - x_p)| < 0.2\,|x_c - x_p|`) is taken.
+3. Without one, :math:`p` takes its nearest site (the Voronoi fill).
+
+A traced pixel keeps its own value. The random numbers come from a per-pixel hash of the
+frame's seed, so a frame is reproducible and successive frames decorrelate.
+
+With demodulation (:mod:`foveated_mi.demodulate`) the chosen site's irradiance is multiplied by
+the pixel's own albedo, so textures stay sharp. The output is a gather of site values with
+indices fixed by the G-buffer and the seed: linear in the values, with the scatter-add of the
+gather as adjoint (Dr.Jit's reverse mode).
+"""
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+
+from ..validate import ParameterError, check_int, check_range
+from .guided import Guide
+from .jfa import NO_SITE, check_buffer, check_film
+
+#: Candidate on the same surface: cosine between normals and relative tangent-plane distance.
+SAME_SURFACE_COS = 0.9
+SAME_SURFACE_PLANE = 0.2
+
+
+def same_surface(p: mi.UInt32, q: mi.UInt32, guide: Guide, valid: mi.Bool) -> mi.Bool:
+    """Whether pixels ``p`` and ``q`` see the same surface (or both see the background)."""
+    normal, position = mi.Vector3f(guide.normal), mi.Vector3f(guide.position)
+    hp = dr.gather(mi.Bool, guide.hit, p)
+    hq = dr.gather(mi.Bool, guide.hit, q, valid)
+    np_ = dr.gather(mi.Vector3f, normal, p)
+    nq = dr.gather(mi.Vector3f, normal, q, valid & hq)
+    xp = dr.gather(mi.Vector3f, position, p)
+    xq = dr.gather(mi.Vector3f, position, q, valid & hq)
+    d = xq - xp
+    plane = dr.abs(dr.dot(np_, d)) <= SAME_SURFACE_PLANE * dr.norm(d)
+    surface = (dr.dot(np_, nq) > SAME_SURFACE_COS) & plane
+    return valid & (hp == hq) & (~hp | surface)
+
+
+def stochastic(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: int,
+               height: int, *, max_radius: int = 32, guide: Guide | None = None, seed=0,
+               jitter: float = 4.0, tries: int = 3) -> mi.Color3f:
+    """Stochastic surface-aware fill (see the module docstring).
+
+    ``seed`` may be a Python int or an opaque ``mi.UInt32`` (per-frame, no recompilation).
+    ``max_radius`` is accepted for the registry's uniform signature.
+    """
+    width, height = check_film(width, height)
+    n = width * height
+    if guide is None:
+        raise ParameterError("guide", None, "a reconstruct.Guide (G-buffer normals, positions "
+                             "and hits) for reconstruction 'stochastic'")
+    for name, value in (("shading", shading), ("site_mask", site_mask), ("nearest", nearest),
+                        ("guide.normal", guide.normal), ("guide.position", guide.position),
+                        ("guide.hit", guide.hit)):
+        check_buffer(name, value, n)
+    jitter = check_range("jitter", jitter, 0.0, 1e4)
+    tries = check_int("tries", tries, 0, 64)
+    seed = seed if isinstance(seed, mi.UInt32) else dr.opaque(mi.UInt32, int(seed) & 0xFFFFFFFF)
+
+    idx = dr.arange(mi.UInt32, n)
+    y = idx // width
+    x = idx - y * width
+    has_site = nearest != NO_SITE
+    sy = dr.select(has_site, nearest // width, y)
+    sx = dr.select(has_site, nearest - sy * width, x)
+    r = dr.sqrt(dr.square(mi.Float(sx) - mi.Float(x)) + dr.square(mi.Float(sy) - mi.Float(y)))
+    radius = dr.opaque(mi.Float, jitter) * (r + 0.5)
+
+    chosen = dr.select(site_mask, idx, nearest)
+    done = mi.Bool(site_mask) | ~has_site
+    for t in range(tries):
+        u1, u2 = mi.sample_tea_32(idx, seed + ((t * 0x9E3779B9) & 0xFFFFFFFF))
+        rho = radius * dr.sqrt(mi.Float(u1) * 2.0 ** -32)
+        phi = (2.0 * math.pi * 2.0 ** -32) * mi.Float(u2)
+        qx = dr.clip(dr.round(mi.Float(x) + rho * dr.cos(phi)), 0, width - 1)
+        qy = dr.clip(dr.round(mi.Float(y) + rho * dr.sin(phi)), 0, height - 1)
+        cand = dr.gather(mi.UInt32, nearest, mi.UInt32(qy) * width + mi.UInt32(qx), ~done)
+        ok = ~done & (cand != NO_SITE)
+        ok &= same_surface(idx, dr.select(ok, cand, 0), guide, ok)
+        chosen = dr.select(ok, cand, chosen)
+        done |= ok
+    value = mi.Color3f(shading)
+    finite = dr.isfinite(value.x) & dr.isfinite(value.y) & dr.isfinite(value.z)
+    value = dr.select(finite, value, 0.0)
+    return dr.gather(mi.Color3f, value, chosen, has_site)
