@@ -320,21 +320,27 @@ def _option_module():
     return foveated
 
 
+def _option_names() -> list[str]:
+    """Keys a configuration may set: the integrator's options (from its own defaults) but
+    gaze and timing, plus spp and frames."""
+    fov = _option_module()
+    return [k for k in getattr(fov, "DEFAULTS", {}) if k not in _FORBIDDEN] + list(_EXTRA_KEYS)
+
+
+def _check_keys(ctx: _Ctx, key: str, table: dict) -> None:
+    names = _option_names()
+    for k, v in table.items():
+        if k in _FORBIDDEN:
+            raise ctx.error(f"{key}.{k}", v, _FORBIDDEN[k])
+        if len(names) > len(_EXTRA_KEYS) and k not in names:
+            raise ctx.error(f"{key}.{k}", v, "a known key (unknown option; allowed: "
+                            + ", ".join(sorted(names)) + ")")
+
+
 def _check_options(ctx: _Ctx, key: str, options: dict, where: dict[str, str]) -> dict:
     """Validate one configuration; ``where`` maps an option to its dotted TOML key."""
     fov = _option_module()
-    known = [k for k in getattr(fov, "DEFAULTS", {}) if k not in _FORBIDDEN]
-    allowed = "a known key (unknown option; allowed: " + ", ".join(sorted(known)
-                                                                    + list(_EXTRA_KEYS)) + ")"
-    opts = {}
-    for k, v in options.items():
-        if k in _FORBIDDEN:
-            raise ctx.error(where.get(k, f"{key}.{k}"), v, _FORBIDDEN[k])
-        if k in _EXTRA_KEYS:
-            continue
-        if known and k not in known:
-            raise ctx.error(where.get(k, f"{key}.{k}"), v, allowed)
-        opts[k] = v
+    opts = {k: v for k, v in options.items() if k not in _EXTRA_KEYS}
     try:
         full = fov.validate_options(dict(opts))
     except ParameterError as e:
@@ -360,6 +366,7 @@ def _foveated(ctx: _Ctx, table: Any) -> list[dict]:
     table = dict(ctx.table("foveated", table))
     ctx.known("foveated", table, ("defaults", "grid", "configs"))
     shared = dict(ctx.table("foveated.defaults", table.get("defaults", {})))
+    _check_keys(ctx, "foveated.defaults", shared)
     for k, v in shared.items():
         if isinstance(v, list) and k != "frames":
             raise ctx.error(f"foveated.defaults.{k}", v, "one value (lists go in "
@@ -367,6 +374,7 @@ def _foveated(ctx: _Ctx, table: Any) -> list[dict]:
     out = []
     if "grid" in table:
         grid = dict(ctx.table("foveated.grid", table["grid"]))
+        _check_keys(ctx, "foveated.grid", grid)
         axes = {}
         for k, v in grid.items():
             values = v if isinstance(v, list) and k != "frames" else [v]
@@ -390,6 +398,7 @@ def _foveated(ctx: _Ctx, table: Any) -> list[dict]:
             raise ctx.error("foveated.configs", configs, "a list of [[foveated.configs]] tables")
         for i, c in enumerate(configs):
             c = dict(ctx.table(f"foveated.configs[{i}]", c))
+            _check_keys(ctx, f"foveated.configs[{i}]", c)
             opts = {**shared, **c}
             where = {**{s: f"foveated.defaults.{s}" for s in shared},
                      **{k: f"foveated.configs[{i}].{k}" for k in c}}
