@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["expand_tasks", "reference_task", "reference_key", "run_task", "run_reference_task",
-           "get_scene", "scene_cache_info", "task_id"]
+           "get_scene", "scene_cache_info", "clear_scene_cache", "task_id"]
 
 #: Test hook (not API): when set to a path that does not exist, the first task a process runs
 #: creates that file and kills its own process, to test that a dead worker's task is retried.
@@ -142,6 +142,11 @@ def get_scene(load_spec: dict, variant: str):
         _SCENES[key] = scene
         _LOADS["count"] += 1
     return scene
+
+
+def clear_scene_cache() -> None:
+    """Drop the scenes this process keeps (they are reloaded on demand)."""
+    _SCENES.clear()
 
 
 def scene_cache_info() -> dict:
