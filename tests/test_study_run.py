@@ -116,11 +116,20 @@ def test_killed_study_resumes_without_duplicates(tmp_path):
 
 @needs_dask
 def test_dead_worker_loses_only_its_running_task(tmp_path, monkeypatch):
+    """On an existing cluster (--scheduler), a worker process that dies in the middle of a
+    task is replaced and the task re-run; every row arrives once."""
+    import logging
+    from distributed import LocalCluster
     marker = tmp_path / "crashed"
-    monkeypatch.setenv(T._CRASH_ONCE_ENV, str(marker))
-    path = study_file(tmp_path, TWO)
-    res = run_study(path, out=str(tmp_path / "out"), executor="dask", workers=2,
-                    progress=False, echo=None)
+    monkeypatch.setenv(T._CRASH_ONCE_ENV, str(marker))        # inherited by the workers
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                           dashboard_address=None, silence_logs=logging.CRITICAL)
+    try:
+        path = study_file(tmp_path, TWO)
+        res = run_study(path, out=str(tmp_path / "out"), executor="dask",
+                        scheduler=cluster.scheduler_address, progress=False, echo=None)
+    finally:
+        cluster.close()
     assert marker.exists(), "no worker died: the hook did not fire"
     assert int(marker.read_text()) != os.getpid()           # a worker, not this process
     assert res.failed == []
@@ -131,9 +140,12 @@ def test_dead_worker_loses_only_its_running_task(tmp_path, monkeypatch):
 
 def test_reference_is_cached_and_scenes_load_once(tmp_path):
     out = tmp_path / "out"
+    import matplotlib
+    backend = matplotlib.get_backend()
     T.clear_scene_cache()
     loads = T.scene_cache_info()["loads"]
     first = run_study(QUICK, out=str(out), size=32, progress=False, echo=None)
+    assert matplotlib.get_backend() == backend              # plots never switch the backend
     assert first.references_rendered == 1 and first.tasks_run == 4 and first.new_rows == 6
     assert T.scene_cache_info()["loads"] == loads + 1        # reference + 4 tasks: one load
     ref_dir = out / "references"

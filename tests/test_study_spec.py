@@ -270,3 +270,38 @@ def test_scene_fronts_flip_is_lower_is_better():
             dict(scene="a", time_ms=3.0, flip=0.2), dict(scene="b", time_ms=1.0, flip=0.5)]
     fr = scene_fronts(rows, "flip")
     assert [r["time_ms"] for r in fr["a"]] == [1.0, 2.0] and len(fr["b"]) == 1
+
+
+def test_front_table_names_the_options_that_vary():
+    import json
+    from foveated_mi.study import front_table
+
+    def r(t, q, reorder):
+        cfg = {"full_options": {"theta": 0.1, "reorder": reorder, "max_radius": 32}}
+        return dict(scene="s", method="foveated", theta=0.1, sigma_p=0.8,
+                    reconstruction="sibson", spp=1.0, frame=1.0, time_ms=t, psnr=q,
+                    config=json.dumps(cfg))
+    text = front_table([r(2.0, 20.0, "none"), r(1.0, 19.0, "compact"),
+                        r(3.0, 18.0, "rows")], "psnr")
+    lines = text.splitlines()
+    assert lines[0].split()[-1] == "options" and len(lines) == 4     # header, rule, 2 rows
+    assert lines[2].endswith("reorder=compact") and lines[3].endswith("reorder=none")
+    assert "max_radius" not in text                                   # the same everywhere
+
+
+@pytest.mark.parametrize("name", ["quick", "paper_fig7_quality", "speed_accuracy",
+                                  "paper_table1"])
+def test_example_studies_parse(name):
+    spec = load_study(os.path.join(os.path.dirname(QUICK), f"{name}.toml"))
+    tasks = expand_tasks(spec, "llvm_ad_rgb")
+    assert tasks and len({t["task_id"] for t in tasks}) == len(tasks)
+    if name == "paper_fig7_quality":
+        combos = {(c["options"]["theta"], c["options"]["reconstruction"]) for c in spec.foveated}
+        assert {t for t, _ in combos} == {0.04, 0.1, 0.2} and len(combos) == 12
+        assert all(c["options"]["sigma_p"] == 0.8 for c in spec.foveated)
+        assert spec.scenes[0].size == (1024, 1024) and spec.scenes[0].name == "voxel-city"
+    if name == "speed_accuracy":
+        assert [s.label for s in spec.scenes] == ["voxel-city", "staircase"]
+        assert spec.scenes[1].optional
+        assert spec.scenes[1].source.endswith(os.path.join("shared", "scenes", "staircase",
+                                                           "scene.xml"))

@@ -61,13 +61,15 @@ _STYLE = {"uniform": dict(marker="s", color="0.25", label="uniform"),
 
 def plot_pareto(rows: list[dict[str, Any]], metric: str, out_dir: str, *,
                 title: str | None = None) -> tuple[str, str]:
-    """Write ``pareto.png`` and ``pareto.svg`` in ``out_dir``: one panel per scene, foveated
+    """Write ``pareto.png`` and ``pareto.svg`` in ``out_dir`` (matplotlib, Agg canvas): one
+    panel per scene, foveated
     points as circles coloured by reconstruction, baselines as squares (uniform) and triangles
     (uniform + OIDN), the front as a step line with ringed points. Returns the two paths."""
+    # A bare Figure (Agg canvas) rather than pyplot: no global backend switch and no figure
+    # left in pyplot's state, so a notebook's inline plots keep working.
     import matplotlib
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
     import matplotlib.ticker
+    from matplotlib.figure import Figure
     from ..io import atomic_write
 
     scenes = list(dict.fromkeys(r["scene"] for r in rows)) or ["(no rows)"]
@@ -75,9 +77,10 @@ def plot_pareto(rows: list[dict[str, Any]], metric: str, out_dir: str, *,
     n = len(scenes)
     cols = min(n, 3)
     nrows = math.ceil(n / cols)
-    fig, axes = plt.subplots(nrows, cols, figsize=(5.2 * cols, 4.2 * nrows), squeeze=False)
+    fig = Figure(figsize=(5.2 * cols, 4.2 * nrows))
+    axes = fig.subplots(nrows, cols, squeeze=False)
     recs = list(dict.fromkeys(r["reconstruction"] for r in rows if r["method"] == "foveated"))
-    cmap = plt.get_cmap("tab10")
+    cmap = matplotlib.colormaps["tab10"]
     sign = -1.0 if metric in LOWER_IS_BETTER else 1.0
     for k, scene in enumerate(scenes):
         ax = axes[k // cols][k % cols]
@@ -132,15 +135,32 @@ def plot_pareto(rows: list[dict[str, Any]], metric: str, out_dir: str, *,
         with atomic_write(path) as tmp:
             fig.savefig(tmp, format=ext, dpi=120)
         paths.append(path)
-    plt.close(fig)
     return paths[0], paths[1]
 
 
+def _varying_options(rows: list[dict[str, Any]]) -> list[str]:
+    """Foveated options (besides θ, σp and reconstruction, which have columns) that differ
+    between the study's foveated rows, from their ``config`` JSON."""
+    import json
+    seen: dict[str, set] = {}
+    for r in rows:
+        if r.get("method") != "foveated" or not r.get("config"):
+            continue
+        opts = json.loads(r["config"]).get("full_options", {})
+        for k, v in opts.items():
+            seen.setdefault(k, set()).add(json.dumps(v, sort_keys=True))
+    return [k for k, v in seen.items() if len(v) > 1
+            and k not in ("theta", "sigma_p", "reconstruction")]
+
+
 def front_table(rows: list[dict[str, Any]], metric: str) -> str:
-    """The fronts of every scene as an aligned text table (``foveated_mi.cli.format_table``)."""
+    """The fronts of every scene as an aligned text table (``foveated_mi.cli.format_table``);
+    foveated options that vary within the study are listed in an ``options`` column."""
+    import json
     from ..cli import format_table
+    varying = _varying_options(rows)
     header = ("scene", "method", "theta", "sigma_p", "reconstruction", "spp", "frame",
-              "time ms", metric)
+              "time ms", metric) + (("options",) if varying else ())
     table = [header]
 
     def num(v, fmt):
@@ -149,9 +169,12 @@ def front_table(rows: list[dict[str, Any]], metric: str) -> str:
     for scene, front in scene_fronts(rows, metric).items():
         for r in front:
             fov = r["method"] == "foveated"
-            table.append((scene, r["method"], num(r["theta"], "g") if fov else "-",
-                           num(r["sigma_p"], "g") if fov else "-",
-                           r["reconstruction"] if fov else "-", num(r["spp"], ".0f"),
-                           num(r["frame"], ".0f"), num(r["time_ms"], ".2f"),
-                           num(r[metric], ".4f")))
+            line = (scene, r["method"], num(r["theta"], "g") if fov else "-",
+                    num(r["sigma_p"], "g") if fov else "-",
+                    r["reconstruction"] if fov else "-", num(r["spp"], ".0f"),
+                    num(r["frame"], ".0f"), num(r["time_ms"], ".2f"), num(r[metric], ".4f"))
+            if varying:
+                opts = json.loads(r["config"]).get("full_options", {}) if fov else {}
+                line += (" ".join(f"{k}={opts[k]}" for k in varying if k in opts) or "-",)
+            table.append(line)
     return format_table(table)

@@ -220,6 +220,7 @@ def _references(spec, scenes, pending, file_refs, out_dir, variant, ex, progress
         paths[label] = path
         if os.path.isfile(path):
             arrays[label] = np.load(path, allow_pickle=False)
+            _filter_note(label, _read_meta(path).get("rfilter"), result, say)
             continue
         task = T.reference_task(scene, variant)
         task["threads"] = ex.threads
@@ -230,25 +231,47 @@ def _references(spec, scenes, pending, file_refs, out_dir, variant, ex, progress
         bar = tqdm(total=len(jobs), unit="ref", desc="references", disable=not progress,
                    file=sys.stderr)
         try:
-            for label, arr, err in ex.run(jobs):
+            for label, out, err in ex.run(jobs):
                 bar.update(1)
                 if err is not None:
                     result.failed.append(f"reference of {label} failed: {_one_line(err)}")
                     continue
+                arr = out["image"]
                 with atomic_write(paths[label], "wb") as f:
                     np.save(f, arr)
                 scene = scenes[label]
                 meta = {"scene": scene.name, "label": label, "size": list(scene.size),
                         "params": scene.params, "integrator": scene.integrator,
                         "spp": scene.reference["spp"], "seed": scene.reference["seed"],
-                        "variant": variant}
+                        "variant": variant, "rfilter": out["rfilter"]}
                 with atomic_write(os.path.splitext(paths[label])[0] + ".json", "w") as f:
                     json.dump(meta, f, indent=2)
                 arrays[label] = arr
                 result.references_rendered += 1
+                _filter_note(label, out["rfilter"], result, say)
         finally:
             bar.close()
     return {label: ex.scatter(arr) for label, arr in arrays.items()}
+
+
+def _read_meta(npy_path: str) -> dict:
+    try:
+        with open(os.path.splitext(npy_path)[0] + ".json") as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return {}
+
+
+def _filter_note(label: str, rfilter: str | None, result, say) -> None:
+    """The foveated integrator develops one box-filtered value per pixel; a film with a
+    wider reconstruction filter blurs the reference and the uniform baselines only."""
+    if rfilter and not rfilter.startswith("BoxFilter"):
+        note = (f"note: scene {label!r}: the film's filter is {rfilter}; the reference and the "
+                "uniform baselines are filtered by it, foveated frames are not (one box-"
+                "filtered value per pixel), which lowers foveated quality; use a box rfilter "
+                "for like-for-like comparisons")
+        result.notes.append(note)
+        say(note)
 
 
 def _run_tasks(pending, refs, ex, results, progress, result, say) -> None:

@@ -154,12 +154,14 @@ def scene_cache_info() -> dict:
     return {"cached": len(_SCENES), "loads": _LOADS["count"], "pid": os.getpid()}
 
 
-def run_reference_task(task: dict) -> np.ndarray:
-    """Render a scene's reference (linear float32 (H, W, 3)) with its nested integrator."""
+def run_reference_task(task: dict) -> dict:
+    """Render a scene's reference with its nested integrator: ``{"image": linear float32
+    (H, W, 3), "rfilter": the film's reconstruction filter (text)}``."""
     _prepare_worker(task)
     from ..baselines import render_reference
     scene = get_scene(task["scene"], task["variant"])
-    return render_reference(scene, spp=task["spp"], seed=task["seed"])
+    image = render_reference(scene, spp=task["spp"], seed=task["seed"])
+    return {"image": image, "rfilter": str(scene.sensors()[0].film().rfilter())}
 
 
 def _median(xs: list[float | None]) -> float | None:
