@@ -1,4 +1,4 @@
-"""``foveated-mi``: render a foveated frame or a sequence from the command line.
+"""``foveated-mi``: render a foveated frame or a sequence, or run a study (command line).
 
 Bad input prints one line (``foveated-mi: error: <name> = <value> is invalid: expected ...``)
 and exits with status 2; no traceback, no half-written output.
@@ -85,7 +85,8 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--executor", default="local", help="local | dask")
     st.add_argument("--scheduler", help="address of a running Dask scheduler, e.g. "
                     "tcp://host:8786 (default with --executor dask: a LocalCluster)")
-    st.add_argument("--workers", type=int, help="LocalCluster worker processes (dask only)")
+    st.add_argument("--workers", type=int, help="LocalCluster worker processes (dask without "
+                    "--scheduler; default 2)")
     st.add_argument("--size", type=int, nargs=2, metavar=("W", "H"),
                     help="override every scene's film size")
     st.add_argument("--metric", help="quality axis of the Pareto plot (default: the "
