@@ -118,7 +118,8 @@ class SceneSpec:
     def identity(self) -> dict:
         """What identifies the scene's results (machine-independent: the TOML spelling)."""
         ref = {k: v for k, v in self.reference.items() if k != "path"}
-        return {"scene": self.name, "size": list(self.size), "gaze": list(self.gaze),
+        return {"scene": self.name, "label": self.label, "size": list(self.size),
+                "gaze": list(self.gaze),
                 "params": self.params, "integrator": self.integrator, "reference": ref}
 
 
