@@ -5,7 +5,7 @@ STAMP  := $(VENV)/.installed
 export DRJIT_LIBLLVM_PATH ?= $(shell cat $(VENV)/llvm-path 2>/dev/null)
 RUN    = DRJIT_LIBLLVM_PATH=$$(cat $(VENV)/llvm-path) 
 
-.PHONY: demo test test-slow bench setup clean
+.PHONY: demo test test-slow bench notebooks setup clean
 
 $(STAMP): pyproject.toml scripts/setup.sh
 	bash scripts/setup.sh
@@ -26,6 +26,9 @@ bench: $(STAMP)
 	$(RUN) $(PY) benchmarks/bench_reconstruct.py
 	$(RUN) $(PY) benchmarks/bench_quality.py
 	$(RUN) $(PY) benchmarks/bench_temporal.py
+
+notebooks: $(STAMP)    # executes notebooks/*.ipynb in place (small size; FULL=1 for paper sizes)
+	$(RUN) $(PY) scripts/run_notebooks.py $(if $(FULL),--full,)
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

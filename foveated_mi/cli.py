@@ -1,4 +1,4 @@
-"""``foveated-mi``: render a foveated frame or a sequence from the command line.
+"""``foveated-mi``: render a foveated frame or a sequence, or run a study (command line).
 
 Bad input prints one line (``foveated-mi: error: <name> = <value> is invalid: expected ...``)
 and exits with status 2; no traceback, no half-written output.
@@ -79,6 +79,22 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--frames", type=int, help="override the frame count")
     s.add_argument("--compare-full", action="store_true", dest="compare_full")
     s.add_argument("--no-progress", action="store_true", dest="no_progress")
+
+    st = sub.add_parser("study", help="run a speed-accuracy study from a TOML file "
+                        "(see configs/studies/)")
+    st.add_argument("study", help="study file (TOML)")
+    st.add_argument("--out", help="output folder (default out/studies/<study name>)")
+    st.add_argument("--executor", default="local", help="local | dask")
+    st.add_argument("--scheduler", help="address of a running Dask scheduler, e.g. "
+                    "tcp://host:8786 (default with --executor dask: a LocalCluster)")
+    st.add_argument("--workers", type=int, help="LocalCluster worker processes (dask without "
+                    "--scheduler; default 2)")
+    st.add_argument("--size", type=int, nargs=2, metavar=("W", "H"),
+                    help="override every scene's film size")
+    st.add_argument("--metric", help="quality axis of the Pareto plot (default: the "
+                    "study's metric, else psnr_fovea)")
+    st.add_argument("--variant")
+    st.add_argument("--no-progress", action="store_true", dest="no_progress")
     return p
 
 
@@ -169,12 +185,23 @@ def cmd_sequence(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_study(args: argparse.Namespace) -> int:
+    from .study import run_study
+    result = run_study(args.study, out=args.out, executor=args.executor,
+                       scheduler=args.scheduler, workers=args.workers,
+                       size=tuple(args.size) if args.size else None, metric=args.metric,
+                       variant=args.variant, progress=not args.no_progress)
+    return 1 if result.failed else 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from .validate import ParameterError
     try:
         if args.command == "render":
             return cmd_render(args)
+        if args.command == "study":
+            return cmd_study(args)
         return cmd_sequence(args)
     except ParameterError as e:
         sys.stderr.write(f"foveated-mi: error: {e}\n")

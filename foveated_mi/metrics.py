@@ -1,7 +1,10 @@
-"""Image-quality metrics: PSNR and SSIM through scikit-image.
+r"""Image-quality metrics: PSNR, SSIM and FLIP over the full frame, the fovea and the periphery,
+and an eccentricity-weighted PSNR.
 
-Both take a reference and a test image of the same shape, (H, W) or (H, W, C), and
-compare all channels (``channel_axis=-1`` for 3-D arrays).
+Every metric takes a reference and a test image of the same shape, (H, W) or (H, W, C), and
+compares all channels (``channel_axis=-1`` for 3-D arrays). The images the metrics are meant
+for are display-referred, in [0, 1] (:func:`foveated_mi.render.to_display`: Reinhard, then
+sRGB).
 
 ``data_range`` (the ``L`` of PSNR's ``10 log10(L^2 / MSE)`` and of SSIM's constants
 ``(K1 L)^2``, ``(K2 L)^2``), when None:
@@ -19,17 +22,56 @@ turning the metric into NaN.
 SSIM uses scikit-image's defaults (uniform 7x7 window, K1 = 0.01, K2 = 0.03, sample
 covariance). An image smaller than 7 px on a side uses the largest odd window
 ``<= min(H, W)``; below 3 px no window fits and SSIM is ``nan``.
+
+**Regions.** The fovea is the set of pixels whose centre lies closer to the gaze than θ, the
+distance being measured as in the sampling pass (:func:`foveated_mi.sampling.normalized_distance`):
+
+.. math::
+
+    d_i = \frac{\lVert (x_i + \tfrac12,\ y_i + \tfrac12) - (g_x W,\ g_y H) \rVert}
+               {\tfrac12\sqrt{W^2 + H^2}},
+    \qquad \text{fovea} = \{ i : d_i < \theta \},
+
+with the gaze ``g`` in normalised film coordinates (origin top-left, x to the right, y down).
+The periphery is its complement. A masked metric uses only the pixels where ``mask`` is True
+(all channels); an empty mask gives ``nan`` (there is nothing to measure), never an error.
+
+* masked PSNR: ``10 log10(L^2 / MSE_mask)``, MSE over the masked pixels and all channels;
+* masked SSIM: the mean over the masked pixels of scikit-image's full SSIM map (averaged over
+  channels). Unlike the unmasked SSIM, which is scikit-image's mean over the pixels whose
+  window lies inside the image, it counts border pixels too (their windows are reflected at
+  the border), so an all-True mask differs from the unmasked value by the border's share;
+* masked FLIP: the mean over the masked pixels of the FLIP error map.
+
+**Eccentricity weighting.** :func:`eccentricity_weights` follows the sampling law's falloff:
+the weight of pixel ``i`` is proportional to the probability with which the foveated
+integrator traces it, :math:`P(d_i) = 1/(w d_i^2 + 1)`, :math:`w = (1/\sigma_p - 1)/\theta^2`,
+normalised to sum 1. :func:`eccentricity_weighted_psnr` is the PSNR of the weighted MSE
+:math:`\sum_i \omega_i \tfrac1C \sum_c (r_{ic} - t_{ic})^2`.
 """
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
-from .validate import ParameterError, check_range
+from .validate import ParameterError, check_point2, check_range
+
+__all__ = ["psnr", "ssim", "flip", "compare", "fovea_mask", "eccentricity_weights",
+           "eccentricity_weighted_psnr", "normalized_distance", "ssim_win_size",
+           "COMPARE_KEYS", "SSIM_WIN_SIZE"]
 
 SSIM_WIN_SIZE = 7
 
+#: Keys of :func:`compare`, always all present (``nan`` where not computable).
+COMPARE_KEYS = ("psnr", "ssim", "flip", "psnr_fovea", "psnr_periphery", "ssim_fovea",
+                "ssim_periphery", "flip_fovea", "flip_periphery", "psnr_eccentricity")
+
+
+# ---------------------------------------------------------------------------------------------
+# Validation
+# ---------------------------------------------------------------------------------------------
 
 def _check_pair(reference, test) -> tuple[np.ndarray, np.ndarray]:
     ref = np.asarray(reference)
@@ -63,18 +105,136 @@ def _data_range(ref: np.ndarray, data_range) -> float:
                          "outside [0, 1]")
 
 
-def psnr(reference, test, data_range: float | None = None) -> float:
-    """Peak signal-to-noise ratio in dB, ``10 log10(L^2 / MSE)`` over all pixels and channels
-    (``skimage.metrics.peak_signal_noise_ratio``); ``inf`` for identical images.
+def _check_mask(mask, shape: tuple[int, ...], name: str = "mask") -> np.ndarray | None:
+    if mask is None:
+        return None
+    m = np.asarray(mask)
+    if m.dtype != np.bool_ or m.shape != tuple(shape[:2]):
+        raise ParameterError(name, f"{m.dtype} array of shape {m.shape}",
+                             f"a boolean array of shape {tuple(shape[:2])} (the images' H, W)")
+    return m
+
+
+def _check_shape(shape) -> tuple[int, int]:
+    allowed = "an image shape (H, W) or (H, W, C) with H, W >= 1"
+    try:
+        dims = tuple(int(s) for s in shape)
+    except (TypeError, ValueError):
+        raise ParameterError("shape", shape, allowed) from None
+    if len(dims) not in (2, 3) or min(dims[:2]) < 1 or any(
+            isinstance(s, bool) or int(s) != s for s in shape):
+        raise ParameterError("shape", shape, allowed)
+    return dims[0], dims[1]
+
+
+# ---------------------------------------------------------------------------------------------
+# Regions and weights
+# ---------------------------------------------------------------------------------------------
+
+def normalized_distance(shape, gaze) -> np.ndarray:
+    """(H, W) distance of each pixel centre to the gaze over half the film diagonal, in double
+    precision: the NumPy twin of :func:`foveated_mi.sampling.normalized_distance` (same
+    convention; the tests compare the two)."""
+    h, w = _check_shape(shape)
+    gx, gy = check_point2("gaze", gaze)
+    half_diag = 0.5 * math.sqrt(w * w + h * h)
+    dx = (np.arange(w, dtype=np.float64) + 0.5) - gx * w
+    dy = (np.arange(h, dtype=np.float64) + 0.5) - gy * h
+    return np.sqrt(dx[None, :] ** 2 + dy[:, None] ** 2) / half_diag
+
+
+def fovea_mask(shape, gaze, theta) -> np.ndarray:
+    """(H, W) boolean mask of the fovea: pixel centres with normalised distance ``d < theta``
+    to ``gaze`` (see the module docstring). The gaze may lie off-screen (the mask may then be
+    empty); θ is a finite number > 0."""
+    theta = check_range("theta", theta, 0.0, None, lo_open=True)
+    return normalized_distance(shape, gaze) < theta
+
+
+def eccentricity_weights(shape, gaze, theta, sigma_p) -> np.ndarray:
+    r"""(H, W) weights following the sampling law's falloff, normalised to sum 1:
+
+    .. math::
+
+        \omega_i = \frac{P(d_i)}{\sum_j P(d_j)}, \qquad P(d) = \frac{1}{w d^2 + 1}
+        = \frac{1/w}{d^2 + 1/w},
+
+    with ``w`` from :func:`foveated_mi.sampling.sampling_weight` (so ``P(θ) = σp``). They are
+    computed as ``m / (d_i^2 + 1/w)`` (``m`` the smallest denominator) and normalised, which
+    keeps the limits exact: ``σp = 1`` (w = 0) gives uniform weights; a ``w`` that overflows
+    (θ → 0) gives ``1/d^2`` weights, or all the weight on a pixel centred on the gaze.
+    """
+    from .sampling import sampling_weight
+
+    w = sampling_weight(theta, sigma_p)
+    d2 = normalized_distance(shape, gaze) ** 2
+    if w == 0.0:
+        v = np.ones_like(d2)
+    else:
+        eps = 1.0 / w                               # 0 when w overflowed to inf
+        den = d2 + eps
+        m = float(den.min())
+        v = (den == 0.0).astype(np.float64) if m == 0.0 else m / den
+    return v / v.sum()
+
+
+# ---------------------------------------------------------------------------------------------
+# PSNR
+# ---------------------------------------------------------------------------------------------
+
+def _psnr_from_mse(mse: float, rng: float) -> float:
+    if mse == 0.0:
+        return math.inf
+    return float(10.0 * np.log10(rng * rng / mse))
+
+
+def psnr(reference, test, data_range: float | None = None, mask=None) -> float:
+    """Peak signal-to-noise ratio in dB, ``10 log10(L^2 / MSE)`` over all channels of the
+    pixels in ``mask`` (all pixels when None: ``skimage.metrics.peak_signal_noise_ratio``);
+    ``inf`` when they are identical, ``nan`` for an empty mask. ``L`` comes from the whole
+    reference (see the module docstring), so region values share one scale.
     """
     from skimage.metrics import peak_signal_noise_ratio
 
     ref, tst = _check_pair(reference, test)
+    m = _check_mask(mask, ref.shape)
     rng = _data_range(ref, data_range)
+    if m is not None:
+        if not m.any():
+            return math.nan
+        diff = ref[m] - tst[m]
+        return _psnr_from_mse(float(np.mean(diff * diff, dtype=np.float64)), rng)
     if np.array_equal(ref, tst):
         return math.inf                      # skimage divides by MSE = 0 with a warning
     return float(peak_signal_noise_ratio(ref, tst, data_range=rng))
 
+
+def eccentricity_weighted_psnr(reference, test, weights, data_range: float = 1.0) -> float:
+    r"""PSNR of the weighted MSE, ``10 log10(L^2 / sum_i w_i mean_c (r_ic - t_ic)^2)``, with
+    ``weights`` an (H, W) array of finite non-negative numbers (normalised here to sum 1; see
+    :func:`eccentricity_weights`). ``inf`` when the weighted error is 0."""
+    ref, tst = _check_pair(reference, test)
+    rng = check_range("data_range", data_range, lo=0.0, lo_open=True)
+    wts = np.asarray(weights)
+    allowed = (f"a finite, non-negative real array of shape {ref.shape[:2]} with a positive "
+               "sum")
+    if wts.shape != ref.shape[:2] or not np.issubdtype(wts.dtype, np.number) or \
+            np.iscomplexobj(wts):
+        raise ParameterError("weights", f"{wts.dtype} array of shape {wts.shape}", allowed)
+    wts = wts.astype(np.float64)
+    if not np.all(np.isfinite(wts)) or (wts < 0).any() or not wts.sum() > 0:
+        raise ParameterError("weights", f"array with min {np.nanmin(wts):g}, sum "
+                             f"{np.nansum(wts):g}", allowed)
+    wts = wts / wts.sum()
+    err = (ref - tst) ** 2
+    if err.ndim == 3:
+        err = err.mean(axis=-1)
+    return _psnr_from_mse(float(np.sum(wts * err)), rng)
+
+
+# ---------------------------------------------------------------------------------------------
+# SSIM
+# ---------------------------------------------------------------------------------------------
 
 def ssim_win_size(height: int, width: int) -> int | None:
     """SSIM window side: 7, or the largest odd number <= min(H, W); None below 3 px."""
@@ -84,22 +244,137 @@ def ssim_win_size(height: int, width: int) -> int | None:
     return side if side >= 3 else None
 
 
-def ssim(reference, test, data_range: float | None = None) -> float:
+def ssim(reference, test, data_range: float | None = None, mask=None) -> float:
     """Mean structural similarity (Wang et al. 2004) through
-    ``skimage.metrics.structural_similarity``, averaged over channels; ``nan`` when the image
-    is smaller than 3 px on a side (see the module docstring)."""
+    ``skimage.metrics.structural_similarity``, averaged over channels; with ``mask``, the
+    mean of the full SSIM map over the masked pixels (see the module docstring). ``nan``
+    when the image is smaller than 3 px on a side or the mask is empty.
+    """
     from skimage.metrics import structural_similarity
 
     ref, tst = _check_pair(reference, test)
+    m = _check_mask(mask, ref.shape)
     rng = _data_range(ref, data_range)
     win = ssim_win_size(ref.shape[0], ref.shape[1])
-    if win is None:
+    if win is None or (m is not None and not m.any()):
         return math.nan
-    return float(structural_similarity(ref, tst, data_range=rng, win_size=win,
-                                       channel_axis=-1 if ref.ndim == 3 else None))
+    channel_axis = -1 if ref.ndim == 3 else None
+    if m is None:
+        return float(structural_similarity(ref, tst, data_range=rng, win_size=win,
+                                           channel_axis=channel_axis))
+    return float(ssim_map(ref, tst, rng, win)[m].mean())
 
 
-def compare(reference, test, data_range: float | None = None) -> dict[str, float]:
-    """``{"psnr": psnr(...), "ssim": ssim(...)}`` with the same ``data_range``."""
-    return {"psnr": psnr(reference, test, data_range),
-            "ssim": ssim(reference, test, data_range)}
+def ssim_map(ref: np.ndarray, tst: np.ndarray, data_range: float, win: int) -> np.ndarray:
+    """scikit-image's full (H, W) SSIM map, averaged over channels (validated float inputs)."""
+    from skimage.metrics import structural_similarity
+
+    channel_axis = -1 if ref.ndim == 3 else None
+    _, full = structural_similarity(ref, tst, data_range=data_range, win_size=win,
+                                    channel_axis=channel_axis, full=True)
+    return full.mean(axis=-1) if full.ndim == 3 else full
+
+
+# ---------------------------------------------------------------------------------------------
+# FLIP
+# ---------------------------------------------------------------------------------------------
+
+def _flip_inputs(reference, test, ppd) -> tuple[np.ndarray, np.ndarray, float]:
+    ref, tst = _check_pair(reference, test)
+    ppd = check_range("ppd", ppd, 0.0, None, lo_open=True)
+    for name, arr in (("reference", ref), ("test", tst)):
+        if arr.ndim == 3 and arr.shape[2] not in (1, 3):
+            raise ParameterError(name, f"array of shape {arr.shape}",
+                                 "an (H, W), (H, W, 1) or (H, W, 3) image for FLIP")
+        lo, hi = float(arr.min()), float(arr.max())
+        if lo < 0.0 or hi > 1.0:
+            raise ParameterError(name, f"array with values in [{lo:g}, {hi:g}]",
+                                 "a display-referred image in [0, 1] for FLIP (LDR); see "
+                                 "foveated_mi.render.to_display")
+
+    def rgb(a):
+        if a.ndim == 2:
+            a = a[..., None]
+        if a.shape[2] == 1:
+            a = np.repeat(a, 3, axis=2)
+        return np.ascontiguousarray(a, dtype=np.float32)
+
+    return rgb(ref), rgb(tst), ppd
+
+
+def flip_map(reference, test, *, ppd: float = 67.0) -> np.ndarray:
+    """(H, W) FLIP error map (Andersson et al. 2020, LDR, sRGB inputs) through
+    ``flip_evaluator``; inputs are validated first, since flip_evaluator exits the process on
+    bad arguments."""
+    import flip_evaluator
+
+    ref, tst, ppd = _flip_inputs(reference, test, ppd)
+    err, _, _ = flip_evaluator.evaluate(ref, tst, "LDR", inputsRGB=True, applyMagma=False,
+                                        computeMeanError=False, parameters={"ppd": ppd})
+    return np.asarray(err, dtype=np.float64).reshape(ref.shape[:2])
+
+
+def flip(reference, test, *, ppd: float = 67.0, mask=None) -> float:
+    """Mean FLIP error in [0, 1] (0: identical) over the pixels in ``mask`` (all when None),
+    ``nan`` for an empty mask. ``ppd`` is the viewing condition in pixels per degree (67: a
+    0.7 m viewing distance from a 24" 4K monitor, FLIP's default). Images must lie in [0, 1];
+    grey (H, W) images are compared as RGB with equal channels."""
+    ref, _, _ = _flip_inputs(reference, test, ppd)
+    m = _check_mask(mask, ref.shape)
+    if m is not None and not m.any():
+        return math.nan
+    err = flip_map(reference, test, ppd=ppd)
+    return float(err.mean() if m is None else err[m].mean())
+
+
+# ---------------------------------------------------------------------------------------------
+# Everything at once
+# ---------------------------------------------------------------------------------------------
+
+def compare(reference, test, *, gaze=None, theta=None, sigma_p=None,
+            data_range: float | None = None, flip: bool = True,
+            ppd: float = 67.0) -> dict[str, float]:
+    """All metrics of ``test`` against ``reference`` as ``{key: float}`` with every key of
+    :data:`COMPARE_KEYS` present (``nan`` where not computable), so CSV columns are stable:
+
+    * ``psnr``, ``ssim``, ``flip``: full frame;
+    * with ``gaze`` and ``theta``: ``*_fovea`` and ``*_periphery`` over :func:`fovea_mask`
+      and its complement;
+    * with ``sigma_p`` too: ``psnr_eccentricity`` (:func:`eccentricity_weighted_psnr` with
+      :func:`eccentricity_weights`, same data range).
+
+    FLIP keys are ``nan`` when ``flip`` is False, and also when an image has values outside
+    [0, 1] (FLIP is defined for display-referred images; call :func:`flip` for an error).
+    """
+    ref, tst = _check_pair(reference, test)
+    if (gaze is None) != (theta is None):
+        name, value = ("theta", theta) if theta is None else ("gaze", gaze)
+        raise ParameterError(name, value, "given together with "
+                             + ("gaze" if gaze is None else "theta") + " (both or neither)")
+    if sigma_p is not None and gaze is None:
+        raise ParameterError("sigma_p", sigma_p, "None unless gaze and theta are given")
+    rng = _data_range(ref, data_range)
+    out = dict.fromkeys(COMPARE_KEYS, math.nan)
+    out["psnr"] = psnr(ref, tst, rng)
+    out["ssim"] = ssim(ref, tst, rng)
+    do_flip = bool(flip) and ref.min() >= 0.0 and ref.max() <= 1.0 and \
+        tst.min() >= 0.0 and tst.max() <= 1.0
+    fmap = flip_map(ref, tst, ppd=ppd) if do_flip else None
+    if fmap is not None:
+        out["flip"] = float(fmap.mean())
+    if gaze is not None:
+        fovea = fovea_mask(ref.shape, gaze, theta)
+        win = ssim_win_size(ref.shape[0], ref.shape[1])
+        smap = ssim_map(ref, tst, rng, win) if win is not None else None
+        for tag, m in (("fovea", fovea), ("periphery", ~fovea)):
+            out[f"psnr_{tag}"] = psnr(ref, tst, rng, mask=m)
+            if m.any():
+                if smap is not None:
+                    out[f"ssim_{tag}"] = float(smap[m].mean())
+                if fmap is not None:
+                    out[f"flip_{tag}"] = float(fmap[m].mean())
+        if sigma_p is not None:
+            out["psnr_eccentricity"] = eccentricity_weighted_psnr(
+                ref, tst, eccentricity_weights(ref.shape, gaze, theta, sigma_p), rng)
+    return out
+

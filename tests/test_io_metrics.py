@@ -13,7 +13,7 @@ from hypothesis import given, settings, strategies as st
 from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
 from foveated_mi import io as fio
-from foveated_mi.metrics import compare, psnr, ssim, ssim_win_size
+from foveated_mi.metrics import COMPARE_KEYS, compare, psnr, ssim, ssim_win_size
 from foveated_mi.validate import ParameterError
 
 
@@ -343,8 +343,11 @@ def test_identical_images_and_compare():
     assert psnr(ref, ref) == math.inf
     assert ssim(ref, ref) == pytest.approx(1.0)
     out = compare(ref, test)
-    assert set(out) == {"psnr", "ssim"}
+    # every key of COMPARE_KEYS is present (stable CSV columns); FLIP and the region keys
+    # are nan here (test has values outside [0, 1]; no gaze given)
+    assert set(out) == set(COMPARE_KEYS)
     assert out["psnr"] == psnr(ref, test) and out["ssim"] == ssim(ref, test)
+    assert all(math.isnan(v) for k, v in out.items() if k not in ("psnr", "ssim"))
     r32 = ref.astype(np.float32)
     assert compare(r32, r32.copy())["psnr"] == math.inf
 

@@ -1,0 +1,138 @@
+"""Where study tasks run: in the client process (``local``) or on Dask ``distributed``.
+
+Both executors take a list of ``(key, function, args)`` jobs and yield ``(key, result,
+error)`` as jobs finish, so the client alone writes results. Functions and arguments are
+plain (module-level functions, dicts, NumPy arrays): nothing Mitsuba-specific is pickled.
+
+``dask``: without a scheduler address, a ``distributed.LocalCluster(n_workers=N,
+threads_per_worker=1, processes=True)`` whose worker processes each get ``cpu_count // N``
+Dr.Jit threads (so N workers do not oversubscribe the cores); with an address
+(``tcp://host:8786``), an existing cluster, reached within :data:`CONNECT_TIMEOUT_S`. A job is
+submitted with ``retries`` (a task that raises is tried again), and a worker process that
+dies is replaced by its nanny while the scheduler re-runs the task it held on another worker:
+only the running task is lost, never a finished one.
+
+Timings under a LocalCluster of N > 1 workers share the machine's cores between concurrent
+tasks: use it for quality sweeps, and ``local`` (or one worker per machine) for timings.
+"""
+from __future__ import annotations
+
+import logging
+import os
+from typing import Any, Callable, Iterable, Iterator
+
+from ..validate import ParameterError, check_int
+
+__all__ = ["LocalExecutor", "DaskExecutor", "make_executor", "EXECUTORS", "CONNECT_TIMEOUT_S",
+           "CLUSTER_HINT"]
+
+EXECUTORS = ("local", "dask")
+CONNECT_TIMEOUT_S = 5
+CLUSTER_HINT = "pip install foveated_mi[cluster]"
+
+Job = tuple[Any, Callable, tuple]
+
+
+class LocalExecutor:
+    """Run jobs one after the other in this process."""
+
+    name = "local"
+    threads: int | None = None
+
+    def scatter(self, value):
+        return value
+
+    def run(self, jobs: Iterable[Job]) -> Iterator[tuple[Any, Any, BaseException | None]]:
+        for key, fn, args in jobs:
+            try:
+                yield key, fn(*args), None
+            except KeyboardInterrupt:
+                raise
+            except Exception as e:           # reported by the caller, the study goes on
+                yield key, None, e
+
+    def close(self) -> None:
+        pass
+
+
+class DaskExecutor:
+    """Run jobs on a Dask ``distributed`` cluster (see the module docstring)."""
+
+    name = "dask"
+
+    def __init__(self, scheduler: str | None = None, workers: int | None = None, *,
+                 retries: int = 2):
+        try:
+            import distributed  # noqa: F401
+            import dask  # noqa: F401
+        except ImportError:
+            raise ParameterError("--executor", "dask", f"the cluster extra installed "
+                                 f"({CLUSTER_HINT})") from None
+        from distributed import Client, LocalCluster
+        self.retries = retries
+        self.cluster = None
+        if scheduler is not None:
+            if workers is not None:
+                raise ParameterError("--workers", workers, "no --workers with --scheduler (the "
+                                     "cluster's workers are started with `dask worker`)")
+            if not isinstance(scheduler, str) or "://" not in scheduler:
+                raise ParameterError("--scheduler", scheduler, "a scheduler address such as "
+                                     "tcp://host:8786")
+            try:
+                self.client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
+            except (OSError, ValueError, TimeoutError) as e:
+                msg = " ".join(str(e).split())
+                raise ParameterError("--scheduler", scheduler, "a reachable Dask scheduler "
+                                     f"(dask scheduler; {msg})") from None
+            self.threads = None
+        else:
+            n = check_int("--workers", 2 if workers is None else workers, 1, 1024)
+            self.threads = max(1, (os.cpu_count() or 1) // n)
+            self.cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                        dashboard_address=None,
+                                        silence_logs=logging.ERROR)
+            self.client = Client(self.cluster)
+
+    def scatter(self, value):
+        """Send ``value`` to every worker once; tasks get the future instead of a copy."""
+        return self.client.scatter(value, broadcast=True)
+
+    def run(self, jobs: Iterable[Job]) -> Iterator[tuple[Any, Any, BaseException | None]]:
+        from distributed import as_completed
+        futures = {}
+        for key, fn, args in jobs:
+            fut = self.client.submit(fn, *args, pure=False, retries=self.retries)
+            futures[fut] = key
+        for fut in as_completed(futures):
+            key = futures[fut]
+            try:
+                yield key, fut.result(), None
+            except KeyboardInterrupt:
+                raise
+            except Exception as e:
+                yield key, None, e
+            finally:
+                fut.release()
+
+    def close(self) -> None:
+        try:
+            self.client.close()
+        finally:
+            if self.cluster is not None:
+                self.cluster.close()
+
+
+def make_executor(kind: str = "local", *, scheduler: str | None = None,
+                  workers: int | None = None):
+    """An executor by name; ``--scheduler`` and ``--workers`` only make sense with dask."""
+    if kind not in EXECUTORS:
+        raise ParameterError("--executor", kind, "one of " + ", ".join(EXECUTORS))
+    if kind == "local":
+        if scheduler is not None:
+            raise ParameterError("--scheduler", scheduler, "no scheduler with --executor local "
+                                 "(use --executor dask)")
+        if workers is not None:
+            raise ParameterError("--workers", workers, "no --workers with --executor local "
+                                 "(use --executor dask)")
+        return LocalExecutor()
+    return DaskExecutor(scheduler, workers)

@@ -1,0 +1,180 @@
+"""Pareto fronts of a study: time per frame (lower is better) against quality (higher is
+better), per scene; the plot (``pareto.png`` / ``pareto.svg``) and the front as a table.
+
+A point ``a`` dominates ``b`` when ``time_a <= time_b`` and ``quality_a >= quality_b`` with one
+of the two strict. The front is the set of non-dominated points; among exact duplicates only
+the first is kept. Points whose time or quality is not finite (nan: not computable, inf:
+identical to the reference) are left out of the front and of the plot.
+"""
+from __future__ import annotations
+
+import math
+import os
+from typing import Any, Sequence
+
+import numpy as np
+
+__all__ = ["pareto_front", "scene_fronts", "plot_pareto", "front_table", "LOWER_IS_BETTER"]
+
+#: Quality columns where lower is better (their front maximises ``-quality``).
+LOWER_IS_BETTER = frozenset({"flip", "flip_fovea", "flip_periphery"})
+
+
+def pareto_front(times: Sequence[float], qualities: Sequence[float]) -> list[int]:
+    """Indices of the non-dominated points (minimum time, maximum quality), by increasing
+    time. Non-finite points never enter the front."""
+    t = np.asarray(times, dtype=np.float64)
+    q = np.asarray(qualities, dtype=np.float64)
+    if t.shape != q.shape:
+        from ..validate import ParameterError
+        raise ParameterError("qualities", f"{q.size} values", f"one per time ({t.size})")
+    ok = np.flatnonzero(np.isfinite(t) & np.isfinite(q))
+    order = sorted(ok, key=lambda i: (t[i], -q[i], i))
+    front, best = [], -math.inf
+    for i in order:
+        if q[i] > best:
+            front.append(int(i))
+            best = q[i]
+    return front
+
+
+def _quality(row: dict, metric: str) -> float:
+    v = row.get(metric, math.nan)
+    v = math.nan if v is None or v == "" else float(v)
+    return -v if metric in LOWER_IS_BETTER else v
+
+
+def scene_fronts(rows: list[dict[str, Any]], metric: str) -> dict[str, list[dict]]:
+    """``{scene: front rows}`` (rows as read by :func:`~foveated_mi.study.results.read_rows`),
+    scenes in the order they first appear."""
+    out: dict[str, list[dict]] = {}
+    for scene in dict.fromkeys(r["scene"] for r in rows):
+        sub = [r for r in rows if r["scene"] == scene]
+        idx = pareto_front([float(r["time_ms"]) for r in sub], [_quality(r, metric) for r in sub])
+        out[scene] = [sub[i] for i in idx]
+    return out
+
+
+_STYLE = {"uniform": dict(marker="s", color="0.25", label="uniform"),
+          "uniform+oidn": dict(marker="^", color="tab:red", label="uniform + OIDN")}
+
+
+def plot_pareto(rows: list[dict[str, Any]], metric: str, out_dir: str, *,
+                title: str | None = None) -> tuple[str, str]:
+    """Write ``pareto.png`` and ``pareto.svg`` in ``out_dir`` (matplotlib, Agg canvas): one
+    panel per scene, foveated
+    points as circles coloured by reconstruction, baselines as squares (uniform) and triangles
+    (uniform + OIDN), the front as a step line with ringed points. Returns the two paths."""
+    # A bare Figure (Agg canvas) rather than pyplot: no global backend switch and no figure
+    # left in pyplot's state, so a notebook's inline plots keep working.
+    import matplotlib
+    import matplotlib.ticker
+    from matplotlib.figure import Figure
+    from ..io import atomic_write
+
+    scenes = list(dict.fromkeys(r["scene"] for r in rows)) or ["(no rows)"]
+    fronts = scene_fronts(rows, metric)
+    n = len(scenes)
+    cols = min(n, 3)
+    nrows = math.ceil(n / cols)
+    fig = Figure(figsize=(5.2 * cols, 4.2 * nrows))
+    axes = fig.subplots(nrows, cols, squeeze=False)
+    recs = list(dict.fromkeys(r["reconstruction"] for r in rows if r["method"] == "foveated"))
+    cmap = matplotlib.colormaps["tab10"]
+    sign = -1.0 if metric in LOWER_IS_BETTER else 1.0
+    for k, scene in enumerate(scenes):
+        ax = axes[k // cols][k % cols]
+        sub = [r for r in rows if r["scene"] == scene]
+        for rec_i, rec in enumerate(recs):
+            pts = [(r["time_ms"], r[metric]) for r in sub
+                   if r["method"] == "foveated" and r["reconstruction"] == rec
+                   and math.isfinite(r["time_ms"]) and math.isfinite(r[metric])]
+            if pts:
+                x, y = zip(*pts)
+                ax.scatter(x, y, s=22, marker="o", color=cmap(rec_i % 10), alpha=0.8,
+                           label=f"foveated, {rec}")
+        for r in sub:                  # later frames (history) carry their frame number
+            if r["method"] == "foveated" and r["frame"] > 1 and \
+                    math.isfinite(r["time_ms"]) and math.isfinite(r[metric]):
+                ax.annotate(f"f{int(r['frame'])}", (r["time_ms"], r[metric]), fontsize=6,
+                            xytext=(3, 3), textcoords="offset points", alpha=0.7)
+        for method, style in _STYLE.items():
+            pts = [(r["time_ms"], r[metric]) for r in sub if r["method"] == method
+                   and math.isfinite(r["time_ms"]) and math.isfinite(r[metric])]
+            if pts:
+                x, y = zip(*pts)
+                ax.scatter(x, y, s=40, edgecolor="black", linewidth=0.5, **style)
+        front = fronts.get(scene, [])
+        if front:
+            fx = [r["time_ms"] for r in front]
+            fy = [r[metric] for r in front]
+            ax.step(fx, fy, where="post", color="black", linewidth=1.0, alpha=0.7,
+                    label="Pareto front")
+            ax.scatter(fx, fy, s=90, facecolor="none", edgecolor="black", linewidth=1.2)
+        ax.set_xscale("log")
+        fmt = matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}")
+        ax.xaxis.set_major_formatter(fmt)
+        xs = [r["time_ms"] for r in sub if math.isfinite(r["time_ms"]) and r["time_ms"] > 0]
+        if xs and max(xs) / min(xs) < 30:   # less than ~1.5 decades: label minor ticks too
+            ax.xaxis.set_minor_formatter(fmt)
+        ax.set_xlabel("time per frame (ms, log scale)")
+        ax.set_ylabel(metric + (" (lower is better)" if sign < 0 else ""))
+        ax.set_title(scene)
+        ax.grid(True, which="both", alpha=0.3)
+        if k == 0:
+            ax.legend(fontsize=7, loc="best")
+    for k in range(n, nrows * cols):
+        axes[k // cols][k % cols].axis("off")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    os.makedirs(out_dir, exist_ok=True)
+    paths = []
+    for ext in ("png", "svg"):
+        path = os.path.join(out_dir, f"pareto.{ext}")
+        with atomic_write(path) as tmp:
+            fig.savefig(tmp, format=ext, dpi=120)
+        paths.append(path)
+    return paths[0], paths[1]
+
+
+def _varying_options(rows: list[dict[str, Any]]) -> list[str]:
+    """Foveated options (besides θ, σp and reconstruction, which have columns) that differ
+    between the study's foveated rows, from their ``config`` JSON."""
+    import json
+    seen: dict[str, set] = {}
+    for r in rows:
+        if r.get("method") != "foveated" or not r.get("config"):
+            continue
+        opts = json.loads(r["config"]).get("full_options", {})
+        for k, v in opts.items():
+            seen.setdefault(k, set()).add(json.dumps(v, sort_keys=True))
+    return [k for k, v in seen.items() if len(v) > 1
+            and k not in ("theta", "sigma_p", "reconstruction")]
+
+
+def front_table(rows: list[dict[str, Any]], metric: str) -> str:
+    """The fronts of every scene as an aligned text table (``foveated_mi.cli.format_table``);
+    foveated options that vary within the study are listed in an ``options`` column."""
+    import json
+    from ..cli import format_table
+    varying = _varying_options(rows)
+    header = ("scene", "method", "theta", "sigma_p", "reconstruction", "spp", "frame",
+              "time ms", metric) + (("options",) if varying else ())
+    table = [header]
+
+    def num(v, fmt):
+        return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt)
+
+    for scene, front in scene_fronts(rows, metric).items():
+        for r in front:
+            fov = r["method"] == "foveated"
+            line = (scene, r["method"], num(r["theta"], "g") if fov else "-",
+                    num(r["sigma_p"], "g") if fov else "-",
+                    r["reconstruction"] if fov else "-", num(r["spp"], ".0f"),
+                    num(r["frame"], ".0f"), num(r["time_ms"], ".2f"), num(r[metric], ".4f"))
+            if varying:
+                opts = json.loads(r["config"]).get("full_options", {}) if fov else {}
+                line += (" ".join(f"{k}={opts[k]}" for k in varying if k in opts) or "-",)
+            table.append(line)
+    return format_table(table)

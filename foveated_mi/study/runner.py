@@ -1,0 +1,304 @@
+"""Run a study end to end: references, tasks on an executor, ``results.csv``, Pareto plots.
+
+:func:`run_study` is what ``foveated-mi study`` calls, and what notebooks call as a library
+function. Output folder (``out``, default ``out/studies/<study name>``)::
+
+    results.csv                   one row per (scene, configuration, frame); resumable
+    pareto.png, pareto.svg        time per frame against the quality metric, per scene
+    references/<label>-<key>.npy  rendered references (float32 (H, W, 3) linear), reused
+    references/<label>-<key>.json what each was rendered from
+"""
+from __future__ import annotations
+
+import json
+import os
+import sys
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from ..validate import ParameterError, check_int
+from .spec import QUALITY_COLUMNS, StudySpec, load_study
+
+__all__ = ["run_study", "StudyResult", "load_reference_file"]
+
+
+@dataclass
+class StudyResult:
+    """What a study run did and produced."""
+    spec: StudySpec
+    out_dir: str
+    results_path: str
+    metric: str
+    rows: list[dict[str, Any]]                 # this study's rows (old and new), parsed
+    new_rows: int = 0
+    tasks_total: int = 0
+    tasks_run: int = 0
+    tasks_skipped: int = 0                     # every recorded frame already in results.csv
+    references_rendered: int = 0
+    failed: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    png: str | None = None
+    svg: str | None = None
+    front: dict[str, list[dict]] = field(default_factory=dict)
+    front_text: str = ""
+
+
+def _size_arg(size) -> tuple[int, int] | None:
+    if size is None:
+        return None
+    if isinstance(size, int) and not isinstance(size, bool):
+        size = (size, size)
+    try:
+        w, h = size
+    except (TypeError, ValueError):
+        raise ParameterError("--size", size, "W H (two integers in [1, 16384])") from None
+    return check_int("--size W", w, 1, 16384), check_int("--size H", h, 1, 16384)
+
+
+def load_reference_file(ref: dict, scene) -> np.ndarray:
+    """A reference file (EXR layer or .npy) as linear float32 (H, W, 3), checked against the
+    scene's film size. EXR: ``layer`` if given, else ``image``, else the unnamed RGB layer,
+    else the file's only layer."""
+    path, name = ref["path"], f"{scene.label}: reference.file"
+    if path.lower().endswith(".npy"):
+        try:
+            arr = np.load(path, allow_pickle=False)
+        except (OSError, ValueError) as e:
+            raise ParameterError(name, ref["file"], f"a readable .npy array ({e})") from None
+    else:
+        from ..io import read_exr
+        try:
+            layers = read_exr(path)
+        except OSError as e:
+            raise ParameterError(name, ref["file"], f"a readable OpenEXR file ({e})") from None
+        layer = ref.get("layer")
+        if layer is None:
+            layer = "image" if "image" in layers else ("" if "" in layers else
+                                                       (next(iter(layers)) if len(layers) == 1
+                                                        else None))
+        if layer not in layers:
+            raise ParameterError(f"{scene.label}: reference.layer", ref.get("layer"),
+                                 "one of the file's layers: " + ", ".join(repr(k) for k in layers))
+        arr = layers[layer]
+    w, h = scene.size
+    arr = np.asarray(arr)
+    if arr.ndim != 3 or arr.shape[:2] != (h, w) or arr.shape[2] < 3 or \
+            not np.issubdtype(arr.dtype, np.floating):
+        raise ParameterError(name, ref["file"], f"a float image of {h}x{w} pixels (H x W, the "
+                             f"scene's size) with >= 3 channels, not {arr.dtype} {arr.shape}")
+    arr = np.ascontiguousarray(arr[..., :3], dtype=np.float32)
+    if not np.isfinite(arr).all():
+        raise ParameterError(name, ref["file"], "finite pixel values")
+    return arr
+
+
+def _one_line(e: BaseException) -> str:
+    text = " ".join(str(e).split())
+    return f"{type(e).__name__}: {text}" if text else type(e).__name__
+
+
+def _describe(task: dict) -> str:
+    if task["kind"] == "foveated":
+        o = task["options"]
+        return (f"{task['label']} foveated theta {o['theta']:g} sigma_p {o['sigma_p']:g} "
+                f"{o['reconstruction']} spp {task['spp']}")
+    return f"{task['label']} {task['method']} spp {task['spp']}"
+
+
+def run_study(study: str | os.PathLike | StudySpec, *, out: str | None = None,
+              executor: str = "local", scheduler: str | None = None,
+              workers: int | None = None, size=None, metric: str | None = None,
+              variant: str | None = None, progress: bool = True,
+              echo: Callable[[str], None] | None = print) -> StudyResult:
+    """Run (or resume) a study and write its results, plots and front table.
+
+    ``study`` is a TOML path or a parsed :class:`StudySpec`; ``size`` (``W`` or ``(W, H)``)
+    overrides every scene's film size; ``metric`` the TOML's quality axis. Bad input raises
+    :class:`ParameterError` before anything runs. Tasks that fail are reported in
+    :attr:`StudyResult.failed` (one line each) and the others go on.
+    """
+    import foveated_mi
+    from ..denoise import oidn_available
+    from ..variant import choose_variant
+    from . import tasks as T
+    from .executors import make_executor
+    from .pareto import front_table, plot_pareto, scene_fronts
+    from .results import ResultsFile, read_rows
+
+    say = echo or (lambda s: None)
+    spec = study if isinstance(study, StudySpec) else load_study(study)
+    spec = spec.with_size(_size_arg(size))
+    if metric is not None and metric not in QUALITY_COLUMNS:
+        raise ParameterError("--metric", metric, "one of " + ", ".join(QUALITY_COLUMNS))
+    metric = metric or spec.metric
+    out_dir = out if out is not None else os.path.join("out", "studies", spec.name)
+    if executor == "local" or scheduler is None:
+        v = foveated_mi.set_variant(variant)   # the client renders (or starts the workers)
+    else:
+        v = choose_variant(variant)            # a remote cluster renders; validate the name
+
+    notes = []
+    for s in spec.scenes:
+        if s.missing:
+            notes.append(f"note: scene {s.label!r} skipped: optional XML file {s.name} "
+                         "not found")
+    have_oidn = oidn_available()
+    if not have_oidn and any(u["denoise"] for u in spec.uniform):
+        notes.append("note: uniform+oidn baselines skipped: pyoidn is not installed "
+                     "(pip install foveated_mi[denoise])")
+    for n in notes:
+        say(n)
+    tasks = T.expand_tasks(spec, v, denoise_available=have_oidn)
+    scenes = {s.label: s for s in spec.scenes if not s.missing}
+    if not tasks:
+        raise ParameterError("study", spec.source, "at least one scene that exists and one "
+                             "configuration that can run")
+    file_refs = {label: load_reference_file(s.reference, s) for label, s in scenes.items()
+                 if "file" in s.reference}
+
+    os.makedirs(out_dir, exist_ok=True)
+    results_path = os.path.join(out_dir, "results.csv")
+    ex = make_executor(executor, scheduler=scheduler, workers=workers)
+    result = StudyResult(spec=spec, out_dir=out_dir, results_path=results_path, metric=metric,
+                         rows=[], tasks_total=len(tasks), notes=notes)
+    try:
+        with ResultsFile(results_path) as results:
+            if results.repaired_bytes:
+                say(f"note: {results_path}: removed a partly written last line "
+                    f"({results.repaired_bytes} bytes)")
+            pending = []
+            for t in tasks:
+                todo = [f for f in t["frames"] if (t["task_id"], f) not in results.done]
+                if todo:
+                    pending.append({**t, "frames_todo": todo, "threads": ex.threads})
+            result.tasks_skipped = len(tasks) - len(pending)
+            say(f"study {spec.name}: {len(tasks)} tasks on {len(scenes)} scene(s), "
+                f"{result.tasks_skipped} already done, {len(pending)} to run "
+                f"({executor}, {v}) -> {out_dir}")
+            refs = _references(spec, scenes, pending, file_refs, out_dir, v, ex, progress,
+                               result, say)
+            _run_tasks(pending, refs, ex, results, progress, result, say)
+    finally:
+        ex.close()
+
+    ids = {t["task_id"] for t in tasks}
+    result.rows = [r for r in read_rows(results_path) if r["task_id"] in ids]
+    result.png, result.svg = plot_pareto(result.rows, metric, out_dir,
+                                         title=f"{spec.name}: {metric} against time per frame")
+    result.front = scene_fronts(result.rows, metric)
+    result.front_text = front_table(result.rows, metric)
+    say(f"wrote {results_path} ({len(result.rows)} rows, {result.new_rows} new), "
+        f"{result.png}, {result.svg}")
+    say(f"Pareto front ({metric}, higher is better; time per frame):"
+        if metric not in ("flip", "flip_fovea", "flip_periphery") else
+        f"Pareto front ({metric}, lower is better; time per frame):")
+    say(result.front_text)
+    for line in result.failed:
+        say(line)
+    return result
+
+
+def _references(spec, scenes, pending, file_refs, out_dir, variant, ex, progress, result,
+                say) -> dict[str, Any]:
+    """Each needed scene's reference (array, or a future on the cluster), rendering and
+    caching the missing ones through the executor."""
+    from ..io import atomic_write
+    from . import tasks as T
+
+    needed = list(dict.fromkeys(t["label"] for t in pending))
+    arrays: dict[str, np.ndarray] = {k: file_refs[k] for k in needed if k in file_refs}
+    jobs, paths = [], {}
+    ref_dir = os.path.join(out_dir, "references")
+    for label in needed:
+        if label in arrays:
+            continue
+        scene = scenes[label]
+        key = T.reference_key(scene, variant)
+        path = os.path.join(ref_dir, f"{label}-{key}.npy")
+        paths[label] = path
+        if os.path.isfile(path):
+            arrays[label] = np.load(path, allow_pickle=False)
+            _filter_note(label, _read_meta(path).get("rfilter"), result, say)
+            continue
+        task = T.reference_task(scene, variant)
+        task["threads"] = ex.threads
+        jobs.append((label, T.run_reference_task, (task,)))
+    if jobs:
+        os.makedirs(ref_dir, exist_ok=True)
+        from tqdm import tqdm
+        bar = tqdm(total=len(jobs), unit="ref", desc="references", disable=not progress,
+                   file=sys.stderr)
+        try:
+            for label, out, err in ex.run(jobs):
+                bar.update(1)
+                if err is not None:
+                    result.failed.append(f"reference of {label} failed: {_one_line(err)}")
+                    continue
+                arr = out["image"]
+                with atomic_write(paths[label], "wb") as f:
+                    np.save(f, arr)
+                scene = scenes[label]
+                meta = {"scene": scene.name, "label": label, "size": list(scene.size),
+                        "params": scene.params, "integrator": scene.integrator,
+                        "spp": scene.reference["spp"], "seed": scene.reference["seed"],
+                        "variant": variant, "rfilter": out["rfilter"]}
+                with atomic_write(os.path.splitext(paths[label])[0] + ".json", "w") as f:
+                    json.dump(meta, f, indent=2)
+                arrays[label] = arr
+                result.references_rendered += 1
+                _filter_note(label, out["rfilter"], result, say)
+        finally:
+            bar.close()
+    return {label: ex.scatter(arr) for label, arr in arrays.items()}
+
+
+def _read_meta(npy_path: str) -> dict:
+    try:
+        with open(os.path.splitext(npy_path)[0] + ".json") as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return {}
+
+
+def _filter_note(label: str, rfilter: str | None, result, say) -> None:
+    """The foveated integrator develops one box-filtered value per pixel; a film with a
+    wider reconstruction filter blurs the reference and the uniform baselines only."""
+    if rfilter and not rfilter.startswith("BoxFilter"):
+        note = (f"note: scene {label!r}: the film's filter is {rfilter}; the reference and the "
+                "uniform baselines are filtered by it, foveated frames are not (one box-"
+                "filtered value per pixel), which lowers foveated quality; use a box rfilter "
+                "for like-for-like comparisons")
+        result.notes.append(note)
+        say(note)
+
+
+def _run_tasks(pending, refs, ex, results, progress, result, say) -> None:
+    from tqdm import tqdm
+    from . import tasks as T
+
+    jobs = []
+    for t in pending:
+        if t["label"] not in refs:
+            result.failed.append(f"task {t['task_id']} ({_describe(t)}) not run: its "
+                                 "reference failed")
+            continue
+        jobs.append((t["task_id"], T.run_task, (t, refs[t["label"]])))
+    by_id = {t["task_id"]: t for t in pending}
+    bar = tqdm(total=len(jobs), unit="task", desc="tasks", disable=not progress,
+               file=sys.stderr)
+    try:
+        for tid, rows, err in ex.run(jobs):
+            bar.update(1)
+            if err is not None:
+                result.failed.append(f"task {tid} ({_describe(by_id[tid])}) failed: "
+                                     f"{_one_line(err)}")
+                continue
+            for row in rows:
+                results.append(row)
+                result.new_rows += 1
+            result.tasks_run += 1
+    finally:
+        bar.close()
+

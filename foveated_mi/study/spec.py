@@ -1,0 +1,436 @@
+"""Study files: a TOML file -> a validated :class:`StudySpec`.
+
+Layout (every key optional except ``scenes``)::
+
+    description = "..."
+    seed = 0                    # seed of every frame (common random numbers across configs)
+    repeats = 3                 # timed repetitions per configuration (median reported)
+    warmup = 2                  # untimed frames per configuration first (kernel compilation)
+    metric = "psnr_fovea"       # quality axis of the Pareto plot (a quality column)
+    size = [256, 256]           # defaults for every scene (each [[scenes]] may override):
+    gaze = [0.5, 0.5]           #   film size, gaze (normalised film coords, origin top-left),
+    [integrator]                #   nested integrator (default: path, max_depth 8)
+    type = "path"
+    max_depth = 8
+    [reference]                 #   reference: rendered at spp (cached under the output
+    spp = 256                   #   folder), or a file (EXR layer / .npy, relative to the
+    seed = 1                    #   TOML): file = "ref.exr", layer = "image"
+
+    [[scenes]]
+    scene = "voxel-city"        # built-in name, or XML path relative to this file
+    label = "city"              # the `scene` column (default: the name, or the XML's folder)
+    params = { size = 128 }     # built-in builder parameters or XML <default> parameters
+    optional = false            # true: a missing XML file is skipped with a note
+
+    [metrics]                   # how quality is measured (the same for every row)
+    theta = 0.1                 #   fovea radius of the *_fovea / *_periphery columns
+    sigma_p = 0.8               #   falloff of the eccentricity weights (psnr_eccentricity)
+    ppd = 67.0                  #   FLIP viewing condition, pixels per degree
+    flip = true
+    exposure = 0.0              #   display transform (Reinhard + sRGB) exposure in stops
+
+    [foveated.defaults]         # options shared by the grid and the list
+    atrous_iterations = 0
+    [foveated.grid]             # cartesian product of the lists (a scalar is one value)
+    theta = [0.04, 0.1, 0.2]
+    reconstruction = ["voronoi", "sibson"]
+    spp = 1
+    frames = [1, 16]            # frames at which quality and time are recorded (one list
+                                # per configuration, never expanded: static gaze, history)
+    [[foveated.configs]]        # explicit configurations
+    theta = 0.1
+    reconstruction = "fast_sibson"
+
+    [uniform]                   # baselines: every pixel traced at spp
+    spp = [1, 4, 16]
+    denoise = [false, true]     # true: + Intel OIDN (skipped with a note without pyoidn)
+
+Foveated keys are the options of the ``foveated`` integrator (checked by
+:func:`foveated_mi.integrators.foveated.validate_options`, so new options work without
+changes here) except ``gaze`` (per scene) and ``timing`` (always on), plus ``spp`` and
+``frames``. Every error is a :class:`~foveated_mi.validate.ParameterError` of one line naming
+the file and the dotted key.
+"""
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import sys
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from ..config import _Ctx
+from ..metrics import COMPARE_KEYS
+from ..validate import ParameterError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+__all__ = ["StudySpec", "SceneSpec", "load_study", "parse_study", "QUALITY_COLUMNS",
+           "DEFAULT_INTEGRATOR", "DEFAULT_REFERENCE_SPP"]
+
+QUALITY_COLUMNS = COMPARE_KEYS
+DEFAULT_INTEGRATOR = {"type": "path", "max_depth": 8}
+DEFAULT_REFERENCE_SPP = 256
+DEFAULT_METRICS = {"theta": 0.1, "sigma_p": 0.8, "ppd": 67.0, "flip": True, "exposure": 0.0}
+
+_TOP_KEYS = ("description", "seed", "repeats", "warmup", "metric", "size", "gaze",
+             "integrator", "reference", "scenes", "metrics", "foveated", "uniform")
+_SCENE_KEYS = ("scene", "label", "size", "gaze", "params", "integrator", "reference",
+               "optional")
+_REFERENCE_KEYS = ("spp", "seed", "file", "layer")
+_EXTRA_KEYS = ("spp", "frames")          # foveated keys that are not integrator options
+_FORBIDDEN = {"gaze": "no gaze here: set it per scene (gaze = [x, y])",
+              "timing": "no timing here: studies always time the stages"}
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """One scene of a study, with its film, gaze, nested integrator and reference."""
+    name: str                     # as written in the TOML (built-in name or relative path)
+    source: str                   # built-in name or absolute XML path
+    label: str
+    size: tuple[int, int]         # (width, height)
+    gaze: tuple[float, float]
+    params: dict = field(default_factory=dict)
+    integrator: dict = field(default_factory=lambda: dict(DEFAULT_INTEGRATOR))
+    reference: dict = field(default_factory=lambda: {"spp": DEFAULT_REFERENCE_SPP, "seed": 1})
+    optional: bool = False
+
+    @property
+    def builtin(self) -> bool:
+        """A built-in scene (XML sources are absolute paths)."""
+        return not os.path.isabs(self.source)
+
+    @property
+    def missing(self) -> bool:
+        """An XML scene whose file does not exist (only legal when ``optional``)."""
+        return not self.builtin and not os.path.isfile(self.source)
+
+    def load_spec(self) -> dict:
+        """Plain dict a worker needs to load the scene (no Mitsuba objects)."""
+        return {"source": self.source, "width": self.size[0], "height": self.size[1],
+                "params": dict(self.params), "integrator": dict(self.integrator)}
+
+    def identity(self) -> dict:
+        """What identifies the scene's results (machine-independent: the TOML spelling)."""
+        ref = {k: v for k, v in self.reference.items() if k != "path"}
+        return {"scene": self.name, "label": self.label, "size": list(self.size),
+                "gaze": list(self.gaze),
+                "params": self.params, "integrator": self.integrator, "reference": ref}
+
+
+@dataclass(frozen=True)
+class StudySpec:
+    """A validated study: scenes, configurations, timing and metric settings."""
+    name: str
+    source: str
+    scenes: tuple[SceneSpec, ...]
+    foveated: tuple[dict, ...]        # each: integrator options + "spp" + "frames"
+    uniform: tuple[dict, ...]         # each: {"spp": n, "denoise": bool}
+    seed: int = 0
+    repeats: int = 3
+    warmup: int = 2
+    metric: str = "psnr_fovea"
+    metrics: dict = field(default_factory=lambda: dict(DEFAULT_METRICS))
+    description: str = ""
+
+    def with_size(self, size: tuple[int, int] | None) -> "StudySpec":
+        """The same study with every scene's film size replaced (None: unchanged)."""
+        if size is None:
+            return self
+        return replace(self, scenes=tuple(replace(s, size=tuple(size)) for s in self.scenes))
+
+
+def load_study(path: str | os.PathLike) -> StudySpec:
+    """Read and validate a study TOML file (see the module docs for the layout)."""
+    if not isinstance(path, (str, os.PathLike)) or not os.path.isfile(path):
+        raise ParameterError("study", path if isinstance(path, str) else str(path),
+                             "an existing TOML file")
+    path = os.fspath(path)
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except tomllib.TOMLDecodeError as e:
+        raise ParameterError("study", path, f"valid TOML ({e})") from None
+    return parse_study(data, base_dir=os.path.dirname(os.path.abspath(path)), source=path,
+                       name=os.path.splitext(os.path.basename(path))[0])
+
+
+def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
+                name: str = "study") -> StudySpec:
+    """Validate an already-parsed TOML table; relative paths resolve against ``base_dir``."""
+    ctx = _Ctx(source)
+    ctx.table("", data)
+    ctx.known("", data, _TOP_KEYS)
+    seed = ctx.integer("seed", data.get("seed", 0), 0, (1 << 32) - 1)
+    repeats = ctx.integer("repeats", data.get("repeats", 3), 1, 10000)
+    warmup = ctx.integer("warmup", data.get("warmup", 2), 0, 10000)
+    metric = ctx.string("metric", data.get("metric", "psnr_fovea"), QUALITY_COLUMNS)
+    description = ctx.string("description", data.get("description", ""))
+    defaults = {
+        "size": _size(ctx, "size", data.get("size", [256, 256])),
+        "gaze": _gaze(ctx, "gaze", data.get("gaze", [0.5, 0.5])),
+        "integrator": _integrator(ctx, "integrator", data.get("integrator", DEFAULT_INTEGRATOR)),
+        "reference": _reference(ctx, "reference", data.get("reference", {}), base_dir),
+    }
+    if "scenes" not in data:
+        raise ctx.error("scenes", None, "a list of [[scenes]] tables, each with a scene name")
+    scenes_in = data["scenes"]
+    if not isinstance(scenes_in, list) or not scenes_in:
+        raise ctx.error("scenes", scenes_in, "a non-empty list of [[scenes]] tables")
+    scenes = [_scene(ctx, f"scenes[{i}]", s, defaults, base_dir)
+              for i, s in enumerate(scenes_in)]
+    labels = [s.label for s in scenes]
+    for i, lab in enumerate(labels):
+        if lab in labels[:i]:
+            raise ctx.error(f"scenes[{i}].label", lab, "a label no other scene uses")
+    metrics = _metrics(ctx, data.get("metrics", {}))
+    foveated = _foveated(ctx, data.get("foveated", {}))
+    uniform = _uniform(ctx, data.get("uniform", {}))
+    if not foveated and not uniform:
+        raise ctx.error("foveated", None, "at least one configuration ([foveated.grid], "
+                        "[[foveated.configs]] or [uniform])")
+    return StudySpec(name=name, source=source, scenes=tuple(scenes), foveated=tuple(foveated),
+                     uniform=tuple(uniform), seed=seed, repeats=repeats, warmup=warmup,
+                     metric=metric, metrics=metrics, description=description)
+
+
+# ---------------------------------------------------------------------------------------------
+# pieces
+# ---------------------------------------------------------------------------------------------
+
+def _size(ctx: _Ctx, key: str, value: Any) -> tuple[int, int]:
+    if isinstance(value, int) and not isinstance(value, bool):
+        value = [value, value]
+    if not isinstance(value, list) or len(value) != 2:
+        raise ctx.error(key, value, "[width, height] with integers in [1, 16384]")
+    return (ctx.integer(f"{key}[0]", value[0], 1, 16384),
+            ctx.integer(f"{key}[1]", value[1], 1, 16384))
+
+
+def _gaze(ctx: _Ctx, key: str, value: Any) -> tuple[float, float]:
+    from ..validate import check_point2
+    try:
+        return check_point2(key, value)
+    except ParameterError as e:
+        raise ctx.rename(e) from None
+
+
+def _integrator(ctx: _Ctx, key: str, value: Any) -> dict:
+    table = dict(ctx.table(key, value))
+    ctx.string(f"{key}.type", table.get("type"))
+    if table["type"] == "foveated":
+        raise ctx.error(f"{key}.type", "foveated", "the nested integrator (e.g. 'path'); the "
+                        "study wraps it in the foveated integrator itself")
+    return table
+
+
+def _reference(ctx: _Ctx, key: str, value: Any, base_dir: str,
+               inherited: dict | None = None) -> dict:
+    table = dict(ctx.table(key, value))
+    ctx.known(key, table, _REFERENCE_KEYS)
+    if "file" in table:
+        for k in ("spp", "seed"):
+            if k in table:
+                raise ctx.error(f"{key}.{k}", table[k], "no spp/seed beside a reference file")
+        path = ctx.string(f"{key}.file", table["file"])
+        full = path if os.path.isabs(path) else os.path.join(base_dir, path)
+        if not os.path.isfile(full) or not full.lower().endswith((".exr", ".npy")):
+            raise ctx.error(f"{key}.file", path, "an existing .exr or .npy file (relative to "
+                            "the study file)")
+        layer = table.get("layer")
+        if layer is not None:
+            ctx.string(f"{key}.layer", layer)
+        return {"file": path, "path": os.path.abspath(full), "layer": layer}
+    if "layer" in table:
+        raise ctx.error(f"{key}.layer", table["layer"], "a layer only with a reference file")
+    base = {"spp": DEFAULT_REFERENCE_SPP, "seed": 1}
+    if inherited is not None and "spp" in inherited:
+        base = {"spp": inherited["spp"], "seed": inherited["seed"]}
+    return {"spp": ctx.integer(f"{key}.spp", table.get("spp", base["spp"]), 1, 1 << 20),
+            "seed": ctx.integer(f"{key}.seed", table.get("seed", base["seed"]), 0,
+                                (1 << 32) - 1)}
+
+
+def _scene(ctx: _Ctx, key: str, table: Any, defaults: dict, base_dir: str) -> SceneSpec:
+    from .. import scenes as builtin
+
+    table = dict(ctx.table(key, table))
+    ctx.known(key, table, _SCENE_KEYS)
+    if "scene" not in table:
+        raise ctx.error(f"{key}.scene", None, "a built-in scene name ("
+                        + ", ".join(repr(n) for n in builtin.SCENES) + ") or an XML path")
+    name = ctx.string(f"{key}.scene", table["scene"])
+    optional = ctx.boolean(f"{key}.optional", table.get("optional", False))
+    if name in builtin.SCENES:
+        source = name
+        label = name
+    else:
+        full = name if os.path.isabs(name) else os.path.join(base_dir, name)
+        source = os.path.abspath(full)
+        if not name.lower().endswith(".xml"):
+            raise ctx.error(f"{key}.scene", name, "one of " + ", ".join(
+                repr(n) for n in builtin.SCENES) + " or a Mitsuba .xml file")
+        if not os.path.isfile(source) and not optional:
+            raise ctx.error(f"{key}.scene", name, "one of " + ", ".join(
+                repr(n) for n in builtin.SCENES) + " or an existing XML file (relative to the "
+                "study file; optional = true skips a missing one)")
+        stem = os.path.splitext(os.path.basename(source))[0]
+        label = os.path.basename(os.path.dirname(source)) if stem == "scene" else stem
+    label = ctx.string(f"{key}.label", table.get("label", label))
+    params = dict(ctx.table(f"{key}.params", table.get("params", {})))
+    if source in builtin.SCENES:
+        import inspect
+        accepted = list(inspect.signature(builtin.SCENES[source]).parameters)
+        ctx.known(f"{key}.params", params, accepted)
+    for k, v in params.items():
+        if not isinstance(v, (bool, int, float, str)):
+            raise ctx.error(f"{key}.params.{k}", v, "a string, number or boolean")
+    size = _size(ctx, f"{key}.size", table["size"]) if "size" in table else defaults["size"]
+    gaze = _gaze(ctx, f"{key}.gaze", table["gaze"]) if "gaze" in table else defaults["gaze"]
+    integ = _integrator(ctx, f"{key}.integrator", table["integrator"]) \
+        if "integrator" in table else defaults["integrator"]
+    ref = _reference(ctx, f"{key}.reference", table["reference"], base_dir,
+                     defaults["reference"]) if "reference" in table else defaults["reference"]
+    return SceneSpec(name=name, source=source, label=label, size=size, gaze=gaze,
+                     params=params, integrator=integ, reference=ref, optional=optional)
+
+
+def _metrics(ctx: _Ctx, table: Any) -> dict:
+    table = dict(ctx.table("metrics", table))
+    ctx.known("metrics", table, tuple(DEFAULT_METRICS))
+    m = {**DEFAULT_METRICS, **table}
+    from ..validate import check_range
+    try:
+        out = {"theta": check_range("metrics.theta", m["theta"], 0.0, None, lo_open=True),
+               "sigma_p": check_range("metrics.sigma_p", m["sigma_p"], 0.0, 1.0, lo_open=True),
+               "ppd": check_range("metrics.ppd", m["ppd"], 0.0, None, lo_open=True),
+               "exposure": check_range("metrics.exposure", m["exposure"], -64.0, 64.0)}
+    except ParameterError as e:
+        raise ctx.rename(e) from None
+    out["flip"] = ctx.boolean("metrics.flip", m["flip"])
+    return out
+
+
+def _option_module():
+    from ..integrators import foveated
+    return foveated
+
+
+def _option_names() -> list[str]:
+    """Keys a configuration may set: the integrator's options (from its own defaults) but
+    gaze and timing, plus spp and frames."""
+    fov = _option_module()
+    return [k for k in getattr(fov, "DEFAULTS", {}) if k not in _FORBIDDEN] + list(_EXTRA_KEYS)
+
+
+def _check_keys(ctx: _Ctx, key: str, table: dict) -> None:
+    names = _option_names()
+    for k, v in table.items():
+        if k in _FORBIDDEN:
+            raise ctx.error(f"{key}.{k}", v, _FORBIDDEN[k])
+        if len(names) > len(_EXTRA_KEYS) and k not in names:
+            raise ctx.error(f"{key}.{k}", v, "a known key (unknown option; allowed: "
+                            + ", ".join(sorted(names)) + ")")
+
+
+def _check_options(ctx: _Ctx, key: str, options: dict, where: dict[str, str]) -> dict:
+    """Validate one configuration; ``where`` maps an option to its dotted TOML key."""
+    fov = _option_module()
+    opts = {k: v for k, v in options.items() if k not in _EXTRA_KEYS}
+    try:
+        full = fov.validate_options(dict(opts))
+    except ParameterError as e:
+        raise ctx.error(where.get(e.name, f"{key}.{e.name}"), e.value, e.allowed) from None
+    full.pop("gaze", None)
+    full.pop("timing", None)
+    spp = ctx.integer(where.get("spp", f"{key}.spp"), options.get("spp", 1), 1, 1 << 16)
+    frames = _frames(ctx, where.get("frames", f"{key}.frames"), options.get("frames", [1]))
+    # the options as given (for the config column) and the full validated set (for the id)
+    return {"options": full, "given": {k: opts[k] for k in opts}, "spp": spp, "frames": frames}
+
+
+def _frames(ctx: _Ctx, key: str, value: Any) -> list[int]:
+    if isinstance(value, int) and not isinstance(value, bool):
+        value = [value]
+    if not isinstance(value, list) or not value:
+        raise ctx.error(key, value, "a frame number >= 1 or a non-empty list of them")
+    frames = [ctx.integer(f"{key}[{i}]", f, 1, 100000) for i, f in enumerate(value)]
+    return sorted(set(frames))
+
+
+def _foveated(ctx: _Ctx, table: Any) -> list[dict]:
+    table = dict(ctx.table("foveated", table))
+    ctx.known("foveated", table, ("defaults", "grid", "configs"))
+    shared = dict(ctx.table("foveated.defaults", table.get("defaults", {})))
+    _check_keys(ctx, "foveated.defaults", shared)
+    for k, v in shared.items():
+        if isinstance(v, list) and k != "frames":
+            raise ctx.error(f"foveated.defaults.{k}", v, "one value (lists go in "
+                            "[foveated.grid])")
+    out = []
+    if "grid" in table:
+        grid = dict(ctx.table("foveated.grid", table["grid"]))
+        _check_keys(ctx, "foveated.grid", grid)
+        axes = {}
+        for k, v in grid.items():
+            values = v if isinstance(v, list) and k != "frames" else [v]
+            if not values:
+                raise ctx.error(f"foveated.grid.{k}", v, "a value or a non-empty list")
+            axes[k] = values
+            listed = isinstance(v, list) and k != "frames"
+            for i, one in enumerate(values):   # each value alone: the error names its index
+                sub = f"foveated.grid.{k}[{i}]" if listed else f"foveated.grid.{k}"
+                _check_options(ctx, "foveated.grid", {**shared, k: one},
+                               {k: sub, **{s: f"foveated.defaults.{s}" for s in shared}})
+        keys = list(axes)
+        for combo in itertools.product(*(axes[k] for k in keys)):
+            opts = {**shared, **dict(zip(keys, combo))}
+            where = {**{s: f"foveated.defaults.{s}" for s in shared},
+                     **{k: f"foveated.grid.{k}" for k in keys}}
+            out.append(_check_options(ctx, "foveated.grid", opts, where))
+    if "configs" in table:
+        configs = table["configs"]
+        if not isinstance(configs, list):
+            raise ctx.error("foveated.configs", configs, "a list of [[foveated.configs]] tables")
+        for i, c in enumerate(configs):
+            c = dict(ctx.table(f"foveated.configs[{i}]", c))
+            _check_keys(ctx, f"foveated.configs[{i}]", c)
+            opts = {**shared, **c}
+            where = {**{s: f"foveated.defaults.{s}" for s in shared},
+                     **{k: f"foveated.configs[{i}].{k}" for k in c}}
+            out.append(_check_options(ctx, f"foveated.configs[{i}]", opts, where))
+    if shared and not out:
+        raise ctx.error("foveated.defaults", shared, "a [foveated.grid] or [[foveated.configs]] "
+                        "to apply to")
+    # identical configurations (grid and list overlapping) run once
+    seen, unique = set(), []
+    for c in out:
+        key = json.dumps([c["options"], c["spp"]], sort_keys=True)
+        if key in seen:
+            continue
+        seen.add(key)
+        unique.append(c)
+    return unique
+
+
+def _uniform(ctx: _Ctx, table: Any) -> list[dict]:
+    table = dict(ctx.table("uniform", table))
+    if not table:
+        return []
+    ctx.known("uniform", table, ("spp", "denoise"))
+    spp = table.get("spp", [1])
+    spp = spp if isinstance(spp, list) else [spp]
+    if not spp:
+        raise ctx.error("uniform.spp", spp, "an integer >= 1 or a non-empty list of them")
+    spps = [ctx.integer(f"uniform.spp[{i}]", s, 1, 1 << 16) for i, s in enumerate(spp)]
+    den = table.get("denoise", [False])
+    den = den if isinstance(den, list) else [den]
+    if not den:
+        raise ctx.error("uniform.denoise", den, "true, false or a list of them")
+    dens = [ctx.boolean(f"uniform.denoise[{i}]", d) for i, d in enumerate(den)]
+    return [{"spp": s, "denoise": d} for s in dict.fromkeys(spps) for d in dict.fromkeys(dens)]

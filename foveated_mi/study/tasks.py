@@ -1,0 +1,253 @@
+"""Study tasks: expansion of a :class:`~foveated_mi.study.spec.StudySpec` into plain-dict tasks,
+and the functions that run one task in a worker (or in the client for ``local``).
+
+A task is a JSON-able dict; it never holds a Mitsuba object, so it pickles to any Dask worker.
+A worker keeps every scene it loaded in a module-level cache keyed by the scene's load spec and
+variant (:func:`get_scene`), so each worker process loads each scene once.
+
+Seeds: every frame of every configuration uses the study's ``seed`` (the foveated integrator
+decorrelates its own frames after the first), so results do not depend on which worker runs
+a task or in which order, and configurations share their random numbers (common random
+numbers: differences between rows are the configurations', not the noise's).
+
+Timing of a foveated task: ``warmup`` untimed frames (kernel compilation, history path
+included), then ``repeats`` times: reset the history, render frames 1 .. max(frames) with
+``timing=True``, and keep ``stats["timings_ms"]`` at each recorded frame. Each time column is
+the median over the repeats of that stage at that frame (so stage medians need not add up to
+the median total). Quality comes from the first repeat (every repeat renders the same images).
+A uniform task is timed the same way around :func:`foveated_mi.baselines.render_uniform`.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import statistics
+from typing import Any
+
+import numpy as np
+
+__all__ = ["expand_tasks", "reference_task", "reference_key", "run_task", "run_reference_task",
+           "get_scene", "scene_cache_info", "clear_scene_cache", "task_id"]
+
+#: Test hook (not API): when set to a path that does not exist, the first task a process runs
+#: creates that file and kills its own process, to test that a dead worker's task is retried.
+_CRASH_ONCE_ENV = "FOVEATED_MI_STUDY_TEST_CRASH_ONCE"
+
+_SCENES: dict[str, Any] = {}
+_LOADS = {"count": 0}
+
+
+def _hash(payload: Any, n: int = 16) -> str:
+    text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha1(text.encode()).hexdigest()[:n]
+
+
+def task_id(scene_identity: dict, method: str, options: dict, spp: int, seed: int,
+            variant: str, metrics: dict) -> str:
+    """Stable id of a configuration on a scene: a hash of everything that changes its rows
+    except the frames recorded, the repeats and the warm-up (rows of those are resumable)."""
+    return _hash({"scene": scene_identity, "method": method, "options": options, "spp": spp,
+                  "seed": seed, "variant": variant, "metrics": metrics})
+
+
+# ---------------------------------------------------------------------------------------------
+# expansion (client side)
+# ---------------------------------------------------------------------------------------------
+
+def reference_key(scene, variant: str) -> str:
+    """Cache key of a rendered reference: scene, size, parameters, integrator, spp, seed,
+    camera and variant (and the XML file's modification time)."""
+    from ..scenes import scene_camera
+    camera = scene_camera(scene.source)
+    mtime = None if scene.builtin else os.stat(scene.source).st_mtime_ns
+    return _hash({"scene": scene.name, "size": list(scene.size), "params": scene.params,
+                  "integrator": scene.integrator, "spp": scene.reference["spp"],
+                  "seed": scene.reference["seed"], "camera": camera, "variant": variant,
+                  "mtime": mtime})
+
+
+def reference_task(scene, variant: str) -> dict:
+    return {"kind": "reference", "scene": scene.load_spec(), "variant": variant,
+            "spp": scene.reference["spp"], "seed": scene.reference["seed"],
+            "label": scene.label}
+
+
+def expand_tasks(spec, variant: str, *, denoise_available: bool = True) -> list[dict]:
+    """Every (scene, configuration) of the study as a task dict, scene by scene, foveated
+    configurations first (in TOML order), then the uniform baselines. Missing optional scenes
+    are left out (the caller reports them); denoised baselines too without pyoidn."""
+    tasks = []
+    for scene in spec.scenes:
+        if scene.missing:
+            continue
+        base = {"scene": scene.load_spec(), "label": scene.label, "gaze": list(scene.gaze),
+                "variant": variant, "seed": spec.seed, "repeats": spec.repeats,
+                "warmup": spec.warmup, "metrics": dict(spec.metrics)}
+        ident = scene.identity()
+        for c in spec.foveated:
+            tid = task_id(ident, "foveated", c["options"], c["spp"], spec.seed, variant,
+                          spec.metrics)
+            config = {"method": "foveated", "options": c["given"], "spp": c["spp"],
+                      "frames": c["frames"], "full_options": c["options"]}
+            tasks.append({**base, "kind": "foveated", "task_id": tid, "method": "foveated",
+                          "options": c["options"], "spp": c["spp"], "frames": c["frames"],
+                          "config": json.dumps(config, sort_keys=True)})
+        for u in spec.uniform:
+            if u["denoise"] and not denoise_available:
+                continue
+            method = "uniform+oidn" if u["denoise"] else "uniform"
+            tid = task_id(ident, method, {"denoise": u["denoise"]}, u["spp"], spec.seed,
+                          variant, spec.metrics)
+            config = {"method": method, "spp": u["spp"], "denoise": u["denoise"],
+                      "integrator": scene.integrator}
+            tasks.append({**base, "kind": "uniform", "task_id": tid, "method": method,
+                          "options": {"denoise": u["denoise"]}, "spp": u["spp"], "frames": [1],
+                          "config": json.dumps(config, sort_keys=True)})
+    return tasks
+
+
+# ---------------------------------------------------------------------------------------------
+# worker side
+# ---------------------------------------------------------------------------------------------
+
+def _prepare_worker(task: dict) -> None:
+    crash = os.environ.get(_CRASH_ONCE_ENV)
+    if crash and task.get("kind") != "reference" and not os.path.exists(crash):
+        with open(crash, "w") as f:
+            f.write(str(os.getpid()))
+        os._exit(1)
+    import foveated_mi
+    import mitsuba as mi
+    if mi.variant() != task["variant"]:
+        foveated_mi.set_variant(task["variant"])
+    threads = task.get("threads")
+    if threads:
+        import drjit as dr
+        if dr.thread_count() != threads:
+            dr.set_thread_count(int(threads))
+
+
+def get_scene(load_spec: dict, variant: str):
+    """The scene of ``load_spec`` for ``variant``, loaded once per process and kept."""
+    import mitsuba as mi
+    from ..scenes import load_scene
+    key = json.dumps({**load_spec, "variant": variant}, sort_keys=True)
+    scene = _SCENES.get(key)
+    if scene is None:
+        assert mi.variant() == variant
+        scene = load_scene(load_spec["source"], width=load_spec["width"],
+                           height=load_spec["height"], spp=1,
+                           integrator=load_spec["integrator"], **load_spec["params"])
+        _SCENES[key] = scene
+        _LOADS["count"] += 1
+    return scene
+
+
+def clear_scene_cache() -> None:
+    """Drop the scenes this process keeps (they are reloaded on demand)."""
+    _SCENES.clear()
+
+
+def scene_cache_info() -> dict:
+    """Scenes cached in this process and how many loads happened (for tests and logs)."""
+    return {"cached": len(_SCENES), "loads": _LOADS["count"], "pid": os.getpid()}
+
+
+def run_reference_task(task: dict) -> dict:
+    """Render a scene's reference with its nested integrator: ``{"image": linear float32
+    (H, W, 3), "rfilter": the film's reconstruction filter (text)}``."""
+    _prepare_worker(task)
+    from ..baselines import render_reference
+    scene = get_scene(task["scene"], task["variant"])
+    image = render_reference(scene, spp=task["spp"], seed=task["seed"])
+    return {"image": image, "rfilter": str(scene.sensors()[0].film().rfilter())}
+
+
+def _median(xs: list[float | None]) -> float | None:
+    xs = [x for x in xs if x is not None]
+    return statistics.median(xs) if xs else None
+
+
+def _quality(reference_display: np.ndarray, image: np.ndarray, task: dict) -> dict:
+    from ..metrics import compare
+    from ..render import to_display
+    m = task["metrics"]
+    test = to_display(image, m["exposure"])
+    return compare(reference_display, test, gaze=tuple(task["gaze"]), theta=m["theta"],
+                   sigma_p=m["sigma_p"], data_range=1.0, flip=m["flip"], ppd=m["ppd"])
+
+
+def _foveated_frames(scene, task: dict, record: list[int]):
+    import drjit as dr
+    import mitsuba as mi
+    from ..integrators.foveated import FoveatedIntegrator
+
+    opts = dict(task["options"])
+    integ = FoveatedIntegrator(nested=scene.integrator(), **opts, gaze=tuple(task["gaze"]),
+                               timing=True)
+    spp, seed, last = task["spp"], task["seed"], max(task["frames"])
+    for _ in range(task["warmup"]):
+        mi.render(scene, integrator=integ, spp=spp, seed=seed)
+    timings = {f: [] for f in record}
+    first = {}
+    for r in range(task["repeats"]):
+        integ.reset()
+        for k in range(1, last + 1):
+            img = mi.render(scene, integrator=integ, spp=spp, seed=seed)
+            if k in timings:
+                dr.eval(img)
+                stats = integ.stats
+                timings[k].append(stats["timings_ms"])
+                if r == 0:
+                    first[k] = (np.array(img, dtype=np.float32), stats)
+    return timings, first
+
+
+def run_task(task: dict, reference: np.ndarray) -> list[dict]:
+    """Run one configuration; returns its rows (one per recorded frame not yet done: the
+    task's ``frames_todo``, default all of ``frames``) as plain dicts."""
+    _prepare_worker(task)
+    from ..render import to_display
+    from .results import stage_columns
+    scene = get_scene(task["scene"], task["variant"])
+    ref_d = to_display(reference, task["metrics"]["exposure"])
+    w, h = task["scene"]["width"], task["scene"]["height"]
+    record = sorted(task.get("frames_todo") or task["frames"])
+    common = {"task_id": task["task_id"], "scene": task["label"], "method": task["method"],
+              "spp": task["spp"], "width": w, "height": h, "repeats": task["repeats"],
+              "variant": task["variant"], "config": task["config"]}
+    rows = []
+    if task["kind"] == "foveated":
+        timings, first = _foveated_frames(scene, task, record)
+        for k in record:
+            image, stats = first[k]
+            row = dict(common, frame=k, theta=task["options"]["theta"],
+                       sigma_p=task["options"]["sigma_p"],
+                       reconstruction=task["options"]["reconstruction"], rays=stats["rays"],
+                       ray_fraction=stats["ray_fraction"], samples=stats["rays"] * task["spp"],
+                       history_hit_rate=stats.get("history_hit_rate"),
+                       time_ms=_median([t.get("total") for t in timings[k]]))
+            for col in stage_columns():
+                row[col] = _median([t.get(col[:-3]) for t in timings[k]])
+            row.update(_quality(ref_d, image, task))
+            rows.append(row)
+        return rows
+    from ..baselines import render_uniform
+    den = bool(task["options"]["denoise"])
+    for _ in range(task["warmup"]):
+        render_uniform(scene, spp=task["spp"], seed=task["seed"], denoise=den)
+    runs = [render_uniform(scene, spp=task["spp"], seed=task["seed"], denoise=den)
+            for _ in range(task["repeats"])]
+    image = runs[0][0]
+    pixels = w * h
+    row = dict(common, frame=1, rays=pixels, ray_fraction=1.0, samples=pixels * task["spp"],
+               time_ms=_median([s["time_ms"] for _, s in runs]))
+    if "trace_ms" in stage_columns():         # the whole uniform render is its trace stage
+        row["trace_ms"] = _median([s["render_ms"] for _, s in runs])
+    if den:
+        row["aov_ms"] = _median([s["aov_ms"] for _, s in runs])
+        row["denoise_ms"] = _median([s["denoise_ms"] for _, s in runs])
+    row.update(_quality(ref_d, image, task))
+    return [row]
+

@@ -1,0 +1,209 @@
+"""Studies end to end at 32x32 (issue 10, items 1, 3, 7): local against Dask, resume after a
+kill, a dying Dask worker, reference caching, per-frame resume, reference files."""
+import math
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import numpy as np
+import pytest
+
+from foveated_mi.metrics import COMPARE_KEYS
+from foveated_mi.study import read_rows, run_study
+from foveated_mi.study import tasks as T
+
+ROOT = os.path.join(os.path.dirname(__file__), "..")
+QUICK = os.path.join(ROOT, "configs", "studies", "quick.toml")
+QUALITY = COMPARE_KEYS + ("rays", "ray_fraction", "samples", "history_hit_rate")
+
+TWO = """
+description = "two foveated configurations, 32x32"
+seed = 3
+repeats = 1
+warmup = 0
+size = [32, 32]
+gaze = [0.4, 0.6]
+[reference]
+spp = 32
+[[scenes]]
+scene = "cornell-box"
+[metrics]
+theta = 0.25
+[foveated.defaults]
+sigma_p = 0.5
+theta = 0.2
+atrous_iterations = 1
+frames = [1, 3]
+[foveated.grid]
+reconstruction = ["voronoi", "fast_sibson"]
+"""
+
+needs_dask = pytest.mark.skipif(
+    __import__("importlib").util.find_spec("distributed") is None, reason="dask not installed")
+
+
+def keyed(path):
+    rows = read_rows(path, raw=True)
+    return {(r["task_id"], r["frame"]): r for r in rows}, rows
+
+
+def study_file(tmp_path, text, name="study.toml"):
+    p = tmp_path / name
+    p.write_text(textwrap.dedent(text))
+    return str(p)
+
+
+@needs_dask
+def test_local_and_dask_give_identical_quality_columns(tmp_path):
+    path = study_file(tmp_path, TWO)
+    local = run_study(path, out=str(tmp_path / "local"), progress=False, echo=None)
+    dask = run_study(path, out=str(tmp_path / "dask"), executor="dask", workers=2,
+                     progress=False, echo=None)
+    assert local.failed == [] and dask.failed == []
+    a, rows_a = keyed(local.results_path)
+    b, _ = keyed(dask.results_path)
+    assert len(a) == 4 and a.keys() == b.keys()          # 2 configurations x frames 1, 3
+    for k in a:
+        for col in QUALITY:
+            assert a[k][col] == b[k][col], (k, col, a[k][col], b[k][col])   # exact text
+    # the reference was rendered once per run, and the two runs agree on it too
+    refs = [os.listdir(tmp_path / d / "references") for d in ("local", "dask")]
+    assert refs[0] == refs[1] and len(refs[0]) == 2
+    npy = [f for f in refs[0] if f.endswith(".npy")][0]
+    assert np.array_equal(np.load(tmp_path / "local" / "references" / npy),
+                          np.load(tmp_path / "dask" / "references" / npy))
+    # sanity of the numbers themselves
+    for r in rows_a:
+        assert 0 < float(r["ray_fraction"]) < 1 and float(r["time_ms"]) > 0
+        assert math.isfinite(float(r["psnr_fovea"])) and 0 <= float(r["flip"]) <= 1
+
+
+def test_killed_study_resumes_without_duplicates(tmp_path):
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "foveated_mi.cli", "study", QUICK, "--size", "32", "32",
+           "--out", str(out), "--no-progress"]
+    env = dict(os.environ, FOVEATED_MI_VARIANT="llvm_ad_rgb")
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    results = out / "results.csv"
+    deadline = time.time() + 300
+    try:
+        while time.time() < deadline and proc.poll() is None:
+            if results.exists() and results.read_text().count("\n") >= 2:   # header + 1 row
+                break
+            time.sleep(0.01)
+        proc.send_signal(signal.SIGKILL)
+    finally:
+        proc.wait()
+    assert proc.returncode == -signal.SIGKILL, proc.stderr.read().decode()
+    before = results.read_text()
+    n_before = len(read_rows(results))
+    expected = 2 * 2 + 2                   # 2 foveated configs x frames [1, 4] + 2 baselines
+    assert 1 <= n_before < expected, "the study finished before it could be killed"
+    # a second run finishes the study: every row once, the first run's rows untouched
+    rc = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    assert rc.returncode == 0, rc.stderr
+    after = results.read_text()
+    rows = read_rows(results)
+    keys = [(r["task_id"], r["frame"]) for r in rows]
+    assert len(keys) == len(set(keys)) == expected
+    complete = before[: before.rfind("\n") + 1]
+    assert after.startswith(complete)
+    assert "already done" in rc.stdout
+
+
+@needs_dask
+def test_dead_worker_loses_only_its_running_task(tmp_path, monkeypatch):
+    """On an existing cluster (--scheduler), a worker process that dies in the middle of a
+    task is replaced and the task re-run; every row arrives once."""
+    import logging
+    from distributed import LocalCluster
+    marker = tmp_path / "crashed"
+    monkeypatch.setenv(T._CRASH_ONCE_ENV, str(marker))        # inherited by the workers
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                           dashboard_address=None, silence_logs=logging.CRITICAL)
+    try:
+        path = study_file(tmp_path, TWO)
+        res = run_study(path, out=str(tmp_path / "out"), executor="dask",
+                        scheduler=cluster.scheduler_address, progress=False, echo=None)
+    finally:
+        cluster.close()
+    assert marker.exists(), "no worker died: the hook did not fire"
+    assert int(marker.read_text()) != os.getpid()           # a worker, not this process
+    assert res.failed == []
+    rows = read_rows(res.results_path)
+    keys = [(r["task_id"], r["frame"]) for r in rows]
+    assert len(keys) == len(set(keys)) == 4
+
+
+def test_reference_is_cached_and_scenes_load_once(tmp_path):
+    out = tmp_path / "out"
+    import matplotlib
+    backend = matplotlib.get_backend()
+    T.clear_scene_cache()
+    loads = T.scene_cache_info()["loads"]
+    first = run_study(QUICK, out=str(out), size=32, progress=False, echo=None)
+    assert matplotlib.get_backend() == backend              # plots never switch the backend
+    assert first.references_rendered == 1 and first.tasks_run == 4 and first.new_rows == 6
+    assert T.scene_cache_info()["loads"] == loads + 1        # reference + 4 tasks: one load
+    ref_dir = out / "references"
+    npy = [p for p in ref_dir.iterdir() if p.suffix == ".npy"]
+    assert len(npy) == 1 and (ref_dir / (npy[0].stem + ".json")).exists()
+    mtime = npy[0].stat().st_mtime_ns
+    # same study again: nothing to do
+    again = run_study(QUICK, out=str(out), size=32, progress=False, echo=None)
+    assert again.references_rendered == 0 and again.tasks_run == 0 and again.new_rows == 0
+    assert again.tasks_skipped == 4 and len(again.rows) == 6
+    # results removed: the tasks run again but the cached reference is reused as is
+    os.remove(first.results_path)
+    third = run_study(QUICK, out=str(out), size=32, progress=False, echo=None)
+    assert third.references_rendered == 0 and third.new_rows == 6
+    assert npy[0].stat().st_mtime_ns == mtime
+    a = {(r["task_id"], r["frame"]): r for r in first.rows}
+    for r in third.rows:                                     # same seeds: same quality
+        assert all(r[c] == a[(r["task_id"], r["frame"])][c] or
+                   (math.isnan(r[c]) and math.isnan(a[(r["task_id"], r["frame"])][c]))
+                   for c in COMPARE_KEYS)
+    # another size is another reference
+    other = run_study(QUICK, out=str(out), size=(24, 16), progress=False, echo=None)
+    assert other.references_rendered == 1 and len(list(ref_dir.glob("*.npy"))) == 2
+    assert {r["width"] for r in other.rows} == {24.0}
+    assert os.path.exists(other.png) and os.path.exists(other.svg)
+    assert open(other.svg).read().lstrip().startswith("<?xml")
+
+
+def test_new_frames_resume_per_frame(tmp_path):
+    path = study_file(tmp_path, TWO.replace("frames = [1, 3]", "frames = [1]"))
+    first = run_study(path, out=str(tmp_path / "o"), progress=False, echo=None)
+    assert {r["frame"] for r in first.rows} == {1.0} and first.new_rows == 2
+    path = study_file(tmp_path, TWO)
+    second = run_study(path, out=str(tmp_path / "o"), progress=False, echo=None)
+    assert second.new_rows == 2 and second.tasks_run == 2 and len(second.rows) == 4
+    f1 = {r["task_id"]: r for r in second.rows if r["frame"] == 1.0}
+    assert {r["task_id"] for r in first.rows} == set(f1)
+
+
+def test_reference_file_optional_scene_and_missing_oidn(tmp_path, monkeypatch, capsys):
+    from foveated_mi import denoise
+    ref = np.full((32, 32, 3), 0.25, np.float32)
+    np.save(tmp_path / "ref.npy", ref)
+    text = TWO.replace("[reference]\nspp = 32", "[reference]\nfile = \"ref.npy\"") + \
+        "\n[uniform]\nspp = 1\ndenoise = [false, true]\n" + \
+        "[[scenes]]\nscene = \"nowhere/scene.xml\"\noptional = true\n"
+    path = study_file(tmp_path, text)
+    monkeypatch.setattr(denoise, "oidn_available", lambda: False)
+    res = run_study(path, out=str(tmp_path / "o"), progress=False)
+    out = capsys.readouterr().out
+    assert "scene 'nowhere' skipped" in out and "uniform+oidn baselines skipped" in out
+    assert "pip install foveated_mi[denoise]" in out
+    assert res.references_rendered == 0 and not (tmp_path / "o" / "references").exists()
+    assert {r["method"] for r in res.rows} == {"foveated", "uniform"}
+    assert {r["scene"] for r in res.rows} == {"cornell-box"}
+    # a reference file of the wrong size is bad input
+    from foveated_mi import cli
+    rc = cli.main(["study", path, "--size", "16", "16", "--out", str(tmp_path / "p"),
+                   "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and "cornell-box: reference.file = 'ref.npy'" in err

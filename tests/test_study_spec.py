@@ -1,0 +1,307 @@
+"""Study files: schema validation (one line, exit 2), grid expansion, results.csv repair and
+Pareto fronts on hand-made points. No rendering here."""
+import math
+import os
+import sys
+import textwrap
+
+import pytest
+
+from foveated_mi import cli
+from foveated_mi.study import load_study, pareto_front, scene_fronts
+from foveated_mi.study import results as R
+from foveated_mi.study.tasks import expand_tasks
+from foveated_mi.validate import ParameterError
+
+QUICK = os.path.join(os.path.dirname(__file__), "..", "configs", "studies", "quick.toml")
+
+BASE = """
+seed = 0
+size = [16, 16]
+[[scenes]]
+scene = "cornell-box"
+[foveated.grid]
+theta = [0.1, 0.2]
+"""
+
+
+def write(tmp_path, text, name="s.toml"):
+    p = tmp_path / name
+    p.write_text(textwrap.dedent(text))
+    return str(p)
+
+
+# ---------------------------------------------------------------------------------------------
+# schema
+# ---------------------------------------------------------------------------------------------
+
+def test_grid_and_list_expand_to_the_product_plus_the_list(tmp_path):
+    spec = load_study(write(tmp_path, """
+        [[scenes]]
+        scene = "cornell-box"
+        [foveated.defaults]
+        atrous_iterations = 0
+        frames = [4, 1]
+        [foveated.grid]
+        theta = [0.1, 0.2, 0.3]
+        reconstruction = ["voronoi", "sibson"]
+        spp = [1, 2]
+        [[foveated.configs]]
+        theta = 0.5
+        frames = 2
+        [[foveated.configs]]
+        theta = 0.1                       # a duplicate of a grid point: runs once
+        reconstruction = "voronoi"
+        frames = [1, 4]
+        [uniform]
+        spp = [1, 4]
+        denoise = [false, true]
+    """))
+    fov = spec.foveated
+    assert len(fov) == 3 * 2 * 2 + 1
+    assert {(c["options"]["theta"], c["options"]["reconstruction"], c["spp"]) for c in fov[:12]} \
+        == {(t, r, s) for t in (0.1, 0.2, 0.3) for r in ("voronoi", "sibson") for s in (1, 2)}
+    assert all(c["frames"] == [1, 4] and c["options"]["atrous_iterations"] == 0 for c in fov[:12])
+    assert fov[12]["options"]["theta"] == 0.5 and fov[12]["frames"] == [2]
+    assert fov[12]["options"]["atrous_iterations"] == 0          # defaults apply to the list
+    assert spec.uniform == ({"spp": 1, "denoise": False}, {"spp": 1, "denoise": True},
+                            {"spp": 4, "denoise": False}, {"spp": 4, "denoise": True})
+    tasks = expand_tasks(spec, "llvm_ad_rgb")
+    assert len(tasks) == 13 + 4 and len({t["task_id"] for t in tasks}) == 17
+    assert len(expand_tasks(spec, "llvm_ad_rgb", denoise_available=False)) == 13 + 2
+    # the id ignores frames, repeats and warm-up, and depends on the size
+    again = expand_tasks(load_study(QUICK), "llvm_ad_rgb")
+    sized = expand_tasks(load_study(QUICK).with_size((32, 32)), "llvm_ad_rgb")
+    assert [t["task_id"] for t in again] == [t["task_id"] for t in
+                                            expand_tasks(load_study(QUICK), "llvm_ad_rgb")]
+    assert not {t["task_id"] for t in again} & {t["task_id"] for t in sized}
+
+
+def test_options_come_from_the_integrator_not_a_fixed_list(tmp_path, monkeypatch):
+    from foveated_mi.integrators import foveated
+    monkeypatch.setitem(foveated.DEFAULTS, "new_option", 3)
+    orig = foveated.validate_options
+
+    def validate(options):
+        new = options.pop("new_option", 3)
+        if not isinstance(new, int) or new < 0:
+            raise ParameterError("new_option", new, "an integer >= 0")
+        out = orig(options)
+        out["new_option"] = new
+        return out
+    monkeypatch.setattr(foveated, "validate_options", validate)
+    spec = load_study(write(tmp_path, BASE + "new_option = [1, 2]\n"))
+    assert [c["options"]["new_option"] for c in spec.foveated] == [1, 2, 1, 2]
+    with pytest.raises(ParameterError, match=r"foveated\.grid\.new_option\[1\] = -1"):
+        load_study(write(tmp_path, BASE + "new_option = [1, -1]\n"))
+
+
+def test_relative_xml_and_optional_scene(tmp_path):
+    (tmp_path / "scenes").mkdir()
+    spec = load_study(write(tmp_path, """
+        [[scenes]]
+        scene = "scenes/nothing/scene.xml"
+        optional = true
+        [[scenes]]
+        scene = "voxel-city"
+        label = "city"
+        params = { size = 16 }
+        [uniform]
+        spp = 1
+    """))
+    assert spec.scenes[0].missing and spec.scenes[0].label == "nothing"
+    assert spec.scenes[0].source == str(tmp_path / "scenes" / "nothing" / "scene.xml")
+    assert not spec.scenes[1].missing and spec.scenes[1].label == "city"
+    assert [t["label"] for t in expand_tasks(spec, "llvm_ad_rgb")] == ["city"]
+
+
+BAD = [
+    ("colour = 1\n" + BASE, "colour"),
+    (BASE + "thetta = [0.1]\n", "foveated.grid.thetta"),
+    (BASE + "reconstruction = ['voronoi', 'bogus']\n", "foveated.grid.reconstruction[1]"),
+    (BASE.replace("[0.1, 0.2]", "[0.1, -0.2]"), "foveated.grid.theta[1]"),
+    (BASE + "frames = [0, 4]\n", "foveated.grid.frames[0]"),
+    (BASE + "gaze = [0.5, 0.5]\n", "foveated.grid.gaze"),
+    (BASE + "timing = false\n", "foveated.grid.timing"),
+    (BASE + "spp = 0\n", "foveated.grid.spp"),
+    (BASE + "[[foveated.configs]]\nsigma_p = 2.0\n", "foveated.configs[0].sigma_p"),
+    (BASE + "[foveated.defaults]\nmax_radius = 0\n", "foveated.defaults.max_radius"),
+    (BASE + "[uniform]\nspp = [1, 0]\n", "uniform.spp[1]"),
+    (BASE + "[uniform]\nmethod = 'path'\n", "uniform.method"),
+    (BASE + "[baseline]\nspp = 1\n", "baseline"),
+    (BASE + "[metrics]\ntheta = 0\n", "metrics.theta"),
+    (BASE + "[metrics]\nlpips = true\n", "metrics.lpips"),
+    ("metric = 'psnr_foveal'\n" + BASE, "metric"),
+    (BASE.replace('"cornell-box"', '"missing/scene.xml"'), "scenes[0].scene"),
+    (BASE.replace('"cornell-box"', '"cornell"'), "scenes[0].scene"),
+    (BASE.replace('scene = "cornell-box"', 'scene = "cornell-box"\nparams = {bogus = 1}'),
+     "scenes[0].params.bogus"),
+    (BASE.replace('scene = "cornell-box"', 'scene = "cornell-box"\ncolor = 1'),
+     "scenes[0].color"),
+    (BASE.replace("size = [16, 16]", "size = [16, 0]"), "size[1]"),
+    (BASE.replace("size = [16, 16]", "gaze = [0.5]"), "gaze"),
+    (BASE.replace("size = [16, 16]", "[reference]\nfile = 'nope.exr'"), "reference.file"),
+    (BASE.replace("size = [16, 16]", "[reference]\nspp = 0"), "reference.spp"),
+    (BASE.replace("size = [16, 16]", "[integrator]\ntype = 'foveated'"), "integrator.type"),
+    ("seed = 0\n", "scenes"),
+    (BASE + "[[foveated.configs]\n", "study"),                           # TOML syntax
+]
+
+
+@pytest.mark.parametrize("text,key", BAD)
+def test_bad_study_files_exit_2_with_one_line(tmp_path, capsys, text, key):
+    path = write(tmp_path, text)
+    assert cli.main(["study", path, "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("foveated-mi: error: "), err
+    if key == "study":
+        assert "valid TOML" in err
+    else:
+        assert f"s.toml: {key} = " in err, err
+    assert "expected" in err
+    assert not os.path.exists(tmp_path / "out" / "results.csv")
+
+
+@pytest.mark.parametrize("argv,name", [
+    (["--executor", "spark"], "--executor"),
+    (["--workers", "2"], "--workers"),
+    (["--scheduler", "tcp://127.0.0.1:1"], "--scheduler"),
+    (["--size", "0", "32"], "--size W"),
+    (["--metric", "lpips"], "--metric"),
+    (["--executor", "dask", "--scheduler", "localhost"], "--scheduler"),
+    (["--executor", "dask", "--workers", "0"], "--workers"),
+    (["--variant", "scalar_spectral_nope"], "variant"),
+])
+def test_bad_command_lines_exit_2(tmp_path, capsys, argv, name):
+    rc = cli.main(["study", QUICK, "--out", str(tmp_path), "--no-progress", *argv])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and f"error: {name} = " in err, err
+
+
+def test_unreachable_scheduler_fails_fast(tmp_path, capsys, monkeypatch):
+    import time
+    from foveated_mi.study import executors
+    monkeypatch.setattr(executors, "CONNECT_TIMEOUT_S", 1)
+    t0 = time.perf_counter()
+    rc = cli.main(["study", QUICK, "--out", str(tmp_path), "--executor", "dask",
+                   "--scheduler", "tcp://127.0.0.1:9", "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and "--scheduler = 'tcp://127.0.0.1:9'" in err
+    assert "reachable Dask scheduler" in err and time.perf_counter() - t0 < 30
+
+
+def test_missing_dask_names_the_extra(tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "distributed", None)       # import fails
+    rc = cli.main(["study", QUICK, "--out", str(tmp_path), "--executor", "dask",
+                   "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1
+    assert "--executor = 'dask'" in err and "pip install foveated_mi[cluster]" in err
+
+
+# ---------------------------------------------------------------------------------------------
+# results.csv
+# ---------------------------------------------------------------------------------------------
+
+def row(tid, frame, **kw):
+    return {"task_id": tid, "frame": frame, "scene": "s", "method": "foveated", **kw}
+
+
+def test_results_stream_and_repair_a_partial_last_line(tmp_path):
+    path = tmp_path / "results.csv"
+    with R.ResultsFile(path) as f:
+        f.append(row("a", 1, psnr=math.inf, ssim=0.1 + 0.2, time_ms=None))
+        f.append(row("a", 4, psnr=math.nan))
+    text = path.read_text()
+    assert text.count("\n") == 3 and text.splitlines()[0] == ",".join(R.columns())
+    with open(path, "a") as fh:
+        fh.write("b,s,foveated,0.1,0.8,sib")            # died while writing a row
+    f = R.ResultsFile(path)
+    assert f.repaired_bytes == len("b,s,foveated,0.1,0.8,sib")
+    assert f.done == {("a", 1), ("a", 4)}
+    f.append(row("b", 1))
+    f.close()
+    rows = R.read_rows(path)
+    assert [(r["task_id"], r["frame"]) for r in rows] == [("a", 1.0), ("a", 4.0), ("b", 1.0)]
+    assert rows[0]["psnr"] == math.inf and rows[0]["ssim"] == 0.1 + 0.2       # exact
+    assert math.isnan(rows[0]["time_ms"]) and math.isnan(rows[1]["psnr"])
+    with pytest.raises(KeyError, match="bogus"):
+        with R.ResultsFile(path) as f:
+            f.append(row("c", 1, bogus=1))
+
+
+def test_results_header_grows_when_the_pipeline_gains_a_stage(tmp_path):
+    path = tmp_path / "results.csv"
+    old = [c for c in R.columns() if c != "post_ms"]
+    with R.ResultsFile(path, old) as f:
+        f.append(row("a", 1, trace_ms=2.5))
+    with R.ResultsFile(path) as f:                         # current columns: post_ms is back
+        assert f.columns[-1] == "post_ms" and f.done == {("a", 1)}
+        f.append(row("b", 1, post_ms=1.5))
+    rows = R.read_rows(path)
+    assert rows[0]["trace_ms"] == 2.5 and math.isnan(rows[0]["post_ms"])
+    assert rows[1]["post_ms"] == 1.5
+
+
+def test_stage_columns_follow_timing_stages():
+    from foveated_mi.timing import STAGES
+    assert R.stage_columns() == [f"{s}_ms" for s in STAGES if s != "total"]
+
+
+# ---------------------------------------------------------------------------------------------
+# Pareto fronts
+# ---------------------------------------------------------------------------------------------
+
+def test_pareto_front_on_hand_made_points():
+    t = [10, 5, 20, 5, 7, 30, 8, 12, math.nan, 1]
+    q = [30, 20, 35, 22, 22, 34, math.inf, 30, 99, math.nan]
+    # by hand: (5, 22) beats (5, 20); (7, 22) is dominated by (5, 22); (10, 30) is on the
+    # front; (12, 30) is dominated by (10, 30); (20, 35) tops it; (30, 34) is dominated.
+    # Non-finite points never count.
+    assert pareto_front(t, q) == [3, 0, 2]
+    assert pareto_front([1, 1, 1], [5, 5, 5]) == [0]                      # duplicates: first
+    assert pareto_front([], []) == []
+    assert pareto_front([3, 2, 1], [1, 2, 3]) == [2]                      # one dominates all
+    assert pareto_front([1, 2, 3], [1, 2, 3]) == [0, 1, 2]                # a trade-off line
+
+
+def test_scene_fronts_flip_is_lower_is_better():
+    rows = [dict(scene="a", time_ms=1.0, flip=0.3), dict(scene="a", time_ms=2.0, flip=0.1),
+            dict(scene="a", time_ms=3.0, flip=0.2), dict(scene="b", time_ms=1.0, flip=0.5)]
+    fr = scene_fronts(rows, "flip")
+    assert [r["time_ms"] for r in fr["a"]] == [1.0, 2.0] and len(fr["b"]) == 1
+
+
+def test_front_table_names_the_options_that_vary():
+    import json
+    from foveated_mi.study import front_table
+
+    def r(t, q, reorder):
+        cfg = {"full_options": {"theta": 0.1, "reorder": reorder, "max_radius": 32}}
+        return dict(scene="s", method="foveated", theta=0.1, sigma_p=0.8,
+                    reconstruction="sibson", spp=1.0, frame=1.0, time_ms=t, psnr=q,
+                    config=json.dumps(cfg))
+    text = front_table([r(2.0, 20.0, "none"), r(1.0, 19.0, "compact"),
+                        r(3.0, 18.0, "rows")], "psnr")
+    lines = text.splitlines()
+    assert lines[0].split()[-1] == "options" and len(lines) == 4     # header, rule, 2 rows
+    assert lines[2].endswith("reorder=compact") and lines[3].endswith("reorder=none")
+    assert "max_radius" not in text                                   # the same everywhere
+
+
+@pytest.mark.parametrize("name", ["quick", "paper_fig7_quality", "speed_accuracy",
+                                  "paper_table1"])
+def test_example_studies_parse(name):
+    spec = load_study(os.path.join(os.path.dirname(QUICK), f"{name}.toml"))
+    tasks = expand_tasks(spec, "llvm_ad_rgb")
+    assert tasks and len({t["task_id"] for t in tasks}) == len(tasks)
+    if name == "paper_fig7_quality":
+        combos = {(c["options"]["theta"], c["options"]["reconstruction"]) for c in spec.foveated}
+        assert {t for t, _ in combos} == {0.04, 0.1, 0.2} and len(combos) == 12
+        assert all(c["options"]["sigma_p"] == 0.8 for c in spec.foveated)
+        assert spec.scenes[0].size == (1024, 1024) and spec.scenes[0].name == "voxel-city"
+    if name == "speed_accuracy":
+        assert [s.label for s in spec.scenes] == ["voxel-city", "staircase"]
+        assert spec.scenes[1].optional
+        assert spec.scenes[1].source.endswith(os.path.join("shared", "scenes", "staircase",
+                                                           "scene.xml"))
