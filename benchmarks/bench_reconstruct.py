@@ -109,7 +109,7 @@ def main(argv=None) -> int:
     variant = foveated_mi.set_variant(args.variant)
     import drjit as dr
     import mitsuba as mi
-    from foveated_mi.reconstruct import RECONSTRUCTIONS, jump_flood
+    from foveated_mi.reconstruct import RECONSTRUCTIONS, Guide, jump_flood, reconstruct
 
     size, rng = args.size, np.random.default_rng(args.seed)
     cases = [("random", f, None) for f in fractions]
@@ -129,10 +129,17 @@ def main(argv=None) -> int:
         row = {"pattern": pattern, "target_fraction": fraction, "theta": theta, "sigma_p": SIGMA_P
                if pattern != "random" else None, "site_fraction": actual, "times_s": {}, "median_s": {}}
         nearest = jump_flood(mask, size, size, args.jfa_variant)
-        dr.eval(nearest)
+        # Guided methods see a flat plane facing the camera, 1 sample per site: their cost
+        # does not depend on the geometry.
+        idx = dr.arange(mi.UInt32, size * size)
+        guide = Guide(normal=mi.Normal3f(0, 0, 1) + dr.zeros(mi.Normal3f, size * size),
+                      position=mi.Point3f(mi.Float(idx % size), mi.Float(idx // size), 0.0),
+                      hit=dr.full(mi.Bool, True, size * size), weight=dr.select(mask, 1.0, 0.0))
+        dr.eval(nearest, guide)
         fns = {"jfa": lambda: jump_flood(mask, size, size, args.jfa_variant)}
-        for name, fn in RECONSTRUCTIONS.items():
-            fns[name] = (lambda fn=fn: fn(image, mask, nearest, size, size, max_radius=args.max_radius))
+        for name in RECONSTRUCTIONS:
+            fns[name] = (lambda name=name: reconstruct(name, image, mask, nearest, size, size,
+                                                       max_radius=args.max_radius, guide=guide))
         times = time_round_robin(fns, (image, mask, nearest), args.repeats)
         row["times_s"] = times
         row["median_s"] = {k: statistics.median(v) for k, v in times.items()}
