@@ -22,6 +22,8 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _add_frame_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--preset", help="auto | paper | oidn | svgf: a tuned group of defaults "
+                   "(auto: oidn when pyoidn is installed, else svgf)")
     p.add_argument("--theta", type=float, help="foveal radius (fraction of half the diagonal)")
     p.add_argument("--sigma-p", type=float, dest="sigma_p", help="P(theta), in (0, 1]")
     p.add_argument("--gaze", type=float, nargs=2, metavar=("X", "Y"),
@@ -31,7 +33,19 @@ def _add_frame_options(p: argparse.ArgumentParser) -> None:
                    help="splat | importance: how samples honour the film's filter")
     p.add_argument("--block-height", type=int, dest="block_height")
     p.add_argument("--edge-threshold", type=float, dest="edge_threshold")
-    p.add_argument("--reconstruction", help="voronoi | sibson | discrete_sibson | fast_sibson")
+    p.add_argument("--reconstruction", help="voronoi | sibson | discrete_sibson | fast_sibson | "
+                   "guided | stochastic")
+    p.add_argument("--demodulate", action=argparse.BooleanOptionalAction, default=None,
+                   help="reconstruct and filter irradiance (radiance / G-buffer albedo)")
+    p.add_argument("--target-samples", type=float, dest="target_samples",
+                   help="samples a guided reconstruction averages per pixel")
+    p.add_argument("--guided-levels", type=int, dest="guided_levels")
+    p.add_argument("--stochastic-jitter", type=float, dest="stochastic_jitter")
+    p.add_argument("--stochastic-tries", type=int, dest="stochastic_tries")
+    p.add_argument("--denoiser", help="none | atrous | svgf | oidn")
+    p.add_argument("--sigma-luminance", type=float, dest="sigma_luminance",
+                   help="svgf colour sigma, in noise standard deviations")
+    p.add_argument("--oidn-quality", dest="oidn_quality", help="high | balanced | fast")
     p.add_argument("--max-radius", type=int, dest="max_radius")
     p.add_argument("--jfa", help="jfa | 1+jfa | jfa+1 | jfa+2")
     p.add_argument("--atrous-iterations", type=int, dest="atrous_iterations")
@@ -43,9 +57,11 @@ def _add_frame_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--clamp", type=float, help="largest accepted sample component")
 
 
-FRAME_OPTIONS = ("theta", "sigma_p", "gaze", "reorder", "pixel_filter", "block_height", "edge_threshold",
-                 "reconstruction", "max_radius", "jfa", "atrous_iterations", "sigma_color",
-                 "sigma_normal", "sigma_position", "tonemap", "exposure", "clamp")
+FRAME_OPTIONS = ("preset", "theta", "sigma_p", "gaze", "reorder", "pixel_filter", "block_height",
+                 "edge_threshold", "demodulate", "reconstruction", "max_radius", "target_samples",
+                 "guided_levels", "stochastic_jitter", "stochastic_tries", "jfa", "denoiser",
+                 "atrous_iterations", "sigma_color", "sigma_normal", "sigma_position",
+                 "sigma_luminance", "oidn_quality", "tonemap", "exposure", "clamp")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -47,6 +47,7 @@ from typing import Any
 
 from .paths import (CameraPath, FixedGaze, GazeCSV, GazeKeyframes, GazePath,
                     Saccades)
+from .options import DEFAULTS
 from .validate import ParameterError
 
 if sys.version_info >= (3, 11):
@@ -62,15 +63,19 @@ GAZE_TYPES = ("fixed", "keyframes", "saccades", "csv")
 
 #: Options of the ``foveated`` integrator a config may set, with their TOML types
 #: (value ranges are checked by the integrator's own validation when it is importable).
+def _toml_types(default: Any) -> tuple[type, ...]:
+    if isinstance(default, bool):
+        return (bool,)
+    if isinstance(default, float):
+        return (int, float)
+    return (type(default),)
+
+
+#: Options of the ``foveated`` integrator a config may set, with their TOML types, derived
+#: from the integrator's defaults (the gaze comes from ``[gaze]``; value ranges are checked by
+#: the integrator's own validation).
 FOVEATED_KEYS: dict[str, tuple[type, ...]] = {
-    "theta": (int, float), "sigma_p": (int, float), "reorder": (str,), "pixel_filter": (str,),
-    "block_height": (int,), "edge_threshold": (int, float), "reconstruction": (str,),
-    "max_radius": (int,), "jfa": (str,), "atrous_iterations": (int,),
-    "sigma_color": (int, float), "sigma_normal": (int, float), "sigma_position": (int, float),
-    "tonemap": (str,), "exposure": (int, float), "history": (bool,),
-    "max_history": (int, float), "reprojection_tolerance": (int, float),
-    "clamp": (int, float), "timing": (bool,),
-}
+    name: _toml_types(default) for name, default in DEFAULTS.items() if name != "gaze"}
 
 _TOP_KEYS = ("scene", "description", "frames", "fps", "size", "spp", "seed", "scene_params",
              "integrator", "foveated", "camera", "gaze", "output")

@@ -24,7 +24,9 @@ whose filter footprint still covers the object, would never accumulate samples.
 - neither: a hole for the reconstruction.
 
 Capping :math:`n` turns the running mean into an exponential moving average with weight
-:math:`s/N_{max}`, so lighting changes are not smeared over hundreds of frames.
+:math:`s/N_{max}`, so lighting changes are not smeared over hundreds of frames. The mean
+squared luminance of the samples (the second moment, for variance estimation, as in SVGF)
+is blended with the same weights.
 """
 from __future__ import annotations
 
@@ -49,6 +51,7 @@ class History:
     """The history cache carried between frames."""
     mean: mi.Color3f
     count: mi.Float
+    moment2: mi.Float
     depth: mi.Float
     camera: CameraState
     width: int
@@ -121,25 +124,33 @@ class Resolved(NamedTuple):
     mask: mi.Bool           #: pixel holds a value (traced or resampled)
     count: mi.Float         #: history sample count after this frame
     resampled: mi.Bool      #: pixel took its value from history only
+    moment2: mi.Float       #: mean squared sample luminance behind ``shading``
 
 
 def resolve(new: mi.Color3f, traced: mi.Bool, spp: int, reproj: ReprojectionMap,
-            history: History | None, max_history: float) -> Resolved:
-    """Merge this frame's sparse samples with the reprojected history (Fig. 4)."""
+            history: History | None, max_history: float,
+            moment2: mi.Float | None = None) -> Resolved:
+    """Merge this frame's sparse samples with the reprojected history (Fig. 4).
+
+    ``moment2`` is the traced pixels' mean squared sample luminance (0 when not given)."""
     s = mi.Float(spp)
+    m2 = dr.zeros(mi.Float, dr.width(traced)) if moment2 is None else dr.detach(moment2)
     if history is None:
         return Resolved(dr.select(traced, new, 0.0), mi.Bool(traced), dr.select(traced, s, 0.0),
-                        dr.zeros(mi.Bool, dr.width(traced)))
+                        dr.zeros(mi.Bool, dr.width(traced)), dr.select(traced, m2, 0.0))
     hit = reproj.hit
     h = dr.gather(mi.Color3f, history.mean, reproj.index, hit)
+    h2 = dr.gather(mi.Float, history.moment2, reproj.index, hit)
     cap = dr.opaque(mi.Float, max_history)
     n = dr.select(hit, dr.minimum(dr.gather(mi.Float, history.count, reproj.index, hit),
                                   dr.maximum(cap - s, 0.0)), 0.0)
-    blended = (h * n + new * s) / (n + s)
+    inv = dr.rcp(n + s)
+    blended = (h * n + new * s) * inv
     shading = dr.select(traced, blended, dr.select(hit, h, 0.0))
+    moment = dr.select(traced, (h2 * n + m2 * s) * inv, dr.select(hit, h2, 0.0))
     count = dr.select(traced, dr.minimum(n + s, dr.maximum(cap, s)), n)
     resampled = hit & ~traced
-    return Resolved(shading, traced | hit, count, resampled)
+    return Resolved(shading, traced | hit, count, resampled, moment)
 
 
 def roundtrip_error(sensor: mi.Sensor, width: int, height: int, position: mi.Point3f,

@@ -51,9 +51,19 @@ PIXEL_FILTERS = ("splat", "importance")
 
 
 class ShadingBuffer(NamedTuple):
-    """The sparse shading buffer of §3.3 before the history: one entry per pixel."""
+    """The sparse shading buffer of §3.3 before the history: one entry per pixel.
+
+    ``moment2`` and ``count`` describe the noise of ``value`` (for variance-guided filtering);
+    like every weight of the image formation they carry no gradient."""
     value: mi.Color3f   #: radiance estimate of a traced pixel (0 elsewhere)
     mask: mi.Bool       #: pixel was traced and holds a value
+    moment2: mi.Float   #: mean squared luminance of the pixel's samples
+    count: mi.Float     #: accepted samples behind ``value``
+
+
+def luminance(c: mi.Color3f) -> mi.Float:
+    """Rec. 709 luminance (Mitsuba's RGB primaries)."""
+    return dr.fma(c.x, 0.212671, dr.fma(c.y, 0.715160, c.z * 0.072169))
 
 
 class ShadingResult(NamedTuple):
@@ -170,13 +180,20 @@ def develop_mean(samples: ShadingResult, pixels: mi.UInt32, spp: int, n_pixels: 
     Returns the sparse shading buffer (``n_pixels`` entries) and the mask of pixels that hold
     a value. Linear in ``samples.radiance`` (the mask and counts are fixed)."""
     ok = mi.Float(samples.ok)
+    lum2 = dr.square(luminance(dr.detach(samples.radiance)))
     if spp > 1:
         total = dr.block_sum(samples.radiance, spp)
         accepted = dr.block_sum(ok, spp)
+        lum2 = dr.block_sum(lum2, spp)
     else:
         total, accepted = samples.radiance, ok
-    mean = total / dr.maximum(dr.detach(accepted), 1.0)
-    return ShadingBuffer(*scatter_to_film(mean, accepted > 0, pixels, n_pixels))
+    inv = dr.rcp(dr.maximum(dr.detach(accepted), 1.0))
+    value, mask = scatter_to_film(total * inv, accepted > 0, pixels, n_pixels)
+    m2 = dr.zeros(mi.Float, n_pixels)
+    count = dr.zeros(mi.Float, n_pixels)
+    dr.scatter(m2, lum2 * inv, pixels, accepted > 0)
+    dr.scatter(count, accepted, pixels, accepted > 0)
+    return ShadingBuffer(value, mask, m2, count)
 
 
 def develop_splat(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.Film
@@ -191,25 +208,31 @@ def develop_splat(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.
     n = width * height
     rfilter = film.rfilter()
     border = bool(film.sample_border())
-    block = mi.ImageBlock(size=film.crop_size(), offset=film.crop_offset(), channel_count=4,
+    block = mi.ImageBlock(size=film.crop_size(), offset=film.crop_offset(), channel_count=5,
                           rfilter=rfilter, border=border, coalesce=spp >= 4)
     off = film.crop_offset()
     pos = mi.Point2f(samples.position.x + float(off[0]), samples.position.y + float(off[1]))
     L = samples.radiance
-    block.put(pos, [L.x, L.y, L.z, mi.Float(1.0)], samples.ok)
+    lum2 = dr.square(luminance(dr.detach(L)))
+    block.put(pos, [L.x, L.y, L.z, lum2, mi.Float(1.0)], samples.ok)
     data = block.tensor()
     if border:
         b = int(rfilter.border_size())
         data = data[b:b + height, b:b + width]
     flat = data.array
-    idx = dr.arange(mi.UInt32, n) * 4
+    idx = dr.arange(mi.UInt32, n) * 5
     acc = mi.Color3f(dr.gather(mi.Float, flat, idx), dr.gather(mi.Float, flat, idx + 1),
                      dr.gather(mi.Float, flat, idx + 2))
-    wsum = dr.detach(dr.gather(mi.Float, flat, idx + 3))
-    ray_ok = dr.block_sum(mi.Float(samples.ok), spp) > 0 if spp > 1 else samples.ok
-    _, traced = scatter_to_film(dr.zeros(mi.Color3f, dr.width(pixels)), ray_ok, pixels, n)
+    m2 = dr.detach(dr.gather(mi.Float, flat, idx + 3))
+    wsum = dr.detach(dr.gather(mi.Float, flat, idx + 4))
+    accepted = dr.block_sum(mi.Float(samples.ok), spp) if spp > 1 else mi.Float(samples.ok)
+    _, traced = scatter_to_film(dr.zeros(mi.Color3f, dr.width(pixels)), accepted > 0, pixels, n)
+    count = dr.zeros(mi.Float, n)
+    dr.scatter(count, accepted, pixels, accepted > 0)
     holds = traced & (wsum > 0)
-    return ShadingBuffer(dr.select(holds, acc / dr.select(holds, wsum, 1.0), 0.0), holds)
+    inv = dr.rcp(dr.select(holds, wsum, 1.0))
+    return ShadingBuffer(dr.select(holds, acc * inv, 0.0), holds, dr.select(holds, m2 * inv, 0.0),
+                         dr.select(holds, count, 0.0))
 
 
 def develop(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.Film,

@@ -93,3 +93,10 @@ def check_point2(name: str, value: Any, bound: float = 1e6) -> tuple[float, floa
     if not (math.isfinite(x) and math.isfinite(y)) or abs(x) > bound or abs(y) > bound:
         raise ParameterError(name, value, allowed)
     return x, y
+
+
+def check_bool(name: str, value: Any) -> bool:
+    """A real ``bool`` (not 0/1, not a string)."""
+    if isinstance(value, bool):
+        return value
+    raise ParameterError(name, value, "true or false")

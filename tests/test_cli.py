@@ -20,7 +20,8 @@ def run(args, capsys):
 def test_render_writes_exr_layers_png_and_stats(tmp_path, capsys):
     exr = tmp_path / "f.exr"
     stats = tmp_path / "s.json"
-    code, out, err = run(["render", "cornell-box", "--size", "40", "32", "--theta", "0.15",
+    code, out, err = run(["render", "cornell-box", "--preset", "paper", "--size", "40", "32",
+                          "--theta", "0.15",
                           "--sigma-p", "0.6", "--gaze", "0.4", "0.6", "--reorder", "rows_blocks",
                           "--atrous-iterations", "1", "--compare-full", "--warmup", "0",
                           "--out", str(exr), "--stats", str(stats)], capsys)

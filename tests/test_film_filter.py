@@ -81,7 +81,7 @@ def test_every_pixel_traced_converges_to_the_nested_image(rfilter):
     ref = to_display(np.array(mi.render(scene, integrator=nested, spp=1024, seed=999)))
     own = np.mean([np.array(mi.render(scene, integrator=nested, spp=1, seed=1 + k))
                    for k in range(32)], axis=0)
-    fov = FoveatedIntegrator(nested=nested, sigma_p=1.0, atrous_iterations=0,
+    fov = FoveatedIntegrator(preset="paper", nested=nested, sigma_p=1.0, atrous_iterations=0,
                              max_history=64.0)
     for k in range(32):
         img = np.array(mi.render(scene, integrator=fov, spp=1, seed=7))
@@ -94,7 +94,7 @@ def test_every_pixel_traced_converges_to_the_nested_image(rfilter):
 def test_every_pixel_traced_is_the_nested_render_with_splatting():
     scene = _cornell(24, 20, "gaussian")
     nested = scene.integrator()
-    fov = FoveatedIntegrator(nested=nested, sigma_p=1.0, atrous_iterations=0, history=False)
+    fov = FoveatedIntegrator(preset="paper", nested=nested, sigma_p=1.0, atrous_iterations=0, history=False)
     for spp in (1, 3):
         a = np.array(mi.render(scene, integrator=fov, spp=spp, seed=4))
         b = np.array(mi.render(scene, integrator=nested, spp=spp, seed=4))
@@ -109,7 +109,7 @@ def test_importance_sampled_frames_converge_to_the_filtered_image(rfilter):
     scene = _cornell(32, 32, rfilter)
     nested = scene.integrator()
     ref = to_display(np.array(mi.render(scene, integrator=nested, spp=4096, seed=999)))
-    fov = FoveatedIntegrator(nested=nested, sigma_p=1.0, atrous_iterations=0, history=False,
+    fov = FoveatedIntegrator(preset="paper", nested=nested, sigma_p=1.0, atrous_iterations=0, history=False,
                              pixel_filter="importance")
     a = np.array(mi.render(scene, integrator=fov, spp=512, seed=5))
     b = np.array(mi.render(scene, integrator=fov, spp=512, seed=6))
@@ -135,10 +135,11 @@ class Constant(mi.SamplingIntegrator):
 
 
 @pytest.mark.parametrize("spp", [1, 2, 7])
-@pytest.mark.parametrize("sigma_p", [1.0, 0.5])
-def test_constant_nested_integrator_is_broadcast(spp, sigma_p):
+@pytest.mark.parametrize("sigma_p,preset", [(1.0, "paper"), (0.5, "paper"), (0.5, "svgf")])
+def test_constant_nested_integrator_is_broadcast(spp, sigma_p, preset):
     scene = _cornell(24, 20, "gaussian")
-    fov = FoveatedIntegrator(nested=Constant(mi.Properties()), sigma_p=sigma_p, theta=0.2)
+    fov = FoveatedIntegrator(preset=preset, nested=Constant(mi.Properties()), sigma_p=sigma_p,
+                             theta=0.2, demodulate=False)
     img = np.array(mi.render(scene, integrator=fov, spp=spp, seed=3))
     assert img.shape == (20, 24, 3)
     np.testing.assert_allclose(img, 0.5, rtol=1e-5)
@@ -151,7 +152,7 @@ def test_nested_ad_integrators_render_the_primal(name):
     scene = _cornell(24, 24, "box", {"type": name, "max_depth": 3} if name != "direct_projective"
                      else {"type": name})
     nested = scene.integrator()
-    fov = FoveatedIntegrator(nested=nested, sigma_p=1.0, atrous_iterations=0, history=False)
+    fov = FoveatedIntegrator(preset="paper", nested=nested, sigma_p=1.0, atrous_iterations=0, history=False)
     ref = to_display(np.array(mi.render(scene, integrator=nested, spp=2048, seed=99)))
     a = np.array(mi.render(scene, integrator=fov, spp=128, seed=5))
     b = np.array(mi.render(scene, integrator=nested, spp=128, seed=6))

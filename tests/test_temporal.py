@@ -36,7 +36,7 @@ def test_static_camera_converges():
     scene = small_cornell()
     nested = scene.integrator()
     ref = np.array(mi.render(scene, integrator=nested, spp=256, seed=99))
-    integ = FoveatedIntegrator(nested=nested, theta=0.1, sigma_p=0.5, max_history=64,
+    integ = FoveatedIntegrator(preset="paper", nested=nested, theta=0.1, sigma_p=0.5, max_history=64,
                                atrous_iterations=0)
     scores = []
     for k in range(32):
@@ -54,7 +54,7 @@ def test_every_pixel_traced_within_predicted_frames():
     p_min = float(np.min(prob.numpy()))
     # Frames after which the least likely pixel is still missed with probability 1e-3 / pixels.
     n = math.ceil(math.log(1e-3 / (W * H)) / math.log(1.0 - p_min))
-    integ = FoveatedIntegrator(atrous_iterations=0, edge_threshold=0.0,
+    integ = FoveatedIntegrator(preset="paper", atrous_iterations=0, edge_threshold=0.0,
                                reconstruction="voronoi", **kw)
     scene = small_cornell(W, H)
     seen = np.zeros((H, W), bool)
@@ -71,7 +71,7 @@ def test_every_pixel_traced_within_predicted_frames():
 def test_small_translation_hits_history():
     scene = load_scene("eye-exam", width=48, height=48, integrator={"type": "path", "max_depth": 2})
     cam = scene_camera("eye-exam")
-    integ = FoveatedIntegrator(theta=0.3, sigma_p=1.0, atrous_iterations=0,
+    integ = FoveatedIntegrator(preset="paper", theta=0.3, sigma_p=1.0, atrous_iterations=0,
                                reconstruction="voronoi")
     mi.render(scene, integrator=integ, seed=0)   # every pixel traced: full history
     integ.sigma_p = 0.5
@@ -114,7 +114,7 @@ def ball_at(x):
 
 def test_moving_object_leaves_no_ghost():
     scene = moving_sphere_scene()
-    integ = FoveatedIntegrator(nested=scene.integrator(), theta=0.3, sigma_p=0.7,
+    integ = FoveatedIntegrator(preset="paper", nested=scene.integrator(), theta=0.3, sigma_p=0.7,
                                atrous_iterations=0, reconstruction="voronoi")
     for _ in range(4):
         mi.render(scene, integrator=integ, seed=0)
@@ -144,7 +144,7 @@ def test_camera_teleport_rejects_history():
         "a": {"type": "sphere", "center": [-10, 0, 0], "bsdf": {"type": "diffuse"}},
         "b": {"type": "sphere", "center": [10, 0, 0], "bsdf": {"type": "diffuse"}},
         "light": {"type": "constant"}})
-    integ = FoveatedIntegrator(theta=0.2, sigma_p=0.8, atrous_iterations=0)
+    integ = FoveatedIntegrator(preset="paper", theta=0.2, sigma_p=0.8, atrous_iterations=0)
     for _ in range(3):
         mi.render(scene, integrator=integ, seed=0)
     assert integ.stats["history_hit_rate"] > 0.2
@@ -179,7 +179,8 @@ def test_reprojection_is_identity_for_a_static_camera(ox, oy, oz, fov, tx, ty):
     sensor = scene.sensors()[0]
     gb = render_gbuffer(scene, sensor)
     n = 23 * 17
-    hist = History(mean=dr.zeros(mi.Color3f, n), count=dr.full(mi.Float, 1.0, n), depth=gb.depth,
+    hist = History(mean=dr.zeros(mi.Color3f, n), count=dr.full(mi.Float, 1.0, n),
+                   moment2=dr.zeros(mi.Float, n), depth=gb.depth,
                    camera=camera_state(sensor), width=23, height=17)
     rm = reprojection_map(gb.position, gb.hit, hist, 23, 17)
     hit = gb.hit.numpy()
@@ -196,7 +197,7 @@ def test_depth_is_measured_from_the_camera_centre_with_a_near_clip():
                    "film": {"type": "hdrfilm", "width": 32, "height": 24}},
         "s": {"type": "sphere", "radius": 1.0},
         "light": {"type": "constant"}})
-    integ = FoveatedIntegrator(sigma_p=1.0, atrous_iterations=0)
+    integ = FoveatedIntegrator(preset="paper", sigma_p=1.0, atrous_iterations=0)
     mi.render(scene, integrator=integ)
     mi.render(scene, integrator=integ)
     hit = integ.buffer("hit").astype(bool)

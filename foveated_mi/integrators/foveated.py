@@ -98,42 +98,13 @@ from .. import reorder as _reorder
 from .. import reproject as _reproject
 from .. import sampling as _sampling
 from .. import shading as _shading
+from .. import variance as _variance
 from ..demodulate import demodulate, remodulate
 from ..postprocess.inverse import inverse_tonemap
 from ..pixel_filter import FilterSampler
 from ..timing import StageTimer
-from ..validate import (ParameterError, check_choice, check_int, check_point2, check_range)
-
-#: name -> (default, kind); kinds are validated in :meth:`FoveatedIntegrator.configure`.
-DEFAULTS: dict[str, Any] = {
-    "theta": 0.1,
-    "sigma_p": 0.8,
-    "gaze": (0.5, 0.5),
-    "reorder": "compact",
-    "pixel_filter": "splat",
-    "block_height": 8,
-    "edge_threshold": 0.1,
-    "reconstruction": "sibson",
-    "max_radius": 32,
-    "demodulate": False,
-    "target_samples": 32.0,
-    "guided_levels": 5,
-    "stochastic_jitter": 4.0,
-    "stochastic_tries": 3,
-    "jfa": "jfa+1",
-    "atrous_iterations": 5,
-    "sigma_color": 0.5,
-    "sigma_normal": 0.1,
-    "sigma_position": 0.5,
-    "tonemap": "reinhard",
-    "exposure": 0.0,
-    "history": True,
-    "max_history": 32.0,
-    "reprojection_tolerance": 0.02,
-    "clamp": 1e4,
-    "timing": False,
-}
-
+from ..options import DEFAULTS, NON_DIFFERENTIABLE_DENOISERS, PRESETS, validate_options  # noqa: F401
+from ..validate import ParameterError, check_int
 
 @dataclass
 class Frame:
@@ -164,64 +135,6 @@ def _reconstruct_module():
 def _postprocess_module():
     from .. import postprocess
     return postprocess
-
-
-def validate_options(options: dict[str, Any]) -> dict[str, Any]:
-    """Check every option and return them normalised. Raises :class:`ParameterError`."""
-    unknown = set(options) - set(DEFAULTS)
-    if unknown:
-        name = sorted(unknown)[0]
-        raise ParameterError(name, options[name], "one of " + ", ".join(sorted(DEFAULTS)))
-    o = {**DEFAULTS, **options}
-    rec, post = _reconstruct_module(), _postprocess_module()
-    out = {
-        "theta": check_range("theta", o["theta"], 0.0, None, lo_open=True),
-        "sigma_p": check_range("sigma_p", o["sigma_p"], 0.0, 1.0, lo_open=True),
-        "gaze": check_point2("gaze", o["gaze"]),
-        "reorder": check_choice("reorder", o["reorder"], _reorder.REORDER_MODES),
-        "pixel_filter": check_choice("pixel_filter", o["pixel_filter"], _shading.PIXEL_FILTERS),
-        "block_height": check_int("block_height", o["block_height"], 1),
-        "edge_threshold": check_range("edge_threshold", o["edge_threshold"], 0.0),
-        "reconstruction": check_choice("reconstruction", o["reconstruction"],
-                                       list(rec.RECONSTRUCTIONS)),
-        "max_radius": check_int("max_radius", o["max_radius"], 1, 4096),
-        "demodulate": _check_bool("demodulate", o["demodulate"]),
-        "target_samples": check_range("target_samples", o["target_samples"], 0.0, 1e9,
-                                      lo_open=True),
-        "guided_levels": check_int("guided_levels", o["guided_levels"], 1, 12),
-        "stochastic_jitter": check_range("stochastic_jitter", o["stochastic_jitter"], 0.0, 1e4),
-        "stochastic_tries": check_int("stochastic_tries", o["stochastic_tries"], 0, 64),
-        "jfa": check_choice("jfa", o["jfa"], rec.JFA_VARIANTS),
-        "atrous_iterations": check_int("atrous_iterations", o["atrous_iterations"], 0, 16),
-        "sigma_color": _check_sigma("sigma_color", o["sigma_color"]),
-        "sigma_normal": _check_sigma("sigma_normal", o["sigma_normal"]),
-        "sigma_position": _check_sigma("sigma_position", o["sigma_position"]),
-        "tonemap": check_choice("tonemap", o["tonemap"], list(post.TONEMAPPERS)),
-        "exposure": check_range("exposure", o["exposure"], -64.0, 64.0),
-        "history": _check_bool("history", o["history"]),
-        "max_history": check_range("max_history", o["max_history"], 1.0, 1e9),
-        "reprojection_tolerance": check_range("reprojection_tolerance",
-                                              o["reprojection_tolerance"], 0.0, 1.0),
-        "clamp": check_range("clamp", o["clamp"], 0.0, 3e38, lo_open=True),
-        "timing": _check_bool("timing", o["timing"]),
-    }
-    return out
-
-
-def _check_sigma(name: str, value: Any) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ParameterError(name, value, "a number > 0, or inf to disable this weight") from None
-    if not (v > 0) or math.isnan(v):
-        raise ParameterError(name, value, "a number > 0, or inf to disable this weight")
-    return v
-
-
-def _check_bool(name: str, value: Any) -> bool:
-    if isinstance(value, bool):
-        return value
-    raise ParameterError(name, value, "true or false")
 
 
 class FoveatedIntegrator(mi.SamplingIntegrator):
@@ -257,7 +170,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         if nested is None:
             nested = mi.load_dict({"type": "path"})
         self.nested: mi.SamplingIntegrator = nested
-        self._options = validate_options(options)
+        self._given = dict(options)          # what the user set; presets fill in the rest
+        self._options = validate_options(self._given)
         self._history: _reproject.History | None = None
         self._scene_ref = None
         # What the primal frame used, for its gradient pass to reuse.
@@ -278,10 +192,11 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
 
     def set_options(self, **options) -> None:
         """Change options between frames (validated as a whole; nothing changes on error)."""
-        new = validate_options({**self._options, **options})
+        given = {**self._given, **options}
+        new = validate_options(given)
         if new["history"] != self._options["history"]:
             self.reset()   # a history from frames ago would be stale
-        self._options = new
+        self._given, self._options = given, new
 
     def __getattr__(self, name):
         opts = self.__dict__.get("_options")
@@ -379,7 +294,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         map_seed = self._map_seed if grad_pass else frame_seed
 
         with dr.suspend_grad():
-            gb = _gbuffer.render_gbuffer(scene, sensor, materials=o["demodulate"])
+            gb = _gbuffer.render_gbuffer(scene, sensor,
+                                         materials=o["demodulate"] or o["denoiser"] == "oidn")
             timer.mark("gbuffer", gb.position, gb.normal, gb.depth, gb.hit)
 
             edges = None
@@ -435,7 +351,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         gb = frame.gbuffer
         new, traced = shading.value, shading.mask
         resolved = _reproject.resolve(new, traced, frame.spp, frame.reprojection,
-                                      frame.history, o["max_history"])
+                                      frame.history, o["max_history"], shading.moment2)
         timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
 
         radiance = resolved.shading
@@ -466,24 +382,44 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                     target_samples=o["target_samples"], jitter=o["stochastic_jitter"],
                     tries=o["stochastic_tries"],
                     seed=dr.opaque(mi.UInt32, (frame.seed ^ 0x6A09E667) & 0xFFFFFFFF))
+        timer.mark("reconstruct", nearest, filled, interpolated)
+
+        tonemapped = filtered = variance = None
+        image = interpolated
+        levels = o["atrous_iterations"]
+        if o["denoiser"] == "svgf" and levels > 0:
+            variance = _variance.estimate_variance(
+                _variance.sample_variance(resolved.shading, resolved.moment2, resolved.count,
+                                          resolved.mask, gb.normal, gb.hit, width, height),
+                resolved.count, resolved.mask, nearest,
+                samples=(dr.full(mi.Float, o["target_samples"], n)
+                         if o["reconstruction"] == "guided" else None),
+                albedo=gb.albedo if o["demodulate"] else None)
+            image = filtered = post.svgf(interpolated, variance, gb.normal, gb.position, gb.hit,
+                                         width, height, iterations=levels,
+                                         sigma_luminance=o["sigma_luminance"])
         if o["demodulate"]:
             filled = remodulate(filled, gb.albedo, gb.emission)
             interpolated = remodulate(interpolated, gb.albedo, gb.emission)
-        timer.mark("reconstruct", nearest, filled, interpolated)
-
-        tonemapped = filtered = None
-        image = interpolated
-        if o["atrous_iterations"] > 0:
-            tonemapped = post.tonemap(interpolated, o["tonemap"], o["exposure"])
+            image = remodulate(image, gb.albedo, gb.emission)
+            if filtered is not None:
+                filtered = image
+        if o["denoiser"] == "atrous" and levels > 0:
+            tonemapped = post.tonemap(image, o["tonemap"], o["exposure"])
             filtered = post.atrous(tonemapped, gb.normal, gb.position, width, height,
-                                   iterations=o["atrous_iterations"],
+                                   iterations=levels,
                                    sigma_color=o["sigma_color"], sigma_normal=o["sigma_normal"],
                                    sigma_position=o["sigma_position"], valid=gb.hit)
             image = inverse_tonemap(filtered, o["tonemap"], o["exposure"])
+        elif o["denoiser"] == "oidn" and not self._grad_pass:
+            # A stage boundary (host round trip) and not differentiable: a gradient pass
+            # differentiates the frame without it.
+            image = filtered = post.oidn(image, gb.albedo, gb.normal, width, height,
+                                         quality=o["oidn_quality"])
         timer.mark("post", image)
         buffers = {"traced": traced, "resolved": resolved, "nearest": nearest,
                    "filled": filled, "interpolated": interpolated, "tonemapped": tonemapped,
-                   "filtered": filtered, "image": image}
+                   "filtered": filtered, "variance": variance, "image": image}
         return image, buffers
 
     def _finish_frame(self, frame: Frame, shade: _shading.ShadingResult,
@@ -496,7 +432,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._map_seed = frame.map_seed
         if o["history"]:
             self._history = _reproject.History(
-                mean=resolved.shading, count=resolved.count, depth=gb.depth,
+                mean=resolved.shading, count=resolved.count, moment2=resolved.moment2,
+                depth=gb.depth,
                 camera=_reproject.camera_state(frame.sensor), width=frame.width,
                 height=frame.height)
         self._frame += 1

@@ -1,0 +1,94 @@
+r"""Per-pixel noise variance of the shading estimates (for variance-guided filtering).
+
+A pixel that holds a value summarises :math:`n` samples (``spp`` this frame, more with
+history) with luminance mean :math:`\mu` and mean square :math:`m_2` (the second moment is
+blended through the history like the mean, as in SVGF, Schied et al. 2017). The variance of
+one sample and of the pixel's estimate are
+
+.. math::
+
+    s^2 = \frac{n}{n - 1} \max(m_2 - \mu^2, 0), \qquad \sigma^2 = s^2 / n .
+
+Where :math:`n < 4` (the first frames, or ``spp`` 1) the pixel's own moments say little, and
+:math:`s^2` is replaced by the spatial estimate: the variance of all the samples of the sites
+in a 5 x 5 neighbourhood on the same surface (their pooled moments, SVGF's spatial fallback;
+it also counts the signal's variation across the window, so it errs towards smoothing).
+
+Untraced pixels take the per-sample variance of their nearest site (Voronoi fill) and the
+number of samples the reconstruction averaged for them (``samples``: the guided
+reconstruction's target, or the nearest site's count for the paper's interpolations).
+
+With demodulation the variance is that of :math:`E = (L - L_e)/\hat a`: divided by the square
+of the albedo's luminance. Everything here is a weight: no gradient flows through it.
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from .reconstruct.jfa import NO_SITE
+from .shading import luminance
+
+#: Below this many samples a pixel's own moments are replaced by the spatial estimate.
+MIN_TEMPORAL_SAMPLES = 4.0
+
+
+def sample_variance(mean: mi.Color3f, moment2: mi.Float, count: mi.Float, mask: mi.Bool,
+                    normal: mi.Vector3f, hit: mi.Bool, width: int, height: int) -> mi.Float:
+    """Per-sample luminance variance :math:`s^2` of each pixel holding a value (0 elsewhere)."""
+    mu = luminance(dr.detach(mean))
+    n = dr.select(mask, dr.detach(count), 0.0)
+    raw = dr.select(mask, dr.maximum(dr.detach(moment2) - mu * mu, 0.0), 0.0)
+    bessel = dr.select(n > 1.0, n / dr.maximum(n - 1.0, 1.0), 1.0)
+    own = raw * bessel
+
+    # Spatial estimate: pooled moments of the samples of a 5x5 window on the same surface.
+    idx = dr.arange(mi.UInt32, width * height)
+    py = idx // width
+    px = mi.Int32(idx - py * width)
+    py = mi.Int32(py)
+    nrm = dr.select(hit, mi.Vector3f(normal), 0.0)
+    m2 = dr.select(mask, dr.detach(moment2), 0.0)
+    dr.schedule(mu, m2, n, nrm)
+
+    def body(k, s0, s1, s2):
+        dy = mi.Int32(k // 5) - 2
+        dx = mi.Int32(k % 5) - 2
+        qx, qy = px + dx, py + dy
+        inside = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
+        q = mi.UInt32(dr.select(inside, qy * width + qx, 0))
+        same = inside & (dr.gather(mi.Bool, hit, q, inside) == hit)
+        same &= ~hit | (dr.dot(nrm, dr.gather(mi.Vector3f, nrm, q, same)) > 0.9)
+        nq = dr.select(same, dr.gather(mi.Float, n, q, same), 0.0)
+        return (k + 1, s0 + nq, dr.fma(nq, dr.gather(mi.Float, mu, q, same), s1),
+                dr.fma(nq, dr.gather(mi.Float, m2, q, same), s2))
+
+    zero = dr.zeros(mi.Float, width * height)
+    _, s0, s1, s2 = dr.while_loop(
+        state=(mi.UInt32(0), zero, zero, zero), cond=lambda k, *_: k < 25, body=body,
+        label="spatial_variance", max_iterations=25)
+    inv = dr.rcp(dr.maximum(s0, 1.0))
+    pooled = dr.maximum(s2 * inv - dr.square(s1 * inv), 0.0)
+    spatial = pooled * dr.select(s0 > 1.0, s0 / dr.maximum(s0 - 1.0, 1.0), 1.0)
+    return dr.select(n >= MIN_TEMPORAL_SAMPLES, own, spatial)
+
+
+def estimate_variance(per_sample: mi.Float, count: mi.Float, mask: mi.Bool, nearest: mi.UInt32,
+                      samples: mi.Float | None = None, albedo: mi.Color3f | None = None
+                      ) -> mi.Float:
+    """Variance :math:`\\sigma^2 = s^2 / n` of every pixel's estimate (see module docstring).
+
+    ``per_sample`` is :func:`sample_variance` (defined at the sites), ``nearest`` the Jump
+    Flooding map, ``samples`` the number of samples the reconstruction averaged per pixel
+    (None: the nearest site's count) and ``albedo`` the demodulation albedo, if any."""
+    has = nearest != NO_SITE
+    s2 = dr.gather(mi.Float, per_sample, nearest, has)
+    n_site = dr.gather(mi.Float, dr.detach(count), nearest, has)
+    n = dr.select(mask, dr.detach(count), n_site if samples is None else
+                  dr.maximum(dr.detach(samples), n_site))
+    var = dr.select(has & (n > 0), s2 / dr.select(n > 0, n, 1.0), 0.0)
+    if albedo is not None:
+        from .demodulate import safe_albedo
+        a = luminance(safe_albedo(albedo))
+        var = var / dr.square(dr.maximum(a, 1e-3))
+    return var
