@@ -17,6 +17,20 @@ Per frame (Fig. 1 of the paper), each stage a pass of its own module:
 ``mi.render(scene)`` returns linear radiance (H, W, 3) like any Mitsuba integrator. After a
 render, :attr:`buffers` holds the intermediate buffers and :attr:`stats` the frame's stats.
 
+**Seeds.** ``mi.render(scene, seed=s)``: with ``history`` off every frame uses ``s`` for its
+Monte Carlo samples and its sampling map, so a frame is a pure function of the scene and
+``s``. With ``history`` on, frame 0 (after :meth:`~FoveatedIntegrator.reset`) uses ``s`` and
+frame ``t > 0`` uses ``sample_tea_32(s, t)[0]``, so the history converges under a fixed ``s``.
+``map_seed >= 0`` pins the sampling map to that seed whatever the frame (the Monte Carlo
+samples still follow the frame seed).
+
+**Gradients** (:mod:`foveated_mi.adjoint`). ``mi.render(scene, params, ...)`` followed by
+``dr.backward`` / ``dr.forward`` differentiates the *last primal frame* this integrator
+rendered: same sampling map, sites, weights and history, with the nested integrator's own
+adjoint (``prb``, ``direct_projective``, ...) on the traced pixels only, or plain AD for C++
+integrators. The history is a constant: frame ``t``'s gradient flows only through the rays
+traced in frame ``t``. Differentiate a frame before rendering the next one.
+
 Stages a frame does not need cost nothing: no edge pass when ``edge_threshold = 0``, no
 reprojection when ``history`` is off or on the first frame, no Jump Flooding or interpolation
 when ``sigma_p = 1`` (every pixel is traced), no filter when ``atrous_iterations = 0``, no tone
@@ -80,6 +94,9 @@ mapping round trip when neither the filter nor the PNG needs it.
  * - timing
    - |bool|
    - Synchronise at stage boundaries and report wall time per stage (default false)
+ * - map_seed
+   - |int|
+   - Seed of the sampling map, 0 .. 2^32-1; -1 (default) follows the frame seed (below)
  * - (nested)
    - |integrator|
    - Any sampling integrator (default ``path``); XML allows it unnamed
@@ -97,6 +114,7 @@ from .. import gbuffer as _gbuffer
 from .. import reorder as _reorder
 from .. import reproject as _reproject
 from .. import sampling as _sampling
+from .. import adjoint as _adjoint
 from .. import shading as _shading
 from ..postprocess.inverse import inverse_tonemap
 from ..pixel_filter import FilterSampler
@@ -126,6 +144,7 @@ DEFAULTS: dict[str, Any] = {
     "reprojection_tolerance": 0.02,
     "clamp": 1e4,
     "timing": False,
+    "map_seed": -1,
 }
 
 
@@ -148,6 +167,22 @@ class Frame:
     reordered: _reorder.Reordered
     history: _reproject.History | None         #: history this frame read (a constant)
     filter_sampler: FilterSampler
+
+
+@dataclass
+class _PrimalFrame:
+    """What a gradient pass needs of its primal frame (the seam of :mod:`foveated_mi.adjoint`)."""
+    frame: Frame
+    shading: _shading.ShadingBuffer   #: traced pixels' values (the primal's, detached)
+    scene_id: int
+
+
+def _tensor_to_color(tensor, frame: Frame, name: str) -> mi.Color3f:
+    shape = tuple(tensor.shape)
+    if shape != (frame.height, frame.width, 3):
+        raise ParameterError(name, f"<tensor of shape {shape}>",
+                             f"a tensor of shape {(frame.height, frame.width, 3)}")
+    return dr.unravel(mi.Color3f, tensor.array)
 
 
 def _reconstruct_module():
@@ -192,6 +227,7 @@ def validate_options(options: dict[str, Any]) -> dict[str, Any]:
                                               o["reprojection_tolerance"], 0.0, 1.0),
         "clamp": check_range("clamp", o["clamp"], 0.0, 3e38, lo_open=True),
         "timing": _check_bool("timing", o["timing"]),
+        "map_seed": check_int("map_seed", o["map_seed"], -1, 0xFFFFFFFF),
     }
     return out
 
@@ -249,10 +285,10 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._history: _reproject.History | None = None
         self._scene_ref = None
         # What the primal frame used, for its gradient pass to reuse.
-        self._history_in: _reproject.History | None = None
-        self._map_seed = 0
         self._frame = 0
-        self._grad_pass = False
+        # The last primal frame, which render_backward / render_forward differentiate.
+        self._primal: _PrimalFrame | None = None
+        self._adjoint = _adjoint.NestedAdjoint()
         self.buffers: dict[str, Any] = {}
         self._stats_raw: dict[str, Any] = {}
         self._stats_cache: dict[str, Any] | None = None
@@ -311,19 +347,52 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             self._scene_ref = id(scene)
 
     # -- differentiation ------------------------------------------------------------------
-    def render_forward(self, scene, params, sensor=0, seed=0, spp=0):
-        self._grad_pass = True
-        try:
-            return super().render_forward(scene, params, sensor, seed, spp)
-        finally:
-            self._grad_pass = False
-
     def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
-        self._grad_pass = True
-        try:
-            return super().render_backward(scene, params, grad_in, sensor, seed, spp)
-        finally:
-            self._grad_pass = False
+        """Reverse mode (see :mod:`foveated_mi.adjoint`): ``grad_in`` (H, W, 3) is pulled back
+        through the image formation to the traced pixels, then through the nested
+        integrator's adjoint into the parameters' gradients. ``seed``/``spp`` are the
+        gradient pass's (``mi.render``'s ``seed_grad``/``spp_grad``)."""
+        _adjoint.check_differentiable(self._options)
+        primal = self._primal_frame(scene, sensor, seed, spp)
+        frame, shading = primal.frame, primal.shading
+        grad = _tensor_to_color(grad_in, frame, "grad_in")
+        delta = _adjoint.image_backward(self._formation(primal), shading.value, grad)
+        self._adjoint.backward(self.nested, scene, params, frame, shading.mask, delta, seed,
+                               spp, self._options)
+
+    def render_forward(self, scene, params, sensor=0, seed=0, spp=0):
+        """Forward mode: the tangent of the traced pixels from the nested integrator, pushed
+        through the image formation. Returns the image tangent (H, W, 3)."""
+        _adjoint.check_differentiable(self._options)
+        primal = self._primal_frame(scene, sensor, seed, spp)
+        frame, shading = primal.frame, primal.shading
+        tangent = self._adjoint.forward(self.nested, scene, params, frame, shading.mask, seed,
+                                        spp, self._options)
+        image = _adjoint.image_forward(self._formation(primal), shading.value, tangent)
+        return mi.TensorXf(dr.ravel(image), shape=(frame.height, frame.width, 3))
+
+    def _formation(self, primal: "_PrimalFrame"):
+        """The primal frame's image formation as a function of the shading values."""
+        def form(value):
+            shading = primal.shading._replace(value=value)
+            return self._form_image(primal.frame, shading, StageTimer(False))[0]
+        return form
+
+    def _primal_frame(self, scene, sensor, seed, spp) -> "_PrimalFrame":
+        """The last primal frame of ``scene`` seen through ``sensor``; without one (a direct
+        call, or another scene / sensor), the frame this integrator would render next with
+        ``seed``, without committing it (no history update)."""
+        if isinstance(sensor, int):
+            sensor = scene.sensors()[sensor]
+        p = self._primal
+        if p is not None and p.scene_id == id(scene) and p.frame.sensor is sensor:
+            return p
+        with dr.suspend_grad():
+            frame = self._prepare(scene, sensor, seed, spp, StageTimer(False))
+            shade = self._shade(scene, frame)
+            shading = _shading.develop(shade, frame.reordered.wavefront, frame.spp,
+                                       sensor.film(), self._options["pixel_filter"])
+        return _PrimalFrame(frame, shading, id(scene))
 
     # -- the frame ------------------------------------------------------------------------
     def render(self, scene: mi.Scene, sensor: int | mi.Sensor = 0, seed: int = 0,
@@ -333,38 +402,32 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                  "its own image)")
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
-        grad_pass = self._grad_pass
         timer = StageTimer(self._options["timing"])
-        frame = self._prepare(scene, sensor, seed, spp, grad_pass, timer)
+        frame = self._prepare(scene, sensor, seed, spp, timer)
         shade = self._shade(scene, frame)
         shading = _shading.develop(shade, frame.reordered.wavefront, frame.spp,
                                    sensor.film(), self._options["pixel_filter"])
         image, buffers = self._form_image(frame, shading, timer)
-        if not grad_pass:
-            self._finish_frame(frame, shade, buffers, timer)
+        self._finish_frame(frame, shade, buffers, timer)
+        self._primal = _PrimalFrame(frame, shading, id(scene))
         return mi.TensorXf(dr.ravel(image), shape=(frame.height, frame.width, 3))
 
-    def _prepare(self, scene: mi.Scene, sensor: mi.Sensor, seed, spp: int, grad_pass: bool,
+    def _prepare(self, scene: mi.Scene, sensor: mi.Sensor, seed, spp: int,
                  timer: StageTimer) -> Frame:
         """Geometry, sampling, reprojection and reorder passes: everything a frame decides
         before it traces. None of it is differentiable (visibility and random choices)."""
         o = self._options
         width, height = _gbuffer.film_size(sensor)
         spp = check_int("spp", spp if spp else sensor.sampler().sample_count(), 1)
-        if not grad_pass:
-            self._check_reset(scene, width, height)
-        history = self._history if (o["history"] and not grad_pass) else None
-        if grad_pass and o["history"]:
-            history = self._history_in
+        self._check_reset(scene, width, height)
+        history = self._history if o["history"] else None
         # Without history a frame is a pure function of (scene, seed). With history, frame 0
         # uses the caller's seed as is (so sigma_p = 1 reproduces a plain render) and later
         # frames decorrelate, so that the history converges under a fixed seed.
         seed = (int(seed) if not dr.is_array_v(seed) else int(dr.slice(seed))) & 0xFFFFFFFF
         frame_seed = seed if (self._frame == 0 or not o["history"]) else \
             int(mi.sample_tea_32(seed, self._frame)[0])
-        # The gradient pass differentiates the frame just rendered: same sampling map, fresh
-        # Monte Carlo samples (mi.render hands it a decorrelated seed).
-        map_seed = self._map_seed if grad_pass else frame_seed
+        map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
 
         with dr.suspend_grad():
             gb = _gbuffer.render_gbuffer(scene, sensor)
@@ -467,8 +530,6 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         o = self._options
         gb, ro, reproj = frame.gbuffer, frame.reordered, frame.reprojection
         resolved = buffers["resolved"]
-        self._history_in = frame.history
-        self._map_seed = frame.map_seed
         if o["history"]:
             self._history = _reproject.History(
                 mean=resolved.shading, count=resolved.count, depth=gb.depth,
