@@ -69,7 +69,7 @@ FOVEATED_KEYS: dict[str, tuple[type, ...]] = {
     "sigma_color": (int, float), "sigma_normal": (int, float), "sigma_position": (int, float),
     "tonemap": (str,), "exposure": (int, float), "history": (bool,),
     "max_history": (int, float), "reprojection_tolerance": (int, float),
-    "clamp": (int, float), "timing": (bool,),
+    "clamp": (int, float), "timing": (bool,), "map_seed": (int,),
 }
 
 _TOP_KEYS = ("scene", "description", "frames", "fps", "size", "spp", "seed", "scene_params",

@@ -371,6 +371,14 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         image = _adjoint.image_forward(self._formation(primal), shading.value, tangent)
         return mi.TensorXf(dr.ravel(image), shape=(frame.height, frame.width, 3))
 
+    def formation(self):
+        """The last primal frame's image as a function of its traced pixels' values, with
+        every weight held: ``(form, shading)`` where ``form(shading.value)`` is the frame's
+        image (a ``mi.Color3f`` per pixel). For analysis and tests of the gradient pass."""
+        if self._primal is None:
+            raise ParameterError("formation", None, "a primal frame rendered first")
+        return self._formation(self._primal), self._primal.shading
+
     def _formation(self, primal: "_PrimalFrame"):
         """The primal frame's image formation as a function of the shading values."""
         def form(value):
