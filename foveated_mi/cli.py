@@ -55,13 +55,16 @@ def _add_frame_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tonemap", help="none | reinhard | aces")
     p.add_argument("--exposure", type=float, help="exposure in stops")
     p.add_argument("--clamp", type=float, help="largest accepted sample component")
+    p.add_argument("--map-seed", type=int, dest="map_seed",
+                   help="pin the sampling map to this seed (0 .. 2^32-1; -1 follows the frame seed)")
 
 
 FRAME_OPTIONS = ("preset", "theta", "sigma_p", "gaze", "reorder", "pixel_filter", "block_height",
                  "edge_threshold", "demodulate", "reconstruction", "max_radius", "target_samples",
                  "guided_levels", "stochastic_jitter", "stochastic_tries", "jfa", "denoiser",
                  "atrous_iterations", "sigma_color", "sigma_normal", "sigma_position",
-                 "sigma_luminance", "oidn_quality", "tonemap", "exposure", "clamp")
+                 "sigma_luminance", "oidn_quality", "tonemap", "exposure", "clamp",
+                 "map_seed")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -11,11 +11,13 @@ defaults by a configuration tuned together; any option given explicitly wins ove
     Denoise installed (``pip install foveated_mi[denoise]``): wider sampling (θ = 0.25),
     albedo demodulation, the stochastic surface-aware fill and OIDN. Not differentiable
     (a gradient pass runs it without OIDN).
-``svgf``
-    The differentiable noise-aware pipeline, no extra dependency: demodulation, the
-    G-buffer-guided sparse reconstruction and a variance-guided à-trous filter (SVGF).
+``guided``
+    The differentiable noise-aware pipeline, no extra dependency: albedo demodulation, the
+    G-buffer-guided sparse reconstruction and the edge-avoiding à-trous filter. (The
+    variance-guided filter, ``denoiser = "svgf"``, kept more noise than the à-trous filter at
+    1-2 spp in the measurements behind this choice, and is an option.)
 ``auto`` (default)
-    ``oidn`` when ``pyoidn`` can be imported, else ``svgf``; ``stats["preset"]`` names the
+    ``oidn`` when ``pyoidn`` can be imported, else ``guided``; ``stats["preset"]`` names the
     one used.
 
 See ``benchmarks/bench_equal_time.py`` and the README for the measurements behind them.
@@ -59,6 +61,7 @@ DEFAULTS: dict[str, Any] = {
     "reprojection_tolerance": 0.02,
     "clamp": 1e4,
     "timing": False,
+    "map_seed": -1,
 }
 
 #: Preset name -> the defaults it replaces (see the module docstring).
@@ -66,7 +69,8 @@ PRESETS: dict[str, dict[str, Any]] = {
     "paper": {},
     "oidn": {"theta": 0.25, "sigma_p": 0.8, "demodulate": True, "reconstruction": "stochastic",
              "denoiser": "oidn"},
-    "svgf": {"demodulate": True, "reconstruction": "guided", "denoiser": "svgf"},
+    "guided": {"demodulate": True, "reconstruction": "guided", "target_samples": 8.0,
+               "denoiser": "atrous"},
 }
 PRESET_NAMES = ("auto", *PRESETS)
 DENOISERS = ("none", "atrous", "svgf", "oidn")
@@ -81,7 +85,7 @@ def resolve_preset(preset: str) -> str:
     if preset != "auto":
         return preset
     from .denoise import oidn_available
-    return "oidn" if oidn_available() else "svgf"
+    return "oidn" if oidn_available() else "guided"
 
 
 def check_sigma(name: str, value: Any) -> float:
@@ -148,6 +152,7 @@ def validate_options(options: dict[str, Any]) -> dict[str, Any]:
                                               o["reprojection_tolerance"], 0.0, 1.0),
         "clamp": check_range("clamp", o["clamp"], 0.0, 3e38, lo_open=True),
         "timing": check_bool("timing", o["timing"]),
+        "map_seed": check_int("map_seed", o["map_seed"], -1, 0xFFFFFFFF),
     }
     if out["denoiser"] == "oidn":
         from .denoise import INSTALL_HINT, oidn_available

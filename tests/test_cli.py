@@ -57,6 +57,7 @@ def test_render_writes_exr_layers_png_and_stats(tmp_path, capsys):
     (["--spp", "0"], "--spp = 0 is invalid"),
     (["--reorder", "diagonal"], "reorder = 'diagonal' is invalid"),
     (["--reconstruction", "cubic"], "reconstruction = 'cubic' is invalid"),
+    (["--map-seed", "-2"], "map_seed = -2 is invalid"),
 ])
 def test_bad_flags_one_line_exit_2(args, needle, capsys, tmp_path):
     out = tmp_path / "x.exr"

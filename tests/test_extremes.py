@@ -8,7 +8,7 @@ import pytest
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 
 #: Every pipeline: the paper's, and the two noise-aware presets.
-PRESETS = ["paper", "svgf", "oidn"]
+PRESETS = ["paper", "guided", "oidn"]
 
 
 def sphere_scene(w, h, env=True):
@@ -97,7 +97,7 @@ def test_gaze_corners_and_off_screen(gaze, preset):
 
 @pytest.mark.parametrize("w,h", [(1, 1), (1, 17), (17, 1), (97, 61)])
 @pytest.mark.parametrize("mode,preset", [("rows_blocks", "paper"), ("compact", "paper"),
-                                         ("none", "paper"), ("compact", "svgf"),
+                                         ("none", "paper"), ("compact", "guided"),
                                          ("compact", "oidn")])
 def test_odd_film_sizes(w, h, mode, preset):
     extra = dict(reconstruction="fast_sibson") if preset == "paper" else {}
@@ -109,7 +109,7 @@ def test_odd_film_sizes(w, h, mode, preset):
 
 @pytest.mark.parametrize("preset,method", [("paper", "voronoi"), ("paper", "sibson"),
                                            ("paper", "fast_sibson"), ("paper", "discrete_sibson"),
-                                           ("svgf", "guided"), ("svgf", "stochastic"),
+                                           ("guided", "guided"), ("guided", "stochastic"),
                                            ("oidn", "stochastic"), ("oidn", "guided")])
 def test_nan_inf_huge_samples_rejected_or_clamped(preset, method):
     """NaN and inf samples are rejected, huge ones clamped, and nothing non-finite or above

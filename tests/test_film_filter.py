@@ -135,7 +135,7 @@ class Constant(mi.SamplingIntegrator):
 
 
 @pytest.mark.parametrize("spp", [1, 2, 7])
-@pytest.mark.parametrize("sigma_p,preset", [(1.0, "paper"), (0.5, "paper"), (0.5, "svgf")])
+@pytest.mark.parametrize("sigma_p,preset", [(1.0, "paper"), (0.5, "paper"), (0.5, "guided")])
 def test_constant_nested_integrator_is_broadcast(spp, sigma_p, preset):
     scene = _cornell(24, 20, "gaussian")
     fov = FoveatedIntegrator(preset=preset, nested=Constant(mi.Properties()), sigma_p=sigma_p,

@@ -253,6 +253,8 @@ BASE = 'scene = "voxel-city"\nframes = 4\n'
      "gaze.dwell", "'long'"),
     (BASE + "[foveated]\ntheta = 'big'\n", "foveated.theta", "'big'"),
     (BASE + "[foveated]\nhistory = 1\n", "foveated.history", "1"),
+    (BASE + "[foveated]\nmap_seed = -3\n", "foveated.map_seed", "-3"),
+    (BASE + "[foveated]\nmap_seed = 1.5\n", "foveated.map_seed", "1.5"),
     (BASE + "[camera]\n[[camera.keyframes]]\nt = 0\norigin = [1, 2]\n",
      "camera.keyframes[0].origin", "[1, 2]"),
     (BASE + "[output]\nexr = 'yes'\n", "output.exr", "'yes'"),

@@ -17,6 +17,20 @@ Per frame (Fig. 1 of the paper), each stage a pass of its own module:
 ``mi.render(scene)`` returns linear radiance (H, W, 3) like any Mitsuba integrator. After a
 render, :attr:`buffers` holds the intermediate buffers and :attr:`stats` the frame's stats.
 
+**Seeds.** ``mi.render(scene, seed=s)``: with ``history`` off every frame uses ``s`` for its
+Monte Carlo samples and its sampling map, so a frame is a pure function of the scene and
+``s``. With ``history`` on, frame 0 (after :meth:`~FoveatedIntegrator.reset`) uses ``s`` and
+frame ``t > 0`` uses ``sample_tea_32(s, t)[0]``, so the history converges under a fixed ``s``.
+``map_seed >= 0`` pins the sampling map to that seed whatever the frame (the Monte Carlo
+samples still follow the frame seed).
+
+**Gradients** (:mod:`foveated_mi.adjoint`). ``mi.render(scene, params, ...)`` followed by
+``dr.backward`` / ``dr.forward`` differentiates the *last primal frame* this integrator
+rendered: same sampling map, sites, weights and history, with the nested integrator's own
+adjoint (``prb``, ``direct_projective``, ...) on the traced pixels only, or plain AD for C++
+integrators. The history is a constant: frame ``t``'s gradient flows only through the rays
+traced in frame ``t``. Differentiate a frame before rendering the next one.
+
 Stages a frame does not need cost nothing: no edge pass when ``edge_threshold = 0``, no
 reprojection when ``history`` is off or on the first frame, no Jump Flooding or interpolation
 when ``sigma_p = 1`` (every pixel is traced), no filter when ``atrous_iterations = 0``, no tone
@@ -80,6 +94,9 @@ mapping round trip when neither the filter nor the PNG needs it.
  * - timing
    - |bool|
    - Synchronise at stage boundaries and report wall time per stage (default false)
+ * - map_seed
+   - |int|
+   - Seed of the sampling map, 0 .. 2^32-1; -1 (default) follows the frame seed (below)
  * - (nested)
    - |integrator|
    - Any sampling integrator (default ``path``); XML allows it unnamed
@@ -87,12 +104,14 @@ mapping round trip when neither the filter nor the PNG needs it.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Any
 
 import drjit as dr
 import mitsuba as mi
 
+from .. import adjoint as _adjoint
 from .. import gbuffer as _gbuffer
 from .. import reorder as _reorder
 from .. import reproject as _reproject
@@ -125,6 +144,22 @@ class Frame:
     reordered: _reorder.Reordered
     history: _reproject.History | None         #: history this frame read (a constant)
     filter_sampler: FilterSampler
+
+
+@dataclass
+class _PrimalFrame:
+    """What a gradient pass needs of its primal frame (the seam of :mod:`foveated_mi.adjoint`)."""
+    frame: Frame
+    shading: _shading.ShadingBuffer   #: traced pixels' values (the primal's, detached)
+    scene_id: int
+
+
+def _tensor_to_color(tensor, frame: Frame, name: str) -> mi.Color3f:
+    shape = tuple(tensor.shape)
+    if shape != (frame.height, frame.width, 3):
+        raise ParameterError(name, f"<tensor of shape {shape}>",
+                             f"a tensor of shape {(frame.height, frame.width, 3)}")
+    return dr.unravel(mi.Color3f, tensor.array)
 
 
 def _reconstruct_module():
@@ -175,10 +210,10 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._history: _reproject.History | None = None
         self._scene_ref = None
         # What the primal frame used, for its gradient pass to reuse.
-        self._history_in: _reproject.History | None = None
-        self._map_seed = 0
         self._frame = 0
-        self._grad_pass = False
+        # The last primal frame, which render_backward / render_forward differentiate.
+        self._primal: _PrimalFrame | None = None
+        self._adjoint = _adjoint.NestedAdjoint()
         self.buffers: dict[str, Any] = {}
         self._stats_raw: dict[str, Any] = {}
         self._stats_cache: dict[str, Any] | None = None
@@ -238,19 +273,69 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             self._scene_ref = id(scene)
 
     # -- differentiation ------------------------------------------------------------------
-    def render_forward(self, scene, params, sensor=0, seed=0, spp=0):
-        self._grad_pass = True
-        try:
-            return super().render_forward(scene, params, sensor, seed, spp)
-        finally:
-            self._grad_pass = False
-
     def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
-        self._grad_pass = True
-        try:
-            return super().render_backward(scene, params, grad_in, sensor, seed, spp)
-        finally:
-            self._grad_pass = False
+        """Reverse mode (see :mod:`foveated_mi.adjoint`): ``grad_in`` (H, W, 3) is pulled back
+        through the image formation to the traced pixels, then through the nested
+        integrator's adjoint into the parameters' gradients. ``seed``/``spp`` are the
+        gradient pass's (``mi.render``'s ``seed_grad``/``spp_grad``)."""
+        self._check_differentiable()
+        primal = self._primal_frame(scene, sensor, seed, spp)
+        frame, shading = primal.frame, primal.shading
+        grad = _tensor_to_color(grad_in, frame, "grad_in")
+        delta = _adjoint.image_backward(self._formation(primal), shading.value, grad)
+        self._adjoint.backward(self.nested, scene, params, frame, shading.mask, delta, seed,
+                               spp, self._options)
+
+    def render_forward(self, scene, params, sensor=0, seed=0, spp=0):
+        """Forward mode: the tangent of the traced pixels from the nested integrator, pushed
+        through the image formation. Returns the image tangent (H, W, 3)."""
+        self._check_differentiable()
+        primal = self._primal_frame(scene, sensor, seed, spp)
+        frame, shading = primal.frame, primal.shading
+        tangent = self._adjoint.forward(self.nested, scene, params, frame, shading.mask, seed,
+                                        spp, self._options)
+        image = _adjoint.image_forward(self._formation(primal), shading.value, tangent)
+        return mi.TensorXf(dr.ravel(image), shape=(frame.height, frame.width, 3))
+
+    def _check_differentiable(self) -> None:
+        _adjoint.check_differentiable(self._options)
+        denoiser = self._options["denoiser"]
+        if denoiser in NON_DIFFERENTIABLE_DENOISERS:
+            # The one place the gradient is cut: said once, in one line.
+            warnings.warn(f"denoiser = {denoiser!r} is not differentiable: the gradient is that "
+                          "of the frame without it (straight through); use preset='guided' for "
+                          "an exact gradient", stacklevel=3)
+
+    def formation(self):
+        """The last primal frame's image as a function of its traced pixels' values, with
+        every weight held: ``(form, shading)`` where ``form(shading.value)`` is the frame's
+        image (a ``mi.Color3f`` per pixel). For analysis and tests of the gradient pass."""
+        if self._primal is None:
+            raise ParameterError("formation", None, "a primal frame rendered first")
+        return self._formation(self._primal), self._primal.shading
+
+    def _formation(self, primal: "_PrimalFrame"):
+        """The primal frame's image formation as a function of the shading values."""
+        def form(value):
+            shading = primal.shading._replace(value=value)
+            return self._form_image(primal.frame, shading, StageTimer(False), grad_pass=True)[0]
+        return form
+
+    def _primal_frame(self, scene, sensor, seed, spp) -> "_PrimalFrame":
+        """The last primal frame of ``scene`` seen through ``sensor``; without one (a direct
+        call, or another scene / sensor), the frame this integrator would render next with
+        ``seed``, without committing it (no history update)."""
+        if isinstance(sensor, int):
+            sensor = scene.sensors()[sensor]
+        p = self._primal
+        if p is not None and p.scene_id == id(scene) and p.frame.sensor is sensor:
+            return p
+        with dr.suspend_grad():
+            frame = self._prepare(scene, sensor, seed, spp, StageTimer(False))
+            shade = self._shade(scene, frame)
+            shading = _shading.develop(shade, frame.reordered.wavefront, frame.spp,
+                                       sensor.film(), self._options["pixel_filter"])
+        return _PrimalFrame(frame, shading, id(scene))
 
     # -- the frame ------------------------------------------------------------------------
     def render(self, scene: mi.Scene, sensor: int | mi.Sensor = 0, seed: int = 0,
@@ -260,43 +345,41 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                  "its own image)")
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
-        grad_pass = self._grad_pass
         timer = StageTimer(self._options["timing"])
-        frame = self._prepare(scene, sensor, seed, spp, grad_pass, timer)
+        frame = self._prepare(scene, sensor, seed, spp, timer)
         shade = self._shade(scene, frame)
         shading = _shading.develop(shade, frame.reordered.wavefront, frame.spp,
                                    sensor.film(), self._options["pixel_filter"])
         image, buffers = self._form_image(frame, shading, timer)
-        if not grad_pass:
-            self._finish_frame(frame, shade, buffers, timer)
+        self._finish_frame(frame, shade, buffers, timer)
+        self._primal = _PrimalFrame(frame, shading, id(scene))
         return mi.TensorXf(dr.ravel(image), shape=(frame.height, frame.width, 3))
 
-    def _prepare(self, scene: mi.Scene, sensor: mi.Sensor, seed, spp: int, grad_pass: bool,
+    def _prepare(self, scene: mi.Scene, sensor: mi.Sensor, seed, spp: int,
                  timer: StageTimer) -> Frame:
         """Geometry, sampling, reprojection and reorder passes: everything a frame decides
         before it traces. None of it is differentiable (visibility and random choices)."""
         o = self._options
         width, height = _gbuffer.film_size(sensor)
         spp = check_int("spp", spp if spp else sensor.sampler().sample_count(), 1)
-        if not grad_pass:
-            self._check_reset(scene, width, height)
-        history = self._history if (o["history"] and not grad_pass) else None
-        if grad_pass and o["history"]:
-            history = self._history_in
+        self._check_reset(scene, width, height)
+        history = self._history if o["history"] else None
         # Without history a frame is a pure function of (scene, seed). With history, frame 0
         # uses the caller's seed as is (so sigma_p = 1 reproduces a plain render) and later
         # frames decorrelate, so that the history converges under a fixed seed.
         seed = (int(seed) if not dr.is_array_v(seed) else int(dr.slice(seed))) & 0xFFFFFFFF
         frame_seed = seed if (self._frame == 0 or not o["history"]) else \
             int(mi.sample_tea_32(seed, self._frame)[0])
-        # The gradient pass differentiates the frame just rendered: same sampling map, fresh
-        # Monte Carlo samples (mi.render hands it a decorrelated seed).
-        map_seed = self._map_seed if grad_pass else frame_seed
+        map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
 
         with dr.suspend_grad():
             gb = _gbuffer.render_gbuffer(scene, sensor,
                                          materials=o["demodulate"] or o["denoiser"] == "oidn")
-            timer.mark("gbuffer", gb.position, gb.normal, gb.depth, gb.hit)
+            # Everything the G-buffer holds is evaluated with the pass: a lazy albedo would
+            # re-run the BSDF dispatch in every later kernel, and would point into the scene
+            # after the scene is gone (a gradient pass can outlive it).
+            timer.mark("gbuffer", gb.position, gb.normal, gb.depth, gb.hit, gb.direction,
+                       gb.albedo, gb.emission)
 
             edges = None
             if o["edge_threshold"] > 0:
@@ -333,8 +416,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                         clamp=self._options["clamp"],
                                         filter_sampler=frame.filter_sampler)
 
-    def _form_image(self, frame: Frame, shading: _shading.ShadingBuffer,
-                    timer: StageTimer) -> tuple[mi.Color3f, dict[str, Any]]:
+    def _form_image(self, frame: Frame, shading: _shading.ShadingBuffer, timer: StageTimer,
+                    grad_pass: bool = False) -> tuple[mi.Color3f, dict[str, Any]]:
         """Everything after the shading buffer: history resolve, reconstruction and
         post-processing.
 
@@ -401,7 +484,10 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         if o["demodulate"]:
             filled = remodulate(filled, gb.albedo, gb.emission)
             interpolated = remodulate(interpolated, gb.albedo, gb.emission)
-            image = remodulate(image, gb.albedo, gb.emission)
+            # Spreading E from a dark site to a brighter albedo scales it by a_q / a_min:
+            # keep the clamp's promise that nothing above it reaches the image.
+            image = dr.minimum(remodulate(image, gb.albedo, gb.emission),
+                               dr.opaque(mi.Float, o["clamp"]))
             if filtered is not None:
                 filtered = image
         if o["denoiser"] == "atrous" and levels > 0:
@@ -411,7 +497,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                    sigma_color=o["sigma_color"], sigma_normal=o["sigma_normal"],
                                    sigma_position=o["sigma_position"], valid=gb.hit)
             image = inverse_tonemap(filtered, o["tonemap"], o["exposure"])
-        elif o["denoiser"] == "oidn" and not self._grad_pass:
+        elif o["denoiser"] == "oidn" and not grad_pass:
             # A stage boundary (host round trip) and not differentiable: a gradient pass
             # differentiates the frame without it.
             image = filtered = post.oidn(image, gb.albedo, gb.normal, width, height,
@@ -428,8 +514,6 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         o = self._options
         gb, ro, reproj = frame.gbuffer, frame.reordered, frame.reprojection
         resolved = buffers["resolved"]
-        self._history_in = frame.history
-        self._map_seed = frame.map_seed
         if o["history"]:
             self._history = _reproject.History(
                 mean=resolved.shading, count=resolved.count, moment2=resolved.moment2,

@@ -1,4 +1,4 @@
-"""Edge-avoiding à-trous wavelet filter (Kwon et al. 2019, §3.5; Dammertz et al. 2010).
+r"""Edge-avoiding à-trous wavelet filter (Kwon et al. 2019, §3.5; Dammertz et al. 2010).
 
 H. Dammertz, D. Sewtz, J. Hanika, H. P. A. Lensch, "Edge-Avoiding À-Trous Wavelet
 Transform for Fast Global Illumination Filtering", HPG 2010. Kwon et al. apply it after
@@ -39,9 +39,17 @@ Rules beyond the paper, so that no NaN can appear or spread:
 
 ``iterations = 0`` returns the input. Each level is one kernel: a symbolic loop over the
 25 taps (``dr.while_loop`` with ``max_iterations=25``); the tap spacing and sigmas are
-opaque, so all levels and all sigma values share one compiled kernel. The filter is
-differentiable with respect to the colour, forward and reverse mode (gathers, exponentials
-and one division per level; checked against the transposed filter in the tests).
+opaque, so all levels and all sigma values share one compiled kernel.
+
+**Derivative.** The edge-stopping weights are computed from detached values (the colour term
+too), so the derivative with respect to the colour is that of the filter with its weights
+held at their primal values: level :math:`i` is the linear map
+:math:`c_{i+1}(p) = \sum_q W_i(p, q) c_i(q)` with :math:`W_i = h\,w_i / \sum h\,w_i` fixed,
+and the reverse mode applies :math:`W_i^{\mathsf T}`. This is what a foveated gradient pass
+needs (the image is linear in the traced radiance with every weight held; see
+:mod:`foveated_mi.adjoint`); it omits :math:`\partial w_i/\partial c`, the change of the
+weights themselves, which a finite difference of the filter output would include. Forward and
+reverse mode are checked against each other and against the transposed filter in the tests.
 """
 from __future__ import annotations
 
@@ -207,7 +215,10 @@ def _atrous_level(c: mi.Color3f, normal: mi.Array3f, position: mi.Array3f, valid
 
         # w_rt * w_n * w_x = exp(-(e_rt + e_n + e_x)): one exponential per tap. Every
         # term is >= 0 (possibly inf), so the sum never forms inf - inf.
-        e_rt = dr.select(finite, _exponent(dr.squared_norm(c_safe - cq), inv_c), 0.0)
+        # Colour weights from detached values: the filter is linear in its input once its
+        # weights are held (the gradient pass of foveated_mi.adjoint relies on it).
+        e_rt = dr.select(finite, _exponent(dr.squared_norm(dr.detach(c_safe) - dr.detach(cq)),
+                                           inv_c), 0.0)
         e_geo = _exponent(dr.squared_norm(normal - nq), inv_n) \
             + _exponent(dr.squared_norm(position - xq), inv_x)
         e_geo = dr.select(valid & vq, e_geo, 0.0)       # miss-miss: colour only

@@ -22,17 +22,22 @@ Level :math:`i` (tap spacing :math:`2^i`, B3-spline taps :math:`h`):
                          - \frac{(n_p \cdot (x_q - x_p))^2}{\sigma_x^2 |x_q - x_p|^2}\Big),
 
 with the variance prefiltered by a 3 x 3 Gaussian (as SVGF does), :math:`\sigma_l`
-``sigma_luminance`` (4 in SVGF), and the G-buffer terms of the guided reconstruction (normal
+``sigma_luminance`` (4 in SVGF; ``inf`` switches the colour weight off), and the G-buffer
+terms of the guided reconstruction (normal
 difference, distance to the tangent plane relative to the distance). The colour distance is
 the L1 norm over RGB rather than SVGF's luminance difference: with zero variance any colour
 difference stops the filter, so **a noise-free image comes back unchanged** (SVGF's luminance
-test would still mix equal-luminance colours). Hits and misses never mix.
+test would still mix equal-luminance colours). Each level is evaluated in residual form,
+:math:`c_{i+1}(p) = c_i(p) + \sum_q h_q w\,(c_i(q) - c_i(p)) / \sum_q h_q w`, so that a pixel
+whose neighbours all have weight 0 keeps its value bit for bit. Hits and misses never mix.
 
 The colour weights depend on the radiance; they are computed from detached values (held at
 their primal values), so the filter is linear in the colour for gradients, as the issue's
 adjoint requires. Non-finite colours get weight 0 as neighbours.
 """
 from __future__ import annotations
+
+import math
 
 import drjit as dr
 import mitsuba as mi
@@ -85,7 +90,8 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
     """
     n = width * height
     iterations = check_int("iterations", iterations, 0, 16)
-    sl = check_range("sigma_luminance", sigma_luminance, 0.0, None, lo_open=True)
+    sl = (math.inf if sigma_luminance == math.inf else
+          check_range("sigma_luminance", sigma_luminance, 0.0, None, lo_open=True))
     inv_n = 1.0 / check_range("sigma_normal", sigma_normal, 0.0, None, lo_open=True) ** 2
     inv_x = 1.0 / check_range("sigma_plane", sigma_plane, 0.0, None, lo_open=True) ** 2
     for name, value in (("color", color), ("variance", variance), ("normal", normal),
@@ -102,7 +108,8 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
     dr.schedule(nrm, pos)
     for level in range(iterations):
         c, var = _level(c, var, nrm, pos, hit, width, height,
-                        step=dr.opaque(mi.Int32, 1 << level), sl=dr.opaque(mi.Float, sl),
+                        step=dr.opaque(mi.Int32, 1 << level),
+                        sl=None if math.isinf(sl) else dr.opaque(mi.Float, sl),
                         inv_n=dr.opaque(mi.Float, inv_n), inv_x=dr.opaque(mi.Float, inv_x))
     return c
 
@@ -115,7 +122,8 @@ def _level(c: mi.Color3f, var: mi.Float, nrm, pos, hit, width: int, height: int,
     finite = dr.isfinite(cd.x) & dr.isfinite(cd.y) & dr.isfinite(cd.z)
     c_safe = dr.select(finite, c, 0.0)
     cd = dr.detach(c_safe)
-    denom = sl * dr.sqrt(_prefilter(var, width, height)) + EPSILON
+    # sigma_luminance = inf switches the colour weight off (a purely geometric filter).
+    denom = None if sl is None else sl * dr.sqrt(_prefilter(var, width, height)) + EPSILON
     px, py = _coords(width, height)
     dr.schedule(c_safe, denom)
 
@@ -128,6 +136,7 @@ def _level(c: mi.Color3f, var: mi.Float, nrm, pos, hit, width: int, height: int,
         cq = dr.gather(mi.Color3f, c_safe, q, inside)
         cqd = dr.detach(cq)
         fq = dr.isfinite(cqd.x) & dr.isfinite(cqd.y) & dr.isfinite(cqd.z)
+        cq = cq - c_safe                      # residual form (see the module docstring)
         hq = dr.gather(mi.Bool, hit, q, inside)
         nq = dr.gather(mi.Vector3f, nrm, q, inside)
         xq = dr.gather(mi.Vector3f, pos, q, inside)
@@ -137,8 +146,11 @@ def _level(c: mi.Color3f, var: mi.Float, nrm, pos, hit, width: int, height: int,
         e_geo = dr.squared_norm(nrm - nq) * inv_n + \
             dr.select(d2 > 0, plane * plane / dr.select(d2 > 0, d2, 1.0), 0.0) * inv_x
         e_geo = dr.select(hit & hq, e_geo, 0.0)
-        diff = dr.abs(cd - cqd)
-        e_col = (diff.x + diff.y + diff.z) / denom
+        if denom is None:
+            e_col = mi.Float(0.0)
+        else:
+            diff = dr.abs(cd - cqd)
+            e_col = (diff.x + diff.y + diff.z) / denom
         h = _tap(dx, _B3) * _tap(dy, _B3)
         w = dr.select(inside & fq & (hit == hq), h * dr.exp(-(e_col + e_geo)), 0.0)
         vq = dr.gather(mi.Float, var, q, inside)
@@ -150,4 +162,4 @@ def _level(c: mi.Color3f, var: mi.Float, nrm, pos, hit, width: int, height: int,
     dr.schedule(c_acc, v_acc, w_acc)
     has = w_acc > 0
     inv = dr.rcp(dr.select(has, w_acc, 1.0))
-    return dr.select(has, c_acc * inv, c), dr.select(has, v_acc * inv * inv, var)
+    return dr.select(has, c_safe + c_acc * inv, c), dr.select(has, v_acc * inv * inv, var)

@@ -73,6 +73,9 @@ class Guide(NamedTuple):
     weight: mi.Float        #: samples behind each pixel's value (0 where it holds none)
 
 
+#: Accumulated weights at or below this count as no sample (far below any real weight).
+MIN_WEIGHT = 1e-20
+
 def _b3(d: mi.Int32) -> mi.Float:
     a = dr.abs(d)
     return dr.select(a == 0, _B3[2], dr.select(a == 1, _B3[1], _B3[0]))
@@ -128,9 +131,12 @@ def guided(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: i
         num, den, gsum = _level(num, den, normal, position, hit, width, height,
                                 step=dr.opaque(mi.Int32, 1 << level), inv_n=opaque(inv_n),
                                 inv_x=opaque(inv_x))
-        has = den > 0
+        # A weight below this is a denormal in the making: kernels flush those to zero or
+        # not, so forward and reverse passes could disagree on which pixels have a value.
+        has = den > MIN_WEIGHT
         est = dr.select(has, num / dr.select(has, den, 1.0), 0.0)
-        density = dr.detach(dr.select(gsum > 0, den / dr.select(gsum > 0, gsum, 1.0), 0.0))
+        some = gsum > MIN_WEIGHT
+        density = dr.detach(dr.select(some, den / dr.select(some, gsum, 1.0), 0.0))
         samples = density * (4.0 * math.pi * level_variance(level))
         tau = dr.select(has, dr.minimum(samples / target, 1.0), 0.0)
         if level == levels - 1:

@@ -1,0 +1,295 @@
+r"""Gradients of a foveated frame: the seam, the image formation's adjoint, the nested adjoint.
+
+**The seam.** A frame is :math:`I = F(S)`, where :math:`S` is the developed shading buffer
+(:class:`foveated_mi.shading.ShadingBuffer`: one radiance estimate :math:`S(p)` per traced
+pixel :math:`p`) and :math:`F` everything after it (history resolve, Jump Flooding,
+interpolation, tone mapping, à-trous, inverse tone mapping: ``FoveatedIntegrator._form_image``).
+The gradient pass holds every decision of the primal frame: sampling map, sites, interpolation
+windows, filter weights and history. Every weight inside :math:`F` is computed from detached
+values, so with them held :math:`F` is linear in :math:`S` except for the tone map and its
+inverse, which are differentiated at the primal values. The derivative is therefore
+
+.. math::
+
+    \frac{\partial I}{\partial \pi} = J_F(S_0)\, \frac{\partial S}{\partial \pi},
+    \qquad
+    \delta S = J_F(S_0)^{\mathsf T} \delta I, \qquad
+    \delta\pi = \sum_{p \in T} \delta S(p)^{\mathsf T} \frac{\partial S(p)}{\partial \pi},
+
+with :math:`T` the traced pixels of the frame. :func:`image_backward` and :func:`image_forward`
+compute :math:`J_F^{\mathsf T}\delta I` and :math:`J_F\,\delta S` by running :math:`F` again on an
+AD-enabled copy of :math:`S_0` (identical values, hence identical detached weights).
+
+- The history is a constant: frame :math:`t` blends :math:`(n h + s S)/(n + s)`, whose
+  derivative is :math:`s/(n+s)\,\partial S/\partial\pi`. The gradient of frame :math:`t` flows
+  only through the rays traced in frame :math:`t`.
+- The à-trous filter's colour weights are held at their primal values (detached): the
+  gradient is that of the filter linearised with frozen edge-stopping weights, not the
+  derivative of the weights themselves (see :mod:`foveated_mi.postprocess.atrous`).
+
+**The nested adjoint** (:class:`NestedAdjoint`) estimates
+:math:`\sum_p \delta S(p)^{\mathsf T}\,\partial S(p)/\partial\pi` (reverse) or
+:math:`\partial S(p)/\partial\pi\cdot\delta\pi` (forward) on the traced pixels only, with the
+nested integrator's own method:
+
+``plain`` (C++ integrators such as ``path``; any integrator that is not an ``ADIntegrator``)
+    Plain AD, as Mitsuba's ``Integrator::render_backward``: the frame's wavefront is traced
+    again with gradients on and symbolic loops off (same camera-ray sampling, same
+    ``develop``), then :math:`\delta S` is back-propagated (or the tangent propagated
+    forward). Memory grows with rays × spp × path length.
+``adjoint`` (Python ``mi.ad.common.ADIntegrator``: ``prb``, ``prb_basic``, ...)
+    The integrator's own ``render_backward(scene, params, δ, sensor, seed, spp)`` /
+    ``render_forward`` on a :class:`~foveated_mi.traced_sensor.TracedPixelSensor` over the
+    traced pixels, with :math:`\delta` the flat image of :math:`\delta S(p_k)`. Its rays are
+    drawn from the footprint the frame's estimator uses (filter importance sampling for
+    ``pixel_filter = 'importance'``, the splat kernel restricted to the traced neighbours for
+    ``'splat'``), so the estimate is that of the derivative of the value each traced pixel
+    shows.
+``projective`` (``mi.ad.common.PSIntegrator``: ``direct_projective``, ``prb_projective``)
+    The continuous part as ``adjoint`` (``render_backward`` with the boundary terms switched
+    off, ``sppp = sppi = 0``); the boundary (visibility) part with ``sppc = 0`` on the full
+    source sensor, with :math:`\delta S` scattered into a full-resolution gradient image
+    (zero at untraced pixels). Silhouette sampling is not restricted to the traced pixels:
+    its cost is that of a full-frame boundary pass (``sppp`` and ``sppi`` per pixel).
+
+**Seeds.** ``mi.render`` gives the gradient pass its ``seed_grad`` (default
+``sample_tea_32(seed, 1)[0]``). The nested adjoint uses it as is: the flat sensor's sampler
+(camera-ray positions and paths) is seeded with it by the integrator's own ``prepare``; the
+projective boundary passes derive their seeds from it as Mitsuba does; the plain path seeds
+the frame's wavefront sampler with it.
+
+**Samples per pixel.** The gradient pass's ``spp`` (``mi.render``'s ``spp_grad``, which
+defaults to ``spp``) is handed to the nested integrator as is; ``0`` means the source sensor's
+sample count, and a projective integrator's ``sppc``/``sppp``/``sppi`` apply as in Mitsuba.
+
+**Not covered.** The clamp of the primal (``clamp``) and its rejection of non-finite samples
+are not differentiated: the adjoint is that of the unclamped estimator (Mitsuba's
+integrators have no clamp). A stage that cannot be differentiated registers a predicate
+with :func:`register_non_differentiable`; :func:`check_differentiable` then refuses the
+configuration in one line.
+"""
+from __future__ import annotations
+
+import contextlib
+from typing import Any, Callable
+
+import drjit as dr
+import mitsuba as mi
+
+from . import shading as _shading
+from .pixel_filter import FilterSampler, SplatFootprint
+from .traced_sensor import TracedSensors
+from .validate import ParameterError
+
+# -- configurations that cannot be differentiated -------------------------------------------
+
+#: option -> (predicate on the validated options, what a differentiable run needs).
+NON_DIFFERENTIABLE: dict[str, tuple[Callable[[dict], bool], str]] = {}
+
+
+def register_non_differentiable(option: str, predicate: Callable[[dict], bool],
+                                allowed: str) -> None:
+    """Declare that options for which ``predicate(options)`` holds make a frame
+    non-differentiable, e.g. ``register_non_differentiable("denoiser", lambda o:
+    o["denoiser"] == "oidn", "'none' for gradients (OIDN is not differentiable)")``."""
+    NON_DIFFERENTIABLE[option] = (predicate, allowed)
+
+
+def check_differentiable(options: dict[str, Any]) -> None:
+    """Raise :class:`ParameterError` (one line) for the first option that makes the frame
+    non-differentiable."""
+    for name, (predicate, allowed) in NON_DIFFERENTIABLE.items():
+        if predicate(options):
+            raise ParameterError(name, options.get(name), allowed)
+
+
+# -- integrator kinds -----------------------------------------------------------------------
+
+def integrator_kind(integrator) -> str:
+    """``'projective'``, ``'adjoint'`` or ``'plain'`` (see the module docstring).
+
+    Classes are matched by name along the MRO: Mitsuba re-imports its AD integrator modules on
+    every ``mi.set_variant``."""
+    names = {(c.__name__, c.__module__.rsplit(".", 1)[-1]) for c in type(integrator).__mro__}
+    if ("PSIntegrator", "common") in names:
+        return "projective"
+    if ("ADIntegrator", "common") in names:
+        return "adjoint"
+    return "plain"
+
+
+# -- the image formation --------------------------------------------------------------------
+
+def _ad_copy(value: mi.Color3f) -> mi.Color3f:
+    """A detached, AD-enabled copy of ``value`` held in memory: Dr.Jit 1.5 drops the
+    derivative of a gather from a *literal* inside a symbolic loop (a constant buffer such as
+    ``dr.zeros`` would silently get a zero gradient in the à-trous filter)."""
+    x = mi.Color3f(dr.detach(value))
+    dr.make_opaque(x)
+    dr.enable_grad(x)
+    return x
+
+
+def image_backward(form: Callable[[mi.Color3f], mi.Color3f], value: mi.Color3f,
+                   grad_image: mi.Color3f) -> mi.Color3f:
+    r""":math:`J_F(S_0)^{\mathsf T}\,\delta I` for ``form`` = :math:`F`, ``value`` =
+    :math:`S_0`, ``grad_image`` = :math:`\delta I` (one Color3f per pixel each)."""
+    with dr.resume_grad():
+        x = _ad_copy(value)
+        image = form(x)
+        dr.set_grad(image, mi.Color3f(grad_image))
+        dr.enqueue(dr.ADMode.Backward, image)
+        dr.traverse(dr.ADMode.Backward)
+        return mi.Color3f(dr.grad(x))
+
+
+def image_forward(form: Callable[[mi.Color3f], mi.Color3f], value: mi.Color3f,
+                  tangent: mi.Color3f) -> mi.Color3f:
+    r""":math:`J_F(S_0)\,\delta S` (see :func:`image_backward`)."""
+    with dr.resume_grad():
+        x = _ad_copy(value)
+        image = form(x)
+        dr.set_grad(x, mi.Color3f(tangent))
+        dr.enqueue(dr.ADMode.Forward, x)
+        dr.traverse(dr.ADMode.Forward)
+        return mi.Color3f(dr.grad(image))
+
+
+# -- the nested integrator ------------------------------------------------------------------
+
+@contextlib.contextmanager
+def _spp_override(integrator, **spp):
+    """Set a projective integrator's ``sppc``/``sppp``/``sppi`` for one call."""
+    old = {k: getattr(integrator, k) for k in spp}
+    try:
+        for k, v in spp.items():
+            setattr(integrator, k, v)
+        yield
+    finally:
+        for k, v in old.items():
+            setattr(integrator, k, v)
+
+
+def _channels(integrator, film: mi.Film) -> int:
+    return int(film.base_channels_count()) + len(integrator.aov_names())
+
+
+def _to_tensor(values: mi.Color3f, count: int, height: int, width: int, channels: int,
+               index: mi.UInt32 | None = None) -> mi.TensorXf:
+    """An (H, W, C) tensor with ``values`` in channels 0..2 of the first ``count`` pixels
+    (or of pixels ``index``), zero elsewhere."""
+    data = dr.zeros(mi.Float, height * width * channels)
+    k = dr.arange(mi.UInt32, count) if index is None else index
+    for c in range(3):
+        dr.scatter(data, values[c], k * channels + c)
+    return mi.TensorXf(data, shape=(height, width, channels))
+
+
+def _from_tensor(tensor: mi.TensorXf, index: mi.UInt32) -> mi.Color3f:
+    """Channels 0..2 of the pixels ``index`` of an (H, W, C) tensor."""
+    channels = tensor.shape[2]
+    data = tensor.array
+    return mi.Color3f(*(dr.gather(mi.Float, data, index * channels + c) for c in range(3)))
+
+
+class NestedAdjoint:
+    """The nested integrator's derivative on a frame's traced pixels (module docstring).
+
+    Owns the flat sensors and footprint samplers, which are built once per film."""
+
+    def __init__(self):
+        self.sensors = TracedSensors()
+        self._footprints: dict[tuple, Any] = {}
+
+    def _footprint(self, film: mi.Film, mode: str):
+        key = (id(film), tuple(film.crop_size()), tuple(film.crop_offset()), mode)
+        fp = self._footprints.get(key)
+        if fp is None:
+            fp = SplatFootprint(film) if mode == "splat" else FilterSampler(film, importance=True)
+            self._footprints[key] = fp
+        return fp
+
+    def _flat(self, frame, mask: mi.Bool, mode: str):
+        """Traced pixels (host sync: the flat film's size is a Python int) and their sensor."""
+        pixels = dr.compress(mask)
+        if dr.width(pixels) == 0:
+            return None, None, None
+        fp = self._footprint(frame.sensor.film(), mode)
+        traced = frame.sampling_map if mode == "splat" else None
+        sensor, layout = self.sensors.get(frame.sensor, pixels, fp, traced)
+        return pixels, sensor, layout
+
+    # -- reverse mode
+    def backward(self, integrator, scene: mi.Scene, params, frame, mask: mi.Bool,
+                 grad: mi.Color3f, seed, spp: int, options: dict[str, Any]) -> None:
+        r"""Accumulate :math:`\sum_p \delta S(p)^{\mathsf T}\partial S(p)/\partial\pi` into the
+        gradients of the scene parameters (``grad`` = :math:`\delta S`, one entry per pixel,
+        used where ``mask``)."""
+        kind = integrator_kind(integrator)
+        if kind == "plain":
+            with dr.resume_grad(), dr.scoped_set_flag(dr.JitFlag.SymbolicLoops, False):
+                value = self._plain_value(integrator, scene, frame, seed, spp, options)
+                dr.set_grad(value, dr.select(mask, grad, 0.0))
+                dr.enqueue(dr.ADMode.Backward, value)
+                dr.traverse(dr.ADMode.Backward)
+            return
+        pixels, sensor, layout = self._flat(frame, mask, options["pixel_filter"])
+        if pixels is None:
+            return
+        film = sensor.film()
+        flat_grad = _to_tensor(dr.gather(mi.Color3f, grad, pixels), dr.width(pixels),
+                               layout.height, layout.width, _channels(integrator, film))
+        if kind == "adjoint":
+            integrator.render_backward(scene, params, flat_grad, sensor, seed, spp)
+            return
+        with _spp_override(integrator, sppp=0, sppi=0):
+            integrator.render_backward(scene, params, flat_grad, sensor, seed, spp)
+        if len(scene.silhouette_shapes()) > 0:
+            src = frame.sensor
+            full = _to_tensor(dr.gather(mi.Color3f, grad, pixels), 0, frame.height, frame.width,
+                              _channels(integrator, src.film()), index=pixels)
+            with _spp_override(integrator, sppc=0):
+                integrator.render_backward(scene, params, full, src, seed, spp)
+
+    # -- forward mode
+    def forward(self, integrator, scene: mi.Scene, params, frame, mask: mi.Bool, seed,
+                spp: int, options: dict[str, Any]) -> mi.Color3f:
+        r""":math:`\partial S(p)/\partial\pi\cdot\delta\pi` at the traced pixels (``mask``),
+        zero elsewhere, for the tangents set on the scene parameters."""
+        n = frame.width * frame.height
+        kind = integrator_kind(integrator)
+        if kind == "plain":
+            with dr.resume_grad(), dr.scoped_set_flag(dr.JitFlag.SymbolicLoops, False):
+                value = self._plain_value(integrator, scene, frame, seed, spp, options)
+                dr.forward_to(value)
+                return dr.select(mask, mi.Color3f(dr.grad(value)), 0.0)
+        out = dr.zeros(mi.Color3f, n)
+        pixels, sensor, _ = self._flat(frame, mask, options["pixel_filter"])
+        if pixels is None:
+            return out
+        count = dr.width(pixels)
+        k = dr.arange(mi.UInt32, count)
+        if kind == "adjoint":
+            tangent = integrator.render_forward(scene, params, sensor, seed, spp)
+        else:
+            with _spp_override(integrator, sppp=0, sppi=0):
+                tangent = integrator.render_forward(scene, params, sensor, seed, spp)
+        dr.scatter(out, _from_tensor(tangent, k), pixels)
+        if kind == "projective" and len(scene.silhouette_shapes()) > 0:
+            with _spp_override(integrator, sppc=0):
+                boundary = integrator.render_forward(scene, params, frame.sensor, seed, spp)
+            out = out + dr.select(mask, _from_tensor(boundary, dr.arange(mi.UInt32, n)), 0.0)
+        return out
+
+    @staticmethod
+    def _plain_value(integrator, scene, frame, seed, spp: int, options) -> mi.Color3f:
+        """The frame's shading buffer traced again (gradients on): same wavefront, same
+        camera-ray sampling and estimator, the gradient pass's seed and spp."""
+        ro = frame.reordered
+        spp = spp if spp else int(frame.sensor.sampler().sample_count())
+        samples = _shading.trace_wavefront(
+            scene, frame.sensor, integrator, ro.wavefront, frame.width, frame.height, spp=spp,
+            seed=seed, active=ro.active, clamp=options["clamp"],
+            filter_sampler=frame.filter_sampler)
+        return _shading.develop(samples, ro.wavefront, spp, frame.sensor.film(),
+                                options["pixel_filter"]).value

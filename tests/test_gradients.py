@@ -1,0 +1,252 @@
+"""Gradients of foveated frames (issue 9): finite differences, forward and reverse mode of the
+same foveated image agree for nested ``path`` (plain AD), ``prb`` (its adjoint on a traced-pixel
+sensor) and the projective integrators; the image formation's adjoint is its transpose for
+every configuration of :data:`gradcheck.OPTION_SETS`; gradients stay finite at the parameter
+extremes; a frame is a pure function of its seed."""
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import gradcheck
+from gradcheck import BALL_GAZE, OPTION_SETS, Probe, agreement
+from foveated_mi import adjoint as _adjoint
+from foveated_mi.integrators.foveated import FoveatedIntegrator
+from foveated_mi.validate import ParameterError
+
+# Projective integrators rebuild their silhouette guiding structure on every gradient pass;
+# these settings make that cheap for 32 px films (they change the variance, not the mean).
+FAST_GUIDING = {"proj_seed_spp": 16, "octree_extra_leaf_sample": 32}
+# The à-trous colour weights are held by design, while a finite difference of the image sees
+# them move (by 1-10 % of these derivatives): the end-to-end comparisons switch them off, and
+# test_every_image_formation_is_differentiated checks the held derivative with them on.
+HELD = {"sigma_color": float("inf"), "sigma_luminance": float("inf")}
+# Visibility: look at the ball, with the fovea around it, and the filter importance sampled
+# (with 'splat' the boundary term uses the full filter, see foveated_mi.adjoint).
+VISIBILITY = {"gaze": [*BALL_GAZE, 0.0], "theta": 0.3, "sigma_p": 0.5, "edge_threshold": 0.0,
+              "atrous_iterations": 0, "pixel_filter": "importance"}
+
+
+class Case:
+    def __init__(self, nested, param, options=None, grad_spp=64, grad_seeds=4, fd_spp=64,
+                 fd_seeds=3, eps=None):
+        self.nested, self.param = nested, param
+        self.options = {**HELD, **(options or {})}
+        self.grad_spp, self.grad_seeds = grad_spp, grad_seeds
+        self.fd_spp, self.fd_seeds, self.eps = fd_spp, fd_seeds, eps
+
+    def __repr__(self):
+        return f"{self.nested}-{self.param}"
+
+
+def _check(case: Case, held: bool = False):
+    sc = gradcheck.scene(case.nested, **case.options)
+    nested = sc.integrator().nested
+    if _adjoint.integrator_kind(nested) == "projective":
+        for k, v in FAST_GUIDING.items():
+            setattr(nested, k, v)
+    probe = Probe(sc, case.param)
+    fd_of = probe.finite_difference_held if held else probe.finite_difference
+    fd = [fd_of(100 + s, case.fd_spp, case.eps) for s in range(case.fd_seeds)]
+    rev = [probe.reverse(s, case.grad_spp) for s in range(case.grad_seeds)]
+    fwd = probe.forward(0, case.grad_spp)
+    ok, msg = agreement(rev, fd)
+    print(f"{case}: {msg}; forward {fwd:.5g} vs reverse {rev[0]:.5g}")
+    assert ok, msg
+    # Same seed, same samples: forward and reverse mode are the same estimator.
+    assert abs(fwd - rev[0]) <= 1e-3 * abs(rev[0]) + 1e-6, (fwd, rev[0])
+    return rev, fd
+
+
+CASES = [
+    Case("path", "albedo"),
+    Case("path", "emitter"),
+    Case("prb", "albedo"),
+    Case("prb", "emitter", {"pixel_filter": "importance"}),
+    Case("direct_projective", "albedo"),
+    Case("direct_projective", "emitter"),
+    Case("direct_projective", "translation", VISIBILITY, grad_spp=128, grad_seeds=6,
+         fd_spp=1024, fd_seeds=6),
+    Case("prb_projective", "albedo", {"reconstruction": "fast_sibson"}),
+]
+
+
+@pytest.mark.parametrize("case", CASES, ids=repr)
+def test_finite_difference_forward_and_reverse_agree(case):
+    _check(case)
+
+
+@pytest.mark.slow
+def test_prb_projective_translation():
+    """Indirect visibility (the ball's shadow and interreflections): high variance, so many
+    repeats."""
+    _check(Case("prb_projective", "translation", VISIBILITY, grad_spp=128, grad_seeds=16,
+                fd_spp=1024, fd_seeds=8))
+
+
+@pytest.mark.parametrize("name,options", OPTION_SETS, ids=[n for n, _ in OPTION_SETS])
+def test_every_image_formation_is_differentiated(name, options):
+    """prb's albedo gradient through each image-formation configuration, against finite
+    differences of the traced values pushed through the formation with its weights held
+    (the colour weights stay on where the configuration has them)."""
+    _check(Case("prb", "albedo", {"sigma_color": 0.5, **options}, grad_spp=64, grad_seeds=3,
+                fd_spp=64, fd_seeds=2), held=True)
+
+
+# ------------------------------------------------------------------ the image formation
+
+def _frame_state(options, frames=1, spp=8):
+    sc = gradcheck.scene("prb", **options)
+    integ = sc.integrator()
+    for k in range(frames):
+        mi.render(sc, seed=k, spp=spp)
+    primal = integ._primal
+    return integ, primal, integ._formation(primal)
+
+
+@pytest.mark.parametrize("name,options", OPTION_SETS + [("history", {"history": True})],
+                         ids=[n for n, _ in OPTION_SETS] + ["history"])
+def test_image_formation_adjoint_is_its_transpose(name, options):
+    """<J x, y> = <x, J^T y> for the whole image formation at a fixed frame state (J from
+    forward mode, J^T from reverse mode), and only traced pixels receive gradient."""
+    integ, primal, form = _frame_state(options, frames=3 if options.get("history") else 1)
+    s0, mask = primal.shading.value, primal.shading.mask
+    n = dr.width(s0)
+    rng = np.random.default_rng(1)
+    x = mi.Color3f(rng.standard_normal((3, n)).astype(np.float32)) * mi.Color3f(mask)
+    y = mi.Color3f(rng.standard_normal((3, n)).astype(np.float32))
+    jx = _adjoint.image_forward(form, s0, x)
+    jty = _adjoint.image_backward(form, s0, y)
+    lhs = float(dr.sum(dr.sum(jx * y))[0])
+    rhs = float(dr.sum(dr.sum(x * jty))[0])
+    assert abs(lhs - rhs) <= 1e-5 * abs(lhs), (lhs, rhs)
+    assert np.all(jty.numpy()[:, ~mask.numpy()] == 0)
+    assert np.abs(jx.numpy()).sum() > 0
+
+
+@pytest.mark.parametrize("name,options", OPTION_SETS, ids=[n for n, _ in OPTION_SETS])
+def test_image_formation_tangent_matches_finite_differences(name, options):
+    """J x against a central difference of the image formation itself, so that no stage can
+    cut the gradient silently. The colour weights of both filters are switched off here: they
+    are held by design, and a finite difference would see them move."""
+    integ, primal, form = _frame_state({**options, "sigma_color": float("inf"),
+                                        "sigma_luminance": float("inf")})
+    s0, mask = primal.shading.value, primal.shading.mask
+    rng = np.random.default_rng(2)
+    # A relative perturbation of the traced values keeps every value on its side of the
+    # tone map's clamps.
+    x = s0 * mi.Color3f(rng.uniform(-0.5, 0.5, (3, dr.width(s0))).astype(np.float32))
+    x = dr.select(mask, x, 0.0)
+    eps = 1e-2
+    fd = (form(s0 + eps * x) - form(s0 - eps * x)) / (2 * eps)
+    jx = _adjoint.image_forward(form, s0, x)
+    err = float(dr.norm(dr.ravel(fd - jx))[0] / dr.norm(dr.ravel(jx))[0])
+    assert err < 1e-2, err
+
+
+# ------------------------------------------------------------------ extremes
+
+@pytest.mark.parametrize("extreme", [
+    {"sigma_p": 1e-6},
+    {"sigma_p": 1e-6, "theta": 1e-6, "edge_threshold": 0.0},   # one site: the gaze pixel
+    {"theta": 1e6},
+], ids=["sigma_p_1e-6", "one_site", "theta_1e6"])
+@pytest.mark.parametrize("reconstruction", ["voronoi", "sibson", "discrete_sibson", "fast_sibson",
+                                            "guided", "stochastic"])
+@pytest.mark.parametrize("nested", ["path", "prb"])
+def test_gradients_are_finite_at_the_extremes(extreme, reconstruction, nested):
+    preset = "guided" if reconstruction in ("guided", "stochastic") else "paper"
+    sc = gradcheck.scene(nested, reconstruction=reconstruction, preset=preset, **extreme)
+    probe = Probe(sc, "emitter")     # every traced pixel depends on it
+    rev = probe.reverse(0, 4)
+    fwd = probe.forward(0, 4)
+    assert np.isfinite(rev) and np.isfinite(fwd)
+    assert rev != 0.0 and abs(fwd - rev) <= 1e-3 * abs(rev)
+    if "theta" in extreme and extreme["theta"] < 1:
+        assert sc.integrator().stats["rays"] == 1
+
+
+# ------------------------------------------------------------------ passes and seeds
+
+def test_backward_without_a_primal_frame_renders_one_and_commits_nothing():
+    sc = gradcheck.scene("prb", sigma_p=0.6, history=True)
+    integ = sc.integrator()
+    params = mi.traverse(sc)
+    key = "red.reflectance.value"
+    dr.enable_grad(params[key])
+    params.update()
+    grad_in = mi.TensorXf(np.ones((32, 32, 3), np.float32))
+    integ.render_backward(sc, params, grad_in, seed=3, spp=4)
+    g = np.array(dr.grad(params[key]))
+    assert np.all(np.isfinite(g)) and g[0] > 0
+    assert integ.frame == 0 and integ.history is None
+
+
+def test_grad_in_of_the_wrong_shape_is_refused_in_one_line():
+    sc = gradcheck.scene("prb")
+    mi.render(sc, spp=1)
+    with pytest.raises(ParameterError, match=r"grad_in = .* is invalid: expected a tensor of shape"):
+        sc.integrator().render_backward(sc, mi.traverse(sc), mi.TensorXf(np.zeros((4, 4, 3))))
+
+
+def test_registered_non_differentiable_stage_stops_the_gradient_pass():
+    sc = gradcheck.scene("prb")
+    _adjoint.register_non_differentiable("exposure", lambda o: o["exposure"] > 3,
+                                         "<= 3 for gradients (test predicate)")
+    try:
+        sc.integrator().exposure = 4.0
+        probe = Probe(sc, "albedo")
+        with pytest.raises(ParameterError, match="exposure = 4.0 is invalid"):
+            probe.reverse(0, 1)
+    finally:
+        _adjoint.NON_DIFFERENTIABLE.pop("exposure")
+
+
+@pytest.mark.parametrize("pixel_filter,preset", [("importance", "paper"), ("splat", "paper"),
+                                                 ("importance", "guided"), ("importance", "auto")])
+def test_without_history_a_frame_is_a_pure_function_of_the_seed(pixel_filter, preset):
+    """Bit-identical with 'importance'; with 'splat' the film's atomic float additions may
+    round in another order on a multi-threaded backend (as in Mitsuba's own mi.render), so
+    equal to float precision."""
+    opts = {"sigma_p": 0.5, "pixel_filter": pixel_filter, "preset": preset}
+    sc = gradcheck.scene("path", map_seed=-1, **opts)
+    a = np.array(mi.render(sc, seed=7))
+    b = np.array(mi.render(sc, seed=7))                  # frame counter has advanced
+    fresh = FoveatedIntegrator(nested=sc.integrator().nested, history=False, **opts)
+    c = np.array(mi.render(sc, integrator=fresh, seed=7))
+    d = np.array(mi.render(sc, seed=8))
+    tol = 0.0 if pixel_filter == "importance" else 1e-5
+    np.testing.assert_allclose(a, b, rtol=tol, atol=tol)
+    np.testing.assert_allclose(a, c, rtol=tol, atol=tol)
+    assert np.abs(a - d).max() > 1e-2
+
+
+def test_frame_seed_derivation_and_map_seed():
+    """With history, frame t > 0 draws its sampling map from sample_tea_32(s, t)[0]; with
+    map_seed the map stays put while the samples move."""
+    sc = gradcheck.scene("path", history=True, map_seed=-1, sigma_p=0.5)
+    integ = sc.integrator()
+    maps = []
+    for _ in range(3):
+        mi.render(sc, seed=5)
+        maps.append(integ.buffer("sampling_map").copy())
+    assert not np.array_equal(maps[0], maps[1]) and not np.array_equal(maps[1], maps[2])
+    ref = FoveatedIntegrator(nested=integ.nested, history=False, sigma_p=0.5, preset="paper")
+    mi.render(sc, integrator=ref, seed=int(mi.sample_tea_32(5, 2)[0]))
+    np.testing.assert_array_equal(ref.buffer("sampling_map"), maps[2])
+
+    integ.reset()
+    integ.map_seed = 5
+    pinned, images = [], []
+    for _ in range(3):
+        images.append(np.array(mi.render(sc, seed=5)))
+        pinned.append(integ.buffer("sampling_map").copy())
+    assert all(np.array_equal(pinned[0], m) for m in pinned)
+    np.testing.assert_array_equal(pinned[0], maps[0])
+    assert not np.array_equal(images[1], images[2])
+
+
+@pytest.mark.parametrize("bad", [-2, 2 ** 32, 1.5, True])
+def test_map_seed_validation_one_line(bad):
+    with pytest.raises(ParameterError, match=r"map_seed = .* is invalid: expected an integer"):
+        FoveatedIntegrator(map_seed=bad)
