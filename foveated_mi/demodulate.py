@@ -16,15 +16,25 @@ handled by subtracting :math:`L_e` first, so a visible light or sky stays sharp.
 
 **The floor** :math:`a_{\min}` (``ALBEDO_FLOOR`` = 0.4). Dividing by a small albedo amplifies
 a dark site's Monte Carlo noise, and a reconstruction that spreads that site into a bright
-neighbour multiplies it back by the neighbour's albedo: with :math:`a_{\min} = 10^{-3}` a
-1-spp-per-site frame of the staircase scene lost 6 dB against no demodulation. The floor caps
-that gain at :math:`a_q / a_{\min}`; below it, demodulation is a constant scale (no effect).
-Measured at 320x180, 2 spp, frame 1 (``benchmarks/bench_demodulation.py``):
-full-frame PSNR 27.9 / 31.2 / 32.5 / 33.4 dB for a floor of 0.001 / 0.1 / 0.25 / 0.4, against
-34.0 dB without demodulation for Sibson interpolation and 34.3 dB with the guided
-reconstruction at 0.4; on a 48² Cornell box demodulation gains 1.0-1.6 dB at every floor.
-Black surfaces, specular materials whose diffuse albedo is 0 and misses are divided by the
-floor, which the remodulation undoes.
+neighbour multiplies it back by the neighbour's albedo. The floor caps that gain at
+:math:`a_q / a_{\min}`; below it, demodulation is a constant scale (no effect). Black
+surfaces, specular materials whose diffuse albedo is 0 and misses are divided by the floor,
+which the remodulation undoes. Measured with ``python benchmarks/bench_demodulation.py``
+(one 2-spp frame without history, display-referred PSNR against 1024 spp; 2 cores,
+llvm_ad_rgb, 2026-11-25):
+
+======  ==========================  ============================  ======================
+floor   staircase 320x180, paper    staircase, ``guided`` preset  Cornell 48², paper
+        + demodulation (dB)         (dB)                          + demodulation (dB)
+======  ==========================  ============================  ======================
+0.001   11.92                       29.06                         27.64
+0.1     31.19                       30.96                         27.67
+0.25    32.49                       32.51                         27.69
+0.4     33.43                       33.81                         27.70
+======  ==========================  ============================  ======================
+
+against 33.95 dB (staircase) and 25.94 dB (Cornell) for the paper's pipeline without
+demodulation.
 
 Both maps are linear in the radiance (the G-buffer terms are fixed weights), so gradients pass
 straight through; :math:`\hat a` and :math:`L_e` carry none (they are held at their primal

@@ -1,0 +1,163 @@
+"""Equal time (issue 8): foveated presets against uniform path tracing, raw and denoised.
+
+Runs the study ``configs/studies/equal_time.toml`` (staircase and voxel-city at 640x360, path
+max_depth 8, a 1024-spp reference cached in the output folder; foveated presets at frames 1
+and 16 with a static gaze; uniform 1/2/4/8 spp with and without Intel OIDN given albedo and
+normal, the AOV pass and OIDN timed inside the frame) and then writes, to ``docs/results/``:
+
+* ``equal_time.md``: every row (time per frame, rays, PSNR / SSIM / FLIP over the full frame,
+  inside the fovea θ = 0.1 and in the periphery) and the targets of the issue, checked
+  against the cheapest denoised uniform frame (1 spp + OIDN): at a frame time no higher than
+  it, the default preset's fovea PSNR at least the baseline's at frame 1 and 3 dB above it at
+  frame 16, and its full-frame PSNR no more than 3 dB below the baseline's at frame 1;
+* ``equal_time_pareto_fovea.{png,svg}`` and ``equal_time_pareto_full.{png,svg}``: time
+  against fovea / full-frame PSNR, the Pareto front marked, baselines drawn apart.
+
+Quality is display-referred (Reinhard tone map, sRGB) against the converged reference, never
+against a full render at the same spp. Times are medians of 3 repeats after a warm-up, from
+``FoveatedIntegrator(timing=True)`` (stage boundaries synchronised) and
+``baselines.render_uniform``; on a CPU they are comparable only within one run.
+
+    python benchmarks/bench_equal_time.py [--size 640 360] [--out out/equal_time]
+
+The study resumes: a second run only re-renders what ``out/equal_time/results.csv`` lacks
+(delete it to re-measure).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import shutil
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, ".."))
+
+STUDY = os.path.join(HERE, "..", "configs", "studies", "equal_time.toml")
+RESULTS = os.path.join(HERE, "..", "docs", "results")
+
+
+def _label(row: dict) -> str:
+    if row["method"] != "foveated":
+        return f"{row['method']} {row['spp']:.0f} spp"
+    opts = json.loads(row["config"]).get("options", {})
+    extra = " ".join(f"{k}={v}" for k, v in sorted(opts.items()) if k != "preset")
+    return f"foveated {opts.get('preset', 'auto')} {row['spp']:.0f} spp" + (f" {extra}" if extra else "")
+
+
+def _f(v, fmt=".2f") -> str:
+    return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt)
+
+
+def rows_table(rows: list[dict]) -> list[str]:
+    out = ["| scene | configuration | frame | time ms | rays | PSNR | fovea | periphery | "
+           "SSIM | fovea | periphery | FLIP | fovea | periphery |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in sorted(rows, key=lambda r: (r["scene"], r["method"] != "foveated", _label(r),
+                                         r["frame"])):
+        out.append(f"| {r['scene']} | {_label(r)} | {r['frame']:.0f} | {_f(r['time_ms'], '.0f')} "
+                   f"| {_f(r['ray_fraction'], '.0%')} | {_f(r['psnr'])} | {_f(r['psnr_fovea'])} "
+                   f"| {_f(r['psnr_periphery'])} | {_f(r['ssim'], '.3f')} "
+                   f"| {_f(r['ssim_fovea'], '.3f')} | {_f(r['ssim_periphery'], '.3f')} "
+                   f"| {_f(r['flip'], '.3f')} | {_f(r['flip_fovea'], '.3f')} "
+                   f"| {_f(r['flip_periphery'], '.3f')} |")
+    return out
+
+
+def targets(rows: list[dict], default_preset: str) -> list[str]:
+    """The issue's three targets per scene, for the default preset's best configuration whose
+    frame-1 time is no higher than the 1 spp + OIDN baseline's."""
+    out = []
+    for scene in dict.fromkeys(r["scene"] for r in rows):
+        sr = [r for r in rows if r["scene"] == scene]
+        base = [r for r in sr if r["method"] == "uniform+oidn" and r["spp"] == 1]
+        if not base:
+            out.append(f"* {scene}: no 1 spp + OIDN baseline (pyoidn missing?)")
+            continue
+        b = base[0]
+        fov = {}
+        for r in sr:
+            if r["method"] != "foveated":
+                continue
+            opts = json.loads(r["config"]).get("options", {})
+            if opts.get("preset") != default_preset or set(opts) - {"preset"}:
+                continue
+            fov.setdefault(r["spp"], {})[int(r["frame"])] = r
+        ok = {s: f for s, f in fov.items() if 1 in f and 16 in f
+              and f[1]["time_ms"] <= b["time_ms"] and f[16]["time_ms"] <= b["time_ms"]}
+        out.append(f"* **{scene}**, baseline uniform 1 spp + OIDN: {b['time_ms']:.0f} ms, "
+                   f"PSNR {b['psnr']:.2f}, fovea {b['psnr_fovea']:.2f} dB.")
+        if not ok:
+            times = ", ".join(f"{s:.0f} spp {f[1]['time_ms']:.0f} ms" for s, f in sorted(fov.items())
+                              if 1 in f)
+            out.append(f"  No `{default_preset}` configuration is as fast ({times}).")
+            continue
+        spp = max(ok, key=lambda s: ok[s][1]["psnr_fovea"])
+        f1, f16 = ok[spp][1], ok[spp][16]
+        checks = [
+            ("fovea PSNR at frame 1 >= baseline", f1["psnr_fovea"] - b["psnr_fovea"], 0.0),
+            ("fovea PSNR at frame 16 >= baseline + 3 dB", f16["psnr_fovea"] - b["psnr_fovea"], 3.0),
+            ("full-frame PSNR at frame 1 >= baseline - 3 dB", f1["psnr"] - b["psnr"], -3.0),
+        ]
+        out.append(f"  `{default_preset}` at {spp:.0f} spp: {f1['time_ms']:.0f} ms (frame 1), "
+                   f"{f16['time_ms']:.0f} ms (frame 16), {f1['ray_fraction']:.0%} of the rays.")
+        for name, delta, need in checks:
+            out.append(f"  - {name}: {delta:+.2f} dB (needs {need:+.0f}) "
+                       f"{'**met**' if delta >= need else '**missed**'}")
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--size", type=int, nargs=2, default=None, metavar=("W", "H"),
+                    help="film size (default: the study's 640 360)")
+    ap.add_argument("--out", default=os.path.join("out", "equal_time"))
+    ap.add_argument("--results", default=RESULTS, help="where the tables and plots go")
+    ap.add_argument("--no-progress", action="store_true")
+    a = ap.parse_args(argv)
+
+    import foveated_mi  # noqa: F401
+    import mitsuba as mi
+    from foveated_mi.options import resolve_preset
+    from foveated_mi.study import run_study
+    from foveated_mi.study.pareto import plot_pareto
+
+    t0 = time.perf_counter()
+    res = run_study(STUDY, out=a.out, size=tuple(a.size) if a.size else None,
+                    progress=not a.no_progress)
+    rows = res.rows
+    os.makedirs(a.results, exist_ok=True)
+    for metric, name in (("psnr_fovea", "fovea"), ("psnr", "full")):
+        d = os.path.join(a.out, f"pareto_{name}")
+        os.makedirs(d, exist_ok=True)
+        png, svg = plot_pareto(rows, metric, d, title=f"Equal time: {metric} against time per frame")
+        shutil.copy(png, os.path.join(a.results, f"equal_time_pareto_{name}.png"))
+        shutil.copy(svg, os.path.join(a.results, f"equal_time_pareto_{name}.svg"))
+    default = resolve_preset("auto")
+    size = f"{rows[0]['width']:.0f}x{rows[0]['height']:.0f}" if rows else "?"
+    lines = [f"# Equal-time comparison ({size}, {mi.variant()})", "",
+             f"Command: `python benchmarks/bench_equal_time.py"
+             f"{' --size ' + ' '.join(map(str, a.size)) if a.size else ''}`  ",
+             f"Machine: {platform.processor() or platform.machine()}, "
+             f"{os.cpu_count()} cores, {mi.variant()}; "
+             f"date {time.strftime('%Y-%m-%d')}; default preset here: `{default}`.  ",
+             "Reference: 1024 spp of the scene's own integrator (path, max_depth 8). Fovea: "
+             "distance to the gaze < θ = 0.1 (half-diagonal units).", "",
+             "## Targets (issue 8)", "", *targets(rows, default), "",
+             "## Every row", "", *rows_table(rows), "",
+             "![fovea](equal_time_pareto_fovea.png) ![full](equal_time_pareto_full.png)", ""]
+    if res.failed:
+        lines += ["## Failed tasks", "", *[f"* {f}" for f in res.failed], ""]
+    with open(os.path.join(a.results, "equal_time.md"), "w") as f:
+        f.write("\n".join(lines))
+    print("\n".join(lines[:lines.index("## Every row")]))
+    print(f"written {os.path.join(a.results, 'equal_time.md')} in {time.perf_counter() - t0:.0f} s")
+    return 1 if res.failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
