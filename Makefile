@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml scripts/setup.sh
 setup: $(STAMP)
 
 demo: $(STAMP)
-	$(RUN) $(VENV)/bin/foveated-mi render voxel-city --size 512 512 --compare-full --out out/demo.exr --stats out/demo.json
+	$(RUN) $(VENV)/bin/foveated-mi demo
 
 test: $(STAMP)
 	$(RUN) $(PY) -m pytest -q

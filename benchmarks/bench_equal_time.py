@@ -68,49 +68,6 @@ def rows_table(rows: list[dict]) -> list[str]:
     return out
 
 
-def targets(rows: list[dict], default_preset: str) -> list[str]:
-    """The issue's three targets per scene, for the default preset's best configuration whose
-    frame-1 time is no higher than the 1 spp + OIDN baseline's."""
-    out = []
-    for scene in dict.fromkeys(r["scene"] for r in rows):
-        sr = [r for r in rows if r["scene"] == scene]
-        base = [r for r in sr if r["method"] == "uniform+oidn" and r["spp"] == 1]
-        if not base:
-            out.append(f"* {scene}: no 1 spp + OIDN baseline (pyoidn missing?)")
-            continue
-        b = base[0]
-        fov = {}
-        for r in sr:
-            if r["method"] != "foveated":
-                continue
-            opts = json.loads(r["config"]).get("options", {})
-            if opts.get("preset") != default_preset or set(opts) - {"preset"}:
-                continue
-            fov.setdefault(r["spp"], {})[int(r["frame"])] = r
-        ok = {s: f for s, f in fov.items() if 1 in f and 16 in f
-              and f[1]["time_ms"] <= b["time_ms"] and f[16]["time_ms"] <= b["time_ms"]}
-        out.append(f"* **{scene}**, baseline uniform 1 spp + OIDN: {b['time_ms']:.0f} ms, "
-                   f"PSNR {b['psnr']:.2f}, fovea {b['psnr_fovea']:.2f} dB.")
-        if not ok:
-            times = ", ".join(f"{s:.0f} spp {f[1]['time_ms']:.0f} ms" for s, f in sorted(fov.items())
-                              if 1 in f)
-            out.append(f"  No `{default_preset}` configuration is as fast ({times}).")
-            continue
-        spp = max(ok, key=lambda s: ok[s][1]["psnr_fovea"])
-        f1, f16 = ok[spp][1], ok[spp][16]
-        checks = [
-            ("fovea PSNR at frame 1 >= baseline", f1["psnr_fovea"] - b["psnr_fovea"], 0.0),
-            ("fovea PSNR at frame 16 >= baseline + 3 dB", f16["psnr_fovea"] - b["psnr_fovea"], 3.0),
-            ("full-frame PSNR at frame 1 >= baseline - 3 dB", f1["psnr"] - b["psnr"], -3.0),
-        ]
-        out.append(f"  `{default_preset}` at {spp:.0f} spp: {f1['time_ms']:.0f} ms (frame 1), "
-                   f"{f16['time_ms']:.0f} ms (frame 16), {f1['ray_fraction']:.0%} of the rays.")
-        for name, delta, need in checks:
-            out.append(f"  - {name}: {delta:+.2f} dB (needs {need:+.0f}) "
-                       f"{'**met**' if delta >= need else '**missed**'}")
-    return out
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--size", type=int, nargs=2, default=None, metavar=("W", "H"),
@@ -124,6 +81,7 @@ def main(argv=None) -> int:
     import mitsuba as mi
     from foveated_mi.options import resolve_preset
     from foveated_mi.study import run_study
+    from foveated_mi.study.equal_time import equal_time_verdicts, verdict_lines, verdict_sentence
     from foveated_mi.study.pareto import plot_pareto
 
     t0 = time.perf_counter()
@@ -138,6 +96,7 @@ def main(argv=None) -> int:
         shutil.copy(png, os.path.join(a.results, f"equal_time_pareto_{name}.png"))
         shutil.copy(svg, os.path.join(a.results, f"equal_time_pareto_{name}.svg"))
     default = resolve_preset("auto")
+    verdicts = equal_time_verdicts(rows, default)
     size = f"{rows[0]['width']:.0f}x{rows[0]['height']:.0f}" if rows else "?"
     lines = [f"# Equal-time comparison ({size}, {mi.variant()})", "",
              f"Command: `python benchmarks/bench_equal_time.py"
@@ -147,7 +106,8 @@ def main(argv=None) -> int:
              f"date {time.strftime('%Y-%m-%d')}; default preset here: `{default}`.  ",
              "Reference: 1024 spp of the scene's own integrator (path, max_depth 8). Fovea: "
              "distance to the gaze < θ = 0.1 (half-diagonal units).", "",
-             "## Targets (issue 8)", "", *targets(rows, default), "",
+             "## Targets (issue 8)", "",
+             *[line for v in verdicts for line in verdict_lines(v) + ["", verdict_sentence(v), ""]],
              "## Every row", "", *rows_table(rows), "",
              "![fovea](equal_time_pareto_fovea.png) ![full](equal_time_pareto_full.png)", ""]
     if res.failed:

@@ -114,6 +114,12 @@ def build_parser() -> argparse.ArgumentParser:
                     "study's metric, else psnr_fovea)")
     st.add_argument("--variant")
     st.add_argument("--no-progress", action="store_true", dest="no_progress")
+
+    d = sub.add_parser("demo", help="equal-time comparison against a converged reference "
+                       "(what `make demo` runs)")
+    d.add_argument("--out", default=os.path.join("out", "demo"))
+    d.add_argument("--size", type=int, nargs=2, metavar=("W", "H"))
+    d.add_argument("--no-progress", action="store_true", dest="no_progress")
     return p
 
 
@@ -221,6 +227,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return cmd_render(args)
         if args.command == "study":
             return cmd_study(args)
+        if args.command == "demo":
+            from .demo import run_demo
+            return run_demo(args.out, size=tuple(args.size) if args.size else None,
+                            progress=not args.no_progress)
         return cmd_sequence(args)
     except ParameterError as e:
         sys.stderr.write(f"foveated-mi: error: {e}\n")
