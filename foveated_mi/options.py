@@ -13,9 +13,11 @@ defaults by a configuration tuned together; any option given explicitly wins ove
     (a gradient pass runs it without OIDN).
 ``guided``
     The differentiable noise-aware pipeline, no extra dependency: albedo demodulation, the
-    G-buffer-guided sparse reconstruction and the edge-avoiding à-trous filter. (The
-    variance-guided filter, ``denoiser = "svgf"``, kept more noise than the à-trous filter at
-    1-2 spp in the measurements behind this choice, and is an option.)
+    G-buffer-guided sparse reconstruction and the variance-guided à-trous filter (SVGF), which
+    stops smoothing where the history has converged. Against the paper's fixed-σ à-trous filter
+    on the staircase (320x180, 2 spp, still gaze) it measured +2 dB fovea PSNR at frame 1 and
+    +5 dB at frame 16 at equal full-frame PSNR; on voxel-city +1.6 / +4.6 dB over the frame /
+    fovea at frame 16.
 ``auto`` (default)
     ``oidn`` when ``pyoidn`` can be imported, else ``guided``; ``stats["preset"]`` names the
     one used.
@@ -69,8 +71,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     "paper": {},
     "oidn": {"theta": 0.25, "sigma_p": 0.8, "demodulate": True, "reconstruction": "stochastic",
              "denoiser": "oidn"},
-    "guided": {"demodulate": True, "reconstruction": "guided", "target_samples": 8.0,
-               "denoiser": "atrous"},
+    "guided": {"demodulate": True, "reconstruction": "guided", "denoiser": "svgf"},
 }
 PRESET_NAMES = ("auto", *PRESETS)
 DENOISERS = ("none", "atrous", "svgf", "oidn")
