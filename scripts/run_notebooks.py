@@ -18,7 +18,7 @@ import time
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), ".."))
 NOTEBOOKS = ("quickstart", "paper_fig9", "paper_fig7_quality", "paper_table1",
-             "speed_accuracy")
+             "speed_accuracy", "inverse_rendering")
 SMALL = 128
 
 

@@ -50,3 +50,26 @@ def test_paper_notebooks_execute_at_a_tiny_size(tmp_path, monkeypatch, name):
     assert any(o.get("output_type") == "display_data" and "image/png" in o.get("data", {})
                for o in outputs), "no figure produced"
     assert os.listdir(tmp_path / "out")                     # results went where we said
+
+
+def test_inverse_rendering_notebook_executes_at_a_tiny_size(tmp_path, monkeypatch):
+    """foveated(prb) and full-frame prb both lower the albedo error, and the notebook states
+    the half-wall-time target's outcome from its own numbers."""
+    monkeypatch.setenv("FOVEATED_MI_NB_SIZE", "32")
+    monkeypatch.setenv("FOVEATED_MI_NB_ITERS", "8")
+    monkeypatch.setenv("FOVEATED_MI_VARIANT", "llvm_ad_rgb")
+    nb = nbformat.read(os.path.join(os.path.dirname(NB), "inverse_rendering.ipynb"), as_version=4)
+    client = NotebookClient(nb, timeout=600, kernel_name="python3",
+                            resources={"metadata": {"path": str(tmp_path)}})
+    client.execute()
+    outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])]
+    text = "".join(o.get("text", "") for o in outputs)
+    assert "size 32" in text and "llvm_ad_rgb" in text
+    assert "target (<= 0.5) met" in text or "target (<= 0.5) missed" in text or \
+        "target missed" in text
+    import re
+    start = float(re.search(r"initial error ([0-9.]+)", text).group(1))
+    finals = [float(v) for v in re.findall(r"\], final error ([0-9.]+)", text)]
+    assert len(finals) == 2 and all(f < 0.8 * start for f in finals), (start, finals)
+    assert any(o.get("output_type") == "display_data" and "image/png" in o.get("data", {})
+               for o in outputs), "no figure produced"
