@@ -29,7 +29,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from .validate import ParameterError, check_bool, check_choice, check_int, check_point2, check_range
+from .validate import (ParameterError, check_bool, check_choice, check_int, check_point2,
+                       check_range, check_sigma)
 
 #: The paper's pipeline; every option of the integrator, with its default.
 DEFAULTS: dict[str, Any] = {
@@ -89,18 +90,6 @@ def resolve_preset(preset: str) -> str:
     return "oidn" if oidn_available() else "guided"
 
 
-def check_sigma(name: str, value: Any) -> float:
-    """A sigma: a number > 0, where ``inf`` disables that weight."""
-    allowed = "a number > 0, or inf to disable this weight"
-    if isinstance(value, bool):
-        raise ParameterError(name, value, allowed)
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ParameterError(name, value, allowed) from None
-    if not (v > 0) or math.isnan(v):
-        raise ParameterError(name, value, allowed)
-    return v
 
 
 def validate_options(options: dict[str, Any]) -> dict[str, Any]:

@@ -100,3 +100,17 @@ def check_bool(name: str, value: Any) -> bool:
     if isinstance(value, bool):
         return value
     raise ParameterError(name, value, "true or false")
+
+
+def check_sigma(name: str, value: Any) -> float:
+    """A filter's sigma: a number > 0, where ``inf`` disables that weight."""
+    allowed = "a number > 0, or inf to disable this weight"
+    if isinstance(value, bool):
+        raise ParameterError(name, value, allowed)
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(name, value, allowed) from None
+    if not (v > 0) or math.isnan(v):
+        raise ParameterError(name, value, allowed)
+    return v

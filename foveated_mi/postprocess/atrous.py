@@ -58,25 +58,13 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-from ..validate import ParameterError, check_int
+from ..validate import ParameterError, check_int, check_sigma  # noqa: F401 (re-exported)
 from .tonemap import as_color3f
 
 #: One-dimensional B3-spline taps (the 5x5 kernel is their outer product).
 B3_SPLINE = (1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0)
 
 
-def check_sigma(name: str, value) -> float:
-    """A sigma: a number > 0, where ``inf`` is allowed and disables that weight."""
-    allowed = "a number > 0 (inf disables the weight)"
-    if isinstance(value, bool):
-        raise ParameterError(name, value, allowed)
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ParameterError(name, value, allowed) from None
-    if math.isnan(v) or v <= 0.0:
-        raise ParameterError(name, value, allowed)
-    return v
 
 
 def _inv_sq(sigma: float) -> float:

@@ -42,6 +42,7 @@ import math
 import drjit as dr
 import mitsuba as mi
 
+from ..reconstruct.guided import surface_energy
 from ..validate import ParameterError, check_int, check_range
 
 _B3 = (1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0)
@@ -137,15 +138,7 @@ def _level(c: mi.Color3f, var: mi.Float, nrm, pos, hit, width: int, height: int,
         cqd = dr.detach(cq)
         fq = dr.isfinite(cqd.x) & dr.isfinite(cqd.y) & dr.isfinite(cqd.z)
         cq = cq - c_safe                      # residual form (see the module docstring)
-        hq = dr.gather(mi.Bool, hit, q, inside)
-        nq = dr.gather(mi.Vector3f, nrm, q, inside)
-        xq = dr.gather(mi.Vector3f, pos, q, inside)
-        dxw = xq - pos
-        d2 = dr.squared_norm(dxw)
-        plane = dr.dot(nrm, dxw)
-        e_geo = dr.squared_norm(nrm - nq) * inv_n + \
-            dr.select(d2 > 0, plane * plane / dr.select(d2 > 0, d2, 1.0), 0.0) * inv_x
-        e_geo = dr.select(hit & hq, e_geo, 0.0)
+        e_geo, hq = surface_energy(nrm, pos, hit, q, inside, inv_n, inv_x)
         if denom is None:
             e_col = mi.Float(0.0)
         else:

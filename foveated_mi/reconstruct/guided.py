@@ -148,6 +148,22 @@ def guided(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: i
     return dr.fma(fallback, remaining, out)
 
 
+
+def surface_energy(normal: mi.Vector3f, position: mi.Vector3f, hit: mi.Bool, q: mi.UInt32,
+                   inside: mi.Bool, inv_n: mi.Float, inv_x: mi.Float) -> tuple[mi.Float, mi.Bool]:
+    """Edge-stopping energy between each pixel and its tap ``q``: the squared normal
+    difference over σn², plus the squared distance of ``q`` to the pixel's tangent plane
+    relative to their distance, over σx²; 0 between misses (misses mix with misses only).
+    Returns the energy and ``q``'s hit flag."""
+    hq = dr.gather(mi.Bool, hit, q, inside)
+    nq = dr.gather(mi.Vector3f, normal, q, inside)
+    dxw = dr.gather(mi.Vector3f, position, q, inside) - position
+    dist2 = dr.squared_norm(dxw)
+    plane = dr.dot(normal, dxw)
+    e = dr.squared_norm(normal - nq) * inv_n + \
+        dr.select(dist2 > 0, plane * plane / dr.select(dist2 > 0, dist2, 1.0), 0.0) * inv_x
+    return dr.select(hit & hq, e, 0.0), hq
+
 def _level(num: mi.Color3f, den: mi.Float, normal: mi.Vector3f, position: mi.Vector3f,
            hit: mi.Bool, width: int, height: int, *, step: mi.Int32, inv_n: mi.Float,
            inv_x: mi.Float) -> tuple[mi.Color3f, mi.Float, mi.Float]:
@@ -168,15 +184,7 @@ def _level(num: mi.Color3f, den: mi.Float, normal: mi.Vector3f, position: mi.Vec
         qy = py + dy * step
         inside = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
         q = mi.UInt32(dr.select(inside, qy * width + qx, 0))
-        hq = dr.gather(mi.Bool, hit, q, inside)
-        nq = dr.gather(mi.Vector3f, normal, q, inside)
-        xq = dr.gather(mi.Vector3f, position, q, inside)
-        dxw = xq - position
-        dist2 = dr.squared_norm(dxw)
-        plane = dr.dot(normal, dxw)
-        e = dr.squared_norm(normal - nq) * inv_n + \
-            dr.select(dist2 > 0, plane * plane / dr.select(dist2 > 0, dist2, 1.0), 0.0) * inv_x
-        e = dr.select(hit & hq, e, 0.0)            # misses mix with misses only
+        e, hq = surface_energy(normal, position, hit, q, inside, inv_n, inv_x)
         g = dr.select(inside & (hit == hq), _b3(dx) * _b3(dy) * dr.exp(-e), 0.0)
         return (k + 1, dr.fma(dr.gather(mi.Color3f, num, q, inside), g, n_acc),
                 dr.fma(dr.gather(mi.Float, den, q, inside), g, d_acc), g_acc + g)
