@@ -70,6 +70,6 @@ def test_inverse_rendering_notebook_executes_at_a_tiny_size(tmp_path, monkeypatc
     import re
     start = float(re.search(r"initial error ([0-9.]+)", text).group(1))
     finals = [float(v) for v in re.findall(r"\], final error ([0-9.]+)", text)]
-    assert len(finals) == 2 and all(f < 0.8 * start for f in finals), (start, finals)
+    assert len(finals) == 3 and all(f < 0.8 * start for f in finals), (start, finals)
     assert any(o.get("output_type") == "display_data" and "image/png" in o.get("data", {})
                for o in outputs), "no figure produced"
