@@ -22,8 +22,8 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _add_frame_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--preset", help="auto | paper | oidn | svgf: a tuned group of defaults "
-                   "(auto: oidn when pyoidn is installed, else svgf)")
+    p.add_argument("--preset", help="auto | paper | oidn | guided: a tuned group of defaults "
+                   "(auto: oidn when pyoidn is installed, else guided)")
     p.add_argument("--theta", type=float, help="foveal radius (fraction of half the diagonal)")
     p.add_argument("--sigma-p", type=float, dest="sigma_p", help="P(theta), in (0, 1]")
     p.add_argument("--gaze", type=float, nargs=2, metavar=("X", "Y"),

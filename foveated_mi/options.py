@@ -82,7 +82,7 @@ NON_DIFFERENTIABLE_DENOISERS = frozenset({"oidn"})
 
 
 def resolve_preset(preset: str) -> str:
-    """The preset ``preset`` stands for (``auto`` -> ``oidn`` or ``svgf``)."""
+    """The preset ``preset`` stands for (``auto`` -> ``oidn`` or ``guided``)."""
     check_choice("preset", preset, PRESET_NAMES)
     if preset != "auto":
         return preset

@@ -38,6 +38,12 @@ mapping round trip when neither the filter nor the PNG needs it.
 
 .. pluginparameters::
 
+ * - preset
+   - |string|
+   - ``auto`` (default: ``oidn`` when ``pyoidn`` imports, else ``guided``) | ``oidn`` |
+     ``guided`` | ``paper``: a tuned group of the defaults below (see
+     :mod:`foveated_mi.options`); options given explicitly win. The defaults listed here are
+     the paper's (``preset = "paper"``)
  * - theta
    - |float|
    - Foveal radius θ in units of half the film diagonal, > 0 (default 0.1)
@@ -64,18 +70,27 @@ mapping round trip when neither the filter nor the PNG needs it.
  * - edge_threshold
    - |float|
    - Relative depth jump that forces a ray, >= 0; 0 disables forced edge rays (default 0.1)
+ * - demodulate
+   - |bool|
+   - Reconstruct and filter irradiance, albedo multiplied back (:mod:`foveated_mi.demodulate`)
  * - reconstruction
    - |string|
-   - ``voronoi`` | ``sibson`` (default) | ``discrete_sibson`` | ``fast_sibson``
+   - ``voronoi`` | ``sibson`` (default) | ``discrete_sibson`` | ``fast_sibson`` | ``guided``
+     | ``stochastic`` (with ``target_samples``, ``guided_levels``, ``stochastic_jitter``,
+     ``stochastic_tries``)
  * - max_radius
    - |int|
    - Bound on the interpolation radius in pixels (default 32)
  * - jfa
    - |string|
    - Jump Flooding variant: ``jfa`` | ``1+jfa`` | ``jfa+1`` (default) | ``jfa+2``
+ * - denoiser
+   - |string|
+   - ``atrous`` (default) | ``svgf`` (variance-guided, ``sigma_luminance``) | ``oidn``
+     (``oidn_quality``; not differentiable) | ``none``
  * - atrous_iterations, sigma_color, sigma_normal, sigma_position
    - |int|, |float|
-   - Edge-avoiding à-trous filter (Dammertz et al. 2010); 0 iterations turns it off
+   - Edge-avoiding à-trous filter (Dammertz et al. 2010); 0 iterations turns the filter off
  * - tonemap, exposure
    - |string|, |float|
    - Tone-mapping operator and exposure in stops (filter domain and PNG output)
