@@ -48,7 +48,7 @@ def main(argv=None):
     edges = depth_edges(gb.depth, gb.hit, W, H, 0.1)
     theta = calibrate_theta(W, H, a.fraction, sigma_p=a.sigma_p, edges=edges)
     # History off and a constant-cost reconstruction: this isolates the trace stage.
-    integs = {m: FoveatedIntegrator(nested=nested, theta=theta, sigma_p=a.sigma_p, reorder=m,
+    integs = {m: FoveatedIntegrator(preset="paper", nested=nested, theta=theta, sigma_p=a.sigma_p, reorder=m,
                                     history=False, reconstruction="voronoi",
                                     atrous_iterations=0, timing=True) for m in MODES}
     full_ms, stage = [], {m: [] for m in MODES}

@@ -40,7 +40,7 @@ def main(argv=None):
     scene, ref = scene_with_reference(a.scene, W, H, max_depth=a.max_depth, ref_spp=a.ref_spp)
     nested = scene.integrator()
     ref_d = to_display(ref)
-    kw = dict(nested=nested, theta=a.theta, sigma_p=a.sigma_p, timing=True)
+    kw = dict(preset="paper", nested=nested, theta=a.theta, sigma_p=a.sigma_p, timing=True)
     with_h = FoveatedIntegrator(history=True, **kw)
     without = FoveatedIntegrator(history=False, **kw)
     t_with, t_without, rows, curve = [], [], [], {}

@@ -53,7 +53,8 @@ def main(argv=None) -> int:
     W, H = a.size
     scene = load_scene("voxel-city", width=W, height=H, spp=1, size=24,
                        integrator={"type": "path", "max_depth": 3})
-    integ = FoveatedIntegrator(nested=scene.integrator(), theta=0.1, sigma_p=0.8, timing=True)
+    integ = FoveatedIntegrator(preset="paper", nested=scene.integrator(), theta=0.1,
+                               sigma_p=0.8, timing=True)
     gaze = Saccades(targets=[[0.3, 0.4], [0.7, 0.6], [0.5, 0.2]], dwell=0.2, duration=0.05)
     rss, compiled, bad = {}, 0, []
     for i in range(a.frames):

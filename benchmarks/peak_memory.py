@@ -32,7 +32,8 @@ def main(argv=None) -> int:
     W, H = a.size
     scene = load_scene("voxel-city", width=W, height=H, spp=1,
                        integrator={"type": "path", "max_depth": 3})
-    integ = FoveatedIntegrator(nested=scene.integrator(), reconstruction=a.reconstruction)
+    integ = FoveatedIntegrator(preset="paper", nested=scene.integrator(),
+                               reconstruction=a.reconstruction)
     t0 = time.perf_counter()
     img = np.array(mi.render(scene, integrator=integ))
     dt = time.perf_counter() - t0
