@@ -190,17 +190,23 @@ class _Ctx:
         return value
 
 
-def load_config(path: str | os.PathLike) -> SequenceConfig:
-    """Read and validate a sequence TOML file (see the module docs for the layout)."""
+def read_toml(name: str, path: str | os.PathLike) -> tuple[dict, str]:
+    """``(table, path)`` of a TOML file; a missing file or a syntax error is a
+    :class:`ParameterError` naming ``name`` (``config``, ``study``)."""
     if not isinstance(path, (str, os.PathLike)) or not os.path.isfile(path):
-        raise ParameterError("config", path if isinstance(path, str) else str(path),
+        raise ParameterError(name, path if isinstance(path, str) else str(path),
                              "an existing TOML file")
     path = os.fspath(path)
     try:
         with open(path, "rb") as f:
-            data = tomllib.load(f)
+            return tomllib.load(f), path
     except tomllib.TOMLDecodeError as e:
-        raise ParameterError("config", path, f"valid TOML ({e})") from None
+        raise ParameterError(name, path, f"valid TOML ({e})") from None
+
+
+def load_config(path: str | os.PathLike) -> SequenceConfig:
+    """Read and validate a sequence TOML file (see the module docs for the layout)."""
+    data, path = read_toml("config", path)
     stem = os.path.splitext(os.path.basename(path))[0]
     return parse_config(data, base_dir=os.path.dirname(os.path.abspath(path)), source=path,
                         default_output=os.path.join("out", stem))

@@ -14,10 +14,10 @@ defaults by a configuration tuned together; any option given explicitly wins ove
 ``guided``
     The differentiable noise-aware pipeline, no extra dependency: albedo demodulation, the
     G-buffer-guided sparse reconstruction and the variance-guided à-trous filter (SVGF), which
-    stops smoothing where the history has converged. Against the paper's fixed-σ à-trous filter
-    on the staircase (320x180, 2 spp, still gaze) it measured +2 dB fovea PSNR at frame 1 and
-    +5 dB at frame 16 at equal full-frame PSNR; on voxel-city +1.6 / +4.6 dB over the frame /
-    fovea at frame 16.
+    stops smoothing where the history has converged. In ``benchmarks/bench_equal_time.py``
+    (640x360, frame 16, still gaze) ``guided`` at 2 spp is ahead of ``paper`` at 4 spp by
+    +2.9 / +6.1 dB (frame / fovea) on the staircase in 337 against 371 ms, and by
+    +2.1 / +8.5 dB on voxel-city in 272 against 228 ms.
 ``auto`` (default)
     ``oidn`` when ``pyoidn`` can be imported, else ``guided``; ``stats["preset"]`` names the
     one used.

@@ -56,18 +56,12 @@ from __future__ import annotations
 import itertools
 import json
 import os
-import sys
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from ..config import _Ctx
+from ..config import _Ctx, read_toml
 from ..metrics import COMPARE_KEYS
 from ..validate import ParameterError
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
 
 __all__ = ["StudySpec", "SceneSpec", "load_study", "parse_study", "QUALITY_COLUMNS",
            "DEFAULT_INTEGRATOR", "DEFAULT_REFERENCE_SPP"]
@@ -147,15 +141,7 @@ class StudySpec:
 
 def load_study(path: str | os.PathLike) -> StudySpec:
     """Read and validate a study TOML file (see the module docs for the layout)."""
-    if not isinstance(path, (str, os.PathLike)) or not os.path.isfile(path):
-        raise ParameterError("study", path if isinstance(path, str) else str(path),
-                             "an existing TOML file")
-    path = os.fspath(path)
-    try:
-        with open(path, "rb") as f:
-            data = tomllib.load(f)
-    except tomllib.TOMLDecodeError as e:
-        raise ParameterError("study", path, f"valid TOML ({e})") from None
+    data, path = read_toml("study", path)
     return parse_study(data, base_dir=os.path.dirname(os.path.abspath(path)), source=path,
                        name=os.path.splitext(os.path.basename(path))[0])
 
