@@ -136,6 +136,7 @@ from .. import variance as _variance
 from ..demodulate import demodulate, remodulate
 from ..postprocess.inverse import inverse_tonemap
 from ..pixel_filter import FilterSampler
+from ..scene_state import GeometryCache
 from ..timing import StageTimer
 from ..options import DEFAULTS, NON_DIFFERENTIABLE_DENOISERS, PRESETS, validate_options  # noqa: F401
 from ..validate import ParameterError, check_int
@@ -159,6 +160,7 @@ class Frame:
     reordered: _reorder.Reordered
     history: _reproject.History | None         #: history this frame read (a constant)
     filter_sampler: FilterSampler
+    gbuffer_reused: bool = False               #: the G-buffer is the previous frame's
 
 
 @dataclass
@@ -233,6 +235,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._stats_raw: dict[str, Any] = {}
         self._stats_cache: dict[str, Any] | None = None
         self._filter_samplers: dict[tuple, FilterSampler] = {}
+        self._geometry = GeometryCache()
 
     # -- options --------------------------------------------------------------------------
     @property
@@ -269,6 +272,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         """Forget the history (next frame starts fresh, as frame 0)."""
         self._history = None
         self._frame = 0
+        self._geometry.clear()
 
     @property
     def frame(self) -> int:
@@ -388,8 +392,9 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
 
         with dr.suspend_grad():
-            gb = _gbuffer.render_gbuffer(scene, sensor,
-                                         materials=o["demodulate"] or o["denoiser"] == "oidn")
+            # A still camera over an unchanged scene reuses the last G-buffer.
+            gb, reused = self._geometry.gbuffer(
+                scene, sensor, materials=o["demodulate"] or o["denoiser"] == "oidn")
             # Everything the G-buffer holds is evaluated with the pass: a lazy albedo would
             # re-run the BSDF dispatch in every later kernel, and would point into the scene
             # after the scene is gone (a gradient pass can outlive it).
@@ -412,7 +417,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         return Frame(sensor=sensor, width=width, height=height, spp=spp, seed=frame_seed,
                      map_seed=map_seed, gbuffer=gb, edges=edges, sampling_map=smap,
                      probability=prob, reprojection=reproj, reordered=ro, history=history,
-                     filter_sampler=self._filter_sampler(sensor, o["pixel_filter"]))
+                     filter_sampler=self._filter_sampler(sensor, o["pixel_filter"]),
+                     gbuffer_reused=reused)
 
     def _filter_sampler(self, sensor: mi.Sensor, mode: str) -> FilterSampler:
         film = sensor.film()
@@ -557,6 +563,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             "history_hits": dr.count(reproj.hit), "resampled": dr.count(resolved.resampled),
             "holes": dr.count(~resolved.mask), "rejected_samples": shade.rejected,
             "clamped_samples": shade.clamped, "timings_ms": timer.finish(),
+            "gbuffer_reused": frame.gbuffer_reused,
             "variant": mi.variant(),
             **{k: (list(v) if k == "gaze" else v) for k, v in o.items() if k != "timing"},
         }
