@@ -1,0 +1,165 @@
+"""Benchmark: what a foveated frame costs besides its rays, stage by stage, against a full render.
+
+    python benchmarks/bench_overhead.py                       # every case, paper sizes
+    python benchmarks/bench_overhead.py --cases voxel-static --frames 7
+    python benchmarks/bench_overhead.py --scale 0.125 --frames 1 --warmup 1   # smoke run
+
+Cases (the film size is multiplied by ``--scale``):
+
+``voxel-static`` / ``voxel-moving``
+    voxel-city 1024x1024, path ``max_depth`` 3, 1 spp, ``preset="paper"``, θ calibrated to 10 %
+    of the pixels (edge rays included), history on; a still camera, or a camera orbiting
+    0.5° per frame.
+``staircase-guided`` / ``staircase-oidn``
+    the shared staircase interior (skipped when absent), 640x360, path ``max_depth`` 8, 2 spp,
+    the ``guided`` and ``oidn`` presets (OIDN skipped without ``pyoidn``).
+
+Each frame runs, back to back so they share the machine's noise: the full render of the
+nested integrator, the foveated frame (timing off: its wall time gives the speed-up), and the
+same frame on a twin integrator with ``timing=True`` (stage boundaries synchronised: its
+stage times give the table). Every image is forced to host memory inside the timed region.
+Medians over the frames after ``--warmup``. The overhead is everything but the trace stage,
+as a multiple of the full frame (the paper's Table 1 puts it at 0.15-0.19x). Kernels: JIT
+launches per foveated frame, and compilations from the third frame on (Dr.Jit's kernel
+history; target 0).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+import foveated_mi
+from common import calibrate_theta, machine, md_table, median, write_json
+
+STAIRCASE = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "scenes", "staircase",
+                         "scene.xml")
+CASES = {
+    "voxel-static": dict(scene="voxel-city", size=(1024, 1024), max_depth=3, spp=1,
+                         preset="paper", fraction=0.10, orbit=0.0),
+    "voxel-moving": dict(scene="voxel-city", size=(1024, 1024), max_depth=3, spp=1,
+                         preset="paper", fraction=0.10, orbit=0.5),
+    "staircase-guided": dict(scene=STAIRCASE, size=(640, 360), max_depth=8, spp=2,
+                             preset="guided", fraction=None, orbit=0.0),
+    "staircase-oidn": dict(scene=STAIRCASE, size=(640, 360), max_depth=8, spp=2,
+                           preset="oidn", fraction=None, orbit=0.0),
+}
+STAGES = ("gbuffer", "sampling", "reorder", "trace", "reconstruct", "post")
+
+
+def _forced(fn) -> float:
+    dr.sync_thread()
+    t0 = time.perf_counter()
+    np.array(fn())
+    dr.sync_thread()
+    return (time.perf_counter() - t0) * 1e3
+
+
+def _orbit(camera: dict, degrees: float) -> dict:
+    """``camera`` turned by ``degrees`` about the vertical axis through its target."""
+    o, t = np.array(camera["origin"], float), np.array(camera["target"], float)
+    a = math.radians(degrees)
+    d = o - t
+    rot = np.array([[math.cos(a), 0, math.sin(a)], [0, 1, 0], [-math.sin(a), 0, math.cos(a)]])
+    return {**camera, "origin": list(t + rot @ d)}
+
+
+def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int) -> dict | None:
+    from foveated_mi.gbuffer import render_gbuffer
+    from foveated_mi.integrators.foveated import FoveatedIntegrator
+    from foveated_mi.sampling import depth_edges
+    from foveated_mi.scenes import apply_camera, camera_of, load_scene
+
+    if spec["scene"].endswith(".xml") and not os.path.exists(spec["scene"]):
+        print(f"{name}: skipped (scene not found: {os.path.abspath(spec['scene'])})")
+        return None
+    if spec["preset"] == "oidn":
+        from foveated_mi.denoise import oidn_available
+        if not oidn_available():
+            print(f"{name}: skipped (pyoidn is not installed)")
+            return None
+    W, H = (max(8, int(round(s * scale))) for s in spec["size"])
+    scene = load_scene(spec["scene"], width=W, height=H, spp=spec["spp"],
+                       integrator={"type": "path", "max_depth": spec["max_depth"]})
+    nested = scene.integrator()
+    opts = dict(preset=spec["preset"], nested=nested)
+    if spec["fraction"] is not None:
+        gb = render_gbuffer(scene, scene.sensors()[0])
+        edges = depth_edges(gb.depth, gb.hit, W, H, 0.1)
+        opts["theta"] = calibrate_theta(W, H, spec["fraction"], sigma_p=0.8, edges=edges)
+    fov = FoveatedIntegrator(**opts)
+    timed = FoveatedIntegrator(**opts, timing=True)
+    camera = camera_of(scene)
+
+    full, frame, stages, launches, compiled, fractions = [], [], [], [], 0, []
+    for k in range(warmup + frames):
+        if spec["orbit"]:
+            camera = _orbit(camera, spec["orbit"])
+            apply_camera(scene, camera)
+        t_full = _forced(lambda: mi.render(scene, integrator=nested, spp=spec["spp"], seed=k))
+        with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+            dr.kernel_history_clear()
+            t_fov = _forced(lambda: mi.render(scene, integrator=fov, spp=spec["spp"], seed=k))
+            hist = dr.kernel_history([dr.KernelType.JIT])
+        _forced(lambda: mi.render(scene, integrator=timed, spp=spec["spp"], seed=k))
+        if k >= 2:
+            compiled += sum(1 for h in hist if not h.get("cache_hit", True))
+        if k >= warmup:
+            full.append(t_full)
+            frame.append(t_fov)
+            stages.append(timed.stats["timings_ms"])
+            launches.append(len(hist))
+            fractions.append(fov.stats["ray_fraction"])
+    full_ms = median(full)
+    st = {s: median([t[s] for t in stages]) for s in STAGES}
+    overhead = sum(v for s, v in st.items() if s != "trace")
+    return {"case": name, "size": [W, H], "preset": spec["preset"], "spp": spec["spp"],
+            "ray_fraction": median(fractions), "full_ms": full_ms, "frame_ms": median(frame),
+            "speedup": full_ms / median(frame), "stages_ms": st,
+            "stages_x_full": {s: v / full_ms for s, v in st.items()},
+            "overhead_x_full": overhead / full_ms, "kernels_per_frame": median(launches),
+            "compiled_from_frame_3": compiled, "frames": frames}
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
+    p.add_argument("--scale", type=float, default=1.0, help="film size multiplier (default 1)")
+    p.add_argument("--frames", type=int, default=5)
+    p.add_argument("--warmup", type=int, default=3)
+    p.add_argument("--variant")
+    p.add_argument("--out", help="JSON results")
+    a = p.parse_args(argv)
+    if not (a.scale > 0 and a.frames >= 1 and a.warmup >= 0):
+        p.error(f"--scale must be > 0 (got {a.scale}), --frames >= 1 (got {a.frames}), "
+                f"--warmup >= 0 (got {a.warmup})")
+    foveated_mi.set_variant(a.variant)
+    rows, results = [], []
+    for name in a.cases:
+        r = run_case(name, CASES[name], scale=a.scale, frames=a.frames, warmup=a.warmup)
+        if r is None:
+            continue
+        results.append(r)
+        x = r["stages_x_full"]
+        rows.append([name, "x".join(map(str, r["size"])), r["preset"],
+                     f"{100 * r['ray_fraction']:.1f} %", f"{r['full_ms']:.0f}",
+                     f"{r['frame_ms']:.0f}", f"x{r['speedup']:.2f}",
+                     *(f"{r['stages_ms'][s]:.1f} ({x[s]:.2f})" for s in STAGES),
+                     f"{r['overhead_x_full']:.2f}", f"{r['kernels_per_frame']:.0f}",
+                     r["compiled_from_frame_3"]])
+    print(md_table(["case", "size", "preset", "rays", "full ms", "foveated ms", "speed-up",
+                    *(f"{s} ms (x full)" for s in STAGES), "overhead x full", "kernels/frame",
+                    "compiled (frame >= 3)"], rows))
+    print(f"\n{machine()}; medians of {a.frames} frames after {a.warmup} warm-up frames")
+    write_json(a.out, {"machine": machine(), "results": results})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
