@@ -28,6 +28,7 @@ import mitsuba as mi
 
 from .reconstruct.jfa import NO_SITE
 from .shading import luminance
+from .taps import Surface, for_each_tap, gather4, packet
 
 #: Below this many samples a pixel's own moments are replaced by the spatial estimate.
 MIN_TEMPORAL_SAMPLES = 4.0
@@ -43,30 +44,20 @@ def sample_variance(mean: mi.Color3f, moment2: mi.Float, count: mi.Float, mask: 
     own = raw * bessel
 
     # Spatial estimate: pooled moments of the samples of a 5x5 window on the same surface.
-    idx = dr.arange(mi.UInt32, width * height)
-    py = idx // width
-    px = mi.Int32(idx - py * width)
-    py = mi.Int32(py)
-    nrm = dr.select(hit, mi.Vector3f(normal), 0.0)
+    surface = Surface.of(normal, dr.zeros(mi.Vector3f, width * height), hit)
     m2 = dr.select(mask, dr.detach(moment2), 0.0)
-    dr.schedule(mu, m2, n, nrm)
+    moments = packet(n, mu, m2, dr.zeros(mi.Float, width * height))
+    dr.schedule(moments)
 
-    def body(k, s0, s1, s2):
-        dy = mi.Int32(k // 5) - 2
-        dx = mi.Int32(k % 5) - 2
-        qx, qy = px + dx, py + dy
-        inside = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
-        q = mi.UInt32(dr.select(inside, qy * width + qx, 0))
-        same = inside & (dr.gather(mi.Bool, hit, q, inside) == hit)
-        same &= ~hit | (dr.dot(nrm, dr.gather(mi.Vector3f, nrm, q, same)) > 0.9)
-        nq = dr.select(same, dr.gather(mi.Float, n, q, same), 0.0)
-        return (k + 1, s0 + nq, dr.fma(nq, dr.gather(mi.Float, mu, q, same), s1),
-                dr.fma(nq, dr.gather(mi.Float, m2, q, same), s2))
+    def visit(tap, s0, s1, s2):
+        nq_, _, hq = surface.at(tap.q, tap.inside)
+        same = tap.inside & (hq == surface.hit)
+        same &= ~surface.hit | (dr.dot(surface.normal, nq_) > 0.9)
+        v = gather4(moments, tap.q, same)
+        return s0 + v.x, dr.fma(v.x, v.y, s1), dr.fma(v.x, v.z, s2)
 
     zero = dr.zeros(mi.Float, width * height)
-    _, s0, s1, s2 = dr.while_loop(
-        state=(mi.UInt32(0), zero, zero, zero), cond=lambda k, *_: k < 25, body=body,
-        label="spatial_variance", max_iterations=25)
+    s0, s1, s2 = for_each_tap(width, height, 1, visit, (zero, zero, zero), "spatial_variance")
     inv = dr.rcp(dr.maximum(s0, 1.0))
     pooled = dr.maximum(s2 * inv - dr.square(s1 * inv), 0.0)
     spatial = pooled * dr.select(s0 > 1.0, s0 / dr.maximum(s0 - 1.0, 1.0), 1.0)

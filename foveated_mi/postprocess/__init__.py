@@ -11,7 +11,8 @@ Pipeline order, as in the paper::
 """
 from __future__ import annotations
 
-from .atrous import B3_SPLINE, atrous, check_sigma
+from ..taps import B3_SPLINE
+from .atrous import atrous, check_sigma
 from .oidn import oidn
 from .svgf import svgf
 from .tonemap import MAX_EXPOSURE, TONEMAPPERS, check_exposure, tonemap

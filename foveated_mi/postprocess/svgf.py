@@ -42,31 +42,17 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-from ..reconstruct.guided import surface_energy
+from ..taps import Surface, for_each_tap, gather4, packet, pixel_xy, surface_energy
 from ..validate import ParameterError, check_int, check_range
 
-_B3 = (1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0)
 _G3 = (0.25, 0.5, 0.25)
 #: Floor of the colour weight's denominator (keeps the zero-variance case finite).
 EPSILON = 1e-10
 
 
-def _tap(d: mi.Int32, taps) -> mi.Float:
-    a = dr.abs(d)
-    if len(taps) == 5:
-        return dr.select(a == 0, taps[2], dr.select(a == 1, taps[1], taps[0]))
-    return dr.select(a == 0, taps[1], taps[0])
-
-
-def _coords(width: int, height: int):
-    idx = dr.arange(mi.UInt32, width * height)
-    py = idx // width
-    return mi.Int32(idx - py * width), mi.Int32(py)
-
-
 def _prefilter(var: mi.Float, width: int, height: int) -> mi.Float:
     """3 x 3 Gaussian blur of the variance (SVGF), renormalised at the borders."""
-    px, py = _coords(width, height)
+    px, py = pixel_xy(width, height)
     acc = dr.zeros(mi.Float, width * height)
     wsum = dr.zeros(mi.Float, width * height)
     for dy in (-1, 0, 1):
@@ -104,18 +90,16 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
         return color
     c = mi.Color3f(color)
     var = dr.select(dr.isfinite(variance), dr.maximum(dr.detach(variance), 0.0), 0.0)
-    nrm = dr.select(hit, mi.Vector3f(normal), 0.0)
-    pos = dr.select(hit, mi.Vector3f(position), 0.0)
-    dr.schedule(nrm, pos)
+    surface = Surface.of(normal, position, hit)
     for level in range(iterations):
-        c, var = _level(c, var, nrm, pos, hit, width, height,
+        c, var = _level(c, var, surface, width, height,
                         step=dr.opaque(mi.Int32, 1 << level),
                         sl=None if math.isinf(sl) else dr.opaque(mi.Float, sl),
                         inv_n=dr.opaque(mi.Float, inv_n), inv_x=dr.opaque(mi.Float, inv_x))
     return c
 
 
-def _level(c: mi.Color3f, var: mi.Float, nrm, pos, hit, width: int, height: int, *, step,
+def _level(c: mi.Color3f, var: mi.Float, surface: Surface, width: int, height: int, *, step,
            sl, inv_n, inv_x) -> tuple[mi.Color3f, mi.Float]:
     n = width * height
     dr.schedule(c, var)
@@ -125,33 +109,30 @@ def _level(c: mi.Color3f, var: mi.Float, nrm, pos, hit, width: int, height: int,
     cd = dr.detach(c_safe)
     # sigma_luminance = inf switches the colour weight off (a purely geometric filter).
     denom = None if sl is None else sl * dr.sqrt(_prefilter(var, width, height)) + EPSILON
-    px, py = _coords(width, height)
-    dr.schedule(c_safe, denom)
+    # One packet per tap: colour (carries the gradient) and the variance, and finiteness
+    # as the variance's sign (variances are >= 0).
+    src = packet(c_safe.x, c_safe.y, c_safe.z, dr.select(finite, var, -1.0))
+    dr.schedule(c_safe, denom, src)
 
-    def body(k, c_acc, v_acc, w_acc):
-        dy = mi.Int32(k // 5) - 2
-        dx = mi.Int32(k % 5) - 2
-        qx, qy = px + dx * step, py + dy * step
-        inside = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
-        q = mi.UInt32(dr.select(inside, qy * width + qx, 0))
-        cq = dr.gather(mi.Color3f, c_safe, q, inside)
+    def visit(tap, c_acc, v_acc, w_acc):
+        v4 = gather4(src, tap.q, tap.inside)
+        cq = mi.Color3f(v4.x, v4.y, v4.z)
         cqd = dr.detach(cq)
-        fq = dr.isfinite(cqd.x) & dr.isfinite(cqd.y) & dr.isfinite(cqd.z)
+        fq, vq = v4.w >= 0.0, dr.maximum(dr.detach(v4.w), 0.0)
         cq = cq - c_safe                      # residual form (see the module docstring)
-        e_geo, hq = surface_energy(nrm, pos, hit, q, inside, inv_n, inv_x)
+        e_geo, hq = surface_energy(surface, tap.q, tap.inside, inv_n, inv_x)
         if denom is None:
             e_col = mi.Float(0.0)
         else:
             diff = dr.abs(cd - cqd)
             e_col = (diff.x + diff.y + diff.z) / denom
-        h = _tap(dx, _B3) * _tap(dy, _B3)
-        w = dr.select(inside & fq & (hit == hq), h * dr.exp(-(e_col + e_geo)), 0.0)
-        vq = dr.gather(mi.Float, var, q, inside)
-        return k + 1, dr.fma(cq, w, c_acc), dr.fma(w * w, vq, v_acc), w_acc + w
+        w = dr.select(tap.inside & fq & (surface.hit == hq), tap.b3 * dr.exp(-(e_col + e_geo)),
+                      0.0)
+        return dr.fma(cq, w, c_acc), dr.fma(w * w, vq, v_acc), w_acc + w
 
-    _, c_acc, v_acc, w_acc = dr.while_loop(
-        state=(mi.UInt32(0), dr.zeros(mi.Color3f, n), dr.zeros(mi.Float, n), dr.zeros(mi.Float, n)),
-        cond=lambda k, *_: k < 25, body=body, label="svgf_taps", max_iterations=25)
+    c_acc, v_acc, w_acc = for_each_tap(
+        width, height, step, visit,
+        (dr.zeros(mi.Color3f, n), dr.zeros(mi.Float, n), dr.zeros(mi.Float, n)), "svgf_taps")
     dr.schedule(c_acc, v_acc, w_acc)
     has = w_acc > 0
     inv = dr.rcp(dr.select(has, w_acc, 1.0))

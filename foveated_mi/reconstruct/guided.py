@@ -58,11 +58,9 @@ from typing import NamedTuple
 import drjit as dr
 import mitsuba as mi
 
+from ..taps import Surface, for_each_tap, gather4, packet, surface_energy
 from ..validate import ParameterError, check_int, check_range
 from .jfa import check_buffer, check_film, voronoi_fill
-
-#: One-dimensional B3-spline taps (the 5x5 kernel is their outer product).
-_B3 = (1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0)
 
 
 class Guide(NamedTuple):
@@ -75,11 +73,6 @@ class Guide(NamedTuple):
 
 #: Accumulated weights at or below this count as no sample (far below any real weight).
 MIN_WEIGHT = 1e-20
-
-def _b3(d: mi.Int32) -> mi.Float:
-    a = dr.abs(d)
-    return dr.select(a == 0, _B3[2], dr.select(a == 1, _B3[1], _B3[0]))
-
 
 def level_variance(level: int) -> float:
     """Per-axis variance (px²) of the cascade kernel after levels ``0 .. level``."""
@@ -115,10 +108,7 @@ def guided(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: i
     w = dr.select(finite, dr.maximum(w, 0.0), 0.0)
     value = dr.select(w > 0, value, 0.0)
 
-    hit = mi.Bool(guide.hit)
-    normal = dr.select(hit, mi.Vector3f(guide.normal), 0.0)
-    position = dr.select(hit, mi.Vector3f(guide.position), 0.0)
-    dr.schedule(hit, normal, position)
+    surface = Surface.of(guide.normal, guide.position, guide.hit)
     opaque = lambda v: dr.opaque(mi.Float, v)  # noqa: E731
 
     num, den = value * w, mi.Float(w)
@@ -128,7 +118,7 @@ def guided(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: i
     remaining = 1.0 - tau
     est = value
     for level in range(levels):
-        num, den, gsum = _level(num, den, normal, position, hit, width, height,
+        num, den, gsum = _level(num, den, surface, width, height,
                                 step=dr.opaque(mi.Int32, 1 << level), inv_n=opaque(inv_n),
                                 inv_x=opaque(inv_x))
         # A weight below this is a denormal in the making: kernels flush those to zero or
@@ -149,50 +139,24 @@ def guided(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: i
 
 
 
-def surface_energy(normal: mi.Vector3f, position: mi.Vector3f, hit: mi.Bool, q: mi.UInt32,
-                   inside: mi.Bool, inv_n: mi.Float, inv_x: mi.Float) -> tuple[mi.Float, mi.Bool]:
-    """Edge-stopping energy between each pixel and its tap ``q``: the squared normal
-    difference over σn², plus the squared distance of ``q`` to the pixel's tangent plane
-    relative to their distance, over σx²; 0 between misses (misses mix with misses only).
-    Returns the energy and ``q``'s hit flag."""
-    hq = dr.gather(mi.Bool, hit, q, inside)
-    nq = dr.gather(mi.Vector3f, normal, q, inside)
-    dxw = dr.gather(mi.Vector3f, position, q, inside) - position
-    dist2 = dr.squared_norm(dxw)
-    plane = dr.dot(normal, dxw)
-    e = dr.squared_norm(normal - nq) * inv_n + \
-        dr.select(dist2 > 0, plane * plane / dr.select(dist2 > 0, dist2, 1.0), 0.0) * inv_x
-    return dr.select(hit & hq, e, 0.0), hq
-
-def _level(num: mi.Color3f, den: mi.Float, normal: mi.Vector3f, position: mi.Vector3f,
-           hit: mi.Bool, width: int, height: int, *, step: mi.Int32, inv_n: mi.Float,
-           inv_x: mi.Float) -> tuple[mi.Color3f, mi.Float, mi.Float]:
+def _level(num: mi.Color3f, den: mi.Float, surface: Surface, width: int, height: int, *,
+           step: mi.Int32, inv_n: mi.Float, inv_x: mi.Float
+           ) -> tuple[mi.Color3f, mi.Float, mi.Float]:
     """One level of the cascade: a symbolic loop over the 25 taps (one kernel per level
     size, shared by all levels: the spacing is opaque)."""
     n = width * height
     dr.schedule(num, den)
-    idx = dr.arange(mi.UInt32, n)
-    py = idx // width
-    px = mi.Int32(idx - py * width)
-    py = mi.Int32(py)
+    src = packet(num.x, num.y, num.z, den)   # one packet per tap (carries the gradient)
 
-    def body(k, n_acc, d_acc, g_acc):
-        ty = k // 5
-        tx = k - ty * 5
-        dx, dy = mi.Int32(tx) - 2, mi.Int32(ty) - 2
-        qx = px + dx * step
-        qy = py + dy * step
-        inside = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
-        q = mi.UInt32(dr.select(inside, qy * width + qx, 0))
-        e, hq = surface_energy(normal, position, hit, q, inside, inv_n, inv_x)
-        g = dr.select(inside & (hit == hq), _b3(dx) * _b3(dy) * dr.exp(-e), 0.0)
-        return (k + 1, dr.fma(dr.gather(mi.Color3f, num, q, inside), g, n_acc),
-                dr.fma(dr.gather(mi.Float, den, q, inside), g, d_acc), g_acc + g)
+    def visit(tap, n_acc, d_acc, g_acc):
+        e, hq = surface_energy(surface, tap.q, tap.inside, inv_n, inv_x)
+        g = dr.select(tap.inside & (surface.hit == hq), tap.b3 * dr.exp(-e), 0.0)
+        v = gather4(src, tap.q, tap.inside)
+        return (dr.fma(mi.Color3f(v.x, v.y, v.z), g, n_acc), dr.fma(v.w, g, d_acc), g_acc + g)
 
-    _, n_acc, d_acc, g_acc = dr.while_loop(
-        state=(mi.UInt32(0), dr.zeros(mi.Color3f, n), dr.zeros(mi.Float, n),
-               dr.zeros(mi.Float, n)),
-        cond=lambda k, *_: k < 25, body=body, label="guided_taps", max_iterations=25)
+    zero = dr.zeros(mi.Float, n)
+    n_acc, d_acc, g_acc = for_each_tap(width, height, step, visit,
+                                       (dr.zeros(mi.Color3f, n), zero, zero), "guided_taps")
     # All three outputs in one launch: a later kernel reading only one of them would run
     # the 25-tap loop again.
     dr.schedule(n_acc, d_acc, g_acc)
