@@ -5,7 +5,7 @@ STAMP  := $(VENV)/.installed
 export DRJIT_LIBLLVM_PATH ?= $(shell cat $(VENV)/llvm-path 2>/dev/null)
 RUN    = DRJIT_LIBLLVM_PATH=$$(cat $(VENV)/llvm-path) 
 
-.PHONY: demo test test-slow bench notebooks setup clean
+.PHONY: demo test test-slow bench notebooks setup clean wheelhouse
 
 $(STAMP): pyproject.toml scripts/setup.sh
 	bash scripts/setup.sh
@@ -29,6 +29,9 @@ bench: $(STAMP)
 
 notebooks: $(STAMP)    # executes notebooks/*.ipynb in place (small size; FULL=1 for paper sizes)
 	$(RUN) $(PY) scripts/run_notebooks.py $(if $(FULL),--full,)
+
+wheelhouse: $(STAMP)    # offline wheels for a CUDA node (PYVER=3.12); see README
+	bash scripts/wheelhouse.sh $(or $(PYVER),3.12)
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

@@ -1,9 +1,12 @@
-"""Shared fixtures: every test runs on llvm_ad_rgb with tiny films and a clean JIT state."""
+"""Shared fixtures: every test runs on llvm_ad_rgb with tiny films and a clean JIT state.
+
+``FOVEATED_MI_VARIANT=cuda_ad_rgb`` runs the suite on the CUDA backend instead."""
 import os
 
 import pytest
 
-os.environ.setdefault("FOVEATED_MI_VARIANT", "llvm_ad_rgb")
+VARIANT = os.environ.get("FOVEATED_MI_VARIANT") or "llvm_ad_rgb"
+os.environ["FOVEATED_MI_VARIANT"] = VARIANT
 
 import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
@@ -15,8 +18,8 @@ SHARED_SCENES = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "s
 
 @pytest.fixture(autouse=True)
 def _variant_and_teardown():
-    if mi.variant() != "llvm_ad_rgb":
-        mi.set_variant("llvm_ad_rgb")
+    if mi.variant() != VARIANT:
+        mi.set_variant(VARIANT)
         foveated_mi.register()
     yield
     dr.sync_thread()
