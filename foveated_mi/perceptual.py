@@ -27,6 +27,7 @@ import importlib.util
 import json
 import math
 import os
+import warnings
 from functools import lru_cache
 
 import numpy as np
@@ -105,9 +106,12 @@ def jod(reference: np.ndarray, test: np.ndarray, *, gaze: tuple[float, float] = 
     ppd = check_range("ppd", ppd, 0.0, None, lo_open=True)
     display = check_display("display", display)
     h, w = ref.shape[:2]
-    metric, torch = _metric(w, h, float(ppd), display)
+    with warnings.catch_warnings():       # pyfvvdp's own SciPy deprecations
+        warnings.simplefilter("ignore", DeprecationWarning)
+        metric, torch = _metric(w, h, float(ppd), display)
     fix = np.array([min(max(gx * w, 0.0), w - 1.0), min(max(gy * h, 0.0), h - 1.0)])
-    with torch.no_grad():
+    with torch.no_grad(), warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
         q, _ = metric.predict(torch.from_numpy(np.clip(tst, 0.0, 1.0)),
                               torch.from_numpy(np.clip(ref, 0.0, 1.0)),
                               dim_order="HWC", fixation_point=fix)

@@ -242,14 +242,16 @@ def verdict_sentence(v: Verdict) -> str:
         base = _label(b)
     else:
         base = f"uniform {b['spp']:.0f} spp" + (" + OIDN" if b["method"] == "uniform+oidn" else "")
-    if c is None:
-        fastest = min((f[1]["time_ms"] for f in v.candidates.values() if 1 in f), default=math.nan)
-        return (f"On {v.scene}, no foveated configuration was as fast as {base} "
-                f"({b['time_ms']:.0f} ms; the fastest took {fastest:.0f} ms), so foveation did "
-                f"not pay at equal time here.")
     n = _seeds(v)
     seeds = f" (means over {n} seeds)" if n > 1 else ""
     h16 = v.history.get(16)
+    if c is None:
+        fastest = min((f[1]["time_ms"] for f in v.candidates.values() if 1 in f), default=math.nan)
+        stronger = (f", nor against the stronger baseline, {_label(h16)} at frame 16 "
+                    f"({h16['time_ms']:.0f} ms)" if h16 is not None and h16 is not b else "")
+        return (f"On {v.scene}, no foveated configuration was as fast as {base} "
+                f"({b['time_ms']:.0f} ms; the fastest took {fastest:.0f} ms), so foveation did "
+                f"not pay at equal time here{stronger}{seeds}.")
     parts = []
     if v.uniform is not None:
         d1 = margin(c[1], v.uniform, "psnr_fovea")
