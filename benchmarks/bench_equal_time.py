@@ -1,15 +1,22 @@
-"""Equal time (issue 8): foveated presets against uniform path tracing, raw and denoised.
+"""Equal time: foveated presets against uniform path tracing, with and without history.
 
 Runs the study ``configs/studies/equal_time.toml`` (staircase and voxel-city at 640x360, path
-max_depth 8, a 1024-spp reference cached in the output folder; foveated presets at frames 1
-and 16 with a static gaze; uniform 1/2/4/8 spp with and without Intel OIDN given albedo and
-normal, the AOV pass and OIDN timed inside the frame) and then writes, to ``docs/results/``:
+max_depth 8, a 1024-spp reference cached in the output folder; three seeds per configuration;
+foveated presets at frames 1 and 16 with a static gaze; uniform 1/2/4/8 spp with and without
+Intel OIDN given albedo and normal, the AOV pass and OIDN timed inside the frame; and uniform
+1/2/4/8 spp with the same reprojection history and denoiser as the ``oidn`` and ``guided``
+presets, the foveated integrator at ``sigma_p = 1``, at frames 1 and 16) and then writes, to
+``docs/results/``:
 
-* ``equal_time.md``: every row (time per frame, rays, PSNR / SSIM / FLIP over the full frame,
-  inside the fovea θ = 0.1 and in the periphery) and the targets of the issue, checked
-  against the cheapest denoised uniform frame (1 spp + OIDN): at a frame time no higher than
-  it, the default preset's fovea PSNR at least the baseline's at frame 1 and 3 dB above it at
-  frame 16, and its full-frame PSNR no more than 3 dB below the baseline's at frame 1;
+* ``equal_time.md``: every cell as mean ± standard deviation over the seeds (time per frame,
+  rays, PSNR / SSIM / FLIP over the full frame, inside the fovea θ = 0.1 and in the periphery,
+  FovVideoVDP JOD with the perceptual extra) and the targets, checked against the cheapest
+  denoised uniform frame (1 spp + OIDN): at a frame time no higher than it, the default
+  preset's fovea PSNR at least the baseline's at frame 1 and 3 dB above it at frame 16, its
+  full-frame PSNR no more than 3 dB below the baseline's at frame 1, and, against the
+  stronger baseline (uniform 1 spp with the same history and denoiser, frame 16), its fovea
+  PSNR at least that baseline's; a margin within its spread over seeds is a tie. Speed-ups at
+  equal JOD (and fovea PSNR) against each uniform family follow;
 * ``equal_time_pareto_fovea.{png,svg}`` and ``equal_time_pareto_full.{png,svg}``: time
   against fovea / full-frame PSNR, the Pareto front marked, baselines drawn apart.
 
@@ -42,6 +49,9 @@ RESULTS = os.path.join(HERE, "..", "docs", "results")
 
 
 def _label(row: dict) -> str:
+    if row["method"].startswith("uniform+history"):
+        preset = json.loads(row["config"]).get("preset", "?")
+        return f"{row['method']} ({preset}) {row['spp']:.0f} spp"
     if row["method"] != "foveated":
         return f"{row['method']} {row['spp']:.0f} spp"
     opts = json.loads(row["config"]).get("options", {})
@@ -53,18 +63,31 @@ def _f(v, fmt=".2f") -> str:
     return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt)
 
 
+def _pm(r: dict, col: str, fmt: str = ".2f") -> str:
+    v = r.get(col)
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "-"
+    sd = r.get(f"{col}_sd", math.nan)
+    return format(v, fmt) + (f" ± {format(sd, fmt)}" if not math.isnan(sd) else "")
+
+
 def rows_table(rows: list[dict]) -> list[str]:
-    out = ["| scene | configuration | frame | time ms | rays | PSNR | fovea | periphery | "
-           "SSIM | fovea | periphery | FLIP | fovea | periphery |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for r in sorted(rows, key=lambda r: (r["scene"], r["method"] != "foveated", _label(r),
-                                         r["frame"])):
-        out.append(f"| {r['scene']} | {_label(r)} | {r['frame']:.0f} | {_f(r['time_ms'], '.0f')} "
-                   f"| {_f(r['ray_fraction'], '.0%')} | {_f(r['psnr'])} | {_f(r['psnr_fovea'])} "
-                   f"| {_f(r['psnr_periphery'])} | {_f(r['ssim'], '.3f')} "
-                   f"| {_f(r['ssim_fovea'], '.3f')} | {_f(r['ssim_periphery'], '.3f')} "
-                   f"| {_f(r['flip'], '.3f')} | {_f(r['flip_fovea'], '.3f')} "
-                   f"| {_f(r['flip_periphery'], '.3f')} |")
+    """Every cell (mean ± standard deviation over its seeds); a JOD column when measured."""
+    from foveated_mi.study.aggregate import aggregate
+    cells = aggregate(rows)
+    jod = any("jod" in r for r in cells)
+    out = ["| scene | configuration | frame | seeds | time ms | rays | PSNR | fovea | periphery "
+           "| SSIM | fovea | periphery | FLIP | fovea | periphery |" + (" JOD |" if jod else ""),
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if jod else "")]
+    for r in sorted(cells, key=lambda r: (r["scene"], r["method"] != "foveated", _label(r),
+                                          r["frame"])):
+        out.append(f"| {r['scene']} | {_label(r)} | {r['frame']:.0f} | {r['seeds']} "
+                   f"| {_pm(r, 'time_ms', '.0f')} | {_f(r['ray_fraction'], '.0%')} "
+                   f"| {_pm(r, 'psnr')} | {_pm(r, 'psnr_fovea')} | {_pm(r, 'psnr_periphery')} "
+                   f"| {_pm(r, 'ssim', '.3f')} | {_pm(r, 'ssim_fovea', '.3f')} "
+                   f"| {_pm(r, 'ssim_periphery', '.3f')} | {_pm(r, 'flip', '.3f')} "
+                   f"| {_pm(r, 'flip_fovea', '.3f')} | {_pm(r, 'flip_periphery', '.3f')} |"
+                   + (f" {_pm(r, 'jod')} |" if jod else ""))
     return out
 
 
@@ -105,8 +128,11 @@ def main(argv=None) -> int:
              f"{os.cpu_count()} cores, {mi.variant()}; "
              f"date {time.strftime('%Y-%m-%d')}; default preset here: `{default}`.  ",
              "Reference: 1024 spp of the scene's own integrator (path, max_depth 8). Fovea: "
-             "distance to the gaze < θ = 0.1 (half-diagonal units).", "",
-             "## Targets (issue 8)", "",
+             "distance to the gaze < θ = 0.1 (half-diagonal units). Cells: mean ± standard "
+             "deviation over the seeds; a margin within its spread is a tie. JOD: "
+             "FovVideoVDP at the gaze (display and ppd in the study file), only with the "
+             "perceptual extra.", "",
+             "## Targets", "",
              *[line for v in verdicts for line in verdict_lines(v) + ["", verdict_sentence(v), ""]],
              "## Every row", "", *rows_table(rows), "",
              "![fovea](equal_time_pareto_fovea.png) ![full](equal_time_pareto_full.png)", ""]

@@ -3,13 +3,19 @@ equal time, scored against a converged reference.
 
 The demo is a small study (:mod:`foveated_mi.study`) on the built-in ``voxel-city`` scene
 (path tracing, max_depth 8): the default preset at 1 and 2 spp, at frame 1 and at frame 16
-with a still gaze, against uniform 1 and 2 spp, raw and denoised by Intel OIDN when
-``pyoidn`` is installed. Quality is display-referred PSNR against a 256-spp reference of the
-same scene, rendered once and cached under ``--out`` (never against a full render at the same
-spp, whose own noise would make PSNR meaningless), over the whole frame, inside the fovea and
-in the periphery. It ends with one sentence: what foveation gained or lost, at what time.
+with a still gaze, against two baselines at 1 and 2 spp: uniform frames without history (raw,
+and denoised by Intel OIDN when ``pyoidn`` is installed), and the stronger one, uniform frames
+with the same reprojection history and the same denoiser as the preset (the foveated
+integrator at ``sigma_p = 1``: every pixel traced), at the same frames. Quality is
+display-referred PSNR against a 256-spp reference of the same scene, rendered once and cached
+under ``--out`` (never against a full render at the same spp, whose own noise would make PSNR
+meaningless), over the whole frame, inside the fovea and in the periphery, plus FovVideoVDP's
+JOD when the perceptual extra is installed. Every configuration runs with three seeds; the
+table shows means ± standard deviations over them, and a margin within its spread is a tie.
+It ends with one sentence: what foveation gained or lost, at what time, against the stronger
+baseline.
 
-Times are medians of two repeats on this machine; they are comparable within the run only.
+Times are on this machine; they are comparable within the run only.
 """
 from __future__ import annotations
 
@@ -21,7 +27,7 @@ from typing import Sequence
 #: The demo study (see :func:`foveated_mi.study.parse_study`).
 STUDY = {
     "description": "make demo: foveated vs uniform (+ OIDN) at equal time",
-    "seed": 0, "repeats": 2, "warmup": 1, "metric": "psnr_fovea",
+    "seeds": [0, 1, 2], "repeats": 1, "warmup": 1, "metric": "psnr_fovea",
     "size": [480, 270], "gaze": [0.5, 0.5],
     "integrator": {"type": "path", "max_depth": 8},
     "reference": {"spp": 256},
@@ -29,7 +35,8 @@ STUDY = {
     "metrics": {"theta": 0.1, "sigma_p": 0.8},
     "foveated": {"defaults": {"frames": [1, 16], "preset": "auto"},
                  "configs": [{"spp": 1}, {"spp": 2}]},
-    "uniform": {"spp": [1, 2], "denoise": [False, True]},
+    # history rows: the foveated preset's history and denoiser, at its frames
+    "uniform": {"spp": [1, 2], "denoise": [False, True], "history": [False, True]},
 }
 
 
@@ -39,6 +46,7 @@ def run_demo(out: str = os.path.join("out", "demo"), *, size: tuple[int, int] | 
     import mitsuba as mi
     from .options import resolve_preset
     from .study import parse_study, run_study
+    from .study.aggregate import SPREAD, aggregate
     from .study.equal_time import equal_time_verdicts, verdict_lines, verdict_sentence
 
     t0 = time.perf_counter()
@@ -52,14 +60,24 @@ def run_demo(out: str = os.path.join("out", "demo"), *, size: tuple[int, int] | 
     print()
     print(f"Equal time on voxel-city {w}x{h}, {mi.variant()}, path max_depth 8, against a "
           f"256-spp reference (fovea: within θ = 0.1 of the gaze):")
-    print(f"{'configuration':34s} {'frame':>5s} {'time ms':>8s} {'rays':>5s} {'PSNR':>6s} "
-          f"{'fovea':>6s} {'periph':>6s}")
-    for r in sorted(res.rows, key=lambda r: (r["method"] != "foveated", r["method"], r["spp"],
-                                             r["frame"])):
+    cells = aggregate(res.rows)
+    jod = any("jod" in r for r in cells)
+    print(f"{'configuration':40s} {'frame':>5s} {'time ms':>10s} {'rays':>5s} {'PSNR':>12s} "
+          f"{'fovea':>12s} {'periph':>12s}" + (f" {'JOD':>11s}" if jod else ""))
+
+    def pm(r, col, fmt):
+        sd = r.get(f"{col}_sd", float("nan"))
+        return format(r[col], fmt) + (f"±{format(sd, fmt)}" if sd == sd else "")
+
+    for r in sorted(cells, key=lambda r: (r["method"] != "foveated", r["method"], r["spp"],
+                                          r["frame"])):
         name = (f"foveated ({preset}) {r['spp']:.0f} spp" if r["method"] == "foveated"
                 else f"{r['method']} {r['spp']:.0f} spp")
-        print(f"{name:34s} {r['frame']:5.0f} {r['time_ms']:8.0f} {r['ray_fraction']:5.0%} "
-              f"{r['psnr']:6.2f} {r['psnr_fovea']:6.2f} {r['psnr_periphery']:6.2f}")
+        print(f"{name:40s} {r['frame']:5.0f} {pm(r, 'time_ms', '.0f'):>10s} "
+              f"{r['ray_fraction']:5.0%} {pm(r, 'psnr', '.2f'):>12s} "
+              f"{pm(r, 'psnr_fovea', '.2f'):>12s} {pm(r, 'psnr_periphery', '.2f'):>12s}"
+              + (f" {pm(r, 'jod', '.2f'):>11s}" if jod else ""))
+    print(f"(mean ± {SPREAD} over {len(spec.seeds)} seeds)")
     verdicts = equal_time_verdicts(res.rows, preset)
     for v in verdicts:
         print()

@@ -1,5 +1,8 @@
 """make demo (foveated-mi demo) and the equal-time verdicts it prints."""
 import json
+import math
+
+import numpy as np
 
 import pytest
 
@@ -27,9 +30,9 @@ def test_verdict_picks_the_best_qualifying_configuration_and_checks_the_targets(
     (v,) = equal_time_verdicts(rows, "oidn")
     assert v.baseline["method"] == "uniform+oidn" and v.chosen_spp == 2.0   # 4 spp is too slow
     d = {name: delta for name, delta, _ in v.deltas()}
-    assert d["fovea PSNR at frame 1 >= baseline"] == pytest.approx(2.0)
-    assert d["fovea PSNR at frame 16 >= baseline + 3 dB"] == pytest.approx(3.0)
-    assert d["full-frame PSNR at frame 1 >= baseline - 3 dB"] == pytest.approx(-1.0)
+    assert d["fovea PSNR at frame 1 >= uniform"] == pytest.approx(2.0)
+    assert d["fovea PSNR at frame 16 >= uniform + 3 dB"] == pytest.approx(3.0)
+    assert d["full-frame PSNR at frame 1 >= uniform - 3 dB"] == pytest.approx(-1.0)
     assert sum("**met**" in line for line in verdict_lines(v)) == 3
     s = verdict_sentence(v)
     assert "gained 2.0 dB" in s and "gained 3.0 dB" in s and "lost 1.0 dB" in s and "90 ms" in s
@@ -61,8 +64,11 @@ def test_demo_runs_end_to_end_and_resumes(tmp_path, capsys):
     assert "256-spp reference" in text and "foveated (" in text
     sentence = [line for line in text.splitlines() if line.startswith("On voxel-city")]
     assert len(sentence) == 1 and " ms" in sentence[0]
+    assert "stronger baseline, uniform 1 spp + history + " in sentence[0]
+    assert "means over 3 seeds" in sentence[0] and "uniform+history" in text
     rows = (out / "results.csv").read_text().splitlines()
-    assert len(rows) == 1 + 2 * 2 + 4 - (0 if _oidn() else 2)   # header, fov x frames, uniform
+    # header; per seed: foveated configs x frames, uniform (+ OIDN), with history x frames
+    assert len(rows) == 1 + 3 * (2 * 2 + 4 - (0 if _oidn() else 2) + 2 * 2 * 2)
     assert any(p.suffix == ".npy" for p in (out / "references").iterdir())
     # A second run re-renders nothing: same rows, no duplicates.
     assert main(["demo", "--size", "32", "18", "--out", str(out), "--no-progress"]) == 0
@@ -72,3 +78,79 @@ def test_demo_runs_end_to_end_and_resumes(tmp_path, capsys):
 def _oidn():
     from foveated_mi.denoise import oidn_available
     return oidn_available()
+
+
+def _hist(spp, frame, time_ms, fovea, seed=None, denoiser="oidn", preset="oidn", jod=None):
+    method = "uniform+history" + (f"+{denoiser}" if denoiser != "none" else "")
+    r = {"scene": "s", "method": method, "spp": float(spp), "frame": float(frame),
+         "time_ms": time_ms, "psnr": fovea, "psnr_fovea": fovea, "ray_fraction": 1.0,
+         "config": json.dumps({"preset": preset, "full_options": {"denoiser": denoiser}})}
+    if seed is not None:
+        r["seed"] = float(seed)
+    if jod is not None:
+        r["jod"] = jod
+    return r
+
+
+def _seeded(row, seed, **kw):
+    return {**row, "seed": float(seed), **kw}
+
+
+def test_frame_16_is_compared_against_uniform_with_the_same_history_and_denoiser():
+    rows = BASE + [
+        _row("foveated", 2, 1, 90.0, 29.0, 32.0, "oidn"), _row("foveated", 2, 16, 90.0, 30.0, 35.0, "oidn"),
+        _hist(1, 1, 110.0, 30.0), _hist(1, 16, 110.0, 34.0),
+        _hist(1, 16, 110.0, 40.0, denoiser="svgf", preset="guided"),   # another preset's
+        _hist(1, 16, 110.0, 20.0, denoiser="none")]                     # no denoiser
+    (v,) = equal_time_verdicts(rows, "oidn")
+    assert v.history[16]["psnr_fovea"] == 34.0 and v.chosen_spp == 2.0
+    d = {name: delta for name, delta, _ in v.deltas()}
+    assert d["fovea PSNR at frame 16 >= uniform with the same history"] == pytest.approx(1.0)
+    assert d["fovea PSNR at frame 16 >= uniform + 3 dB"] == pytest.approx(5.0)
+    s = verdict_sentence(v)
+    assert "stronger baseline, uniform 1 spp + history + oidn at frame 16" in s
+    assert "gained 1.0 dB of fovea PSNR" in s
+
+
+def test_seed_means_spreads_and_ties():
+    from foveated_mi.study.aggregate import aggregate, margin
+    fov = [_row("foveated", 2, f, 90.0, 30.0, 35.0, "oidn") for f in (1, 16)]
+    rows = []
+    # seeds 0..2: the foveated frame-16 fovea PSNR is 35, 36, 37; the history baseline's
+    # 34.5, 35.0, 36.5: a mean margin of +0.67 with per-seed differences 0.5, 1.0, 0.5
+    for s, (f16, h16) in enumerate(((35.0, 34.5), (36.0, 35.0), (37.0, 36.5))):
+        rows += [_seeded(BASE[1], s), _seeded(fov[0], s),
+                 _seeded(fov[1], s, psnr_fovea=f16), _hist(1, 16, 110.0, h16, seed=s)]
+    cells = {(c["method"], c["frame"]): c for c in aggregate(rows)}
+    c = cells[("foveated", 16.0)]
+    assert c["seeds"] == 3 and c["psnr_fovea"] == pytest.approx(36.0)
+    assert c["psnr_fovea_sd"] == pytest.approx(1.0)          # sample standard deviation
+    assert "seed_sd" not in c and c["spp"] == 2.0            # identity columns untouched
+    m = margin(c, cells[("uniform+history+oidn", 16.0)], "psnr_fovea")
+    assert m.delta == pytest.approx(2 / 3) and m.seeds == 3
+    # the spread is the largest of the cells' spreads (1.0, 1.04) and the differences' (0.29)
+    assert m.spread == pytest.approx(np.std([34.5, 35.0, 36.5], ddof=1)) and m.tie
+    (v,) = equal_time_verdicts(rows, "oidn")
+    lines = verdict_lines(v)
+    assert any("same history" in line and "**tie**" in line and "3 seeds" in line
+               for line in lines)
+    assert "tied (+0.7 ± 1.0 dB" in verdict_sentence(v)
+    assert "means over 3 seeds" in verdict_sentence(v)
+    # a margin larger than its spread is decided
+    wide = [_seeded(r, r["seed"], psnr_fovea=r["psnr_fovea"] + 5.0)
+            if r["method"] == "foveated" and r["frame"] == 16 else r for r in rows]
+    (v,) = equal_time_verdicts(wide, "oidn")
+    m = dict(v.margins())["fovea PSNR at frame 16 >= uniform with the same history"]
+    assert not m.tie and m.met and m.delta == pytest.approx(5 + 2 / 3)
+
+
+def test_speedup_at_equal_quality_interpolates_in_log_time():
+    from foveated_mi.study.equal_time import speedup
+    fam = [_hist(s, 16, t, 0.0, jod=j) for s, t, j in ((1, 100.0, 8.0), (2, 200.0, 9.0),
+                                                        (4, 400.0, 9.5))]
+    cell = {"frame": 16.0, "time_ms": 80.0, "jod": 8.5}
+    ratio, rel = speedup(cell, fam, "jod")
+    assert rel == "=" and ratio == pytest.approx(100 * 2 ** 0.5 / 80)
+    assert speedup({**cell, "jod": 9.9}, fam, "jod") == (pytest.approx(5.0), ">")
+    assert speedup({**cell, "jod": 7.0}, fam, "jod") == (pytest.approx(1.25), "<")
+    assert math.isnan(speedup(cell, fam, "psnr_eccentricity")[0])

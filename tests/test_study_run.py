@@ -1,5 +1,6 @@
 """Studies end to end at 32x32 (issue 10, items 1, 3, 7): local against Dask, resume after a
 kill, a dying Dask worker, reference caching, per-frame resume, reference files."""
+import json
 import math
 import os
 import signal
@@ -207,3 +208,55 @@ def test_reference_file_optional_scene_and_missing_oidn(tmp_path, monkeypatch, c
                    "--no-progress"])
     err = capsys.readouterr().err
     assert rc == 2 and err.count("\n") == 1 and "cornell-box: reference.file = 'ref.npy'" in err
+
+
+HISTORY = """
+seeds = [0, 1]
+repeats = 1
+warmup = 0
+size = [32, 18]
+[reference]
+spp = 64
+[[scenes]]
+scene = "cornell-box"
+[metrics]
+flip = false
+[[foveated.configs]]
+preset = "guided"
+frames = [1, 4]
+[uniform]
+spp = 1
+history = [false, true]
+"""
+
+
+@pytest.mark.parametrize("jod", [False, True])
+def test_uniform_history_rows_seeds_and_jod_column(tmp_path, monkeypatch, capsys, jod):
+    from foveated_mi import perceptual
+    if jod:
+        pytest.importorskip("pyfvvdp")
+        pytest.importorskip("torch")
+    else:
+        monkeypatch.setattr(perceptual, "available", lambda: False)
+    res = run_study(study_file(tmp_path, HISTORY), out=str(tmp_path / "o"), progress=False)
+    out = capsys.readouterr().out
+    assert res.failed == []
+    header = open(res.results_path).readline().strip().split(",")
+    assert "seed" in header
+    assert ("jod" in header) == jod and ("no jod column" in out) == (not jod)
+    rows = res.rows
+    assert {r["seed"] for r in rows} == {0.0, 1.0}
+    hist = [r for r in rows if r["method"] == "uniform+history"]
+    # the history baseline is the integrator at sigma_p = 1: every pixel, the preset's frames
+    assert sorted((r["seed"], r["frame"]) for r in hist) == [(0, 1), (0, 4), (1, 1), (1, 4)]
+    assert all(r["ray_fraction"] == 1.0 and r["sigma_p"] == 1.0 for r in hist)
+    assert json.loads(hist[0]["config"])["preset"] == "guided"
+    for seed in (0.0, 1.0):        # the history accumulates: frame 4 beats frame 1
+        by_frame = {r["frame"]: r for r in hist if r["seed"] == seed}
+        assert by_frame[4]["psnr"] > by_frame[1]["psnr"] + 1.0
+    plain = [r for r in rows if r["method"] == "uniform"]
+    assert [r["frame"] for r in plain] == [1.0, 1.0]
+    if jod:
+        assert all(0.0 < r["jod"] <= 10.0 for r in rows)
+        by = {(r["method"], r["frame"], r["seed"]): r["jod"] for r in rows}
+        assert by[("uniform+history", 4.0, 0.0)] > by[("uniform+history", 1.0, 0.0)]

@@ -64,8 +64,8 @@ def test_grid_and_list_expand_to_the_product_plus_the_list(tmp_path):
     assert all(c["frames"] == [1, 4] and c["options"]["atrous_iterations"] == 0 for c in fov[:12])
     assert fov[12]["options"]["theta"] == 0.5 and fov[12]["frames"] == [2]
     assert fov[12]["options"]["atrous_iterations"] == 0          # defaults apply to the list
-    assert spec.uniform == ({"spp": 1, "denoise": False}, {"spp": 1, "denoise": True},
-                            {"spp": 4, "denoise": False}, {"spp": 4, "denoise": True})
+    assert spec.uniform == tuple({"spp": s, "denoise": d, "history": False}
+                                 for s in (1, 4) for d in (False, True))
     tasks = expand_tasks(spec, "llvm_ad_rgb")
     assert len(tasks) == 13 + 4 and len({t["task_id"] for t in tasks}) == 17
     assert len(expand_tasks(spec, "llvm_ad_rgb", denoise_available=False)) == 13 + 2
@@ -128,6 +128,15 @@ BAD = [
     (BASE + "[foveated.defaults]\nmax_radius = 0\n", "foveated.defaults.max_radius"),
     (BASE + "[uniform]\nspp = [1, 0]\n", "uniform.spp[1]"),
     (BASE + "[uniform]\nmethod = 'path'\n", "uniform.method"),
+    (BASE + "[uniform]\nhistory = [false, 'yes']\n", "uniform.history[1]"),
+    (BASE + "[uniform]\nhistory = true\npresets = ['fast']\n", "uniform.presets[0]"),
+    (BASE + "[uniform]\nhistory = true\nframes = [1, 0]\n", "uniform.frames[1]"),
+    (BASE + "[uniform]\nframes = [1, 16]\n", "uniform.frames"),      # no history rows
+    ("seeds = [0, 1]\n" + BASE, "seed"),                               # both seed and seeds
+    ("seeds = []\n" + BASE.replace("seed = 0\n", ""), "seeds"),
+    ("seeds = [0, -1]\n" + BASE.replace("seed = 0\n", ""), "seeds[1]"),
+    ("seeds = [2, 2]\n" + BASE.replace("seed = 0\n", ""), "seeds[1]"),
+    (BASE + "[metrics]\njod = 'yes'\n", "metrics.jod"),
     (BASE + "[baseline]\nspp = 1\n", "baseline"),
     (BASE + "[metrics]\ntheta = 0\n", "metrics.theta"),
     (BASE + "[metrics]\nlpips = true\n", "metrics.lpips"),
@@ -289,8 +298,76 @@ def test_front_table_names_the_options_that_vary():
     assert "max_radius" not in text                                   # the same everywhere
 
 
+def test_uniform_history_rows_and_seeds_expand(tmp_path):
+    spec = load_study(write(tmp_path, """
+        seeds = [0, 1, 2]
+        [[scenes]]
+        scene = "cornell-box"
+        [foveated.defaults]
+        frames = [1, 16]
+        [[foveated.configs]]
+        preset = "guided"
+        [[foveated.configs]]
+        preset = "paper"
+        [uniform]
+        spp = [1, 2]
+        denoise = [false, true]
+        history = [false, true]
+    """))
+    assert spec.seeds == (0, 1, 2) and spec.seed == 0
+    hist = [u for u in spec.uniform if u["history"]]
+    # presets and frames default to the foveated configurations'; every pixel traced
+    assert {u["preset"] for u in hist} == {"guided", "paper"}
+    assert all(u["frames"] == [1, 16] and u["options"]["sigma_p"] == 1.0 and
+               u["options"]["history"] for u in hist)
+    den = {(u["preset"], u["denoise"]): u["denoiser"] for u in hist if u["spp"] == 1}
+    assert den == {("guided", True): "svgf", ("paper", True): "atrous",
+                   ("guided", False): "none", ("paper", False): "none"}
+    assert all(u["options"]["denoiser"] == u["denoiser"] for u in hist)
+    tasks = expand_tasks(spec, "llvm_ad_rgb")
+    per_seed = 2 + 2 * 2 + len(hist)          # foveated, uniform (+ OIDN), with history
+    assert len(tasks) == 3 * per_seed and len({t["task_id"] for t in tasks}) == len(tasks)
+    assert {t["seed"] for t in tasks} == {0, 1, 2}
+    methods = {t["method"] for t in tasks}
+    assert {"uniform+history", "uniform+history+svgf", "uniform+history+atrous"} <= methods
+    h = [t for t in tasks if t["method"] == "uniform+history+svgf"]
+    assert all(t["kind"] == "foveated" and t["frames"] == [1, 16] for t in h)
+    # explicit presets and frames; without OIDN its history rows are left out, like uniform+oidn
+    spec = load_study(write(tmp_path, """
+        [[scenes]]
+        scene = "cornell-box"
+        [uniform]
+        denoise = true
+        history = [true]
+        presets = ["oidn", "guided"]
+        frames = 4
+    """))
+    assert [(u["preset"], u["frames"]) for u in spec.uniform] == [("oidn", [4]), ("guided", [4])]
+    assert [t["method"] for t in expand_tasks(spec, "llvm_ad_rgb", denoise_available=False)] \
+        == ["uniform+history+svgf"]
+
+
+def test_one_seed_keeps_the_task_ids_of_studies_without_seeds():
+    spec = load_study(QUICK)
+    import dataclasses
+    from foveated_mi.study import tasks as T
+    ids = [t["task_id"] for t in expand_tasks(spec, "llvm_ad_rgb")]
+    # the ids as they were computed before seeds and perceptual settings existed
+    old = []
+    for scene in spec.scenes:
+        ident = scene.identity()
+        old += [T.task_id(ident, "foveated", c["options"], c["spp"], spec.seed, "llvm_ad_rgb",
+                          spec.metrics) for c in spec.foveated]
+        old += [T.task_id(ident, "uniform+oidn" if u["denoise"] else "uniform",
+                          {"denoise": u["denoise"]}, u["spp"], spec.seed, "llvm_ad_rgb",
+                          spec.metrics) for u in spec.uniform]
+    assert ids == old
+    other = dataclasses.replace(spec, perceptual={"jod": True, "display": "standard_4k"})
+    assert not set(ids) & {t["task_id"] for t in expand_tasks(other, "llvm_ad_rgb")}
+
+
 @pytest.mark.parametrize("name", ["quick", "paper_fig7_quality", "speed_accuracy",
-                                  "paper_table1"])
+                                  "paper_table1", "equal_time"])
 def test_example_studies_parse(name):
     spec = load_study(os.path.join(os.path.dirname(QUICK), f"{name}.toml"))
     tasks = expand_tasks(spec, "llvm_ad_rgb")

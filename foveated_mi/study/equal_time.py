@@ -1,69 +1,129 @@
-"""Equal-time verdicts from study rows: a foveated preset against the cheapest denoised
-uniform frame (issue 8's comparison, used by ``benchmarks/bench_equal_time.py`` and
-``foveated-mi demo``).
+"""Equal-time verdicts from study rows: a foveated preset against uniform path tracing at the
+same frame time (used by ``benchmarks/bench_equal_time.py`` and ``foveated-mi demo``).
 
-The baseline is uniform 1 spp + OIDN when the study has it, else uniform 1 spp. A foveated
-configuration *qualifies* when its frame-1 and frame-16 times are no higher than the
-baseline's; among those, the one with the best frame-1 fovea PSNR is compared.
+Two baselines, both at 1 spp:
+
+* **uniform** -- one frame without history: uniform 1 spp + OIDN when the study has it, else
+  uniform 1 spp. Its quality does not depend on the frame number.
+* **uniform with history** (the stronger one) -- the ``foveated`` integrator with the same
+  preset at ``sigma_p = 1``: every pixel traced, the same reprojection history and the same
+  denoiser (method ``uniform+history+<denoiser>``), at the same frame. A frame-16 verdict
+  compares against it at frame 16.
+
+A foveated configuration *qualifies* when its frame-1 and frame-16 times are no higher than
+the uniform baseline's (the history baseline's without one); among those, the one with the
+best frame-1 fovea PSNR is compared. With several seeds every number is a mean over seeds
+and every margin carries its spread (:mod:`.aggregate`): a margin within its spread is a
+tie. Speed-up at equal quality (:func:`speedup`) reads the time a uniform family (one
+method over its spp) needs to reach a foveated cell's quality (JOD when the perceptual extra
+is installed, fovea PSNR otherwise).
 """
 from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["Verdict", "equal_time_verdicts", "verdict_lines", "verdict_sentence"]
+from .aggregate import Margin, aggregate, margin
 
-#: Issue 8's targets: (name, row, column, needed difference to the baseline in dB).
+__all__ = ["Verdict", "equal_time_verdicts", "verdict_lines", "verdict_sentence", "speedup",
+           "TARGETS"]
+
+#: (name, frame, column, needed margin, against): "uniform" is the baseline without history
+#: (frame 1: it does not change with the frame), "history" the uniform frame with the same
+#: history and denoiser at the same frame.
 TARGETS = (
-    ("fovea PSNR at frame 1 >= baseline", 1, "psnr_fovea", 0.0),
-    ("fovea PSNR at frame 16 >= baseline + 3 dB", 16, "psnr_fovea", 3.0),
-    ("full-frame PSNR at frame 1 >= baseline - 3 dB", 1, "psnr", -3.0),
+    ("fovea PSNR at frame 1 >= uniform", 1, "psnr_fovea", 0.0, "uniform"),
+    ("fovea PSNR at frame 16 >= uniform + 3 dB", 16, "psnr_fovea", 3.0, "uniform"),
+    ("full-frame PSNR at frame 1 >= uniform - 3 dB", 1, "psnr", -3.0, "uniform"),
+    ("fovea PSNR at frame 16 >= uniform with the same history", 16, "psnr_fovea", 0.0,
+     "history"),
 )
 
 
 @dataclass
 class Verdict:
     scene: str
-    baseline: dict[str, Any]
+    baseline: dict[str, Any]                        # the time reference (a cell)
     preset: str
-    candidates: dict[float, dict[int, dict]]       # spp -> frame -> row
+    candidates: dict[float, dict[int, dict]]        # spp -> frame -> cell
     chosen_spp: float | None = None
+    uniform: dict[str, Any] | None = None           # no history, 1 spp (a cell)
+    history: dict[int, dict] = field(default_factory=dict)      # frame -> cell, 1 spp
+    families: dict[str, list[dict]] = field(default_factory=dict)  # method -> cells (spp)
 
     @property
     def chosen(self) -> dict[int, dict] | None:
         return None if self.chosen_spp is None else self.candidates[self.chosen_spp]
 
-    def deltas(self) -> list[tuple[str, float, float]]:
+    def margins(self) -> list[tuple[str, Margin]]:
+        """Each target whose cells exist: its margin (mean over seeds, spread, verdict)."""
         c = self.chosen
         if c is None:
             return []
-        return [(name, c[frame][col] - self.baseline[col], need)
-                for name, frame, col, need in TARGETS]
+        out = []
+        for name, frame, col, need, against in TARGETS:
+            base = self.uniform if against == "uniform" else self.history.get(frame)
+            if base is None or frame not in c:
+                continue
+            out.append((name, margin(c[frame], base, col, need)))
+        return out
+
+    def deltas(self) -> list[tuple[str, float, float]]:
+        return [(name, m.delta, m.need) for name, m in self.margins()]
+
+
+def _config(row: dict) -> dict:
+    return json.loads(row.get("config") or "{}")
 
 
 def _options(row: dict) -> dict:
-    return json.loads(row.get("config") or "{}").get("options", {})
+    return _config(row).get("options", {})
+
+
+def _denoiser(preset: str, cands: dict) -> str:
+    for frames in cands.values():
+        for cell in frames.values():
+            d = _config(cell).get("full_options", {}).get("denoiser")
+            if d:
+                return d
+    from ..options import DEFAULTS, PRESETS
+    return PRESETS.get(preset, {}).get("denoiser", DEFAULTS["denoiser"])
 
 
 def equal_time_verdicts(rows: list[dict[str, Any]], preset: str) -> list[Verdict]:
     """One :class:`Verdict` per scene with a baseline, for foveated rows whose only given
-    option is ``preset`` (plus spp)."""
+    option is ``preset`` (plus spp). ``rows`` are study rows (any number of seeds)."""
     out = []
-    for scene in dict.fromkeys(r["scene"] for r in rows):
-        sr = [r for r in rows if r["scene"] == scene]
-        base = [r for r in sr if r["method"] == "uniform+oidn" and r["spp"] == 1] or \
-               [r for r in sr if r["method"] == "uniform" and r["spp"] == 1]
-        if not base:
-            continue
+    cells = aggregate(rows)
+    for scene in dict.fromkeys(r["scene"] for r in cells):
+        sr = [r for r in cells if r["scene"] == scene]
+        uni = [r for r in sr if r["method"] == "uniform+oidn" and r["spp"] == 1] or \
+              [r for r in sr if r["method"] == "uniform" and r["spp"] == 1]
         cands: dict[float, dict[int, dict]] = {}
         for r in sr:
             o = _options(r)
             if r["method"] == "foveated" and o.get("preset") == preset and set(o) <= {"preset"}:
                 cands.setdefault(r["spp"], {})[int(r["frame"])] = r
-        v = Verdict(scene, base[0], preset, cands)
-        t = base[0]["time_ms"]
+        den = _denoiser(preset, cands)
+        method = "uniform+history" + (f"+{den}" if den != "none" else "")
+        hist_cells = [r for r in sr if r["method"] == method
+                      and _config(r).get("preset") == preset]
+        history = {int(r["frame"]): r for r in hist_cells if r["spp"] == 1}
+        if not uni and 1 not in history:
+            continue
+        base = uni[0] if uni else history[1]
+        families = {}
+        for m in ("uniform", "uniform+oidn"):
+            fam = [r for r in sr if r["method"] == m]
+            if fam:
+                families[m] = fam
+        if hist_cells:
+            families[method] = hist_cells
+        v = Verdict(scene, base, preset, cands, uniform=uni[0] if uni else None,
+                    history=history, families=families)
+        t = base["time_ms"]
         ok = [s for s, f in cands.items() if 1 in f and 16 in f
               and f[1]["time_ms"] <= t and f[16]["time_ms"] <= t]
         if ok:
@@ -72,43 +132,137 @@ def equal_time_verdicts(rows: list[dict[str, Any]], preset: str) -> list[Verdict
     return out
 
 
+def speedup(cell: dict, family: list[dict], column: str) -> tuple[float, str]:
+    """How many times longer than ``cell`` a uniform ``family`` (one method's cells at several
+    spp) takes to reach ``cell``'s quality in ``column`` at the same frame (``cell``'s, or
+    frame 1 for a family without history): ``(ratio, relation)``. The family's quality is
+    interpolated linearly in log time along its best-so-far curve; ``relation`` is ``"="``,
+    ``">"`` (the family never reaches it: at least the ratio at its slowest cell) or ``"<"``
+    (its fastest cell already does). NaN without data."""
+    q = cell.get(column, math.nan)
+    frame = int(cell["frame"])
+    pts = [r for r in family if int(r["frame"]) == frame] or \
+          [r for r in family if int(r["frame"]) == 1]
+    pts = sorted(((r["time_ms"], r.get(column, math.nan)) for r in pts),
+                 key=lambda p: p[0])
+    pts = [(t, y) for t, y in pts if t > 0 and math.isfinite(t) and math.isfinite(y)]
+    t0 = cell.get("time_ms", math.nan)
+    if not pts or not math.isfinite(q) or not (t0 > 0):
+        return math.nan, "="
+    best, env = -math.inf, []
+    for t, y in pts:                      # best quality reachable within time t
+        if y > best:
+            best = y
+            env.append((t, y))
+    if q <= env[0][1]:
+        return env[0][0] / t0, "<" if q < env[0][1] else "="
+    if q > env[-1][1]:
+        return env[-1][0] / t0, ">"
+    for (ta, ya), (tb, yb) in zip(env, env[1:]):
+        if ya <= q <= yb:
+            f = (q - ya) / (yb - ya)
+            return math.exp(math.log(ta) + f * (math.log(tb) - math.log(ta))) / t0, "="
+    return math.nan, "="
+
+
+def _label(cell: dict) -> str:
+    m = cell["method"]
+    if m.startswith("uniform+history"):
+        den = m.split("+")[2] if m.count("+") == 2 else "no denoiser"
+        return f"uniform {cell['spp']:.0f} spp + history + {den}"
+    return f"{m} {cell['spp']:.0f} spp"
+
+
+def _pm(cell: dict, col: str, fmt: str = ".2f") -> str:
+    sd = cell.get(f"{col}_sd", math.nan)
+    s = format(cell[col], fmt)
+    return s + (f" ± {format(sd, fmt)}" if isinstance(sd, float) and math.isfinite(sd) else "")
+
+
+def _seeds(v: Verdict) -> int:
+    cells = [v.baseline] + [f for c in v.candidates.values() for f in c.values()]
+    return max(int(c.get("seeds", 1)) for c in cells)
+
+
 def verdict_lines(v: Verdict) -> list[str]:
-    """Markdown bullet lines: the baseline, the chosen configuration, each target met/missed."""
-    b = v.baseline
-    lines = [f"* **{v.scene}**, baseline {b['method']} 1 spp: {b['time_ms']:.0f} ms, PSNR "
-             f"{b['psnr']:.2f} dB, fovea {b['psnr_fovea']:.2f} dB."]
+    """Markdown bullet lines: the baselines, the chosen configuration, each target met,
+    missed or tied, and the speed-ups at equal quality."""
+    n = _seeds(v)
+    seeds = f" Means over {n} seeds ± standard deviation." if n > 1 else ""
+    lines = []
+    for b in [v.uniform] + [v.history.get(f) for f in (1, 16)]:
+        if b is None:
+            continue
+        lines.append(f"* **{v.scene}**, baseline {_label(b)} at frame {b['frame']:.0f}: "
+                     f"{_pm(b, 'time_ms', '.0f')} ms, PSNR {_pm(b, 'psnr')} dB, fovea "
+                     f"{_pm(b, 'psnr_fovea')} dB"
+                     + (f", JOD {_pm(b, 'jod')}" if "jod" in b else "") + ".")
+    lines[0] += seeds
     c = v.chosen
     if c is None:
         times = ", ".join(f"{s:.0f} spp: {f[1]['time_ms']:.0f} ms" for s, f in
                           sorted(v.candidates.items()) if 1 in f)
         return lines + [f"  No `{v.preset}` configuration is as fast ({times or 'none run'})."]
+    jod = "".join(f", JOD {_pm(c[k], 'jod')}" for k in (1,) if "jod" in c[k])
     lines.append(f"  `{v.preset}` at {v.chosen_spp:.0f} spp: {c[1]['time_ms']:.0f} ms at frame 1, "
                  f"{c[16]['time_ms']:.0f} ms at frame 16, {c[1]['ray_fraction']:.0%} of the "
-                 f"pixels traced; PSNR {c[1]['psnr']:.2f} / {c[16]['psnr']:.2f} dB, fovea "
-                 f"{c[1]['psnr_fovea']:.2f} / {c[16]['psnr_fovea']:.2f} dB (frame 1 / 16).")
-    for name, delta, need in v.deltas():
-        lines.append(f"  - {name}: {delta:+.2f} dB (needs {need:+.0f}): "
-                     f"{'**met**' if delta >= need else '**missed**'}")
+                 f"pixels traced; PSNR {_pm(c[1], 'psnr')} / {_pm(c[16], 'psnr')} dB, fovea "
+                 f"{_pm(c[1], 'psnr_fovea')} / {_pm(c[16], 'psnr_fovea')} dB (frame 1 / 16)"
+                 f"{jod}.")
+    for name, m in v.margins():
+        lines.append(f"  - {name}: {m.text()} (needs {m.need:+.0f}): **{m.word}**")
+    for col, what in (("jod", "JOD"), ("psnr_fovea", "fovea PSNR")):
+        if col not in c[16]:
+            continue
+        parts = []
+        for method, fam in v.families.items():
+            ratio, rel = speedup(c[16], fam, col)
+            if math.isfinite(ratio):
+                parts.append(f"{'≥' if rel == '>' else ('≤' if rel == '<' else '')}"
+                             f"×{ratio:.2f} against {method}")
+        if parts:
+            lines.append(f"  - speed-up at equal {what} (frame 16): " + ", ".join(parts))
     return lines
 
 
+def _word(m: Margin) -> str:
+    spread = f" ± {m.spread:.1f}" if math.isfinite(m.spread) else ""
+    if m.tie:
+        return f"tied ({m.delta:+.1f}{spread} dB, within the spread over seeds)"
+    d = m.delta
+    return (f"gained {d:.1f}{spread} dB" if d >= 0 else f"lost {-d:.1f}{spread} dB")
+
+
 def verdict_sentence(v: Verdict) -> str:
-    """One plain sentence: what foveation gained or lost, at what time."""
+    """One plain sentence: what foveation gained or lost, at what time, against the stronger
+    baseline (uniform with the same history and denoiser) when the study has it."""
     b = v.baseline
     c = v.chosen
-    base = f"uniform 1 spp{' + OIDN' if b['method'] == 'uniform+oidn' else ''}"
+    if v.uniform is None:
+        base = _label(b)
+    else:
+        base = f"uniform {b['spp']:.0f} spp" + (" + OIDN" if b["method"] == "uniform+oidn" else "")
+    n = _seeds(v)
+    seeds = f" (means over {n} seeds)" if n > 1 else ""
+    h16 = v.history.get(16)
     if c is None:
         fastest = min((f[1]["time_ms"] for f in v.candidates.values() if 1 in f), default=math.nan)
+        stronger = (f", nor against the stronger baseline, {_label(h16)} at frame 16 "
+                    f"({h16['time_ms']:.0f} ms)" if h16 is not None and h16 is not b else "")
         return (f"On {v.scene}, no foveated configuration was as fast as {base} "
                 f"({b['time_ms']:.0f} ms; the fastest took {fastest:.0f} ms), so foveation did "
-                f"not pay at equal time here.")
-    d1 = c[1]["psnr_fovea"] - b["psnr_fovea"]
-    d16 = c[16]["psnr_fovea"] - b["psnr_fovea"]
-    full = c[1]["psnr"] - b["psnr"]
-
-    def word(d):
-        return f"gained {d:.1f} dB" if d >= 0 else f"lost {-d:.1f} dB"
+                f"not pay at equal time here{stronger}{seeds}.")
+    parts = []
+    if v.uniform is not None:
+        d1 = margin(c[1], v.uniform, "psnr_fovea")
+        d16 = margin(c[16], v.uniform, "psnr_fovea")
+        full = margin(c[1], v.uniform, "psnr")
+        parts.append(f"{_word(d1)} of fovea PSNR on the first frame and {_word(d16)} after 16 "
+                     f"frames with a still gaze, and {_word(full)} over the whole first frame")
+    if h16 is not None:
+        dh = margin(c[16], h16, "psnr_fovea")
+        parts.append(f"against the stronger baseline, {_label(h16)} at frame 16 "
+                     f"({h16['time_ms']:.0f} ms), it {_word(dh)} of fovea PSNR")
     return (f"On {v.scene}, in {c[1]['time_ms']:.0f} ms per frame against {b['time_ms']:.0f} ms "
-            f"for {base}, foveated rendering ({v.preset}, {v.chosen_spp:.0f} spp) {word(d1)} of "
-            f"fovea PSNR on the first frame and {word(d16)} after 16 frames with a still gaze, "
-            f"and {word(full)} over the whole first frame.")
+            f"for {base}, foveated rendering ({v.preset}, {v.chosen_spp:.0f} spp) "
+            + "; ".join(parts) + f"{seeds}.")

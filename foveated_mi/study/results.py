@@ -26,7 +26,8 @@ from ..metrics import COMPARE_KEYS
 __all__ = ["columns", "ResultsFile", "read_rows", "format_value", "parse_value",
            "NUMERIC_COLUMNS"]
 
-_HEAD = ("task_id", "scene", "method", "theta", "sigma_p", "reconstruction", "spp", "frame",
+_HEAD = ("task_id", "scene", "method", "seed", "theta", "sigma_p", "reconstruction", "spp",
+         "frame",
          "rays", "ray_fraction", "samples", "time_ms")
 _TAIL = ("aov_ms", "denoise_ms", *COMPARE_KEYS, "history_hit_rate", "width", "height",
          "repeats", "variant", "config")
@@ -39,15 +40,18 @@ def stage_columns() -> list[str]:
     return [f"{s}_ms" for s in STAGES if s != "total"]
 
 
-def columns() -> list[str]:
-    """The columns of ``results.csv``, in order."""
-    return [*_HEAD, *stage_columns(), *_TAIL]
+def columns(extra: Iterable[str] = ()) -> list[str]:
+    """The columns of ``results.csv``, in order; ``extra`` (e.g. ``jod`` when the perceptual
+    extra is installed) go after the quality columns. Without them the columns are absent,
+    never empty or zero."""
+    i = _TAIL.index("history_hit_rate")
+    return [*_HEAD, *stage_columns(), *_TAIL[:i], *extra, *_TAIL[i:]]
 
 
 #: Columns read back as numbers by :func:`read_rows` (besides any ``*_ms`` column).
-NUMERIC_COLUMNS = frozenset(("theta", "sigma_p", "spp", "frame", "rays", "ray_fraction",
-                             "samples", "time_ms", *COMPARE_KEYS, "history_hit_rate", "width",
-                             "height", "repeats"))
+NUMERIC_COLUMNS = frozenset(("seed", "theta", "sigma_p", "spp", "frame", "rays",
+                             "ray_fraction", "samples", "time_ms", *COMPARE_KEYS, "jod",
+                             "history_hit_rate", "width", "height", "repeats"))
 
 
 def format_value(v: Any) -> str:

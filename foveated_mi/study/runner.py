@@ -100,11 +100,15 @@ def _one_line(e: BaseException) -> str:
 
 
 def _describe(task: dict) -> str:
-    if task["kind"] == "foveated":
+    seed = f" seed {task['seed']}" if "seed" in task else ""
+    if task["method"] == "foveated":
         o = task["options"]
         return (f"{task['label']} foveated theta {o['theta']:g} sigma_p {o['sigma_p']:g} "
-                f"{o['reconstruction']} spp {task['spp']}")
-    return f"{task['label']} {task['method']} spp {task['spp']}"
+                f"{o['reconstruction']} spp {task['spp']}{seed}")
+    if task["kind"] == "foveated":            # uniform with history: the integrator at P = 1
+        return (f"{task['label']} {task['method']} ({task['options']['preset']}) "
+                f"spp {task['spp']}{seed}")
+    return f"{task['label']} {task['method']} spp {task['spp']}{seed}"
 
 
 def run_study(study: str | os.PathLike | StudySpec, *, out: str | None = None,
@@ -120,12 +124,13 @@ def run_study(study: str | os.PathLike | StudySpec, *, out: str | None = None,
     :attr:`StudyResult.failed` (one line each) and the others go on.
     """
     import foveated_mi
+    from .. import perceptual
     from ..denoise import oidn_available
     from ..variant import choose_variant
     from . import tasks as T
     from .executors import make_executor
     from .pareto import front_table, plot_pareto, scene_fronts
-    from .results import ResultsFile, read_rows
+    from .results import ResultsFile, columns, read_rows
 
     say = echo or (lambda s: None)
     spec = study if isinstance(study, StudySpec) else load_study(study)
@@ -145,12 +150,17 @@ def run_study(study: str | os.PathLike | StudySpec, *, out: str | None = None,
             notes.append(f"note: scene {s.label!r} skipped: optional XML file {s.name} "
                          "not found")
     have_oidn = oidn_available()
-    if not have_oidn and any(u["denoise"] for u in spec.uniform):
+    if not have_oidn and any(u["denoise"] and u.get("denoiser", "oidn") == "oidn"
+                             for u in spec.uniform):
         notes.append("note: uniform+oidn baselines skipped: pyoidn is not installed "
                      "(pip install foveated_mi[denoise])")
+    with_jod = bool(spec.perceptual.get("jod")) and perceptual.available()
+    if spec.perceptual.get("jod") and not with_jod:
+        notes.append("note: no jod column: FovVideoVDP (pyfvvdp, torch) is not installed "
+                     f"({perceptual.INSTALL_HINT})")
     for n in notes:
         say(n)
-    tasks = T.expand_tasks(spec, v, denoise_available=have_oidn)
+    tasks = [{**t, "jod": with_jod} for t in T.expand_tasks(spec, v, denoise_available=have_oidn)]
     scenes = {s.label: s for s in spec.scenes if not s.missing}
     if not tasks:
         raise ParameterError("study", spec.source, "at least one scene that exists and one "
@@ -164,7 +174,8 @@ def run_study(study: str | os.PathLike | StudySpec, *, out: str | None = None,
     result = StudyResult(spec=spec, out_dir=out_dir, results_path=results_path, metric=metric,
                          rows=[], tasks_total=len(tasks), notes=notes)
     try:
-        with ResultsFile(results_path) as results:
+        extra = perceptual.COLUMNS if with_jod else ()
+        with ResultsFile(results_path, columns(extra)) as results:
             if results.repaired_bytes:
                 say(f"note: {results_path}: removed a partly written last line "
                     f"({results.repaired_bytes} bytes)")

@@ -4,6 +4,8 @@ Layout (every key optional except ``scenes``)::
 
     description = "..."
     seed = 0                    # seed of every frame (common random numbers across configs)
+    seeds = [0, 1, 2]           # or several: every configuration runs once per seed (a `seed`
+                                #   column); tables report the mean and the spread over seeds
     repeats = 3                 # timed repetitions per configuration (median reported)
     warmup = 2                  # untimed frames per configuration first (kernel compilation)
     metric = "psnr_fovea"       # quality axis of the Pareto plot (a quality column)
@@ -25,9 +27,12 @@ Layout (every key optional except ``scenes``)::
     [metrics]                   # how quality is measured (the same for every row)
     theta = 0.1                 #   fovea radius of the *_fovea / *_periphery columns
     sigma_p = 0.8               #   falloff of the eccentricity weights (psnr_eccentricity)
-    ppd = 67.0                  #   FLIP viewing condition, pixels per degree
+    ppd = 67.0                  #   viewing condition of FLIP and JOD, pixels per degree
     flip = true
     exposure = 0.0              #   display transform (Reinhard + sRGB) exposure in stops
+    jod = true                  #   FovVideoVDP JOD at the scene's gaze (a `jod` column) when
+                                #   the perceptual extra is installed; absent without it
+    display = "standard_fhd"    #   FovVideoVDP display model (photometry); see perceptual.py
 
     [foveated.defaults]         # options shared by the grid and the list
     atrous_iterations = 0
@@ -43,7 +48,20 @@ Layout (every key optional except ``scenes``)::
 
     [uniform]                   # baselines: every pixel traced at spp
     spp = [1, 4, 16]
-    denoise = [false, true]     # true: + Intel OIDN (skipped with a note without pyoidn)
+    denoise = [false, true]     # true: + a denoiser (skipped with a note without pyoidn)
+    history = [false, true]     # true: + the foveated integrator's reprojection history
+    presets = ["oidn"]          # history rows: whose history and denoiser (default: the
+                                #   foveated configurations' presets, else "auto")
+    frames = [1, 16]            # history rows: frames recorded (default: the foveated
+                                #   configurations' frames, else [1])
+
+Uniform rows without history render one frame with ``mi.render`` (+ Intel OIDN when
+denoised); a frame does not depend on its number, so they are recorded at frame 1 only.
+Uniform rows with history run the ``foveated`` integrator itself at ``sigma_p = 1`` (P = 1 at
+every pixel: every pixel traced, reconstruction a no-op) with the preset's options, so they
+accumulate the same reprojection history; ``denoise = true`` keeps the preset's denoiser
+(method ``uniform+history+<denoiser>``), ``false`` sets ``denoiser = "none"``
+(``uniform+history``).
 
 Foveated keys are the options of the ``foveated`` integrator (checked by
 :func:`foveated_mi.integrators.foveated.validate_options`, so new options work without
@@ -70,8 +88,11 @@ QUALITY_COLUMNS = COMPARE_KEYS
 DEFAULT_INTEGRATOR = {"type": "path", "max_depth": 8}
 DEFAULT_REFERENCE_SPP = 256
 DEFAULT_METRICS = {"theta": 0.1, "sigma_p": 0.8, "ppd": 67.0, "flip": True, "exposure": 0.0}
+#: Perceptual settings (``[metrics]`` keys too); kept apart so that their defaults do not
+#: change the ids (and resumability) of studies written before them.
+DEFAULT_PERCEPTUAL = {"jod": True, "display": "standard_fhd"}
 
-_TOP_KEYS = ("description", "seed", "repeats", "warmup", "metric", "size", "gaze",
+_TOP_KEYS = ("description", "seed", "seeds", "repeats", "warmup", "metric", "size", "gaze",
              "integrator", "reference", "scenes", "metrics", "foveated", "uniform")
 _SCENE_KEYS = ("scene", "label", "size", "gaze", "params", "integrator", "reference",
                "optional")
@@ -124,12 +145,15 @@ class StudySpec:
     source: str
     scenes: tuple[SceneSpec, ...]
     foveated: tuple[dict, ...]        # each: integrator options + "spp" + "frames"
-    uniform: tuple[dict, ...]         # each: {"spp": n, "denoise": bool}
-    seed: int = 0
+    uniform: tuple[dict, ...]         # each: {"spp", "denoise", "history"} (+ history rows:
+                                      #   "preset", "denoiser", "frames", "options", "given")
+    seed: int = 0                     # the first of seeds
+    seeds: tuple[int, ...] = (0,)
     repeats: int = 3
     warmup: int = 2
     metric: str = "psnr_fovea"
     metrics: dict = field(default_factory=lambda: dict(DEFAULT_METRICS))
+    perceptual: dict = field(default_factory=lambda: dict(DEFAULT_PERCEPTUAL))
     description: str = ""
 
     def with_size(self, size: tuple[int, int] | None) -> "StudySpec":
@@ -152,7 +176,7 @@ def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
     ctx = _Ctx(source)
     ctx.table("", data)
     ctx.known("", data, _TOP_KEYS)
-    seed = ctx.integer("seed", data.get("seed", 0), 0, (1 << 32) - 1)
+    seeds = _seeds(ctx, data)
     repeats = ctx.integer("repeats", data.get("repeats", 3), 1, 10000)
     warmup = ctx.integer("warmup", data.get("warmup", 2), 0, 10000)
     metric = ctx.string("metric", data.get("metric", "psnr_fovea"), QUALITY_COLUMNS)
@@ -174,20 +198,37 @@ def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
     for i, lab in enumerate(labels):
         if lab in labels[:i]:
             raise ctx.error(f"scenes[{i}].label", lab, "a label no other scene uses")
-    metrics = _metrics(ctx, data.get("metrics", {}))
+    metrics, perceptual = _metrics(ctx, data.get("metrics", {}))
     foveated = _foveated(ctx, data.get("foveated", {}))
-    uniform = _uniform(ctx, data.get("uniform", {}))
+    uniform = _uniform(ctx, data.get("uniform", {}), foveated)
     if not foveated and not uniform:
         raise ctx.error("foveated", None, "at least one configuration ([foveated.grid], "
                         "[[foveated.configs]] or [uniform])")
     return StudySpec(name=name, source=source, scenes=tuple(scenes), foveated=tuple(foveated),
-                     uniform=tuple(uniform), seed=seed, repeats=repeats, warmup=warmup,
-                     metric=metric, metrics=metrics, description=description)
+                     uniform=tuple(uniform), seed=seeds[0], seeds=seeds, repeats=repeats,
+                     warmup=warmup, metric=metric, metrics=metrics, perceptual=perceptual,
+                     description=description)
 
 
 # ---------------------------------------------------------------------------------------------
 # pieces
 # ---------------------------------------------------------------------------------------------
+
+def _seeds(ctx: _Ctx, data: dict) -> tuple[int, ...]:
+    hi = (1 << 32) - 1
+    if "seeds" not in data:
+        return (ctx.integer("seed", data.get("seed", 0), 0, hi),)
+    if "seed" in data:
+        raise ctx.error("seed", data["seed"], "no seed beside seeds (put it in the list)")
+    value = data["seeds"]
+    if not isinstance(value, list) or not value:
+        raise ctx.error("seeds", value, "a non-empty list of distinct integers in [0, 2^32)")
+    seeds = [ctx.integer(f"seeds[{i}]", v, 0, hi) for i, v in enumerate(value)]
+    for i, v in enumerate(seeds):
+        if v in seeds[:i]:
+            raise ctx.error(f"seeds[{i}]", v, "a seed not already in the list")
+    return tuple(seeds)
+
 
 def _size(ctx: _Ctx, key: str, value: Any) -> tuple[int, int]:
     if isinstance(value, int) and not isinstance(value, bool):
@@ -286,9 +327,16 @@ def _scene(ctx: _Ctx, key: str, table: Any, defaults: dict, base_dir: str) -> Sc
                      params=params, integrator=integ, reference=ref, optional=optional)
 
 
-def _metrics(ctx: _Ctx, table: Any) -> dict:
+def _metrics(ctx: _Ctx, table: Any) -> tuple[dict, dict]:
     table = dict(ctx.table("metrics", table))
-    ctx.known("metrics", table, tuple(DEFAULT_METRICS))
+    ctx.known("metrics", table, tuple(DEFAULT_METRICS) + tuple(DEFAULT_PERCEPTUAL))
+    perceptual = {"jod": ctx.boolean("metrics.jod", table.pop("jod", True))}
+    from ..perceptual import check_display
+    try:
+        perceptual["display"] = check_display(
+            "metrics.display", table.pop("display", DEFAULT_PERCEPTUAL["display"]))
+    except ParameterError as e:
+        raise ctx.rename(e) from None
     m = {**DEFAULT_METRICS, **table}
     from ..validate import check_range
     try:
@@ -299,7 +347,7 @@ def _metrics(ctx: _Ctx, table: Any) -> dict:
     except ParameterError as e:
         raise ctx.rename(e) from None
     out["flip"] = ctx.boolean("metrics.flip", m["flip"])
-    return out
+    return out, perceptual
 
 
 def _option_module():
@@ -404,19 +452,71 @@ def _foveated(ctx: _Ctx, table: Any) -> list[dict]:
     return unique
 
 
-def _uniform(ctx: _Ctx, table: Any) -> list[dict]:
+def _bools(ctx: _Ctx, key: str, value: Any) -> list[bool]:
+    values = value if isinstance(value, list) else [value]
+    if not values:
+        raise ctx.error(key, value, "true, false or a list of them")
+    return list(dict.fromkeys(ctx.boolean(f"{key}[{i}]" if isinstance(value, list) else key, v)
+                              for i, v in enumerate(values)))
+
+
+def _uniform(ctx: _Ctx, table: Any, foveated: list[dict]) -> list[dict]:
+    from ..options import DEFAULTS, PRESET_NAMES, PRESETS
     table = dict(ctx.table("uniform", table))
     if not table:
         return []
-    ctx.known("uniform", table, ("spp", "denoise"))
+    ctx.known("uniform", table, ("spp", "denoise", "history", "presets", "frames"))
     spp = table.get("spp", [1])
     spp = spp if isinstance(spp, list) else [spp]
     if not spp:
         raise ctx.error("uniform.spp", spp, "an integer >= 1 or a non-empty list of them")
     spps = [ctx.integer(f"uniform.spp[{i}]", s, 1, 1 << 16) for i, s in enumerate(spp)]
-    den = table.get("denoise", [False])
-    den = den if isinstance(den, list) else [den]
-    if not den:
-        raise ctx.error("uniform.denoise", den, "true, false or a list of them")
-    dens = [ctx.boolean(f"uniform.denoise[{i}]", d) for i, d in enumerate(den)]
-    return [{"spp": s, "denoise": d} for s in dict.fromkeys(spps) for d in dict.fromkeys(dens)]
+    dens = _bools(ctx, "uniform.denoise", table.get("denoise", [False]))
+    hists = _bools(ctx, "uniform.history", table.get("history", [False]))
+    if True not in hists:
+        for k in ("presets", "frames"):
+            if k in table:
+                raise ctx.error(f"uniform.{k}", table[k], "no history rows to apply to "
+                                "(uniform.history = [false, true] adds them)")
+    # history rows: the foveated configurations' presets and frames unless given
+    default_presets = list(dict.fromkeys(c["options"]["preset"] for c in foveated)) or ["auto"]
+    presets = table.get("presets", default_presets)
+    presets = presets if isinstance(presets, list) else [presets]
+    if not presets:
+        raise ctx.error("uniform.presets", presets, "a preset name or a non-empty list of them")
+    presets = [ctx.string(f"uniform.presets[{i}]", p, PRESET_NAMES)
+               for i, p in enumerate(presets)]
+    if "frames" in table:
+        frames = _frames(ctx, "uniform.frames", table["frames"])
+    else:
+        frames = sorted({f for c in foveated for f in c["frames"]}) or [1]
+    out = []
+    for s in dict.fromkeys(spps):
+        for d in dens:
+            if False in hists:
+                out.append({"spp": s, "denoise": d, "history": False})
+            if True not in hists:
+                continue
+            seen = set()
+            for i, p in enumerate(presets):
+                given = {"preset": p, "sigma_p": 1.0, "history": True, "denoiser": "none"}
+                where = {k: f"uniform.presets[{i}]" for k in given}
+                # validated without the denoiser (OIDN may be missing here: the row is then
+                # skipped with a note, like uniform+oidn), which is then the preset's own
+                full = _check_options(ctx, "uniform", given, where)["options"]
+                given["preset"] = full["preset"]
+                denoiser = "none"
+                if d:
+                    denoiser = PRESETS[full["preset"]].get("denoiser", DEFAULTS["denoiser"])
+                    full["denoiser"] = denoiser
+                    del given["denoiser"]
+                if denoiser == "none" and d:
+                    continue            # the preset has no denoiser: the same as denoise false
+                key = json.dumps(full, sort_keys=True)
+                if key in seen:
+                    continue
+                seen.add(key)
+                out.append({"spp": s, "denoise": d, "history": True, "preset": full["preset"],
+                            "denoiser": denoiser, "frames": frames, "options": full,
+                            "given": given})
+    return out

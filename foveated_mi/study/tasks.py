@@ -5,17 +5,22 @@ A task is a JSON-able dict; it never holds a Mitsuba object, so it pickles to an
 A worker keeps every scene it loaded in a module-level cache keyed by the scene's load spec and
 variant (:func:`get_scene`), so each worker process loads each scene once.
 
-Seeds: every frame of every configuration uses the study's ``seed`` (the foveated integrator
-decorrelates its own frames after the first), so results do not depend on which worker runs
-a task or in which order, and configurations share their random numbers (common random
-numbers: differences between rows are the configurations', not the noise's).
+Seeds: a task runs one configuration with one of the study's ``seeds``; every frame of it uses
+that seed (the foveated integrator decorrelates its own frames after the first), so results
+do not depend on which worker runs a task or in which order, and configurations share their
+random numbers per seed (common random numbers: differences between rows of one seed are the
+configurations', not the noise's; :mod:`.aggregate` pairs them by seed).
 
 Timing of a foveated task: ``warmup`` untimed frames (kernel compilation, history path
 included), then ``repeats`` times: reset the history, render frames 1 .. max(frames) with
 ``timing=True``, and keep ``stats["timings_ms"]`` at each recorded frame. Each time column is
 the median over the repeats of that stage at that frame (so stage medians need not add up to
 the median total). Quality comes from the first repeat (every repeat renders the same images).
-A uniform task is timed the same way around :func:`foveated_mi.baselines.render_uniform`.
+A uniform task is timed the same way around :func:`foveated_mi.baselines.render_uniform`; a
+uniform task with history is a foveated task (the integrator at ``sigma_p = 1``).
+
+Quality columns: :func:`foveated_mi.metrics.compare` against the reference, plus ``jod``
+(:mod:`foveated_mi.perceptual`) when the study asks for it and the extra is installed.
 """
 from __future__ import annotations
 
@@ -74,37 +79,70 @@ def reference_task(scene, variant: str) -> dict:
 
 
 def expand_tasks(spec, variant: str, *, denoise_available: bool = True) -> list[dict]:
-    """Every (scene, configuration) of the study as a task dict, scene by scene, foveated
-    configurations first (in TOML order), then the uniform baselines. Missing optional scenes
-    are left out (the caller reports them); denoised baselines too without pyoidn."""
+    """Every (scene, configuration, seed) of the study as a task dict, scene by scene,
+    foveated configurations first (in TOML order), then the uniform baselines, each
+    configuration's seeds together. Missing optional scenes are left out (the caller reports
+    them); baselines denoised by OIDN too without pyoidn."""
     tasks = []
+    seeds = getattr(spec, "seeds", None) or (spec.seed,)
     for scene in spec.scenes:
         if scene.missing:
             continue
         base = {"scene": scene.load_spec(), "label": scene.label, "gaze": list(scene.gaze),
-                "variant": variant, "seed": spec.seed, "repeats": spec.repeats,
-                "warmup": spec.warmup, "metrics": dict(spec.metrics)}
+                "variant": variant, "repeats": spec.repeats, "warmup": spec.warmup,
+                "metrics": dict(spec.metrics), "perceptual": _perceptual(spec)}
         ident = scene.identity()
+        hashed = _hashed_metrics(spec)
         for c in spec.foveated:
-            tid = task_id(ident, "foveated", c["options"], c["spp"], spec.seed, variant,
-                          spec.metrics)
             config = {"method": "foveated", "options": c["given"], "spp": c["spp"],
                       "frames": c["frames"], "full_options": c["options"]}
-            tasks.append({**base, "kind": "foveated", "task_id": tid, "method": "foveated",
-                          "options": c["options"], "spp": c["spp"], "frames": c["frames"],
-                          "config": json.dumps(config, sort_keys=True)})
+            for seed in seeds:
+                tid = task_id(ident, "foveated", c["options"], c["spp"], seed, variant, hashed)
+                tasks.append({**base, "kind": "foveated", "task_id": tid, "seed": seed,
+                              "method": "foveated", "options": c["options"], "spp": c["spp"],
+                              "frames": c["frames"], "config": json.dumps(config,
+                                                                          sort_keys=True)})
         for u in spec.uniform:
+            if u.get("history"):
+                if u["denoiser"] == "oidn" and not denoise_available:
+                    continue
+                method = "uniform+history" + (f"+{u['denoiser']}" if u["denoise"] else "")
+                config = {"method": method, "spp": u["spp"], "preset": u["preset"],
+                          "options": u["given"], "frames": u["frames"],
+                          "full_options": u["options"], "integrator": scene.integrator}
+                for seed in seeds:
+                    tid = task_id(ident, method, u["options"], u["spp"], seed, variant, hashed)
+                    tasks.append({**base, "kind": "foveated", "task_id": tid, "seed": seed,
+                                  "method": method, "options": u["options"], "spp": u["spp"],
+                                  "frames": u["frames"],
+                                  "config": json.dumps(config, sort_keys=True)})
+                continue
             if u["denoise"] and not denoise_available:
                 continue
             method = "uniform+oidn" if u["denoise"] else "uniform"
-            tid = task_id(ident, method, {"denoise": u["denoise"]}, u["spp"], spec.seed,
-                          variant, spec.metrics)
             config = {"method": method, "spp": u["spp"], "denoise": u["denoise"],
                       "integrator": scene.integrator}
-            tasks.append({**base, "kind": "uniform", "task_id": tid, "method": method,
-                          "options": {"denoise": u["denoise"]}, "spp": u["spp"], "frames": [1],
-                          "config": json.dumps(config, sort_keys=True)})
+            for seed in seeds:
+                tid = task_id(ident, method, {"denoise": u["denoise"]}, u["spp"], seed,
+                              variant, hashed)
+                tasks.append({**base, "kind": "uniform", "task_id": tid, "seed": seed,
+                              "method": method, "options": {"denoise": u["denoise"]},
+                              "spp": u["spp"], "frames": [1],
+                              "config": json.dumps(config, sort_keys=True)})
     return tasks
+
+
+def _perceptual(spec) -> dict:
+    from .spec import DEFAULT_PERCEPTUAL
+    return dict(getattr(spec, "perceptual", None) or DEFAULT_PERCEPTUAL)
+
+
+def _hashed_metrics(spec) -> dict:
+    """The metric settings in task ids: the perceptual ones only where they differ from their
+    defaults (studies written before them keep their ids, and resume)."""
+    from .spec import DEFAULT_PERCEPTUAL
+    extra = {k: v for k, v in _perceptual(spec).items() if v != DEFAULT_PERCEPTUAL[k]}
+    return {**spec.metrics, **extra}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -174,8 +212,13 @@ def _quality(reference_display: np.ndarray, image: np.ndarray, task: dict) -> di
     from ..render import to_display
     m = task["metrics"]
     test = to_display(image, m["exposure"])
-    return compare(reference_display, test, gaze=tuple(task["gaze"]), theta=m["theta"],
-                   sigma_p=m["sigma_p"], data_range=1.0, flip=m["flip"], ppd=m["ppd"])
+    out = compare(reference_display, test, gaze=tuple(task["gaze"]), theta=m["theta"],
+                  sigma_p=m["sigma_p"], data_range=1.0, flip=m["flip"], ppd=m["ppd"])
+    if task.get("jod"):                   # the client checked the extra is installed
+        from ..perceptual import jod
+        out["jod"] = jod(reference_display, test, gaze=tuple(task["gaze"]), ppd=m["ppd"],
+                         display=task["perceptual"]["display"])
+    return out
 
 
 def _foveated_frames(scene, task: dict, record: list[int]):
@@ -215,7 +258,7 @@ def run_task(task: dict, reference: np.ndarray) -> list[dict]:
     w, h = task["scene"]["width"], task["scene"]["height"]
     record = sorted(task.get("frames_todo") or task["frames"])
     common = {"task_id": task["task_id"], "scene": task["label"], "method": task["method"],
-              "spp": task["spp"], "width": w, "height": h, "repeats": task["repeats"],
+              "seed": task["seed"], "spp": task["spp"], "width": w, "height": h, "repeats": task["repeats"],
               "variant": task["variant"], "config": task["config"]}
     rows = []
     if task["kind"] == "foveated":
