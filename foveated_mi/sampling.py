@@ -123,6 +123,33 @@ def sampling_map(width: int, height: int, *, gaze: tuple[float, float], theta: f
     return smap, prob
 
 
+def largest_gap(width: int, height: int, *, gaze: tuple[float, float], theta: float,
+                sigma_p: float, epsilon: float = 1e-12) -> float | None:
+    """A distance (pixels) that, with probability at least ``1 - epsilon``, no pixel of a
+    sampling map drawn from this law is farther than from its nearest ray; None when the law
+    gives no useful bound (the map may be as sparse as one ray).
+
+    Every pixel is traced independently with probability at least ``p_min = P(d_max)``, the
+    probability at the film corner farthest from the gaze. A pixel has no ray within ``r``
+    only if the (at least quarter-) disk of radius ``r`` around it holds none:
+    ``(1 - p_min)^(pi r^2 / 4)``; over ``W H`` pixels, ``r^2 = 4 ln(W H / epsilon) /
+    (pi (-ln(1 - p_min)))`` bounds every gap. Rays forced on edges, the gaze pixel and history
+    only add sites. Computed on the host from the frame's scalars (no synchronisation)."""
+    w = sampling_weight(theta, sigma_p)
+    half_diag = 0.5 * math.hypot(width, height)
+    gx, gy = gaze[0] * width, gaze[1] * height
+    d_max = max(math.hypot(cx - gx, cy - gy) for cx in (0.5, width - 0.5)
+                for cy in (0.5, height - 0.5)) / half_diag
+    p_min = 1.0 if d_max == 0 else 1.0 / (w * d_max * d_max + 1.0) if math.isfinite(w) else 0.0
+    if p_min >= 1.0:
+        return 1.0
+    rate = -math.log1p(-p_min)
+    if rate <= 0.0:
+        return None
+    r = math.sqrt(4.0 * math.log(width * height / epsilon) / (math.pi * rate))
+    return r if r < max(width, height) / 2 else None
+
+
 def expected_fraction(width: int, height: int, *, gaze: tuple[float, float], theta: float,
                       sigma_p: float) -> float:
     """Analytic mean of P over the film (no edges): the expected ray fraction."""

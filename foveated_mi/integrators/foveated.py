@@ -470,7 +470,11 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             if every_pixel:
                 nearest = dr.arange(mi.UInt32, n)
             else:
-                nearest = rec.jump_flood(resolved.mask, width, height, variant=o["jfa"])
+                # No jump longer than the sampling law's largest gap (host scalars, no sync).
+                gap = _sampling.largest_gap(width, height, gaze=o["gaze"], theta=o["theta"],
+                                            sigma_p=o["sigma_p"])
+                nearest = rec.jump_flood(resolved.mask, width, height, variant=o["jfa"],
+                                         max_gap=gap)
         if every_pixel:
             filled = interpolated = radiance
         else:

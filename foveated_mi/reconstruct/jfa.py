@@ -67,8 +67,12 @@ def check_buffer(name: str, value, n: int) -> None:
         raise ParameterError(name, f"<buffer of {size} entries>", f"a buffer of {n} entries (width * height)")
 
 
-def jfa_steps(width: int, height: int, variant: str = "jfa+1") -> list[int]:
-    """The JFA step lengths for a ``width`` x ``height`` film (see module docstring)."""
+def jfa_steps(width: int, height: int, variant: str = "jfa+1",
+              max_gap: float | None = None) -> list[int]:
+    """The JFA step lengths for a ``width`` x ``height`` film (see module docstring).
+
+    ``max_gap``: a bound on the distance from any pixel to its nearest site (see
+    :func:`jump_flood`); the first step is then the smallest power of two reaching it."""
     width, height = check_film(width, height)
     check_choice("variant", variant, JFA_VARIANTS)
     n = 1
@@ -76,6 +80,11 @@ def jfa_steps(width: int, height: int, variant: str = "jfa+1") -> list[int]:
         n *= 2
     steps = []
     k = n // 2
+    if max_gap is not None:
+        b = 1
+        while b < max_gap:
+            b *= 2
+        k = min(k, b)
     while k >= 1:
         steps.append(k)
         k //= 2
@@ -128,13 +137,20 @@ def _packed_d2(packed: mi.UInt32, x: mi.Int32, y: mi.Int32) -> mi.UInt32:
     return dr.select(packed == NO_SITE, _D2_INF, d2)
 
 
-def jump_flood(site_mask: mi.Bool, width: int, height: int, variant: str = "jfa+1") -> mi.UInt32:
+def jump_flood(site_mask: mi.Bool, width: int, height: int, variant: str = "jfa+1",
+               max_gap: float | None = None) -> mi.UInt32:
     """Index of the (approximately) nearest site for every pixel, by jump flooding.
 
     Args:
         site_mask: ``mi.Bool`` with ``width * height`` entries, true at the sites (shaded pixels).
         width, height: film size in pixels (any size, not only powers of two).
         variant: step sequence, one of :data:`JFA_VARIANTS` (see module docstring).
+        max_gap: a bound on the distance from any pixel to its nearest site, such as
+            :func:`foveated_mi.sampling.largest_gap` of the sampling law: no step longer
+            than it is taken (steps longer than every gap only carry sites that later steps
+            replace). Fallback: a pixel left without a site (the bound was wrong) searches
+            square rings around itself, out to ``4 max_gap`` pixels; packets of pixels that
+            all have a site skip that search at the cost of one test.
 
     Returns:
         ``mi.UInt32`` buffer: the pixel index ``s_y * W + s_x`` of the site assigned to each
@@ -145,10 +161,54 @@ def jump_flood(site_mask: mi.Bool, width: int, height: int, variant: str = "jfa+
     check_buffer("site_mask", site_mask, width * height)
     x, y = pixel_coords(width, height)
     seed = dr.select(mi.Bool(site_mask), _pack(x, y), NO_SITE)
-    for k in jfa_steps(width, height, variant):
+    for k in jfa_steps(width, height, variant, max_gap):
         seed = _jfa_pass(seed, x, y, width, height, k)
+    if max_gap is not None:
+        seed = _ring_search(seed, site_mask, x, y, width, height,
+                            dr.opaque(mi.Int32, min(max(width, height), int(4 * max_gap) + 1)))
     index = (seed >> 16) * width + (seed & 0xFFFF)
     return dr.select(seed == NO_SITE, NO_SITE, index)
+
+
+def _ring_search(seed: mi.UInt32, site_mask: mi.Bool, x: mi.Int32, y: mi.Int32, width: int,
+                 height: int, max_ring: mi.Int32) -> mi.UInt32:
+    """Nearest site of each pixel still without one, by scanning the square rings of
+    Chebyshev radius 1, 2, ... ``max_ring`` around it (exact, ties as in JFA)."""
+    dr.schedule(seed)
+    lost = seed == NO_SITE
+    mask = mi.Bool(site_mask)
+
+    def cond(r, t, best, best_d2, active):
+        return active
+
+    def body(r, t, best, best_d2, active):
+        side = 2 * r
+        qx = dr.select(t < side, x - r + t, dr.select(t < 2 * side, x + r,
+                       dr.select(t < 3 * side, x + r - (t - 2 * side), x - r)))
+        qy = dr.select(t < side, y - r, dr.select(t < 2 * side, y - r + (t - side),
+                       dr.select(t < 3 * side, y + r, y + r - (t - 3 * side))))
+        inside = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
+        is_site = dr.gather(mi.Bool, mask, mi.UInt32(dr.select(inside, qy * width + qx, 0)),
+                            inside & active)
+        cand = dr.select(is_site & inside, _pack(qx, qy), NO_SITE)
+        d2 = _packed_d2(cand, x, y)
+        better = active & ((d2 < best_d2) | ((d2 == best_d2) & (cand < best)))
+        best = dr.select(better, cand, best)
+        best_d2 = dr.select(better, d2, best_d2)
+        t = t + 1
+        ring_done = t >= 4 * side
+        # Every site not yet seen lies on ring r + 1 or farther: at least (r + 1)^2 away.
+        final = ring_done & (best_d2 < mi.UInt32(dr.square(r + 1)))
+        r = dr.select(ring_done, r + 1, r)
+        t = dr.select(ring_done, 0, t)
+        return r, t, best, best_d2, active & ~final & (r <= max_ring)
+
+    one = dr.ones(mi.Int32, dr.width(seed))
+    _, _, best, _, _ = dr.while_loop(
+        state=(one, dr.zeros(mi.Int32, dr.width(seed)), seed,
+               dr.full(mi.UInt32, _D2_INF, dr.width(seed)), lost),
+        cond=cond, body=body, label="jfa_ring_search")
+    return best
 
 
 def site_distance2(nearest: mi.UInt32, width: int, height: int):
