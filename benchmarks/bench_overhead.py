@@ -10,9 +10,14 @@ Cases (the film size is multiplied by ``--scale``):
     voxel-city 1024x1024, path ``max_depth`` 3, 1 spp, ``preset="paper"``, θ calibrated to 10 %
     of the pixels (edge rays included), history on; a still camera, or a camera orbiting
     0.5° per frame.
-``staircase-guided`` / ``staircase-oidn``
+``staircase-guided`` / ``staircase-oidn`` / ``-oidn-balanced`` / ``-oidn-fast``
     the shared staircase interior (skipped when absent), 640x360, path ``max_depth`` 8, 2 spp,
-    the ``guided`` and ``oidn`` presets (OIDN skipped without ``pyoidn``).
+    the ``guided`` and ``oidn`` presets, the latter at OIDN's three quality levels (skipped
+    without ``pyoidn``); OIDN reads the albedo and normal of the G-buffer.
+``table1-rungholt`` / ``table1-vokselia`` / ``table1-eye-exam``
+    the paper's Table 1 budgets at 1024x1024, path ``max_depth`` 8, 1 spp, ``preset="paper"``:
+    θ calibrated to 19.8 % (voxel-city, 200² blocks), 3.3 % (the shared voxel-monument) and
+    6.9 % (eye-exam) of the pixels, edge rays included.
 
 Each frame runs, back to back so they share the machine's noise: the full render of the
 nested integrator, the foveated frame (timing off: its wall time gives the speed-up), and the
@@ -38,8 +43,8 @@ import numpy as np
 import foveated_mi
 from common import calibrate_theta, machine, md_table, median, write_json
 
-STAIRCASE = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "scenes", "staircase",
-                         "scene.xml")
+SHARED = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "scenes")
+STAIRCASE = os.path.join(SHARED, "staircase", "scene.xml")
 CASES = {
     "voxel-static": dict(scene="voxel-city", size=(1024, 1024), max_depth=3, spp=1,
                          preset="paper", fraction=0.10, orbit=0.0),
@@ -49,7 +54,21 @@ CASES = {
                              preset="guided", fraction=None, orbit=0.0),
     "staircase-oidn": dict(scene=STAIRCASE, size=(640, 360), max_depth=8, spp=2,
                            preset="oidn", fraction=None, orbit=0.0),
+    "staircase-oidn-balanced": dict(scene=STAIRCASE, size=(640, 360), max_depth=8, spp=2,
+                                    preset="oidn", fraction=None, orbit=0.0,
+                                    options={"oidn_quality": "balanced"}),
+    "staircase-oidn-fast": dict(scene=STAIRCASE, size=(640, 360), max_depth=8, spp=2,
+                                preset="oidn", fraction=None, orbit=0.0,
+                                options={"oidn_quality": "fast"}),
+    "table1-rungholt": dict(scene="voxel-city", params={"size": 200}, size=(1024, 1024),
+                            max_depth=8, spp=1, preset="paper", fraction=0.198, orbit=0.0),
+    "table1-vokselia": dict(scene=os.path.join(SHARED, "voxel-monument", "scene.xml"),
+                            size=(1024, 1024), max_depth=8, spp=1, preset="paper",
+                            fraction=0.033, orbit=0.0),
+    "table1-eye-exam": dict(scene="eye-exam", size=(1024, 1024), max_depth=8, spp=1,
+                            preset="paper", fraction=0.069, orbit=0.0),
 }
+DEFAULT_CASES = ("voxel-static", "voxel-moving", "staircase-guided", "staircase-oidn")
 STAGES = ("gbuffer", "sampling", "reorder", "trace", "reconstruct", "post")
 
 
@@ -73,6 +92,7 @@ def _orbit(camera: dict, degrees: float) -> dict:
 def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int) -> dict | None:
     from foveated_mi.gbuffer import render_gbuffer
     from foveated_mi.integrators.foveated import FoveatedIntegrator
+    from foveated_mi.options import validate_options
     from foveated_mi.sampling import depth_edges
     from foveated_mi.scenes import apply_camera, camera_of, load_scene
 
@@ -86,13 +106,18 @@ def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int) -
             return None
     W, H = (max(8, int(round(s * scale))) for s in spec["size"])
     scene = load_scene(spec["scene"], width=W, height=H, spp=spec["spp"],
-                       integrator={"type": "path", "max_depth": spec["max_depth"]})
+                       integrator={"type": "path", "max_depth": spec["max_depth"]},
+                       **spec.get("params", {}))
     nested = scene.integrator()
-    opts = dict(preset=spec["preset"], nested=nested)
+    opts = dict(preset=spec["preset"], nested=nested, **spec.get("options", {}))
     if spec["fraction"] is not None:
+        # Calibrated with the preset's own edge rays, which count towards the fraction.
+        o = validate_options({"preset": spec["preset"]})
         gb = render_gbuffer(scene, scene.sensors()[0])
-        edges = depth_edges(gb.depth, gb.hit, W, H, 0.1)
-        opts["theta"] = calibrate_theta(W, H, spec["fraction"], sigma_p=0.8, edges=edges)
+        edges = depth_edges(gb.depth, gb.hit, W, H, o["edge_threshold"]) \
+            if o["edge_threshold"] > 0 else None
+        opts["theta"] = calibrate_theta(W, H, spec["fraction"], sigma_p=o["sigma_p"],
+                                        edges=edges)
     fov = FoveatedIntegrator(**opts)
     timed = FoveatedIntegrator(**opts, timing=True)
     camera = camera_of(scene)
@@ -120,6 +145,7 @@ def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int) -
     st = {s: median([t[s] for t in stages]) for s in STAGES}
     overhead = sum(v for s, v in st.items() if s != "trace")
     return {"case": name, "size": [W, H], "preset": spec["preset"], "spp": spec["spp"],
+            "options": spec.get("options", {}),
             "ray_fraction": median(fractions), "full_ms": full_ms, "frame_ms": median(frame),
             "speedup": full_ms / median(frame), "stages_ms": st,
             "stages_x_full": {s: v / full_ms for s, v in st.items()},
@@ -129,7 +155,8 @@ def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int) -
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
+    p.add_argument("--cases", nargs="+", default=list(DEFAULT_CASES), choices=list(CASES),
+                   help="default: " + " ".join(DEFAULT_CASES))
     p.add_argument("--scale", type=float, default=1.0, help="film size multiplier (default 1)")
     p.add_argument("--frames", type=int, default=5)
     p.add_argument("--warmup", type=int, default=3)

@@ -1,0 +1,34 @@
+"""The overhead benchmark runs end to end at a tiny size and reports a consistent table."""
+import json
+import os
+import sys
+
+import pytest
+
+BENCH = os.path.join(os.path.dirname(__file__), "..", "benchmarks")
+
+
+@pytest.fixture
+def bench(monkeypatch):
+    monkeypatch.syspath_prepend(BENCH)
+    import bench_overhead
+    return bench_overhead
+
+
+def test_tiny_run_reports_stages_kernels_and_speedup(bench, tmp_path, capsys):
+    out = tmp_path / "overhead.json"
+    assert bench.main(["--cases", "voxel-static", "--scale", "0.03125", "--frames", "1",
+                       "--warmup", "2", "--out", str(out)]) == 0
+    r = json.loads(out.read_text())["results"][0]
+    assert r["size"] == [32, 32] and r["preset"] == "paper"
+    assert r["full_ms"] > 0 and r["frame_ms"] > 0
+    assert r["speedup"] == pytest.approx(r["full_ms"] / r["frame_ms"])
+    rest = sum(v for k, v in r["stages_x_full"].items() if k != "trace")
+    assert r["overhead_x_full"] == pytest.approx(rest)
+    assert r["kernels_per_frame"] > 0 and r["compiled_from_frame_3"] == 0
+    assert "voxel-static" in capsys.readouterr().out
+
+
+def test_bad_arguments_name_the_value(bench):
+    with pytest.raises(SystemExit):
+        bench.main(["--scale", "0"])
