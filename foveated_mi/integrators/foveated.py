@@ -140,6 +140,38 @@ from ..timing import StageTimer
 from ..options import DEFAULTS, NON_DIFFERENTIABLE_DENOISERS, PRESETS, validate_options  # noqa: F401
 from ..validate import ParameterError, check_int
 
+#: A camera move after which fewer pixels than this fraction reproject into the history is a
+#: cut: the frame starts afresh (history and frame counter reset), as a new integrator would.
+CUT_HIT_FRACTION = 0.1
+
+#: Scene objects whose parameters are the camera's: changing them moves the view, which
+#: reprojection follows, rather than changing what the history holds.
+_CAMERA_TYPES = ("Sensor", "Film", "Sampler", "ReconstructionFilter")
+
+
+def _value_state(value):
+    """What identifies a parameter's value without reading it: the Dr.Jit variables it
+    holds (``params.update()`` installs new ones), or the value itself for a Python scalar."""
+    if dr.is_array_v(value) or hasattr(value, "matrix"):
+        try:
+            return tuple(dr.detail.collect_indices(value))
+        except Exception:  # noqa: BLE001 - an exotic type: fall back to its identity
+            return id(value)
+    return value if isinstance(value, (int, float, bool, str)) else id(value)
+
+
+def _scene_state(scene: mi.Scene, sensor: mi.Sensor) -> tuple[tuple, tuple]:
+    """(scene parameters, camera parameters) identities; no device read."""
+    params = mi.traverse(scene)
+    scene_part, camera_part = [], []
+    for key in params.keys():
+        node = params.properties[key][2]
+        is_camera = any(c.__name__ in _CAMERA_TYPES for c in type(node).__mro__)
+        (camera_part if is_camera else scene_part).append((key, _value_state(params[key])))
+    camera_part.append(("world", _value_state(sensor.world_transform())))
+    return tuple(scene_part), tuple(camera_part)
+
+
 @dataclass
 class Frame:
     """What a frame decided before tracing (the passes of :meth:`FoveatedIntegrator._prepare`).
@@ -224,6 +256,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._options = validate_options(self._given)
         self._history: _reproject.History | None = None
         self._scene_ref = None
+        self._scene_state = self._camera_state = None
+        self._camera_moved = False
         # What the primal frame used, for its gradient pass to reuse.
         self._frame = 0
         # The last primal frame, which render_backward / render_forward differentiate.
@@ -279,13 +313,27 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
     def history(self) -> _reproject.History | None:
         return self._history
 
-    def _check_reset(self, scene: mi.Scene, width: int, height: int) -> None:
+    def _check_reset(self, scene: mi.Scene, sensor: mi.Sensor, width: int, height: int) -> None:
+        """Forget the history when it cannot describe this frame: another scene, another
+        film size, or a scene parameter changed (``params.update()``: new materials,
+        lights or geometry). A camera move is not a reset: reprojection handles it, and a
+        cut (reprojection fails almost everywhere) resets in :meth:`_prepare`."""
         # Scenes take no weak references, and a strong one would make a scene <-> integrator
         # cycle; the id is enough (a reused id still passes through the depth test).
         h = self._history
-        if self._scene_ref != id(scene) or (h is not None and (h.width, h.height) != (width, height)):
+        state, camera = (_scene_state(scene, sensor) if self._options["history"]
+                         else (None, None))
+        if self._scene_ref != id(scene) or (h is not None and (h.width, h.height) != (width, height)) \
+                or state != self._scene_state:
             self.reset()
             self._scene_ref = id(scene)
+        self._camera_moved = camera != self._camera_state
+        self._scene_state, self._camera_state = state, camera
+
+    def _is_cut(self, reproj: _reproject.ReprojectionMap, n: int) -> bool:
+        """Whether fewer than :data:`CUT_HIT_FRACTION` of the pixels found their history
+        (one host read, only on frames whose camera moved)."""
+        return int(dr.count(reproj.hit)[0]) < CUT_HIT_FRACTION * n
 
     # -- differentiation ------------------------------------------------------------------
     def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
@@ -377,15 +425,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         o = self._options
         width, height = _gbuffer.film_size(sensor)
         spp = check_int("spp", spp if spp else sensor.sampler().sample_count(), 1)
-        self._check_reset(scene, width, height)
-        history = self._history if o["history"] else None
-        # Without history a frame is a pure function of (scene, seed). With history, frame 0
-        # uses the caller's seed as is (so sigma_p = 1 reproduces a plain render) and later
-        # frames decorrelate, so that the history converges under a fixed seed.
+        self._check_reset(scene, sensor, width, height)
         seed = (int(seed) if not dr.is_array_v(seed) else int(dr.slice(seed))) & 0xFFFFFFFF
-        frame_seed = seed if (self._frame == 0 or not o["history"]) else \
-            int(mi.sample_tea_32(seed, self._frame)[0])
-        map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
 
         with dr.suspend_grad():
             gb = _gbuffer.render_gbuffer(scene, sensor,
@@ -395,6 +436,21 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             # after the scene is gone (a gradient pass can outlive it).
             timer.mark("gbuffer", gb.position, gb.normal, gb.depth, gb.hit, gb.direction,
                        gb.albedo, gb.emission)
+            history = self._history if o["history"] else None
+            reproj = _reproject.reprojection_map(gb.position, gb.hit, history, width, height,
+                                                 tolerance=o["reprojection_tolerance"],
+                                                 direction=gb.direction)
+            if history is not None and self._camera_moved and self._is_cut(reproj, width * height):
+                # A camera cut: the next frame is a first frame, as for a fresh integrator.
+                self.reset()
+                history = None
+                reproj = _reproject.reprojection_map(gb.position, gb.hit, None, width, height)
+            # Without history a frame is a pure function of (scene, seed). With history,
+            # frame 0 uses the caller's seed as is (so sigma_p = 1 reproduces a plain render)
+            # and later frames decorrelate, so that the history converges under a fixed seed.
+            frame_seed = seed if (self._frame == 0 or not o["history"]) else \
+                int(mi.sample_tea_32(seed, self._frame)[0])
+            map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
 
             edges = None
             if o["edge_threshold"] > 0:
@@ -402,9 +458,6 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             smap, prob = _sampling.sampling_map(width, height, gaze=o["gaze"], theta=o["theta"],
                                                 sigma_p=o["sigma_p"], seed=map_seed,
                                                 edges=edges)
-            reproj = _reproject.reprojection_map(gb.position, gb.hit, history, width, height,
-                                                 tolerance=o["reprojection_tolerance"],
-                                                 direction=gb.direction)
             timer.mark("sampling", smap, prob, reproj.hit, reproj.index, edges)
 
             ro = _reorder.reorder(smap, width, height, o["reorder"], o["block_height"])
