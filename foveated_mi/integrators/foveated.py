@@ -119,7 +119,7 @@ mapping round trip when neither the filter nor the PNG needs it.
 from __future__ import annotations
 
 import math
-import warnings
+import sys
 from dataclasses import dataclass
 from typing import Any
 
@@ -201,6 +201,25 @@ class _PrimalFrame:
     scene_id: int
 
 
+def _differentiated() -> bool:
+    """Whether this ``render`` is the primal of ``mi.render(scene, params, ...)`` with
+    parameters that require gradients (Mitsuba's render op calls it with gradients
+    suspended, and keeps the parameters on itself)."""
+    f = sys._getframe(2)
+    for _ in range(4):
+        if f is None:
+            return False
+        op = f.f_locals.get("self")
+        if type(op).__name__ == "_RenderOp":
+            params = getattr(op, "params", None)
+            if params is None:
+                return False
+            with dr.resume_grad():
+                return any(dr.grad_enabled(params[k]) for k in params.keys())
+        f = f.f_back
+    return False
+
+
 def _tensor_to_color(tensor, frame: Frame, name: str) -> mi.Color3f:
     shape = tuple(tensor.shape)
     if shape != (frame.height, frame.width, 3):
@@ -253,7 +272,10 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             nested = mi.load_dict({"type": "path"})
         self.nested: mi.SamplingIntegrator = nested
         self._given = dict(options)          # what the user set; presets fill in the rest
-        self._options = validate_options(self._given)
+        # Frames of a nested AD integrator (prb, ...) are meant to be differentiated: the
+        # 'auto' preset then resolves to one whose gradient is exact.
+        self._gradients = _shading.is_ad_integrator(nested)
+        self._options = validate_options(self._given, self._gradients)
         self._history: _reproject.History | None = None
         self._scene_ref = None
         self._scene_state = self._camera_state = None
@@ -277,7 +299,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
     def set_options(self, **options) -> None:
         """Change options between frames (validated as a whole; nothing changes on error)."""
         given = {**self._given, **options}
-        new = validate_options(given)
+        new = validate_options(given, self._gradients)
         if new["history"] != self._options["history"]:
             self.reset()   # a history from frames ago would be stale
         self._given, self._options = given, new
@@ -364,10 +386,23 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         _adjoint.check_differentiable(self._options)
         denoiser = self._options["denoiser"]
         if denoiser in NON_DIFFERENTIABLE_DENOISERS:
-            # The one place the gradient is cut: said once, in one line.
-            warnings.warn(f"denoiser = {denoiser!r} is not differentiable: the gradient is that "
-                          "of the frame without it (straight through); use preset='guided' for "
-                          "an exact gradient", stacklevel=3)
+            # A gradient of another image than the one shown would mislead an optimisation.
+            how = ("preset = 'auto' chose it for a frame rendered without gradients; render "
+                   "the frame with mi.render(scene, params, ...) or set preset='guided'"
+                   if self._given.get("preset", "auto") == "auto"
+                   and "denoiser" not in self._given else
+                   "preset='guided' (or denoiser='svgf', 'atrous' or 'none') for gradients")
+            raise ParameterError("denoiser", denoiser,
+                                 f"a differentiable denoiser ({denoiser} is not "
+                                 f"differentiable): {how}")
+
+    def _prepare_gradients(self) -> None:
+        """Called by a primal frame that ``mi.render`` will differentiate: from now on the
+        'auto' preset is the exact one, and an explicit non-differentiable choice raises."""
+        if not self._gradients:
+            self._gradients = True
+            self._options = validate_options(self._given, True)
+        self._check_differentiable()
 
     def formation(self):
         """The last primal frame's image as a function of its traced pixels' values, with
@@ -408,6 +443,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                  "its own image)")
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
+        if _differentiated():
+            self._prepare_gradients()
         timer = StageTimer(self._options["timing"])
         frame = self._prepare(scene, sensor, seed, spp, timer)
         shade = self._shade(scene, frame)
