@@ -398,11 +398,11 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
 
     def _prepare_gradients(self) -> None:
         """Called by a primal frame that ``mi.render`` will differentiate: from now on the
-        'auto' preset is the exact one, and an explicit non-differentiable choice raises."""
+        'auto' preset is the exact one (an explicit non-differentiable choice raises in
+        the gradient pass)."""
         if not self._gradients:
             self._gradients = True
             self._options = validate_options(self._given, True)
-        self._check_differentiable()
 
     def formation(self):
         """The last primal frame's image as a function of its traced pixels' values, with
