@@ -10,7 +10,7 @@ defaults by a configuration tuned together; any option given explicitly wins ove
     For a Monte Carlo nested integrator, best measured at equal time with Intel Open Image
     Denoise installed (``pip install foveated_mi[denoise]``): wider sampling (θ = 0.25),
     albedo demodulation, the stochastic surface-aware fill and OIDN. Not differentiable
-    (a gradient pass runs it without OIDN).
+    (a gradient pass raises).
 ``guided``
     The differentiable noise-aware pipeline, no extra dependency: albedo demodulation, the
     G-buffer-guided sparse reconstruction and the variance-guided à-trous filter (SVGF), which

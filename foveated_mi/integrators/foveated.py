@@ -31,6 +31,12 @@ adjoint (``prb``, ``direct_projective``, ...) on the traced pixels only, or plai
 integrators. The history is a constant: frame ``t``'s gradient flows only through the rays
 traced in frame ``t``. Differentiate a frame before rendering the next one.
 
+**History resets.** The history is forgotten (the next frame is a first frame, seeded as for
+a fresh integrator) on another scene or film size, when ``params.update()`` changed a scene
+parameter other than the camera's, and on a camera cut: a camera move after which fewer than
+``CUT_HIT_FRACTION`` of the pixels reproject into the history. Otherwise each pixel that
+fails reprojection (disoccluded, off-screen, or behind the previous camera) starts afresh.
+
 Stages a frame does not need cost nothing: no edge pass when ``edge_threshold = 0``, no
 reprojection when ``history`` is off or on the first frame, no Jump Flooding or interpolation
 when ``sigma_p = 1`` (every pixel is traced), no filter when ``atrous_iterations = 0``, no tone
@@ -40,7 +46,8 @@ mapping round trip when neither the filter nor the PNG needs it.
 
  * - preset
    - |string|
-   - ``auto`` (default: ``oidn`` when ``pyoidn`` imports, else ``guided``) | ``oidn`` |
+   - ``auto`` (default: ``oidn`` when ``pyoidn`` imports, else ``guided``; ``guided`` for a
+     nested AD integrator or a differentiated ``mi.render``) | ``oidn`` |
      ``guided`` | ``paper``: a tuned group of the defaults below (see
      :mod:`foveated_mi.options`); options given explicitly win. The defaults listed here are
      the paper's (``preset = "paper"``)
@@ -154,7 +161,9 @@ def _value_state(value):
     holds (``params.update()`` installs new ones), or the value itself for a Python scalar."""
     if dr.is_array_v(value) or hasattr(value, "matrix"):
         try:
-            return tuple(dr.detail.collect_indices(value))
+            # The JIT part of each index (the low 32 bits): enabling gradients on an
+            # unchanged value changes only its AD part.
+            return tuple(i & 0xFFFFFFFF for i in dr.detail.collect_indices(value))
         except Exception:  # noqa: BLE001 - an exotic type: fall back to its identity
             return id(value)
     return value if isinstance(value, (int, float, bool, str)) else id(value)
