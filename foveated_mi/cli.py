@@ -108,6 +108,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "tcp://host:8786 (default with --executor dask: a LocalCluster)")
     st.add_argument("--workers", type=int, help="LocalCluster worker processes (dask without "
                     "--scheduler; default 2)")
+    st.add_argument("--task-timeout", type=float, help="seconds without any finished task "
+                    "after which the pending tasks fail (dask; default 1800)")
     st.add_argument("--size", type=int, nargs=2, metavar=("W", "H"),
                     help="override every scene's film size")
     st.add_argument("--metric", help="quality axis of the Pareto plot (default: the "
@@ -215,7 +217,8 @@ def cmd_study(args: argparse.Namespace) -> int:
     result = run_study(args.study, out=args.out, executor=args.executor,
                        scheduler=args.scheduler, workers=args.workers,
                        size=tuple(args.size) if args.size else None, metric=args.metric,
-                       variant=args.variant, progress=not args.no_progress)
+                       variant=args.variant, progress=not args.no_progress,
+                       task_timeout=args.task_timeout)
     return 1 if result.failed else 0
 
 

@@ -10,7 +10,7 @@ defaults by a configuration tuned together; any option given explicitly wins ove
     For a Monte Carlo nested integrator, best measured at equal time with Intel Open Image
     Denoise installed (``pip install foveated_mi[denoise]``): wider sampling (θ = 0.25),
     albedo demodulation, the stochastic surface-aware fill and OIDN. Not differentiable
-    (a gradient pass runs it without OIDN).
+    (a gradient pass raises).
 ``guided``
     The differentiable noise-aware pipeline, no extra dependency: albedo demodulation, the
     G-buffer-guided sparse reconstruction and the variance-guided à-trous filter (SVGF), which
@@ -19,8 +19,10 @@ defaults by a configuration tuned together; any option given explicitly wins ove
     +2.9 / +6.1 dB (frame / fovea) on the staircase in 337 against 371 ms, and by
     +2.1 / +8.5 dB on voxel-city in 272 against 228 ms.
 ``auto`` (default)
-    ``oidn`` when ``pyoidn`` can be imported, else ``guided``; ``stats["preset"]`` names the
-    one used.
+    ``oidn`` when ``pyoidn`` can be imported, else ``guided``; ``guided`` whenever the frames
+    are differentiated (a nested AD integrator such as ``prb``, or ``mi.render`` with
+    parameters that require gradients), so that gradients are exact. ``stats["preset"]``
+    names the one used.
 
 See ``benchmarks/bench_equal_time.py`` and the README for the measurements behind them.
 """
@@ -81,19 +83,25 @@ OIDN_QUALITIES = ("high", "balanced", "fast")
 NON_DIFFERENTIABLE_DENOISERS = frozenset({"oidn"})
 
 
-def resolve_preset(preset: str) -> str:
-    """The preset ``preset`` stands for (``auto`` -> ``oidn`` or ``guided``)."""
+def resolve_preset(preset: str, gradients: bool = False) -> str:
+    """The preset ``preset`` stands for (``auto`` -> ``oidn`` or ``guided``).
+
+    ``gradients``: the frames will be differentiated (a nested AD integrator such as
+    ``prb``, or a gradient pass), so ``auto`` picks the preset whose gradient is exact."""
     check_choice("preset", preset, PRESET_NAMES)
     if preset != "auto":
         return preset
+    if gradients:
+        return "guided"
     from .denoise import oidn_available
     return "oidn" if oidn_available() else "guided"
 
 
 
 
-def validate_options(options: dict[str, Any]) -> dict[str, Any]:
-    """Check every option and return them all, normalised, with the preset resolved.
+def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[str, Any]:
+    """Check every option and return them all, normalised, with the preset resolved
+    (``gradients``: see :func:`resolve_preset`).
 
     Raises :class:`~foveated_mi.validate.ParameterError` (one line) for an unknown option or
     a bad value."""
@@ -106,7 +114,7 @@ def validate_options(options: dict[str, Any]) -> dict[str, Any]:
     if unknown:
         name = sorted(unknown)[0]
         raise ParameterError(name, options[name], "one of " + ", ".join(sorted(DEFAULTS)))
-    preset = resolve_preset(options.get("preset", DEFAULTS["preset"]))
+    preset = resolve_preset(options.get("preset", DEFAULTS["preset"]), gradients)
     o = {**DEFAULTS, **PRESETS[preset], **options}
     out = {
         "preset": preset,

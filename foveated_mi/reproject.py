@@ -95,15 +95,20 @@ def reprojection_map(position: mi.Point3f, hit: mi.Bool, history: History | None
     n = width * height
     if history is None:
         return ReprojectionMap(dr.zeros(mi.Point2f, n), dr.zeros(mi.Bool, n), dr.zeros(mi.UInt32, n))
+    q = history.camera.matrix @ mi.Vector4f(position.x, position.y, position.z, 1.0)
     uv, dist = project(history.camera, position, width, height)
+    # A point behind the previous camera (w <= 0) projects, mirrored, into its film: it was
+    # never seen, whatever the stored depth there says.
+    front = q.w > 0
     background = ~hit
     if direction is not None:
-        q = history.camera.matrix @ mi.Vector4f(direction.x, direction.y, direction.z, 0.0)
-        inv_w = dr.rcp(q.w)
-        uv = dr.select(hit, uv, mi.Point2f(q.x * inv_w * width, q.y * inv_w * height))
+        qd = history.camera.matrix @ mi.Vector4f(direction.x, direction.y, direction.z, 0.0)
+        inv_w = dr.rcp(qd.w)
+        uv = dr.select(hit, uv, mi.Point2f(qd.x * inv_w * width, qd.y * inv_w * height))
+        front = dr.select(hit, front, qd.w > 0)
     else:
         background = mi.Bool(False)
-    finite = dr.isfinite(uv.x) & dr.isfinite(uv.y)
+    finite = dr.isfinite(uv.x) & dr.isfinite(uv.y) & front
     px = dr.floor(uv.x)
     py = dr.floor(uv.y)
     inside = (hit | background) & finite & (px >= 0) & (py >= 0) & (px < width) & (py < height)

@@ -55,6 +55,8 @@ are upgraded first (``maxDepth`` -> ``max_depth``), as ``mi.load_file`` does.
 """
 from __future__ import annotations
 
+import contextlib
+
 import inspect
 import math
 import os
@@ -739,7 +741,28 @@ def load_scene(name_or_path: str, *, width: int | None = None, height: int | Non
     path = _check_xml_path(name_or_path)
     if integrator is not None:
         _check_integrator(integrator)
-    return _load_xml(path, width, height, spp, integrator, camera, params)
+    with loader_threads():
+        return _load_xml(path, width, height, spp, integrator, camera, params)
+
+
+@contextlib.contextmanager
+def loader_threads():
+    """At least two Dr.Jit threads while a scene loads.
+
+    Mitsuba reads EXR images through OpenEXR, whose worker tasks run on Dr.Jit's thread
+    pool while the reading thread waits on a semaphore. With ``dr.set_thread_count(1)`` (a
+    Dask worker given one core) the pool has no thread left to run them, and the load never
+    returns. The previous count is restored afterwards."""
+    import drjit as dr
+    n = dr.thread_count()
+    if n >= 2:
+        yield
+        return
+    dr.set_thread_count(2)
+    try:
+        yield
+    finally:
+        dr.set_thread_count(n)
 
 
 def scene_camera(name_or_path: str) -> dict[str, Any]:

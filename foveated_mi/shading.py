@@ -39,6 +39,7 @@ reconstruction fills), so one bad path never spreads over the frame.
 """
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import drjit as dr
@@ -48,6 +49,7 @@ from .pixel_filter import FilterSample, FilterSampler
 
 
 PIXEL_FILTERS = ("splat", "importance")
+_NO_RAY = 0xFFFFFFFF
 
 
 class ShadingBuffer(NamedTuple):
@@ -200,39 +202,71 @@ def develop_splat(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.
                   ) -> ShadingBuffer:
     """``splat`` mode: Mitsuba's film estimator :math:`\\sum f L / \\sum f` at the traced pixels.
 
-    The samples are splatted with the film's filter into an ``mi.ImageBlock`` of the film's
-    crop (the block Mitsuba's ``hdrfilm`` would create); a traced pixel with any weight
-    holds the ratio, every other pixel holds nothing. Linear in ``samples.radiance`` (the
-    weights depend only on the sample positions)."""
+    The estimator of an ``mi.ImageBlock`` of the film's crop (the block ``hdrfilm`` would
+    create), written as a gather: each traced pixel visits the traced pixels within the
+    filter's reach, in a fixed order, and sums the filter-weighted samples that reach it.
+    Splatting with atomic adds sums in the order threads happen to run, which changes the
+    last bits from run to run; this sum is the same for a seed on every run. A traced pixel
+    with any weight holds the ratio, every other pixel holds nothing. Linear in
+    ``samples.radiance`` (the weights depend only on the sample positions)."""
     width, height = (int(v) for v in film.crop_size())
     n = width * height
     rfilter = film.rfilter()
-    border = bool(film.sample_border())
-    block = mi.ImageBlock(size=film.crop_size(), offset=film.crop_offset(), channel_count=5,
-                          rfilter=rfilter, border=border, coalesce=spp >= 4)
+    radius = float(rfilter.radius())
+    border = int(rfilter.border_size()) if film.sample_border() else 0
     off = film.crop_offset()
-    pos = mi.Point2f(samples.position.x + float(off[0]), samples.position.y + float(off[1]))
+    rays = dr.width(pixels)
+    # Samples of pixel q lie in [q, q + 1): they reach pixel centres within radius + 1/2.
+    reach = max(0, math.ceil(radius + 0.5) - 1)
+    ray_of = dr.full(mi.UInt32, _NO_RAY, n)
+    dr.scatter(ray_of, dr.arange(mi.UInt32, rays), pixels)
     L = samples.radiance
     lum2 = dr.square(luminance(dr.detach(L)))
-    block.put(pos, [L.x, L.y, L.z, lum2, mi.Float(1.0)], samples.ok)
-    data = block.tensor()
-    if border:
-        b = int(rfilter.border_size())
-        data = data[b:b + height, b:b + width]
-    flat = data.array
-    idx = dr.arange(mi.UInt32, n) * 5
-    acc = mi.Color3f(dr.gather(mi.Float, flat, idx), dr.gather(mi.Float, flat, idx + 1),
-                     dr.gather(mi.Float, flat, idx + 2))
-    m2 = dr.detach(dr.gather(mi.Float, flat, idx + 3))
-    wsum = dr.detach(dr.gather(mi.Float, flat, idx + 4))
+    # Film position as ImageBlock::put computes it: block pixels (border included), centres
+    # at integers.
+    shift = mi.Point2f(float(off[0] - border) + 0.5, float(off[1] - border) + 0.5)
+    pos = mi.Point2f(samples.position.x + float(off[0]), samples.position.y + float(off[1])) - shift
+    dr.schedule(ray_of, pos, lum2)
+
+    lane = dr.arange(mi.UInt32, rays * spp)
+    ray = lane // spp if spp > 1 else lane
+    k = lane - ray * spp
+    p = dr.gather(mi.UInt32, pixels, ray)
+    py = p // width
+    px = mi.Int32(p - py * width)
+    py = mi.Int32(py)
+    bx, by = mi.Float(px + border), mi.Float(py + border)
+    acc = dr.zeros(mi.Color3f, rays * spp)
+    m2 = dr.zeros(mi.Float, rays * spp)
+    wsum = dr.zeros(mi.Float, rays * spp)
+    for dy in range(-reach, reach + 1):
+        for dx in range(-reach, reach + 1):
+            qx, qy = px + dx, py + dy
+            inside = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
+            j = dr.gather(mi.UInt32, ray_of, mi.UInt32(dr.select(inside, qy * width + qx, 0)),
+                          inside)
+            src = j * spp + k
+            valid = inside & (j != _NO_RAY)
+            valid &= dr.gather(mi.Bool, samples.ok, src, valid)
+            sp = dr.gather(mi.Point2f, pos, src, valid)
+            ex, ey = bx - sp.x, by - sp.y
+            valid &= (dr.abs(ex) <= radius) & (dr.abs(ey) <= radius)
+            w = dr.select(valid, rfilter.eval(ex, valid) * rfilter.eval(ey, valid), 0.0)
+            acc += dr.gather(mi.Color3f, L, src, valid) * w
+            m2 += dr.gather(mi.Float, lum2, src, valid) * w
+            wsum += w
+    if spp > 1:
+        acc, m2, wsum = (dr.block_sum(v, spp) for v in (acc, m2, wsum))
+    m2, wsum = dr.detach(m2), dr.detach(wsum)
     accepted = dr.block_sum(mi.Float(samples.ok), spp) if spp > 1 else mi.Float(samples.ok)
-    _, traced = scatter_to_film(dr.zeros(mi.Color3f, dr.width(pixels)), accepted > 0, pixels, n)
-    count = dr.zeros(mi.Float, n)
-    dr.scatter(count, accepted, pixels, accepted > 0)
-    holds = traced & (wsum > 0)
+    holds = (accepted > 0) & (wsum > 0)
     inv = dr.rcp(dr.select(holds, wsum, 1.0))
-    return ShadingBuffer(dr.select(holds, acc * inv, 0.0), holds, dr.select(holds, m2 * inv, 0.0),
-                         dr.select(holds, count, 0.0))
+    value, mask = scatter_to_film(acc * inv, holds, pixels, n)
+    moment = dr.zeros(mi.Float, n)
+    count = dr.zeros(mi.Float, n)
+    dr.scatter(moment, m2 * inv, pixels, holds)
+    dr.scatter(count, accepted, pixels, holds)
+    return ShadingBuffer(value, mask, moment, count)
 
 
 def develop(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.Film,

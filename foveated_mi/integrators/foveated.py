@@ -31,6 +31,12 @@ adjoint (``prb``, ``direct_projective``, ...) on the traced pixels only, or plai
 integrators. The history is a constant: frame ``t``'s gradient flows only through the rays
 traced in frame ``t``. Differentiate a frame before rendering the next one.
 
+**History resets.** The history is forgotten (the next frame is a first frame, seeded as for
+a fresh integrator) on another scene or film size, when ``params.update()`` changed a scene
+parameter other than the camera's, and on a camera cut: a camera move after which fewer than
+``CUT_HIT_FRACTION`` of the pixels reproject into the history. Otherwise each pixel that
+fails reprojection (disoccluded, off-screen, or behind the previous camera) starts afresh.
+
 Stages a frame does not need cost nothing: no edge pass when ``edge_threshold = 0``, no
 reprojection when ``history`` is off or on the first frame, no Jump Flooding or interpolation
 when ``sigma_p = 1`` (every pixel is traced), no filter when ``atrous_iterations = 0``, no tone
@@ -40,7 +46,8 @@ mapping round trip when neither the filter nor the PNG needs it.
 
  * - preset
    - |string|
-   - ``auto`` (default: ``oidn`` when ``pyoidn`` imports, else ``guided``) | ``oidn`` |
+   - ``auto`` (default: ``oidn`` when ``pyoidn`` imports, else ``guided``; ``guided`` for a
+     nested AD integrator or a differentiated ``mi.render``) | ``oidn`` |
      ``guided`` | ``paper``: a tuned group of the defaults below (see
      :mod:`foveated_mi.options`); options given explicitly win. The defaults listed here are
      the paper's (``preset = "paper"``)
@@ -119,7 +126,7 @@ mapping round trip when neither the filter nor the PNG needs it.
 from __future__ import annotations
 
 import math
-import warnings
+import sys
 from dataclasses import dataclass
 from typing import Any
 
@@ -140,6 +147,40 @@ from ..scene_state import GeometryCache
 from ..timing import StageTimer
 from ..options import DEFAULTS, NON_DIFFERENTIABLE_DENOISERS, PRESETS, validate_options  # noqa: F401
 from ..validate import ParameterError, check_int
+
+#: A camera move after which fewer pixels than this fraction reproject into the history is a
+#: cut: the frame starts afresh (history and frame counter reset), as a new integrator would.
+CUT_HIT_FRACTION = 0.1
+
+#: Scene objects whose parameters are the camera's: changing them moves the view, which
+#: reprojection follows, rather than changing what the history holds.
+_CAMERA_TYPES = ("Sensor", "Film", "Sampler", "ReconstructionFilter")
+
+
+def _value_state(value):
+    """What identifies a parameter's value without reading it: the Dr.Jit variables it
+    holds (``params.update()`` installs new ones), or the value itself for a Python scalar."""
+    if dr.is_array_v(value) or hasattr(value, "matrix"):
+        try:
+            # The JIT part of each index (the low 32 bits): enabling gradients on an
+            # unchanged value changes only its AD part.
+            return tuple(i & 0xFFFFFFFF for i in dr.detail.collect_indices(value))
+        except Exception:  # noqa: BLE001 - an exotic type: fall back to its identity
+            return id(value)
+    return value if isinstance(value, (int, float, bool, str)) else id(value)
+
+
+def _scene_state(scene: mi.Scene, sensor: mi.Sensor) -> tuple[tuple, tuple]:
+    """(scene parameters, camera parameters) identities; no device read."""
+    params = mi.traverse(scene)
+    scene_part, camera_part = [], []
+    for key in params.keys():
+        node = params.properties[key][2]
+        is_camera = any(c.__name__ in _CAMERA_TYPES for c in type(node).__mro__)
+        (camera_part if is_camera else scene_part).append((key, _value_state(params[key])))
+    camera_part.append(("world", _value_state(sensor.world_transform())))
+    return tuple(scene_part), tuple(camera_part)
+
 
 @dataclass
 class Frame:
@@ -169,6 +210,25 @@ class _PrimalFrame:
     frame: Frame
     shading: _shading.ShadingBuffer   #: traced pixels' values (the primal's, detached)
     scene_id: int
+
+
+def _differentiated() -> bool:
+    """Whether this ``render`` is the primal of ``mi.render(scene, params, ...)`` with
+    parameters that require gradients (Mitsuba's render op calls it with gradients
+    suspended, and keeps the parameters on itself)."""
+    f = sys._getframe(2)
+    for _ in range(4):
+        if f is None:
+            return False
+        op = f.f_locals.get("self")
+        if type(op).__name__ == "_RenderOp":
+            params = getattr(op, "params", None)
+            if params is None:
+                return False
+            with dr.resume_grad():
+                return any(dr.grad_enabled(params[k]) for k in params.keys())
+        f = f.f_back
+    return False
 
 
 def _tensor_to_color(tensor, frame: Frame, name: str) -> mi.Color3f:
@@ -223,9 +283,14 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             nested = mi.load_dict({"type": "path"})
         self.nested: mi.SamplingIntegrator = nested
         self._given = dict(options)          # what the user set; presets fill in the rest
-        self._options = validate_options(self._given)
+        # Frames of a nested AD integrator (prb, ...) are meant to be differentiated: the
+        # 'auto' preset then resolves to one whose gradient is exact.
+        self._gradients = _shading.is_ad_integrator(nested)
+        self._options = validate_options(self._given, self._gradients)
         self._history: _reproject.History | None = None
         self._scene_ref = None
+        self._scene_state = self._camera_state = None
+        self._camera_moved = False
         # What the primal frame used, for its gradient pass to reuse.
         self._frame = 0
         # The last primal frame, which render_backward / render_forward differentiate.
@@ -246,7 +311,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
     def set_options(self, **options) -> None:
         """Change options between frames (validated as a whole; nothing changes on error)."""
         given = {**self._given, **options}
-        new = validate_options(given)
+        new = validate_options(given, self._gradients)
         if new["history"] != self._options["history"]:
             self.reset()   # a history from frames ago would be stale
         self._given, self._options = given, new
@@ -283,13 +348,27 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
     def history(self) -> _reproject.History | None:
         return self._history
 
-    def _check_reset(self, scene: mi.Scene, width: int, height: int) -> None:
+    def _check_reset(self, scene: mi.Scene, sensor: mi.Sensor, width: int, height: int) -> None:
+        """Forget the history when it cannot describe this frame: another scene, another
+        film size, or a scene parameter changed (``params.update()``: new materials,
+        lights or geometry). A camera move is not a reset: reprojection handles it, and a
+        cut (reprojection fails almost everywhere) resets in :meth:`_prepare`."""
         # Scenes take no weak references, and a strong one would make a scene <-> integrator
         # cycle; the id is enough (a reused id still passes through the depth test).
         h = self._history
-        if self._scene_ref != id(scene) or (h is not None and (h.width, h.height) != (width, height)):
+        state, camera = (_scene_state(scene, sensor) if self._options["history"]
+                         else (None, None))
+        if self._scene_ref != id(scene) or (h is not None and (h.width, h.height) != (width, height)) \
+                or state != self._scene_state:
             self.reset()
             self._scene_ref = id(scene)
+        self._camera_moved = camera != self._camera_state
+        self._scene_state, self._camera_state = state, camera
+
+    def _is_cut(self, reproj: _reproject.ReprojectionMap, n: int) -> bool:
+        """Whether fewer than :data:`CUT_HIT_FRACTION` of the pixels found their history
+        (one host read, only on frames whose camera moved)."""
+        return int(dr.count(reproj.hit)[0]) < CUT_HIT_FRACTION * n
 
     # -- differentiation ------------------------------------------------------------------
     def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
@@ -320,10 +399,23 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         _adjoint.check_differentiable(self._options)
         denoiser = self._options["denoiser"]
         if denoiser in NON_DIFFERENTIABLE_DENOISERS:
-            # The one place the gradient is cut: said once, in one line.
-            warnings.warn(f"denoiser = {denoiser!r} is not differentiable: the gradient is that "
-                          "of the frame without it (straight through); use preset='guided' for "
-                          "an exact gradient", stacklevel=3)
+            # A gradient of another image than the one shown would mislead an optimisation.
+            how = ("preset = 'auto' chose it for a frame rendered without gradients; render "
+                   "the frame with mi.render(scene, params, ...) or set preset='guided'"
+                   if self._given.get("preset", "auto") == "auto"
+                   and "denoiser" not in self._given else
+                   "preset='guided' (or denoiser='svgf', 'atrous' or 'none') for gradients")
+            raise ParameterError("denoiser", denoiser,
+                                 f"a differentiable denoiser ({denoiser} is not "
+                                 f"differentiable): {how}")
+
+    def _prepare_gradients(self) -> None:
+        """Called by a primal frame that ``mi.render`` will differentiate: from now on the
+        'auto' preset is the exact one (an explicit non-differentiable choice raises in
+        the gradient pass)."""
+        if not self._gradients:
+            self._gradients = True
+            self._options = validate_options(self._given, True)
 
     def formation(self):
         """The last primal frame's image as a function of its traced pixels' values, with
@@ -364,6 +456,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                  "its own image)")
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
+        if _differentiated():
+            self._prepare_gradients()
         timer = StageTimer(self._options["timing"])
         frame = self._prepare(scene, sensor, seed, spp, timer)
         shade = self._shade(scene, frame)
@@ -381,15 +475,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         o = self._options
         width, height = _gbuffer.film_size(sensor)
         spp = check_int("spp", spp if spp else sensor.sampler().sample_count(), 1)
-        self._check_reset(scene, width, height)
-        history = self._history if o["history"] else None
-        # Without history a frame is a pure function of (scene, seed). With history, frame 0
-        # uses the caller's seed as is (so sigma_p = 1 reproduces a plain render) and later
-        # frames decorrelate, so that the history converges under a fixed seed.
+        self._check_reset(scene, sensor, width, height)
         seed = (int(seed) if not dr.is_array_v(seed) else int(dr.slice(seed))) & 0xFFFFFFFF
-        frame_seed = seed if (self._frame == 0 or not o["history"]) else \
-            int(mi.sample_tea_32(seed, self._frame)[0])
-        map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
 
         with dr.suspend_grad():
             # A still camera over an unchanged scene reuses the last G-buffer.
@@ -400,6 +487,21 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             # after the scene is gone (a gradient pass can outlive it).
             timer.mark("gbuffer", gb.position, gb.normal, gb.depth, gb.hit, gb.direction,
                        gb.albedo, gb.emission)
+            history = self._history if o["history"] else None
+            reproj = _reproject.reprojection_map(gb.position, gb.hit, history, width, height,
+                                                 tolerance=o["reprojection_tolerance"],
+                                                 direction=gb.direction)
+            if history is not None and self._camera_moved and self._is_cut(reproj, width * height):
+                # A camera cut: the next frame is a first frame, as for a fresh integrator.
+                self.reset()
+                history = None
+                reproj = _reproject.reprojection_map(gb.position, gb.hit, None, width, height)
+            # Without history a frame is a pure function of (scene, seed). With history,
+            # frame 0 uses the caller's seed as is (so sigma_p = 1 reproduces a plain render)
+            # and later frames decorrelate, so that the history converges under a fixed seed.
+            frame_seed = seed if (self._frame == 0 or not o["history"]) else \
+                int(mi.sample_tea_32(seed, self._frame)[0])
+            map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
 
             edges = None
             if o["edge_threshold"] > 0:
@@ -407,9 +509,6 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             smap, prob = _sampling.sampling_map(width, height, gaze=o["gaze"], theta=o["theta"],
                                                 sigma_p=o["sigma_p"], seed=map_seed,
                                                 edges=edges)
-            reproj = _reproject.reprojection_map(gb.position, gb.hit, history, width, height,
-                                                 tolerance=o["reprojection_tolerance"],
-                                                 direction=gb.direction)
             timer.mark("sampling", smap, prob, reproj.hit, reproj.index, edges)
 
             ro = _reorder.reorder(smap, width, height, o["reorder"], o["block_height"])

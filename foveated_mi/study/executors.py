@@ -12,6 +12,10 @@ submitted with ``retries`` (a task that raises is tried again), and a worker pro
 dies is replaced by its nanny while the scheduler re-runs the task it held on another worker:
 only the running task is lost, never a finished one.
 
+A job that cannot finish does not hang the study: when no job has finished for
+``task_timeout`` seconds (:data:`TASK_TIMEOUT_S` by default, ``--task-timeout``), every job
+still pending fails with one line saying so, and the study goes on to write what finished.
+
 Timings under a LocalCluster of N > 1 workers share the machine's cores between concurrent
 tasks: use it for quality sweeps, and ``local`` (or one worker per machine) for timings.
 """
@@ -21,13 +25,15 @@ import logging
 import os
 from typing import Any, Callable, Iterable, Iterator
 
-from ..validate import ParameterError, check_int
+from ..validate import ParameterError, check_int, check_range
 
 __all__ = ["LocalExecutor", "DaskExecutor", "make_executor", "EXECUTORS", "CONNECT_TIMEOUT_S",
-           "CLUSTER_HINT"]
+           "CLUSTER_HINT", "TASK_TIMEOUT_S"]
 
 EXECUTORS = ("local", "dask")
 CONNECT_TIMEOUT_S = 5
+#: Longest wait, in seconds, for the next Dask job to finish before the pending ones fail.
+TASK_TIMEOUT_S = 1800.0
 CLUSTER_HINT = "pip install foveated_mi[cluster]"
 
 Job = tuple[Any, Callable, tuple]
@@ -61,7 +67,7 @@ class DaskExecutor:
     name = "dask"
 
     def __init__(self, scheduler: str | None = None, workers: int | None = None, *,
-                 retries: int = 2):
+                 retries: int = 2, task_timeout: float | None = None):
         try:
             import distributed  # noqa: F401
             import dask  # noqa: F401
@@ -70,6 +76,8 @@ class DaskExecutor:
                                  f"({CLUSTER_HINT})") from None
         from distributed import Client, LocalCluster
         self.retries = retries
+        self.task_timeout = check_range("--task-timeout", TASK_TIMEOUT_S if task_timeout is None
+                                        else task_timeout, 0.0, None, lo_open=True)
         self.cluster = None
         if scheduler is not None:
             if workers is not None:
@@ -98,21 +106,33 @@ class DaskExecutor:
         return self.client.scatter(value, broadcast=True)
 
     def run(self, jobs: Iterable[Job]) -> Iterator[tuple[Any, Any, BaseException | None]]:
-        from distributed import as_completed
+        from distributed import wait
         futures = {}
         for key, fn, args in jobs:
             fut = self.client.submit(fn, *args, pure=False, retries=self.retries)
             futures[fut] = key
-        for fut in as_completed(futures):
-            key = futures[fut]
+        pending = set(futures)
+        while pending:
             try:
-                yield key, fut.result(), None
-            except KeyboardInterrupt:
-                raise
-            except Exception as e:
-                yield key, None, e
-            finally:
-                fut.release()
+                done, pending = wait(pending, timeout=self.task_timeout,
+                                     return_when="FIRST_COMPLETED")
+            except TimeoutError:      # nothing finished in time: the rest fail, no hang
+                for fut in pending:
+                    fut.cancel()
+                    yield futures[fut], None, TimeoutError(
+                        f"no task finished within {self.task_timeout:g} s (--task-timeout); "
+                        "this one was still pending or running and was cancelled")
+                return
+            for fut in done:
+                key = futures[fut]
+                try:
+                    yield key, fut.result(), None
+                except KeyboardInterrupt:
+                    raise
+                except Exception as e:
+                    yield key, None, e
+                finally:
+                    fut.release()
 
     def close(self) -> None:
         try:
@@ -123,7 +143,7 @@ class DaskExecutor:
 
 
 def make_executor(kind: str = "local", *, scheduler: str | None = None,
-                  workers: int | None = None):
+                  workers: int | None = None, task_timeout: float | None = None):
     """An executor by name; ``--scheduler`` and ``--workers`` only make sense with dask."""
     if kind not in EXECUTORS:
         raise ParameterError("--executor", kind, "one of " + ", ".join(EXECUTORS))
@@ -135,4 +155,4 @@ def make_executor(kind: str = "local", *, scheduler: str | None = None,
             raise ParameterError("--workers", workers, "no --workers with --executor local "
                                  "(use --executor dask)")
         return LocalExecutor()
-    return DaskExecutor(scheduler, workers)
+    return DaskExecutor(scheduler, workers, task_timeout=task_timeout)

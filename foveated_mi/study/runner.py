@@ -115,13 +115,15 @@ def run_study(study: str | os.PathLike | StudySpec, *, out: str | None = None,
               executor: str = "local", scheduler: str | None = None,
               workers: int | None = None, size=None, metric: str | None = None,
               variant: str | None = None, progress: bool = True,
-              echo: Callable[[str], None] | None = print) -> StudyResult:
+              echo: Callable[[str], None] | None = print,
+              task_timeout: float | None = None) -> StudyResult:
     """Run (or resume) a study and write its results, plots and front table.
 
     ``study`` is a TOML path or a parsed :class:`StudySpec`; ``size`` (``W`` or ``(W, H)``)
     overrides every scene's film size; ``metric`` the TOML's quality axis. Bad input raises
     :class:`ParameterError` before anything runs. Tasks that fail are reported in
-    :attr:`StudyResult.failed` (one line each) and the others go on.
+    :attr:`StudyResult.failed` (one line each) and the others go on. ``task_timeout``
+    (seconds, Dask only): when no task finishes for that long the pending ones fail.
     """
     import foveated_mi
     from .. import perceptual
@@ -170,7 +172,7 @@ def run_study(study: str | os.PathLike | StudySpec, *, out: str | None = None,
 
     os.makedirs(out_dir, exist_ok=True)
     results_path = os.path.join(out_dir, "results.csv")
-    ex = make_executor(executor, scheduler=scheduler, workers=workers)
+    ex = make_executor(executor, scheduler=scheduler, workers=workers, task_timeout=task_timeout)
     result = StudyResult(spec=spec, out_dir=out_dir, results_path=results_path, metric=metric,
                          rows=[], tasks_total=len(tasks), notes=notes)
     try:
