@@ -124,6 +124,20 @@ def reprojection_map(position: mi.Point3f, hit: mi.Bool, history: History | None
     return ReprojectionMap(uv, ok, prev)
 
 
+def unless_cut(reproj: ReprojectionMap, fraction: float) -> tuple[ReprojectionMap, mi.Bool]:
+    """``reproj`` with no hit at all when fewer than ``fraction`` of the pixels hit, and that
+    verdict (a one-entry ``mi.Bool``): after a camera cut the few pixels that still pass the
+    depth test are chance matches, and a frame that keeps them mixes two views. Decided on the
+    device (a one-entry count, broadcast), so the frame never waits for it."""
+    n = dr.width(reproj.hit)
+    hits = dr.zeros(mi.UInt32, 1)
+    dr.scatter_reduce(dr.ReduceOp.Add, hits, mi.UInt32(1), mi.UInt32(0), reproj.hit)
+    total = dr.gather(mi.UInt32, hits, dr.zeros(mi.UInt32, n))
+    keep = mi.Float(total) >= dr.opaque(mi.Float, fraction * n)
+    cut = mi.Float(dr.gather(mi.UInt32, hits, mi.UInt32(0))) < dr.opaque(mi.Float, fraction * n)
+    return reproj._replace(hit=reproj.hit & keep), cut
+
+
 class Resolved(NamedTuple):
     shading: mi.Color3f     #: shading buffer (value per pixel, see ``mask``)
     mask: mi.Bool           #: pixel holds a value (traced or resampled)

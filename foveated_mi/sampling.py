@@ -95,6 +95,12 @@ def depth_edges(depth: mi.Float, hit: mi.Bool, width: int, height: int,
     return edge
 
 
+def opaque_seed(seed) -> mi.UInt32:
+    """A per-frame seed as a kernel input, not a constant: a Python int through
+    ``dr.opaque``, a seed already on the device (chosen there, e.g. after a cut) as is."""
+    return seed if dr.is_array_v(seed) else dr.opaque(mi.UInt32, int(seed) & 0xFFFFFFFF)
+
+
 def gaze_pixel(gaze: mi.Point2f, width: int, height: int) -> mi.UInt32:
     """Index of the pixel under the gaze, clamped to the film (off-screen gaze -> border)."""
     gx = mi.Int32(dr.floor(dr.clip(gaze.x * width, 0.0, width - 1.0)))
@@ -115,7 +121,7 @@ def sampling_map(width: int, height: int, *, gaze: tuple[float, float], theta: f
     g = mi.Point2f(dr.opaque(mi.Float, gaze[0]), dr.opaque(mi.Float, gaze[1]))
     d = normalized_distance(mi.Float(x) + 0.5, mi.Float(y) + 0.5, g, width, height)
     prob = sampling_probability(d, dr.opaque(mi.Float, w))
-    u = mi.sample_tea_float32(idx, dr.opaque(mi.UInt32, seed & 0xFFFFFFFF))
+    u = mi.sample_tea_float32(idx, opaque_seed(seed))
     smap = u < prob
     if edges is not None:
         smap |= edges

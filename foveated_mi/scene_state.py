@@ -1,43 +1,66 @@
-"""What the geometry pass depends on, as a value that changes whenever it changes.
+"""What a frame's passes depend on in the scene, as values that change whenever it changes.
 
-A still camera over an unchanged scene sees the same G-buffer every frame; recomputing it is
-the largest pass a static view can skip. :func:`scene_state` is the key of that reuse: the
-scene and sensor objects, the film's crop, and every parameter that ``mi.traverse`` exposes
-(``params.update()`` gives an updated parameter a new Dr.Jit variable, so its index changes;
-Python scalars are compared by value). Reading it costs one traversal, well under a
-millisecond for the scenes shipped here, and evaluates nothing.
+:func:`scene_state` reads one ``mi.traverse`` of the scene, without touching the device, and
+splits its parameters in two: the camera's (sensor, film, sampler, filter; a camera move is
+followed by reprojection) and the rest (materials, lights, geometry: a change there makes the
+history describe another scene). A parameter is identified by the Dr.Jit variables it holds
+(``params.update()`` installs new ones; only their JIT part counts, so enabling gradients on
+an unchanged value changes nothing) or, for a Python scalar, by its value. The traversal costs
+well under a millisecond for the scenes shipped here.
+
+Its users: the integrator's history resets, and :class:`GeometryCache`, which lets a still
+camera over an unchanged scene reuse its G-buffer, the largest pass a static view can skip.
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import drjit as dr
 import mitsuba as mi
 
 from .gbuffer import GBuffer, render_gbuffer
 
+#: Scene objects whose parameters are the camera's.
+CAMERA_TYPES = ("Sensor", "Film", "Sampler", "ReconstructionFilter")
+
 
 def _token(value: Any) -> Any:
-    if dr.is_jit_v(type(value)) or hasattr(type(value), "DRJIT_STRUCT"):
-        return tuple(dr.detail.collect_indices(value))
-    if dr.is_array_v(type(value)):          # scalar Dr.Jit arrays (film size, crop offset)
-        return repr(value)
-    if hasattr(value, "matrix"):            # scalar transforms
-        return repr(value)
+    if dr.is_array_v(value) or hasattr(value, "matrix") or hasattr(type(value), "DRJIT_STRUCT"):
+        if dr.is_jit_v(type(value)) or hasattr(type(value), "DRJIT_STRUCT") or \
+                hasattr(value, "matrix"):
+            try:
+                return tuple(i & 0xFFFFFFFF for i in dr.detail.collect_indices(value))
+            except Exception:  # noqa: BLE001 - an exotic type: its identity
+                return ("id", id(value))
+        return repr(value)                      # scalar Dr.Jit arrays (film size, offsets)
     return value if isinstance(value, (bool, int, float, str, type(None))) else repr(value)
 
 
-def scene_state(scene: mi.Scene, sensor: mi.Sensor) -> tuple:
-    """A hashable value equal for two calls exactly when no parameter of ``scene`` (sensors
-    included) was replaced in between, and ``sensor`` and its crop are the same."""
-    film = sensor.film()
+class SceneState(NamedTuple):
+    scene: tuple           #: the scene and every parameter but the camera's
+    camera: tuple          #: the sensor, its crop, its parameters and pose
+    differentiated: bool   #: some parameter requires gradients
+
+
+def scene_state(scene: mi.Scene, sensor: mi.Sensor) -> SceneState:
+    """The :class:`SceneState` of ``scene`` seen through ``sensor`` (no device read)."""
     params = mi.traverse(scene)
-    return (id(scene), id(sensor), tuple(film.crop_size()), tuple(film.crop_offset()),
-            tuple((k, _token(v)) for k, v in params.items()))
+    scene_part, camera_part, grads = [id(scene)], [id(sensor)], False
+    with dr.resume_grad():
+        for key in params.keys():
+            value = params[key]
+            node = params.properties[key][2]
+            is_camera = any(c.__name__ in CAMERA_TYPES for c in type(node).__mro__)
+            (camera_part if is_camera else scene_part).append((key, _token(value)))
+            grads = grads or (dr.is_diff_v(value) and dr.grad_enabled(value))
+    film = sensor.film()
+    camera_part += [tuple(film.crop_size()), tuple(film.crop_offset()),
+                    _token(sensor.world_transform())]
+    return SceneState(tuple(scene_part), tuple(camera_part), bool(grads))
 
 
 class GeometryCache:
-    """The last G-buffer, reused while :func:`scene_state` and the pass's options are
+    """The last G-buffer, reused while the scene state and the pass's options are
     unchanged; anything else recomputes it."""
 
     def __init__(self):
@@ -47,14 +70,13 @@ class GeometryCache:
     def clear(self) -> None:
         self._key = self._value = None
 
-    def gbuffer(self, scene: mi.Scene, sensor: mi.Sensor, *, materials: bool
-                ) -> tuple[GBuffer, bool]:
+    def gbuffer(self, scene: mi.Scene, sensor: mi.Sensor, *, materials: bool,
+                state: SceneState | None = None) -> tuple[GBuffer, bool]:
         """The G-buffer of ``scene`` seen through ``sensor``, and whether it was reused."""
-        key = (scene_state(scene, sensor), bool(materials))
+        state = state if state is not None else scene_state(scene, sensor)
+        key = (state.scene, state.camera, bool(materials))
         if self._value is not None and key == self._key:
             return self._value, True
         self._value = render_gbuffer(scene, sensor, materials=materials)
-        # The key was read before the pass: a parameter replaced after it changes the key,
-        # and the next frame recomputes.
         self._key = key
         return self._value, False

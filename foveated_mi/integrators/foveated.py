@@ -32,10 +32,11 @@ integrators. The history is a constant: frame ``t``'s gradient flows only throug
 traced in frame ``t``. Differentiate a frame before rendering the next one.
 
 **History resets.** The history is forgotten (the next frame is a first frame, seeded as for
-a fresh integrator) on another scene or film size, when ``params.update()`` changed a scene
-parameter other than the camera's, and on a camera cut: a camera move after which fewer than
-``CUT_HIT_FRACTION`` of the pixels reproject into the history. Otherwise each pixel that
-fails reprojection (disoccluded, off-screen, or behind the previous camera) starts afresh.
+a fresh integrator) on another scene or film size, and when ``params.update()`` changed a
+scene parameter other than the camera's. On a camera cut, a camera move after which fewer
+than ``CUT_HIT_FRACTION`` of the pixels reproject into the history, no pixel reads it (decided
+on the device, without waiting for it). Otherwise each pixel that fails reprojection
+(disoccluded, off-screen, or behind the previous camera) starts afresh.
 
 Stages a frame does not need cost nothing: no edge pass when ``edge_threshold = 0``, no
 reprojection when ``history`` is off or on the first frame, no Jump Flooding or interpolation
@@ -126,7 +127,6 @@ mapping round trip when neither the filter nor the PNG needs it.
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import dataclass
 from typing import Any
 
@@ -143,44 +143,14 @@ from .. import variance as _variance
 from ..demodulate import demodulate, remodulate
 from ..postprocess.inverse import inverse_tonemap
 from ..pixel_filter import FilterSampler
-from ..scene_state import GeometryCache
+from ..scene_state import GeometryCache, SceneState, scene_state
 from ..timing import StageTimer
 from ..options import DEFAULTS, NON_DIFFERENTIABLE_DENOISERS, PRESETS, validate_options  # noqa: F401
 from ..validate import ParameterError, check_int
 
 #: A camera move after which fewer pixels than this fraction reproject into the history is a
-#: cut: the frame starts afresh (history and frame counter reset), as a new integrator would.
+#: cut: no pixel of the frame reads the history.
 CUT_HIT_FRACTION = 0.1
-
-#: Scene objects whose parameters are the camera's: changing them moves the view, which
-#: reprojection follows, rather than changing what the history holds.
-_CAMERA_TYPES = ("Sensor", "Film", "Sampler", "ReconstructionFilter")
-
-
-def _value_state(value):
-    """What identifies a parameter's value without reading it: the Dr.Jit variables it
-    holds (``params.update()`` installs new ones), or the value itself for a Python scalar."""
-    if dr.is_array_v(value) or hasattr(value, "matrix"):
-        try:
-            # The JIT part of each index (the low 32 bits): enabling gradients on an
-            # unchanged value changes only its AD part.
-            return tuple(i & 0xFFFFFFFF for i in dr.detail.collect_indices(value))
-        except Exception:  # noqa: BLE001 - an exotic type: fall back to its identity
-            return id(value)
-    return value if isinstance(value, (int, float, bool, str)) else id(value)
-
-
-def _scene_state(scene: mi.Scene, sensor: mi.Sensor) -> tuple[tuple, tuple]:
-    """(scene parameters, camera parameters) identities; no device read."""
-    params = mi.traverse(scene)
-    scene_part, camera_part = [], []
-    for key in params.keys():
-        node = params.properties[key][2]
-        is_camera = any(c.__name__ in _CAMERA_TYPES for c in type(node).__mro__)
-        (camera_part if is_camera else scene_part).append((key, _value_state(params[key])))
-    camera_part.append(("world", _value_state(sensor.world_transform())))
-    return tuple(scene_part), tuple(camera_part)
-
 
 @dataclass
 class Frame:
@@ -191,8 +161,8 @@ class Frame:
     width: int
     height: int
     spp: int
-    seed: int                                  #: Monte Carlo seed of the shading pass
-    map_seed: int                              #: seed of the sampling map
+    seed: int | mi.UInt32                      #: Monte Carlo seed of the shading pass
+    map_seed: int | mi.UInt32                  #: seed of the sampling map
     gbuffer: _gbuffer.GBuffer
     edges: mi.Bool | None
     sampling_map: mi.Bool
@@ -210,25 +180,6 @@ class _PrimalFrame:
     frame: Frame
     shading: _shading.ShadingBuffer   #: traced pixels' values (the primal's, detached)
     scene_id: int
-
-
-def _differentiated() -> bool:
-    """Whether this ``render`` is the primal of ``mi.render(scene, params, ...)`` with
-    parameters that require gradients (Mitsuba's render op calls it with gradients
-    suspended, and keeps the parameters on itself)."""
-    f = sys._getframe(2)
-    for _ in range(4):
-        if f is None:
-            return False
-        op = f.f_locals.get("self")
-        if type(op).__name__ == "_RenderOp":
-            params = getattr(op, "params", None)
-            if params is None:
-                return False
-            with dr.resume_grad():
-                return any(dr.grad_enabled(params[k]) for k in params.keys())
-        f = f.f_back
-    return False
 
 
 def _tensor_to_color(tensor, frame: Frame, name: str) -> mi.Color3f:
@@ -348,27 +299,20 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
     def history(self) -> _reproject.History | None:
         return self._history
 
-    def _check_reset(self, scene: mi.Scene, sensor: mi.Sensor, width: int, height: int) -> None:
+    def _check_reset(self, scene: mi.Scene, state: SceneState, width: int, height: int) -> None:
         """Forget the history when it cannot describe this frame: another scene, another
         film size, or a scene parameter changed (``params.update()``: new materials,
         lights or geometry). A camera move is not a reset: reprojection handles it, and a
-        cut (reprojection fails almost everywhere) resets in :meth:`_prepare`."""
+        cut (reprojection fails almost everywhere) discards the history in :meth:`_prepare`."""
         # Scenes take no weak references, and a strong one would make a scene <-> integrator
         # cycle; the id is enough (a reused id still passes through the depth test).
         h = self._history
-        state, camera = (_scene_state(scene, sensor) if self._options["history"]
-                         else (None, None))
         if self._scene_ref != id(scene) or (h is not None and (h.width, h.height) != (width, height)) \
-                or state != self._scene_state:
+                or state.scene != self._scene_state:
             self.reset()
             self._scene_ref = id(scene)
-        self._camera_moved = camera != self._camera_state
-        self._scene_state, self._camera_state = state, camera
-
-    def _is_cut(self, reproj: _reproject.ReprojectionMap, n: int) -> bool:
-        """Whether fewer than :data:`CUT_HIT_FRACTION` of the pixels found their history
-        (one host read, only on frames whose camera moved)."""
-        return int(dr.count(reproj.hit)[0]) < CUT_HIT_FRACTION * n
+        self._camera_moved = state.camera != self._camera_state
+        self._scene_state, self._camera_state = state.scene, state.camera
 
     # -- differentiation ------------------------------------------------------------------
     def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
@@ -456,10 +400,13 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                  "its own image)")
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
-        if _differentiated():
+        state = scene_state(scene, sensor)
+        if state.differentiated:
+            # mi.render(scene, params) with parameters that need gradients: 'auto' becomes
+            # the exact preset before this primal frame, which the gradient pass reuses.
             self._prepare_gradients()
         timer = StageTimer(self._options["timing"])
-        frame = self._prepare(scene, sensor, seed, spp, timer)
+        frame = self._prepare(scene, sensor, seed, spp, timer, state)
         shade = self._shade(scene, frame)
         shading = _shading.develop(shade, frame.reordered.wavefront, frame.spp,
                                    sensor.film(), self._options["pixel_filter"])
@@ -469,19 +416,20 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         return mi.TensorXf(dr.ravel(image), shape=(frame.height, frame.width, 3))
 
     def _prepare(self, scene: mi.Scene, sensor: mi.Sensor, seed, spp: int,
-                 timer: StageTimer) -> Frame:
+                 timer: StageTimer, state: SceneState | None = None) -> Frame:
         """Geometry, sampling, reprojection and reorder passes: everything a frame decides
         before it traces. None of it is differentiable (visibility and random choices)."""
         o = self._options
         width, height = _gbuffer.film_size(sensor)
         spp = check_int("spp", spp if spp else sensor.sampler().sample_count(), 1)
-        self._check_reset(scene, sensor, width, height)
+        state = state if state is not None else scene_state(scene, sensor)
+        self._check_reset(scene, state, width, height)
         seed = (int(seed) if not dr.is_array_v(seed) else int(dr.slice(seed))) & 0xFFFFFFFF
 
         with dr.suspend_grad():
             # A still camera over an unchanged scene reuses the last G-buffer.
             gb, reused = self._geometry.gbuffer(
-                scene, sensor, materials=o["demodulate"] or o["denoiser"] == "oidn")
+                scene, sensor, materials=o["demodulate"] or o["denoiser"] == "oidn", state=state)
             # Everything the G-buffer holds is evaluated with the pass: a lazy albedo would
             # re-run the BSDF dispatch in every later kernel, and would point into the scene
             # after the scene is gone (a gradient pass can outlive it).
@@ -491,16 +439,19 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             reproj = _reproject.reprojection_map(gb.position, gb.hit, history, width, height,
                                                  tolerance=o["reprojection_tolerance"],
                                                  direction=gb.direction)
-            if history is not None and self._camera_moved and self._is_cut(reproj, width * height):
-                # A camera cut: the next frame is a first frame, as for a fresh integrator.
-                self.reset()
-                history = None
-                reproj = _reproject.reprojection_map(gb.position, gb.hit, None, width, height)
+            cut = None
+            if history is not None and self._camera_moved:
+                reproj, cut = _reproject.unless_cut(reproj, CUT_HIT_FRACTION)
             # Without history a frame is a pure function of (scene, seed). With history,
             # frame 0 uses the caller's seed as is (so sigma_p = 1 reproduces a plain render)
             # and later frames decorrelate, so that the history converges under a fixed seed.
             frame_seed = seed if (self._frame == 0 or not o["history"]) else \
                 int(mi.sample_tea_32(seed, self._frame)[0])
+            if cut is not None:
+                # After a cut the frame is a first frame, seeded as a fresh integrator's:
+                # chosen on the device, like the cut itself.
+                frame_seed = dr.select(cut, dr.opaque(mi.UInt32, seed),
+                                       dr.opaque(mi.UInt32, frame_seed))
             map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
 
             edges = None
@@ -588,7 +539,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                     max_radius=o["max_radius"], guide=guide, levels=o["guided_levels"],
                     target_samples=o["target_samples"], jitter=o["stochastic_jitter"],
                     tries=o["stochastic_tries"],
-                    seed=dr.opaque(mi.UInt32, (frame.seed ^ 0x6A09E667) & 0xFFFFFFFF))
+                    seed=_sampling.opaque_seed(frame.seed) ^ 0x6A09E667)
         timer.mark("reconstruct", nearest, filled, interpolated)
 
         tonemapped = filtered = variance = None
