@@ -1,9 +1,9 @@
-"""Time and peak memory of one gradient step (issue 9): ``foveated(prb)`` against full-frame
-``prb`` and against ``foveated(path)`` differentiated by plain AD.
+"""Time and peak memory of one gradient step: ``foveated(prb)`` (``guided`` and ``paper``
+presets) against full-frame ``prb`` and against ``foveated(path)`` differentiated by plain AD.
 
 Scene: the Cornell box at W x W (gaussian film filter), the red wall's albedo as the
 parameter, path length 4, 4 spp; foveated with θ = 0.1, σp = 0.8 and the differentiable
-``guided`` preset. Each configuration runs in a fresh process (so that its peak resident memory,
+``guided`` preset, or the ``paper`` preset. Each configuration runs in a fresh process (so that its peak resident memory,
 ``ru_maxrss``, is its own): one warm-up step, then ``--repeats`` steps, each a primal
 ``mi.render(scene, params)`` and ``dr.backward`` of the image mean, timed with a sync at the end.
 The primal frame alone is timed the same way, so ``backward ms`` = step − primal is what the
@@ -25,6 +25,7 @@ import time
 
 CONFIGS = {
     "foveated(prb)": {"nested": "prb", "foveated": True},
+    "foveated(prb), paper": {"nested": "prb", "foveated": True, "preset": "paper"},
     "prb": {"nested": "prb", "foveated": False},
     "foveated(path), plain AD": {"nested": "path", "foveated": True},
 }
@@ -42,7 +43,8 @@ def child(name: str, size: int, spp: int, repeats: int) -> dict:
     d = mi.cornell_box()
     d["sensor"]["film"].update(width=size, height=size, rfilter={"type": "gaussian"})
     nested = {"type": cfg["nested"], "max_depth": 4}
-    d["integrator"] = ({"type": "foveated", "preset": "guided", "theta": 0.1, "sigma_p": 0.8,
+    d["integrator"] = ({"type": "foveated", "preset": cfg.get("preset", "guided"),
+                        "theta": 0.1, "sigma_p": 0.8,
                         "history": False, "nested": nested} if cfg["foveated"] else nested)
     scene = mi.load_dict(d)
     params = mi.traverse(scene)
