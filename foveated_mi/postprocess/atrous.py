@@ -59,7 +59,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..validate import ParameterError, check_int, check_sigma  # noqa: F401 (re-exported)
-from ..taps import Surface, for_each_tap, gather4, packet
+from ..taps import HeldLevel, Surface, gather4, held_filter, packet
 from .tonemap import as_color3f
 
 
@@ -160,34 +160,31 @@ def atrous(color: mi.Color3f, normal: mi.Array3f, position: mi.Array3f, width: i
 def _atrous_level(c: mi.Color3f, surface: Surface, width: int, height: int, *, step: mi.Int32,
                   inv_c: mi.Float, inv_n: mi.Float, inv_x: mi.Float) -> mi.Color3f:
     """One à-trous level: a symbolic loop over the 25 taps (one small kernel, not 25
-    unrolled copies, which LLVM needs seconds to compile). A tap reads three packets:
-    colour + finiteness, normal, position + hit."""
-    n = width * height
+    unrolled copies, which LLVM needs seconds to compile), with its weights held
+    (:func:`~foveated_mi.taps.held_filter`). A tap reads three packets: colour + finiteness,
+    normal, position + hit."""
     dr.schedule(c)   # the previous level's result: its own kernel, read by every tap
-    finite = _all_finite(c)
-    c_safe = dr.select(finite, c, 0.0)
-    cpk = packet(c_safe.x, c_safe.y, c_safe.z, dr.select(finite, 1.0, 0.0))
+    cd = dr.detach(c)
+    finite = _all_finite(cd)
+    cd = dr.select(finite, cd, 0.0)
+    cpk = packet(cd.x, cd.y, cd.z, dr.select(finite, 1.0, 0.0))
     dr.schedule(cpk)
-    normal, position, valid = surface.normal, surface.position, surface.hit
 
-    def visit(tap, w_sum, c_sum):
-        c4 = gather4(cpk, tap.q, tap.inside)
-        cq, fq = mi.Color3f(c4.x, c4.y, c4.z), c4.w > 0.0
-        nq, xq, vq = surface.at(tap.q, tap.inside)
+    def at(q, active):
+        c4 = gather4(cpk, q, active)
+        return (mi.Color3f(c4.x, c4.y, c4.z), c4.w > 0.0, *surface.at(q, active))
+
+    def weight(P, Q, tap):
+        cp, fp, np_, xp, vp = P
+        cq, fq, nq, xq, vq = Q
         # w_rt * w_n * w_x = exp(-(e_rt + e_n + e_x)): one exponential per tap. Every
         # term is >= 0 (possibly inf), so the sum never forms inf - inf.
-        # Colour weights from detached values: the filter is linear in its input once its
-        # weights are held (the gradient pass of foveated_mi.adjoint relies on it).
-        e_rt = dr.select(finite, _exponent(dr.squared_norm(dr.detach(c_safe) - dr.detach(cq)),
-                                           inv_c), 0.0)
-        e_geo = _exponent(dr.squared_norm(normal - nq), inv_n) \
-            + _exponent(dr.squared_norm(position - xq), inv_x)
-        e_geo = dr.select(valid & vq, e_geo, 0.0)       # miss-miss: colour only
-        use = tap.inside & fq & ~(valid ^ vq)            # hit-miss pairs never mix
-        w = dr.select(use, tap.b3 * dr.exp(-(e_rt + e_geo)), 0.0)
-        return w_sum + w, c_sum + cq * w
+        e_rt = dr.select(fp, _exponent(dr.squared_norm(cp - cq), inv_c), 0.0)
+        e_geo = _exponent(dr.squared_norm(np_ - nq), inv_n) \
+            + _exponent(dr.squared_norm(xp - xq), inv_x)
+        e_geo = dr.select(vp & vq, e_geo, 0.0)          # miss-miss: colour only
+        use = tap.inside & fq & ~(vp ^ vq)               # hit-miss pairs never mix
+        return dr.select(use, tap.b3 * dr.exp(-(e_rt + e_geo)), 0.0)
 
-    w_sum, c_sum = for_each_tap(width, height, step, visit,
-                                (dr.zeros(mi.Float, n), dr.zeros(mi.Color3f, n)), "atrous_taps")
-    has = w_sum > 0.0
-    return dr.select(has, c_sum / dr.select(has, w_sum, 1.0), c)
+    y, = held_filter(c, HeldLevel(width, height, step, at, weight, label="atrous_taps"))
+    return y

@@ -42,7 +42,7 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-from ..taps import Surface, for_each_tap, gather4, packet, pixel_xy, surface_energy
+from ..taps import HeldLevel, Surface, gather4, held_filter, packet, pixel_xy, surface_energy
 from ..validate import ParameterError, check_int, check_range
 
 _G3 = (0.25, 0.5, 0.25)
@@ -101,39 +101,40 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
 
 def _level(c: mi.Color3f, var: mi.Float, surface: Surface, width: int, height: int, *, step,
            sl, inv_n, inv_x) -> tuple[mi.Color3f, mi.Float]:
+    """One level, its weights held (:func:`~foveated_mi.taps.held_filter`), the variance
+    filtered alongside with the squared weights."""
     n = width * height
     dr.schedule(c, var)
     cd = dr.detach(c)
     finite = dr.isfinite(cd.x) & dr.isfinite(cd.y) & dr.isfinite(cd.z)
-    c_safe = dr.select(finite, c, 0.0)
-    cd = dr.detach(c_safe)
+    cd = dr.select(finite, cd, 0.0)
     # sigma_luminance = inf switches the colour weight off (a purely geometric filter).
-    denom = None if sl is None else sl * dr.sqrt(_prefilter(var, width, height)) + EPSILON
-    # One packet per tap: colour (carries the gradient) and the variance, and finiteness
-    # as the variance's sign (variances are >= 0).
-    src = packet(c_safe.x, c_safe.y, c_safe.z, dr.select(finite, var, -1.0))
-    dr.schedule(c_safe, denom, src)
+    denom = dr.zeros(mi.Float, n) if sl is None else \
+        sl * dr.sqrt(_prefilter(var, width, height)) + EPSILON
+    # Colour and variance, finiteness as the variance's sign (variances are >= 0); the
+    # colour distance's denominator of the centre pixel.
+    src = packet(cd.x, cd.y, cd.z, dr.select(finite, var, -1.0))
+    aux = packet(denom, dr.zeros(mi.Float, n), dr.zeros(mi.Float, n), dr.zeros(mi.Float, n))
+    dr.schedule(src, aux)
 
-    def visit(tap, c_acc, v_acc, w_acc):
-        v4 = gather4(src, tap.q, tap.inside)
-        cq = mi.Color3f(v4.x, v4.y, v4.z)
-        cqd = dr.detach(cq)
-        fq, vq = v4.w >= 0.0, dr.maximum(dr.detach(v4.w), 0.0)
-        cq = cq - c_safe                      # residual form (see the module docstring)
-        e_geo, hq = surface_energy(surface, tap.q, tap.inside, inv_n, inv_x)
-        if denom is None:
+    def at(q, active):
+        v4 = gather4(src, q, active)
+        return (mi.Color3f(v4.x, v4.y, v4.z), v4.w >= 0.0, dr.maximum(v4.w, 0.0),
+                gather4(aux, q, active).x, *surface.at(q, active))
+
+    def weight(P, Q, tap):
+        e_geo = surface_energy(P[4:], Q[4:], inv_n, inv_x)
+        if sl is None:
             e_col = mi.Float(0.0)
         else:
-            diff = dr.abs(cd - cqd)
-            e_col = (diff.x + diff.y + diff.z) / denom
-        w = dr.select(tap.inside & fq & (surface.hit == hq), tap.b3 * dr.exp(-(e_col + e_geo)),
-                      0.0)
-        return dr.fma(cq, w, c_acc), dr.fma(w * w, vq, v_acc), w_acc + w
+            diff = dr.abs(P[0] - Q[0])
+            e_col = (diff.x + diff.y + diff.z) / P[3]
+        use = tap.inside & Q[1] & (P[6] == Q[6])
+        return dr.select(use, tap.b3 * dr.exp(-(e_col + e_geo)), 0.0)
 
-    c_acc, v_acc, w_acc = for_each_tap(
-        width, height, step, visit,
-        (dr.zeros(mi.Color3f, n), dr.zeros(mi.Float, n), dr.zeros(mi.Float, n)), "svgf_taps")
-    dr.schedule(c_acc, v_acc, w_acc)
+    y, v_acc, w_acc = held_filter(c, HeldLevel(
+        width, height, step, at, weight, residual=True,
+        extra=lambda P, Q, w: (w * w * Q[2], w), label="svgf_taps"))
     has = w_acc > 0
     inv = dr.rcp(dr.select(has, w_acc, 1.0))
-    return dr.select(has, c_safe + c_acc * inv, c), dr.select(has, v_acc * inv * inv, var)
+    return y, dr.select(has, v_acc * inv * inv, var)

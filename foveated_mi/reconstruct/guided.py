@@ -58,7 +58,7 @@ from typing import NamedTuple
 import drjit as dr
 import mitsuba as mi
 
-from ..taps import Surface, for_each_tap, gather4, packet, surface_energy
+from ..taps import HeldLevel, Surface, gather4, held_filter, packet, surface_energy
 from ..validate import ParameterError, check_int, check_range
 from .jfa import check_buffer, check_film, voronoi_fill
 
@@ -143,20 +143,25 @@ def _level(num: mi.Color3f, den: mi.Float, surface: Surface, width: int, height:
            step: mi.Int32, inv_n: mi.Float, inv_x: mi.Float
            ) -> tuple[mi.Color3f, mi.Float, mi.Float]:
     """One level of the cascade: a symbolic loop over the 25 taps (one kernel per level
-    size, shared by all levels: the spacing is opaque)."""
+    size, shared by all levels: the spacing is opaque), with its weights held
+    (:func:`~foveated_mi.taps.held_filter`): ``num`` carries the gradient, the sample weights
+    ``den`` and the kernel mass are accumulated alongside."""
     n = width * height
     dr.schedule(num, den)
-    src = packet(num.x, num.y, num.z, den)   # one packet per tap (carries the gradient)
+    dpk = packet(dr.detach(den), dr.zeros(mi.Float, n), dr.zeros(mi.Float, n),
+                 dr.zeros(mi.Float, n))
+    dr.schedule(dpk)
 
-    def visit(tap, n_acc, d_acc, g_acc):
-        e, hq = surface_energy(surface, tap.q, tap.inside, inv_n, inv_x)
-        g = dr.select(tap.inside & (surface.hit == hq), tap.b3 * dr.exp(-e), 0.0)
-        v = gather4(src, tap.q, tap.inside)
-        return (dr.fma(mi.Color3f(v.x, v.y, v.z), g, n_acc), dr.fma(v.w, g, d_acc), g_acc + g)
+    def at(q, active):
+        return (*surface.at(q, active), gather4(dpk, q, active).x)
 
-    zero = dr.zeros(mi.Float, n)
-    n_acc, d_acc, g_acc = for_each_tap(width, height, step, visit,
-                                       (dr.zeros(mi.Color3f, n), zero, zero), "guided_taps")
+    def weight(P, Q, tap):
+        e = surface_energy(P[:3], Q[:3], inv_n, inv_x)
+        return dr.select(tap.inside & (P[2] == Q[2]), tap.b3 * dr.exp(-e), 0.0)
+
+    n_acc, d_acc, g_acc = held_filter(num, HeldLevel(
+        width, height, step, at, weight, normalized=False,
+        extra=lambda P, Q, g: (g * Q[3], g), label="guided_taps"))
     # All three outputs in one launch: a later kernel reading only one of them would run
     # the 25-tap loop again.
     dr.schedule(n_acc, d_acc, g_acc)
