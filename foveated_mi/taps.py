@@ -17,11 +17,8 @@ through them like through the buffers they hold.
 function. :func:`held_filter` runs it forward, and differentiates it as the linear map it is
 once its weights are held (what the gradient pass of :mod:`foveated_mi.adjoint` needs): the
 tangent reruns the level on the tangent, and the adjoint walks the same taps from the other
-end, with gathers only. Dr.Jit's own reverse mode of the tap loop scatters every tap's
-adjoint atomically; on the guided preset's image formation at 512² the transposes took the
-reverse pass from 66 kernels / 1.29 s to 43 kernels / 0.54 s (2.4x), 0.75 to 0.31 s on the
-paper preset, measured side by side on a loaded 2-core machine with
-``python benchmarks/bench_backward.py``'s scene.
+end, with gathers only, where Dr.Jit's own reverse mode of the tap loop would scatter every
+tap's adjoint atomically (``python benchmarks/bench_backward.py`` measures the gradient step).
 """
 from __future__ import annotations
 
