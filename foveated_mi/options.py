@@ -61,6 +61,8 @@ DEFAULTS: dict[str, Any] = {
     "exposure": 0.0,
     "history": True,
     "max_history": 32.0,
+    "sibson_inclusive": True,
+    "edge_detector": "relative",
     "reprojection_tolerance": 0.02,
     "clamp": 1e4,
     "timing": False,
@@ -69,13 +71,20 @@ DEFAULTS: dict[str, Any] = {
 
 #: Preset name -> the defaults it replaces (see the module docstring).
 PRESETS: dict[str, dict[str, Any]] = {
-    "paper": {},
+    # As published (Kwon et al. 2019) and, where the text is silent, the authors' code: the
+    # Strategy 2 launch layout, an uncapped history, plain JFA, the strict in-circle test,
+    # Sobel edges on depth, one à-trous level with unit sigmas (see the module docstring).
+    "paper": {"reorder": "rows_blocks", "max_history": 0.0, "jfa": "jfa",
+              "sibson_inclusive": False, "edge_detector": "sobel", "edge_threshold": 0.99,
+              "atrous_iterations": 1, "sigma_color": 1.0, "sigma_normal": 1.0,
+              "sigma_position": 1.0},
     "oidn": {"theta": 0.25, "sigma_p": 0.8, "demodulate": True, "reconstruction": "stochastic",
              "denoiser": "oidn"},
     "guided": {"demodulate": True, "reconstruction": "guided", "denoiser": "svgf"},
 }
 PRESET_NAMES = ("auto", *PRESETS)
 DENOISERS = ("none", "atrous", "svgf", "oidn")
+EDGE_DETECTORS = ("relative", "sobel")
 OIDN_QUALITIES = ("high", "balanced", "fast")
 #: Denoisers a gradient pass cannot differentiate (it runs the frame without them).
 NON_DIFFERENTIABLE_DENOISERS = frozenset({"oidn"})
@@ -90,6 +99,14 @@ def resolve_preset(preset: str) -> str:
     return "oidn" if oidn_available() else "guided"
 
 
+
+
+def _check_max_history(value) -> float:
+    """0 (no cap, the paper) or a cap in [1, 1e9]."""
+    v = check_range("max_history", value, 0.0, 1e9)
+    if 0.0 < v < 1.0:
+        raise ParameterError("max_history", value, "0 (no cap) or a number in [1, 1e9]")
+    return v
 
 
 def validate_options(options: dict[str, Any]) -> dict[str, Any]:
@@ -137,7 +154,9 @@ def validate_options(options: dict[str, Any]) -> dict[str, Any]:
         "tonemap": check_choice("tonemap", o["tonemap"], list(post.TONEMAPPERS)),
         "exposure": check_range("exposure", o["exposure"], -64.0, 64.0),
         "history": check_bool("history", o["history"]),
-        "max_history": check_range("max_history", o["max_history"], 1.0, 1e9),
+        "max_history": _check_max_history(o["max_history"]),
+        "sibson_inclusive": check_bool("sibson_inclusive", o["sibson_inclusive"]),
+        "edge_detector": check_choice("edge_detector", o["edge_detector"], EDGE_DETECTORS),
         "reprojection_tolerance": check_range("reprojection_tolerance",
                                               o["reprojection_tolerance"], 0.0, 1.0),
         "clamp": check_range("clamp", o["clamp"], 0.0, 3e38, lo_open=True),

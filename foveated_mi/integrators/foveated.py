@@ -67,9 +67,12 @@ mapping round trip when neither the filter nor the PNG needs it.
  * - block_height
    - |int|
    - Rows per block of Strategy 2 (default 8)
- * - edge_threshold
-   - |float|
-   - Relative depth jump that forces a ray, >= 0; 0 disables forced edge rays (default 0.1)
+ * - edge_threshold, edge_detector
+   - |float|, |string|
+   - Depth edges that force a ray; 0 disables them. ``relative`` (default): relative depth
+     jump to a 4-neighbour above the threshold (default 0.1). ``sobel`` (``paper``): the
+     authors' test, ``|Gx| + |Gy|`` of the 3x3 Sobel filter on depth above the threshold
+     (the authors use 0.99, in scene units)
  * - demodulate
    - |bool|
    - Reconstruct and filter irradiance, albedo multiplied back (:mod:`foveated_mi.demodulate`)
@@ -81,6 +84,10 @@ mapping round trip when neither the filter nor the PNG needs it.
  * - max_radius
    - |int|
    - Bound on the interpolation radius in pixels (default 32)
+ * - sibson_inclusive
+   - |bool|
+   - In-circle test of ``sibson``: ``d(q, p) <= r`` (default, the authors' shader) or
+     ``d(q, p) < r`` (false; the paper's text, ``paper``)
  * - jfa
    - |string|
    - Jump Flooding variant: ``jfa`` | ``1+jfa`` | ``jfa+1`` (default) | ``jfa+2``
@@ -99,7 +106,7 @@ mapping round trip when neither the filter nor the PNG needs it.
    - Temporal reuse through reverse reprojection (default true)
  * - max_history
    - |float|
-   - Cap on the history sample count, >= 1 (default 32)
+   - Cap on the history sample count, >= 1 (default 32); 0 = no cap (``paper``)
  * - reprojection_tolerance
    - |float|
    - Relative depth tolerance of the reprojection test (default 0.02)
@@ -398,7 +405,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
 
             edges = None
             if o["edge_threshold"] > 0:
-                edges = _sampling.depth_edges(gb.depth, gb.hit, width, height, o["edge_threshold"])
+                edges = _sampling.depth_edges(gb.depth, gb.hit, width, height, o["edge_threshold"],
+                                              detector=o["edge_detector"])
             smap, prob = _sampling.sampling_map(width, height, gaze=o["gaze"], theta=o["theta"],
                                                 sigma_p=o["sigma_p"], seed=map_seed,
                                                 edges=edges)
@@ -478,7 +486,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                     o["reconstruction"], radiance, resolved.mask, nearest, width, height,
                     max_radius=o["max_radius"], guide=guide, levels=o["guided_levels"],
                     target_samples=o["target_samples"], jitter=o["stochastic_jitter"],
-                    tries=o["stochastic_tries"],
+                    tries=o["stochastic_tries"], inclusive=o["sibson_inclusive"],
                     seed=dr.opaque(mi.UInt32, (frame.seed ^ 0x6A09E667) & 0xFFFFFFFF))
         timer.mark("reconstruct", nearest, filled, interpolated)
 
@@ -552,7 +560,11 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         rays = dr.width(ro.wavefront) if ro.active is None else dr.count(frame.sampling_map)
         self._stats_raw = {
             "width": frame.width, "height": frame.height, "pixels": frame.width * frame.height,
-            "rays": rays, "spp": frame.spp, "lanes": dr.width(ro.wavefront) * frame.spp,
+            "rays": rays, "spp": frame.spp, "lanes": ro.lanes * frame.spp,
+            "lanes_launched": ro.lanes * frame.spp, "lanes_active": rays * frame.spp,
+            "reorder_swaps": ro.swaps if ro.swaps is not None else 0,
+            # Rays forced on depth edges (some the sampling probability would draw too).
+            "edge_rays": dr.count(frame.edges) if frame.edges is not None else 0,
             "frame": self._frame - 1,
             "history_hits": dr.count(reproj.hit), "resampled": dr.count(resolved.resampled),
             "holes": dr.count(~resolved.mask), "rejected_samples": shade.rejected,
@@ -575,6 +587,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                 s[k] = v
             if s:
                 s["ray_fraction"] = s["rays"] / s["pixels"]
+                s["edge_fraction"] = s["edge_rays"] / s["pixels"]
                 s["history_hit_rate"] = s["history_hits"] / s["pixels"]
             self._stats_cache = s
         return dict(self._stats_cache)

@@ -170,7 +170,7 @@ def voronoi(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: 
 
 
 def sibson(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: int, height: int,
-           *, max_radius: int = 32) -> mi.Color3f:
+           *, max_radius: int = 32, inclusive: bool = True) -> mi.Color3f:
     """Approximate Sibson interpolation of Kwon et al. 2019 (§3.4, Fig. 5), the paper's default.
 
     ``out(p) = sum_{q in D_p} F(q) / |D_p|`` with ``D_p = {q in film : |q - p|^2 <= r_p^2}`` and
@@ -180,9 +180,17 @@ def sibson(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: i
     once: a constant image stays exactly constant, a site (``r_p = 0``) keeps its colour
     exactly, and every output lies within the range of the site colours. Differentiable in
     both modes (the loop only accumulates sums: ``max_iterations=-1`` fast path).
+
+    ``inclusive=False`` is the paper's test as printed, ``d(q, p) < r`` (§3.4): the disk loses
+    its rim, ``|q - p|^2 <= r_p^2 - 1`` in integers; a site keeps its own colour (the
+    authors' shader falls back to the closest site when the disk is empty). ``True`` (``<=``)
+    is the authors' shader (``sibsonFS.glsl`` line 37: ``if (radius > dist_to_closest)
+    continue``).
     """
     filled, x, y, r2, has_site, width, height, radius = _prepare(shading, site_mask, nearest, width, height,
                                                                  max_radius)
+    if not inclusive:
+        r2 = dr.maximum(r2 - 1, 0)
     sums, count = _disk_sums(filled, x, y, r2, width, height, radius, "sibson_disk", max_iterations=-1)
     return _ratio(sums, mi.Float64(dr.maximum(count, 1)))  # count >= 1: p is in its own disk
 
