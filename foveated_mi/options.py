@@ -4,11 +4,19 @@ r"""Options of the ``foveated`` integrator: defaults, presets and validation.
 defaults by a configuration tuned together; any option given explicitly wins over both:
 
 ``paper``
-    The paper as published: sampling map with θ = 0.1, σp = 0.8, approximate Sibson
-    interpolation of radiance, the edge-avoiding à-trous filter in the tone-mapped domain.
+    The paper as published: sampling map with θ = 0.1, σp = 0.8, Strategy 2 launch layout
+    (``rows_blocks``), history without a cap, plain JFA (N/2 … 1), approximate Sibson
+    interpolation with the text's in-circle test ``d(q, p) < r``, tone mapping then the basic
+    à-trous filter (§3.5). Where the text is silent, the authors' public code
+    (``ohseokkwon/Foveated-Rendering-using-Ray-Tracing``, commit 37426a9): Sobel edges on
+    depth above 0.99 (``shared_helper_funcs.h`` 116-129), one à-trous level
+    (``main.cpp`` 355) with σ = 1 for colour, normal and position (``ATrous.cpp`` 53-55;
+    the shader's ``exp(-d²/φ)`` with φ = 1), the Uncharted 2 tone curve
+    (``shared_helper_funcs.h`` 354-373). ``compact``, ``jfa+1``, ``max_history`` caps and
+    the inclusive test are extensions.
 ``oidn``
     For a Monte Carlo nested integrator, best measured at equal time with Intel Open Image
-    Denoise installed (``pip install foveated_mi[denoise]``): wider sampling (θ = 0.25),
+    Denoise installed (``pip install -e '.[denoise]'`` from a clone): wider sampling (θ = 0.25),
     albedo demodulation, the stochastic surface-aware fill and OIDN. Not differentiable
     (a gradient pass runs it without OIDN).
 ``guided``
@@ -77,7 +85,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     "paper": {"reorder": "rows_blocks", "max_history": 0.0, "jfa": "jfa",
               "sibson_inclusive": False, "edge_detector": "sobel", "edge_threshold": 0.99,
               "atrous_iterations": 1, "sigma_color": 1.0, "sigma_normal": 1.0,
-              "sigma_position": 1.0},
+              "sigma_position": 1.0, "tonemap": "uncharted2"},
     "oidn": {"theta": 0.25, "sigma_p": 0.8, "demodulate": True, "reconstruction": "stochastic",
              "denoiser": "oidn"},
     "guided": {"demodulate": True, "reconstruction": "guided", "denoiser": "svgf"},

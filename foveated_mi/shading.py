@@ -1,13 +1,10 @@
 r"""Sparse shading pass (Kwon et al. 2019, §3.3): trace only the wavefront's rays.
 
-Camera rays are generated for the launched lanes only, ``spp`` per lane, and handed to the
-nested integrator's ``sample()`` as one wavefront of ``lanes * spp`` (pixel-major, ``spp``
-consecutive lanes per pixel, idle lanes masked). With the ``independent`` sampler each
-sample's random stream is keyed by the frame seed, its pixel and its sample index, not by its
-lane, so every launch layout of :mod:`foveated_mi.reorder` traces the same samples and gives
-the same image for a seed. These streams are not those of a plain ``mi.render`` (which keys
-them by lane), so a frame with every pixel traced is the nested integrator's render with
-other random numbers: the same estimator, not the same noise.
+Camera rays are generated for the wavefront's pixels only, ``spp`` per pixel, and handed to
+the nested integrator's ``sample()`` as one wavefront of ``rays * spp`` lanes. The lane order
+(pixel-major, ``spp`` consecutive lanes per pixel) and the sampler seeding follow
+``SamplingIntegrator::render``, so with every pixel traced in ``compact`` order the random
+numbers are those of a plain ``mi.render`` of the nested integrator.
 
 **The film's filter** (``pixel_filter`` option). The traced samples become the sparse
 shading buffer in one of two ways, both converging to the image the nested integrator renders
@@ -17,7 +14,7 @@ on the same film (Mitsuba's default filter is ``gaussian``), never to a box-filt
     Mitsuba's own estimator: uniformly jittered samples are splatted with the film's filter
     into an ``mi.ImageBlock`` and a traced pixel holds :math:`\sum f L / \sum f` over the
     samples that reach it. Neighbouring traced pixels share samples, as in ``mi.render``, so
-    with every pixel traced the frame is the nested integrator's estimator.
+    with every pixel traced the frame *is* the nested integrator's render, noise included.
     A traced pixel without traced neighbours sees only its own samples: its footprint is
     the filter clipped to its neighbourhood (a slightly sharper kernel).
 ``importance`` (:func:`develop_mean`)
@@ -124,14 +121,6 @@ def camera_rays(sensor: mi.Sensor, sampler: mi.Sampler, pixels: mi.UInt32, width
     return ray, weight, fs
 
 
-def keyed_seeding(sampler: mi.Sampler) -> bool:
-    """Whether ``sampler`` is seeded per (pixel, sample) rather than per lane: the
-    ``independent`` sampler, whose streams are then the same in every launch layout. A
-    stratified or low-discrepancy sampler derives its pattern from the lane index, so it
-    keeps lane seeding (and its image then depends on the layout)."""
-    return sampler.class_name() == "IndependentSampler"
-
-
 def trace_wavefront(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingIntegrator,
                     pixels: mi.UInt32, width: int, height: int, *, spp: int, seed,
                     active: mi.Bool | None = None, clamp: float = 1e4,
@@ -144,20 +133,14 @@ def trace_wavefront(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingI
     """
     n = dr.width(pixels)
     lanes = n * spp
-    lane = dr.arange(mi.UInt32, lanes)
-    ray_id = lane // spp if spp > 1 else lane
-    pix = dr.gather(mi.UInt32, pixels, ray_id)
-
     sampler = sensor.sampler().clone()
     sampler.set_sample_count(spp)
     sampler.set_samples_per_wavefront(spp)
-    if keyed_seeding(sampler):
-        # Each sample's random stream is keyed by (seed, pixel, sample index), not by its
-        # lane: every launch layout traces the same samples, so gives the same image.
-        key = pix * spp + (lane - ray_id * spp) if spp > 1 else pix
-        sampler.seed(mi.sample_tea_32(dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), key)[0], 1)
-    else:
-        sampler.seed(seed, lanes)
+    sampler.seed(seed, lanes)
+
+    lane = dr.arange(mi.UInt32, lanes)
+    ray_id = lane // spp if spp > 1 else lane
+    pix = dr.gather(mi.UInt32, pixels, ray_id)
     lane_active = mi.Bool(True) if active is None else dr.gather(mi.Bool, active, ray_id)
     if filter_sampler is None:
         filter_sampler = FilterSampler(sensor.film())
