@@ -7,7 +7,7 @@ whose noise is independent from pixel to pixel, which the stochastic reconstruct
 
 **A stage boundary.** OIDN runs outside Dr.Jit on materialised host buffers: this stage
 evaluates its inputs and synchronises, the one place where a frame leaves the JIT. It is
-optional (``pip install foveated_mi[denoise]``) and **not differentiable**: a gradient pass
+optional (``pip install -e '.[denoise]' (from a clone)``) and **not differentiable**: a gradient pass
 runs the frame without it (see :class:`foveated_mi.integrators.foveated.FoveatedIntegrator`).
 """
 from __future__ import annotations
