@@ -11,8 +11,13 @@ diagonal. This :math:`w` gives :math:`P(0) = 1` and :math:`P(\theta) = \sigma_p`
 
 The paper prints Eq. (2) as :math:`w = (\sigma_p - 1)/\theta^2`. For :math:`\sigma_p < 1`
 that :math:`w` is negative, so :math:`P > 1` near the gaze and :math:`P` is infinite at
-:math:`d = 1/\sqrt{|w|}`. The form above keeps :math:`P \in (0, 1]` and is the one the
-authors' public implementation computes.
+:math:`d = 1/\sqrt{|w|}`. The form above keeps :math:`P \in (0, 1]`. The authors' public
+code computes it (``cuda/samplingStep.cu`` lines 145-147 of
+``ohseokkwon/Foveated-Rendering-using-Ray-Tracing``, distance over the full diagonal times
+2, i.e. over half the diagonal) but does not use it: line 151 overwrites the probability
+with Weier et al.'s linear falloff (1 inside θ, 0.05 beyond 2θ), and line 222 decides the
+rays with fixed 4x4 masks around a radius of 0.07 plus a saliency term instead. This module
+implements the text's Eq. (1) with the corrected :math:`w`.
 
 The sampling map is one uniform draw per pixel per frame (:math:`u_i < P(d_i)`), plus rays
 forced on depth discontinuities (the Voronoi fill would otherwise smear silhouettes), plus
