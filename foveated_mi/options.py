@@ -12,8 +12,9 @@ defaults by a configuration tuned together; any option given explicitly wins ove
     depth above 0.99 (``shared_helper_funcs.h`` 116-129), one à-trous level
     (``main.cpp`` 355) with σ = 1 for colour, normal and position (``ATrous.cpp`` 53-55;
     the shader's ``exp(-d²/φ)`` with φ = 1), the Uncharted 2 tone curve
-    (``shared_helper_funcs.h`` 354-373). ``compact``, ``jfa+1``, ``max_history`` caps and
-    the inclusive test are extensions.
+    (``shared_helper_funcs.h`` 354-373) applied to the frame before the filter.
+    ``compact``, ``jfa+1``, ``max_history`` caps, the inclusive test and
+    ``tonemap_samples`` (the authors' per-sample tone mapping, an option) are extensions.
 ``oidn``
     For a Monte Carlo nested integrator, best measured at equal time with Intel Open Image
     Denoise installed (``pip install -e '.[denoise]'`` from a clone): wider sampling (θ = 0.25),
@@ -67,6 +68,7 @@ DEFAULTS: dict[str, Any] = {
     "oidn_quality": "high",
     "tonemap": "reinhard",
     "exposure": 0.0,
+    "tonemap_samples": False,
     "history": True,
     "max_history": 32.0,
     "sibson_inclusive": True,
@@ -161,6 +163,7 @@ def validate_options(options: dict[str, Any]) -> dict[str, Any]:
         "oidn_quality": check_choice("oidn_quality", o["oidn_quality"], OIDN_QUALITIES),
         "tonemap": check_choice("tonemap", o["tonemap"], list(post.TONEMAPPERS)),
         "exposure": check_range("exposure", o["exposure"], -64.0, 64.0),
+        "tonemap_samples": check_bool("tonemap_samples", o["tonemap_samples"]),
         "history": check_bool("history", o["history"]),
         "max_history": _check_max_history(o["max_history"]),
         "sibson_inclusive": check_bool("sibson_inclusive", o["sibson_inclusive"]),
@@ -171,6 +174,14 @@ def validate_options(options: dict[str, Any]) -> dict[str, Any]:
         "timing": check_bool("timing", o["timing"]),
         "map_seed": check_int("map_seed", o["map_seed"], -1, 0xFFFFFFFF),
     }
+    if out["tonemap_samples"]:
+        # The history and the reconstruction then hold display values: demodulation and
+        # SVGF's variance estimate assume radiance.
+        if out["demodulate"]:
+            raise ParameterError("demodulate", True, "False with tonemap_samples = True")
+        if out["denoiser"] == "svgf":
+            raise ParameterError("denoiser", "svgf", "atrous, oidn or none with "
+                                 "tonemap_samples = True")
     if out["denoiser"] == "oidn":
         from .denoise import INSTALL_HINT, oidn_available
         if not oidn_available():

@@ -130,3 +130,90 @@ def test_edge_fraction_is_reported():
     s = integ.stats
     assert 0 < s["edge_fraction"] <= s["ray_fraction"]
     assert s["edge_rays"] == int(integ.buffer("edges").sum())
+
+
+def _box_sphere(w, h):
+    from test_extremes import sphere_scene
+    return sphere_scene(w, h)
+
+
+def test_tonemap_samples_maps_each_sample_and_back():
+    """One sample per pixel and a box filter: tone-mapping the sample or the pixel is the
+    same, so the image matches the frame-level pipeline while the history holds display
+    values."""
+    from foveated_mi.postprocess import tonemap
+    scene = _box_sphere(16, 12)
+    kw = dict(preset="paper", sigma_p=1.0, atrous_iterations=0, history=False)
+    a = FoveatedIntegrator(**kw)
+    b = FoveatedIntegrator(tonemap_samples=True, **kw)
+    img_a = np.array(mi.render(scene, integrator=a, seed=3, spp=1))
+    img_b = np.array(mi.render(scene, integrator=b, seed=3, spp=1))
+    np.testing.assert_allclose(img_b, img_a, rtol=2e-3, atol=1e-5)
+    sh_a = a.buffers["shading"]
+    expect = tonemap(sh_a, "uncharted2").numpy()
+    np.testing.assert_allclose(b.buffers["shading"].numpy(), expect, rtol=1e-4, atol=1e-6)
+    assert not np.allclose(expect, sh_a.numpy()), "the history must hold display values"
+
+
+def test_tonemap_samples_averages_display_values():
+    """Four samples per pixel: the pixel is the inverse of the mean tone-mapped sample,
+    which differs from the frame-level pipeline (Jensen), and the history is reset when the
+    option changes (its values are in another domain)."""
+    scene = _box_sphere(16, 12)
+    kw = dict(preset="paper", sigma_p=1.0, atrous_iterations=0)
+    a = FoveatedIntegrator(**kw)
+    b = FoveatedIntegrator(tonemap_samples=True, **kw)
+    img_a = np.array(mi.render(scene, integrator=a, seed=3, spp=4))
+    img_b = np.array(mi.render(scene, integrator=b, seed=3, spp=4))
+    assert np.abs(img_b - img_a).max() > 1e-3
+    b.tonemap_samples = False
+    assert b.frame == 0
+
+
+@pytest.mark.parametrize("bad", [dict(demodulate=True), dict(denoiser="svgf")])
+def test_tonemap_samples_refuses_radiance_stages(bad):
+    with pytest.raises(ParameterError, match=next(iter(bad))):
+        validate_options({"preset": "paper", "tonemap_samples": True, **bad})
+
+
+def test_tonemap_samples_is_not_differentiable():
+    scene = _box_sphere(8, 6)
+    integ = FoveatedIntegrator(preset="paper", tonemap_samples=True)
+    mi.render(scene, integrator=integ, spp=1)
+    with pytest.raises(ParameterError, match="tonemap_samples"):
+        integ.render_forward(scene, mi.traverse(scene))
+
+
+def test_atrous_level_matches_the_authors_shader():
+    """One level with unit sigmas is ``shader/atFS.glsl`` with c_phi = n_phi = p_phi = 1:
+    weights exp(-d^2 / phi), the B3 kernel, off-screen taps skipped."""
+    from foveated_mi.postprocess import atrous
+    W, H = 7, 5
+    rng = np.random.default_rng(4)
+    c = rng.random((H * W, 3)).astype(np.float32)
+    n = rng.normal(size=(H * W, 3)).astype(np.float32)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    x = rng.random((H * W, 3)).astype(np.float32) * 2
+    k1 = np.array([1, 4, 6, 4, 1]) / 16.0
+    expect = np.zeros_like(c)
+    for p in range(H * W):
+        py, px = divmod(p, W)
+        s = np.zeros(3)
+        cum = 0.0
+        for dy in range(-2, 3):
+            for dx in range(-2, 3):
+                qx, qy = px + dx, py + dy
+                if not (0 <= qx < W and 0 <= qy < H):
+                    continue
+                q = qy * W + qx
+                w = min(np.exp(-np.sum((c[p] - c[q]) ** 2) / 1.0), 1.0) \
+                    * min(np.exp(-np.sum((n[p] - n[q]) ** 2) / 1.0 / 1.0), 1.0) \
+                    * min(np.exp(-np.sum((x[p] - x[q]) ** 2) / 1.0), 1.0)
+                s += c[q] * w * k1[dx + 2] * k1[dy + 2]
+                cum += w * k1[dx + 2] * k1[dy + 2]
+        expect[p] = s / cum
+    o = validate_options({"preset": "paper"})
+    got = atrous(mi.Color3f(c.T), mi.Array3f(n.T), mi.Array3f(x.T), W, H,
+                 iterations=o["atrous_iterations"], sigma_color=o["sigma_color"],
+                 sigma_normal=o["sigma_normal"], sigma_position=o["sigma_position"])
+    np.testing.assert_allclose(got.numpy().T, expect, rtol=1e-4, atol=1e-6)

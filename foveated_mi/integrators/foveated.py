@@ -101,6 +101,12 @@ mapping round trip when neither the filter nor the PNG needs it.
  * - tonemap, exposure
    - |string|, |float|
    - Tone-mapping operator and exposure in stops (filter domain and PNG output)
+ * - tonemap_samples
+   - |bool|
+   - Tone-map every traced sample before the film and the history, as the authors' code
+     does (``cuda/fov_path_trace_camera.cu`` line 169); the history and the reconstruction
+     then hold display values and the image is mapped back to radiance at the end. Off by
+     default and in ``paper`` (the text tone-maps the frame); not differentiable
  * - history
    - |bool|
    - Temporal reuse through reverse reprojection (default true)
@@ -146,6 +152,11 @@ from ..pixel_filter import FilterSampler
 from ..timing import StageTimer
 from ..options import DEFAULTS, NON_DIFFERENTIABLE_DENOISERS, PRESETS, validate_options  # noqa: F401
 from ..validate import ParameterError, check_int
+
+_adjoint.register_non_differentiable(
+    "tonemap_samples", lambda o: o["tonemap_samples"],
+    "False for gradients (per-sample tone mapping is not part of the differentiated image)")
+
 
 @dataclass
 class Frame:
@@ -251,8 +262,11 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         """Change options between frames (validated as a whole; nothing changes on error)."""
         given = {**self._given, **options}
         new = validate_options(given)
-        if new["history"] != self._options["history"]:
-            self.reset()   # a history from frames ago would be stale
+        old = self._options
+        domain = ("tonemap_samples", "tonemap", "exposure") if new["tonemap_samples"] \
+            else ("tonemap_samples",)
+        if new["history"] != old["history"] or any(new[k] != old[k] for k in domain):
+            self.reset()   # a stale history, or one held in another domain
         self._given, self._options = given, new
 
     def __getattr__(self, name):
@@ -355,8 +369,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         with dr.suspend_grad():
             frame = self._prepare(scene, sensor, seed, spp, StageTimer(False))
             shade = self._shade(scene, frame)
-            shading = _shading.develop(shade, frame.reordered.wavefront, frame.spp,
-                                       sensor.film(), self._options["pixel_filter"])
+            shading = self._develop(shade, frame)
         return _PrimalFrame(frame, shading, id(scene))
 
     # -- the frame ------------------------------------------------------------------------
@@ -370,8 +383,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         timer = StageTimer(self._options["timing"])
         frame = self._prepare(scene, sensor, seed, spp, timer)
         shade = self._shade(scene, frame)
-        shading = _shading.develop(shade, frame.reordered.wavefront, frame.spp,
-                                   sensor.film(), self._options["pixel_filter"])
+        shading = self._develop(shade, frame)
         image, buffers = self._form_image(frame, shading, timer)
         self._finish_frame(frame, shade, buffers, timer)
         self._primal = _PrimalFrame(frame, shading, id(scene))
@@ -439,6 +451,17 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                         clamp=self._options["clamp"],
                                         filter_sampler=frame.filter_sampler)
 
+    def _develop(self, shade: _shading.ShadingResult, frame: Frame) -> _shading.ShadingBuffer:
+        """The frame's samples into the sparse shading buffer; with ``tonemap_samples`` each
+        sample is tone-mapped first (the authors' order: display values are averaged)."""
+        o = self._options
+        if o["tonemap_samples"]:
+            shade = shade._replace(radiance=dr.select(
+                shade.ok, _postprocess_module().tonemap(shade.radiance, o["tonemap"],
+                                                        o["exposure"]), 0.0))
+        return _shading.develop(shade, frame.reordered.wavefront, frame.spp,
+                                frame.sensor.film(), o["pixel_filter"])
+
     def _form_image(self, frame: Frame, shading: _shading.ShadingBuffer, timer: StageTimer,
                     grad_pass: bool = False) -> tuple[mi.Color3f, dict[str, Any]]:
         """Everything after the shading buffer: history resolve, reconstruction and
@@ -488,6 +511,12 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                     target_samples=o["target_samples"], jitter=o["stochastic_jitter"],
                     tries=o["stochastic_tries"], inclusive=o["sibson_inclusive"],
                     seed=dr.opaque(mi.UInt32, (frame.seed ^ 0x6A09E667) & 0xFFFFFFFF))
+        if o["tonemap_samples"]:
+            # Display values so far: back to radiance, so every later stage and buffer means
+            # what it means without the option (the à-trous pass maps them forth again,
+            # exactly: the round trip is the identity below the operator's cap).
+            filled = inverse_tonemap(filled, o["tonemap"], o["exposure"])
+            interpolated = inverse_tonemap(interpolated, o["tonemap"], o["exposure"])
         timer.mark("reconstruct", nearest, filled, interpolated)
 
         tonemapped = filtered = variance = None

@@ -30,11 +30,13 @@ with the exposure in photographic stops. The operators act on each channel on it
     bias 2, white point 11.2 and the exponent 2.2 as written there). Monotone; it reaches 1
     at x = 5.6 and tends to about 1.74. The authors apply it to every traced sample before
     the history (``cuda/fov_path_trace_camera.cu``, line 169); here it is a frame operator
-    like the others (``benchmarks/bench_tonemap_fireflies.py`` measures the per-sample form).
+    like the others, and the integrator's ``tonemap_samples`` option applies it (or any
+    operator) per sample instead (``benchmarks/bench_tonemap_fireflies.py`` compares them).
 
-Non-finite and negative input, for ``"reinhard"``, ``"aces"`` and ``"uncharted2"``: NaN -> 0, negative
-values (``-inf`` included) -> 0, ``+inf`` -> 1. The output is then always finite and in
-[0, 1]. The rules are applied to the exposed value, per channel.
+Non-finite and negative input, for ``"reinhard"``, ``"aces"`` and ``"uncharted2"``: NaN -> 0,
+negative values (``-inf`` included) -> 0, ``+inf`` -> 1 (``"uncharted2"``: its value at the
+input cap 1e4, about 1.74). The output is then always finite, in [0, 1] (``"uncharted2"``:
+[0, 1.74]). The rules are applied to the exposed value, per channel.
 
 All operators are plain Dr.Jit arithmetic, so they are differentiable where the curve is
 (the clamps have zero derivative outside their range; NaN lanes get a zero gradient).
