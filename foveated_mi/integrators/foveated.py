@@ -70,9 +70,10 @@ mapping round trip when neither the filter nor the PNG needs it.
  * - edge_threshold, edge_detector
    - |float|, |string|
    - Depth edges that force a ray; 0 disables them. ``relative`` (default): relative depth
-     jump to a 4-neighbour above the threshold (default 0.1). ``sobel`` (``paper``): the
-     authors' test, ``|Gx| + |Gy|`` of the 3x3 Sobel filter on depth above the threshold
-     (the authors use 0.99, in scene units)
+     jump to a 4-neighbour above the threshold (default 0.1, also ``paper``). ``sobel``:
+     the test in the authors' code (which does not call it), ``|Gx| + |Gy|`` of the 3x3
+     Sobel filter on depth above the threshold (the authors use 0.99, in scene units).
+     ``stats`` reports ``edge_rays`` and ``edge_fraction``
  * - demodulate
    - |bool|
    - Reconstruct and filter irradiance, albedo multiplied back (:mod:`foveated_mi.demodulate`)
