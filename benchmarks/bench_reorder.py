@@ -6,7 +6,7 @@ Every mode is a launch layout of the ``paper`` preset: ``none`` launches W x H l
 paper's "un-optimised" row), ``rows`` (Strategy 1) H x the largest row count,
 ``rows_blocks`` (Strategy 2, the paper's "our" row) H x the largest balanced row count, and
 ``compact`` (an extension) exactly one lane per ray. θ is calibrated to ``--fraction`` of
-the pixels with the preset's edge rays counted (Sobel on depth).
+the pixels with the preset's edge rays counted.
 
 Per mode it renders warm-up frames, then ``--frames`` timed frames, interleaving the modes
 and the full render frame by frame so they share the machine's noise. It reports the lanes
@@ -23,7 +23,7 @@ import drjit as dr
 import mitsuba as mi
 
 import foveated_mi
-from common import calibrate_theta, machine, md_table, median, timed, write_json
+from common import calibrate_theta, machine, md_table, median, preset_edges, timed, write_json
 
 MODES = ("none", "rows", "rows_blocks", "compact")
 
@@ -42,20 +42,14 @@ def main(argv=None):
     p.add_argument("--out", help="JSON results")
     a = p.parse_args(argv)
     foveated_mi.set_variant(a.variant)
-    from foveated_mi.gbuffer import render_gbuffer
     from foveated_mi.integrators.foveated import FoveatedIntegrator
-    from foveated_mi.options import validate_options
-    from foveated_mi.sampling import depth_edges
     from foveated_mi.scenes import load_scene
 
     W, H = a.size
     scene = load_scene(a.scene, width=W, height=H, spp=a.spp,
                        integrator={"type": "path", "max_depth": a.max_depth})
     nested = scene.integrator()
-    gb = render_gbuffer(scene, scene.sensors()[0])
-    paper = validate_options({"preset": "paper"})
-    edges = depth_edges(gb.depth, gb.hit, W, H, paper["edge_threshold"],
-                        detector=paper["edge_detector"])
+    edges = preset_edges(scene, "paper")
     theta = calibrate_theta(W, H, a.fraction, sigma_p=a.sigma_p, edges=edges)
     # History off and a constant-cost reconstruction: this isolates the trace stage.
     integs = {m: FoveatedIntegrator(preset="paper", nested=nested, theta=theta, sigma_p=a.sigma_p, reorder=m,
