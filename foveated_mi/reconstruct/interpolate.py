@@ -13,13 +13,15 @@ compared squared in integers (``|q - p|^2 <= r_p^2``), so the pixel sets are exa
     ``F(p)``: nearest-site colour (the paper's fill).
 ``sibson``
     the paper's approximate Sibson interpolation (§3.4, Fig. 5):
-    ``mean { F(q) : |q - p| <= r_p, q in the film }``. At a site ``r_p = 0`` and the output is
-    the site colour. Cost per pixel ~ ``pi r_p^2`` gathers, bounded through ``max_radius``.
+    ``mean { F(q) : |q - p| <= r_p, q in the film }`` (``inclusive=True``; ``inclusive=False``
+    is the text's ``|q - p| < r_p``, used by the ``paper`` preset). At a site ``r_p = 0`` and
+    the output is the site colour. Cost per pixel ~ ``pi r_p^2`` gathers, bounded through ``max_radius``.
 ``discrete_sibson``
-    exact discrete Sibson interpolation of Park et al., "Discrete Sibson Interpolation",
+    discrete Sibson interpolation of Park et al., "Discrete Sibson Interpolation",
     IEEE TVCG 12(2), 2006: every pixel ``q`` scatters ``F(q)`` to all ``p`` with
     ``|p - q| <= r_q``; the output at ``p`` is the mean of what ``p`` received (at least its own
-    contribution). Used as the accuracy reference.
+    contribution). Used as the accuracy reference. Exact only while every ``|q - s(q)|`` is
+    within ``max_radius``: a pixel farther from its site scatters over the capped disk.
 ``fast_sibson``
     ``sibson`` with the disk replaced by a square of the same pixel count (the 5-pixel plus is
     kept exactly), evaluated from a Float64 summed-area table
@@ -225,7 +227,8 @@ class _DiscreteSibsonOp(dr.CustomOp):
 
 def discrete_sibson(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: int, height: int,
                     *, max_radius: int = 32) -> mi.Color3f:
-    """Exact discrete Sibson interpolation (Park et al. 2006), the accuracy reference.
+    """Discrete Sibson interpolation (Park et al. 2006), the accuracy reference; exact while
+    no pixel is farther than ``max_radius`` from its site (the disk is capped there).
 
     Every pixel ``q`` adds ``F(q)`` to every ``p`` in its disk ``{p : |p - q|^2 <= r_q^2}``
     (``r_q = min(|q - s(q)|, max_radius)``); ``out(p) = sum / count`` of what ``p`` received.
