@@ -220,7 +220,6 @@ def _references(spec, scenes, pending, file_refs, out_dir, variant, ex, progress
         paths[label] = path
         if os.path.isfile(path):
             arrays[label] = np.load(path, allow_pickle=False)
-            _filter_note(label, _read_meta(path).get("rfilter"), result, say)
             continue
         task = T.reference_task(scene, variant)
         task["threads"] = ex.threads
@@ -248,30 +247,9 @@ def _references(spec, scenes, pending, file_refs, out_dir, variant, ex, progress
                     json.dump(meta, f, indent=2)
                 arrays[label] = arr
                 result.references_rendered += 1
-                _filter_note(label, out["rfilter"], result, say)
         finally:
             bar.close()
     return {label: ex.scatter(arr) for label, arr in arrays.items()}
-
-
-def _read_meta(npy_path: str) -> dict:
-    try:
-        with open(os.path.splitext(npy_path)[0] + ".json") as f:
-            return json.load(f)
-    except (OSError, ValueError):
-        return {}
-
-
-def _filter_note(label: str, rfilter: str | None, result, say) -> None:
-    """The foveated integrator develops one box-filtered value per pixel; a film with a
-    wider reconstruction filter blurs the reference and the uniform baselines only."""
-    if rfilter and not rfilter.startswith("BoxFilter"):
-        note = (f"note: scene {label!r}: the film's filter is {rfilter}; the reference and the "
-                "uniform baselines are filtered by it, foveated frames are not (one box-"
-                "filtered value per pixel), which lowers foveated quality; use a box rfilter "
-                "for like-for-like comparisons")
-        result.notes.append(note)
-        say(note)
 
 
 def _run_tasks(pending, refs, ex, results, progress, result, say) -> None:
