@@ -31,7 +31,8 @@ defaults by a configuration tuned together; any option given explicitly wins ove
     The differentiable noise-aware pipeline, no extra dependency: albedo demodulation, the
     G-buffer-guided sparse reconstruction and the variance-guided à-trous filter (SVGF), which
     stops smoothing where the history has converged. In ``benchmarks/bench_equal_time.py``
-    (640x360, frame 16, still gaze) ``guided`` at 2 spp is ahead of ``paper`` at 4 spp by
+    (640x360, frame 16, still gaze; measured against the earlier ``paper`` pipeline: compact
+    reorder, capped history, five à-trous levels) ``guided`` at 2 spp is ahead of it at 4 spp by
     +2.9 / +6.1 dB (frame / fovea) on the staircase in 337 against 371 ms, and by
     +2.1 / +8.5 dB on voxel-city in 272 against 228 ms.
 ``auto`` (default)
