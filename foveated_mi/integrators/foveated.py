@@ -155,7 +155,7 @@ from ..options import DEFAULTS, NON_DIFFERENTIABLE_DENOISERS, PRESETS, validate_
 from ..validate import ParameterError, check_int
 
 _adjoint.register_non_differentiable(
-    "tonemap_samples", lambda o: o["tonemap_samples"],
+    "tonemap_samples", lambda o: bool(o.get("tonemap_samples", False)),
     "False for gradients (per-sample tone mapping is not part of the differentiated image)")
 
 
