@@ -6,7 +6,8 @@ The shading buffer takes its values from a converged full render (``--ref-spp``)
 Carlo noise does not hide reconstruction error: the only error left is that of filling the
 untraced pixels. For θ ∈ {0.04, 0.1, 0.2}, σp = 0.8, gaze at the centre, with depth-edge rays,
 it reports PSNR and SSIM (display-referred: Reinhard then sRGB, data range 1) of every method,
-without and with the à-trous filter, and the ray fraction. The paper reports PSNR ≈ 26 dB and
+without and with the à-trous filter, and the ray fraction. ``sibson`` runs twice: with the
+text's in-circle test ``d(q, p) < r`` and with the inclusive ``<=``. The paper reports PSNR ≈ 26 dB and
 SSIM ≈ 0.8 at about 5 % rays.
 """
 from __future__ import annotations
@@ -59,9 +60,15 @@ def main(argv=None):
         frac = dr.count(smap)[0] / (W * H)
         shading = dr.select(smap, ref_c, 0.0)
         nearest = rec.jump_flood(smap, W, H)
+        runs = []
         for method in a.methods:
+            # Sibson's in-circle test: the text's d(q, p) < r and the inclusive <=.
+            runs += [(f"sibson {t}", {"inclusive": t == "<="}) for t in ("<", "<=")] \
+                if method == "sibson" else [(method, {})]
+        for label, extra in runs:
+            method = label.split()[0]
             img, ms = timed(rec.reconstruct, method, shading, smap, nearest, W, H,
-                            max_radius=a.max_radius)
+                            max_radius=a.max_radius, **extra)
             filt = inverse_tonemap(atrous(tonemap(img), gb.normal, gb.position, W, H,
                                           valid=gb.hit))
             res = {}
@@ -69,11 +76,11 @@ def main(argv=None):
                 d = to_display(np.array(dr.ravel(x)).reshape(H, W, 3))
                 res[tag] = (float(psnr(ref_d, d, data_range=1.0)),
                             float(ssim(ref_d, d, data_range=1.0)))
-            out[f"{theta}/{method}"] = {"theta": theta, "ray_fraction": frac, "ms": ms,
+            out[f"{theta}/{label}"] = {"theta": theta, "ray_fraction": frac, "ms": ms,
                                         "psnr": res[""][0], "ssim": res[""][1],
                                         "psnr_atrous": res["+atrous"][0],
                                         "ssim_atrous": res["+atrous"][1]}
-            rows.append((theta, f"{frac:.3f}", method, f"{res[''][0]:.2f}", f"{res[''][1]:.3f}",
+            rows.append((theta, f"{frac:.3f}", label, f"{res[''][0]:.2f}", f"{res[''][1]:.3f}",
                          f"{res['+atrous'][0]:.2f}", f"{res['+atrous'][1]:.3f}"))
     print(f"{a.scene} {W}x{H}, sigma_p {a.sigma_p}, reference {a.ref_spp} spp, {machine()}")
     print(md_table(("θ", "rays", "method", "PSNR dB", "SSIM", "PSNR +à-trous",

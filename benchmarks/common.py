@@ -53,9 +53,32 @@ def md_table(header, rows) -> str:
     return "\n".join(out)
 
 
+def preset_edges(scene, preset="paper", **options):
+    """The edge rays the ``foveated`` integrator would force on ``scene``'s first sensor
+    under ``preset`` (its edge detector and threshold; ``options`` override), or None when
+    the threshold is 0."""
+    from foveated_mi.gbuffer import film_size, render_gbuffer
+    from foveated_mi.options import validate_options
+    from foveated_mi.sampling import depth_edges
+    o = validate_options({"preset": preset, **options})
+    if o["edge_threshold"] <= 0:
+        return None
+    sensor = scene.sensors()[0]
+    W, H = film_size(sensor)
+    gb = render_gbuffer(scene, sensor)
+    return depth_edges(gb.depth, gb.hit, W, H, o["edge_threshold"], detector=o["edge_detector"])
+
+
 def calibrate_theta(width, height, target, *, sigma_p, gaze=(0.5, 0.5), edges=None, seed=0):
-    """θ whose sampling map (with ``edges``) traces about ``target`` of the pixels."""
+    """θ whose sampling map (edge rays ``edges`` included, e.g. from :func:`preset_edges`)
+    traces about ``target`` of the pixels. Raises ValueError when the edge rays alone
+    exceed the target."""
     from foveated_mi.sampling import sampling_map
+    if edges is not None:
+        forced = dr.count(edges)[0] / (width * height)
+        if forced > target:
+            raise ValueError(f"target = {target!r} is invalid: expected at least the edge-ray "
+                             f"fraction {forced:.4f}")
     lo, hi = 1e-4, 10.0
     for _ in range(30):
         mid = (lo * hi) ** 0.5

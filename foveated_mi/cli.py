@@ -33,6 +33,8 @@ def _add_frame_options(p: argparse.ArgumentParser) -> None:
                    help="splat | importance: how samples honour the film's filter")
     p.add_argument("--block-height", type=int, dest="block_height")
     p.add_argument("--edge-threshold", type=float, dest="edge_threshold")
+    p.add_argument("--edge-detector", dest="edge_detector",
+                   help="relative | sobel: the depth-edge test that forces rays")
     p.add_argument("--reconstruction", help="voronoi | sibson | discrete_sibson | fast_sibson | "
                    "guided | stochastic")
     p.add_argument("--demodulate", action=argparse.BooleanOptionalAction, default=None,
@@ -48,11 +50,17 @@ def _add_frame_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--oidn-quality", dest="oidn_quality", help="high | balanced | fast")
     p.add_argument("--max-radius", type=int, dest="max_radius")
     p.add_argument("--jfa", help="jfa | 1+jfa | jfa+1 | jfa+2")
+    p.add_argument("--sibson-inclusive", action=argparse.BooleanOptionalAction, default=None,
+                   dest="sibson_inclusive", help="sibson's in-circle test: <= (or the text's <)")
     p.add_argument("--atrous-iterations", type=int, dest="atrous_iterations")
     p.add_argument("--sigma-color", type=float, dest="sigma_color")
     p.add_argument("--sigma-normal", type=float, dest="sigma_normal")
     p.add_argument("--sigma-position", type=float, dest="sigma_position")
-    p.add_argument("--tonemap", help="none | reinhard | aces")
+    p.add_argument("--tonemap", help="none | reinhard | aces | uncharted2")
+    p.add_argument("--tonemap-samples", action=argparse.BooleanOptionalAction, default=None,
+                   dest="tonemap_samples", help="tone-map every sample before the history")
+    p.add_argument("--max-history", type=float, dest="max_history",
+                   help="cap on the history sample count (0: no cap)")
     p.add_argument("--exposure", type=float, help="exposure in stops")
     p.add_argument("--clamp", type=float, help="largest accepted sample component")
     p.add_argument("--map-seed", type=int, dest="map_seed",
@@ -60,10 +68,10 @@ def _add_frame_options(p: argparse.ArgumentParser) -> None:
 
 
 FRAME_OPTIONS = ("preset", "theta", "sigma_p", "gaze", "reorder", "pixel_filter", "block_height",
-                 "edge_threshold", "demodulate", "reconstruction", "max_radius", "target_samples",
-                 "guided_levels", "stochastic_jitter", "stochastic_tries", "jfa", "denoiser",
+                 "edge_threshold", "edge_detector", "demodulate", "reconstruction", "max_radius", "target_samples",
+                 "guided_levels", "stochastic_jitter", "stochastic_tries", "jfa", "sibson_inclusive", "denoiser",
                  "atrous_iterations", "sigma_color", "sigma_normal", "sigma_position",
-                 "sigma_luminance", "oidn_quality", "tonemap", "exposure", "clamp",
+                 "sigma_luminance", "oidn_quality", "tonemap", "tonemap_samples", "max_history", "exposure", "clamp",
                  "map_seed")
 
 

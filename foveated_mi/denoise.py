@@ -1,4 +1,4 @@
-"""Intel Open Image Denoise through ``pyoidn`` (optional: ``pip install foveated_mi[denoise]``).
+"""Intel Open Image Denoise through ``pyoidn`` (optional: ``pip install -e '.[denoise]' (from a clone)``).
 
 :func:`denoise` is a validated wrapper over :func:`pyoidn.denoise` with OIDN's ``RT`` filter:
 colour, and optionally albedo and normal, as float32 (H, W, 3) arrays (copied to C-contiguous
@@ -27,7 +27,7 @@ from .validate import ParameterError, check_choice
 __all__ = ["oidn_available", "denoise", "QUALITIES", "INSTALL_HINT"]
 
 QUALITIES = ("high", "balanced", "fast", "default")
-INSTALL_HINT = "pip install foveated_mi[denoise]"
+INSTALL_HINT = "pip install -e '.[denoise]' (from a clone)"
 
 
 def oidn_available() -> bool:

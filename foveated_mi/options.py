@@ -4,18 +4,35 @@ r"""Options of the ``foveated`` integrator: defaults, presets and validation.
 defaults by a configuration tuned together; any option given explicitly wins over both:
 
 ``paper``
-    The paper as published: sampling map with θ = 0.1, σp = 0.8, approximate Sibson
-    interpolation of radiance, the edge-avoiding à-trous filter in the tone-mapped domain.
+    The paper as published: sampling map with θ = 0.1, σp = 0.8, Strategy 2 launch layout
+    (``rows_blocks``), history without a cap, plain JFA (N/2 … 1), approximate Sibson
+    interpolation with the text's in-circle test ``d(q, p) < r``, tone mapping then the basic
+    à-trous filter (§3.5). Where the text is silent, the authors' public code
+    (``ohseokkwon/Foveated-Rendering-using-Ray-Tracing``, commit 37426a9): one à-trous
+    level (``main.cpp`` 355) with σ = 1 for colour, normal and position (``ATrous.cpp``
+    53-55; the shader's ``exp(-d²/φ)`` with φ = 1), the Uncharted 2 tone curve
+    (``shared_helper_funcs.h`` 354-373) applied to the frame before the filter.
+    ``compact``, ``jfa+1``, ``max_history`` caps, the inclusive test and
+    ``tonemap_samples`` (the authors' per-sample tone mapping, an option) are extensions.
+
+    Edge rays: the text asks for "edge detection by the depth buffer" and names no test.
+    The authors' code holds a Sobel test on depth (``shared_helper_funcs.h`` 116-129,
+    ``|Gx| + |Gy| > 0.99`` in scene units) but does not call it (``samplingStep.cu`` line
+    85 is commented out). That test is ``edge_detector = "sobel"`` with
+    ``edge_threshold = 0.99``; the preset keeps the relative depth jump (0.1), because the
+    Sobel test in scene units marks 38 % (voxel-monument) to 78 % (voxel-city) of a 256²
+    frame as edges, above every ray budget of the paper's Table 1 (3.3 % to 19.8 %).
 ``oidn``
     For a Monte Carlo nested integrator, best measured at equal time with Intel Open Image
-    Denoise installed (``pip install foveated_mi[denoise]``): wider sampling (θ = 0.25),
+    Denoise installed (``pip install -e '.[denoise]'`` from a clone): wider sampling (θ = 0.25),
     albedo demodulation, the stochastic surface-aware fill and OIDN. Not differentiable
     (a gradient pass raises).
 ``guided``
     The differentiable noise-aware pipeline, no extra dependency: albedo demodulation, the
     G-buffer-guided sparse reconstruction and the variance-guided à-trous filter (SVGF), which
     stops smoothing where the history has converged. In ``benchmarks/bench_equal_time.py``
-    (640x360, frame 16, still gaze) ``guided`` at 2 spp is ahead of ``paper`` at 4 spp by
+    (640x360, frame 16, still gaze; measured against the earlier ``paper`` pipeline: compact
+    reorder, capped history, five à-trous levels) ``guided`` at 2 spp is ahead of it at 4 spp by
     +2.9 / +6.1 dB (frame / fovea) on the staircase in 337 against 371 ms, and by
     +2.1 / +8.5 dB on voxel-city in 272 against 228 ms.
 ``auto`` (default)
@@ -61,8 +78,11 @@ DEFAULTS: dict[str, Any] = {
     "oidn_quality": "high",
     "tonemap": "reinhard",
     "exposure": 0.0,
+    "tonemap_samples": False,
     "history": True,
     "max_history": 32.0,
+    "sibson_inclusive": True,
+    "edge_detector": "relative",
     "reprojection_tolerance": 0.02,
     "clamp": 1e4,
     "timing": False,
@@ -71,13 +91,20 @@ DEFAULTS: dict[str, Any] = {
 
 #: Preset name -> the defaults it replaces (see the module docstring).
 PRESETS: dict[str, dict[str, Any]] = {
-    "paper": {},
+    # As published (Kwon et al. 2019) and, where the text is silent, the authors' code: the
+    # Strategy 2 launch layout, an uncapped history, plain JFA, the strict in-circle test,
+    # one à-trous level with unit sigmas (see the module docstring).
+    "paper": {"reorder": "rows_blocks", "max_history": 0.0, "jfa": "jfa",
+              "sibson_inclusive": False,
+              "atrous_iterations": 1, "sigma_color": 1.0, "sigma_normal": 1.0,
+              "sigma_position": 1.0, "tonemap": "uncharted2"},
     "oidn": {"theta": 0.25, "sigma_p": 0.8, "demodulate": True, "reconstruction": "stochastic",
              "denoiser": "oidn"},
     "guided": {"demodulate": True, "reconstruction": "guided", "denoiser": "svgf"},
 }
 PRESET_NAMES = ("auto", *PRESETS)
 DENOISERS = ("none", "atrous", "svgf", "oidn")
+EDGE_DETECTORS = ("relative", "sobel")
 OIDN_QUALITIES = ("high", "balanced", "fast")
 #: Denoisers a gradient pass cannot differentiate (it runs the frame without them).
 NON_DIFFERENTIABLE_DENOISERS = frozenset({"oidn"})
@@ -97,6 +124,14 @@ def resolve_preset(preset: str, gradients: bool = False) -> str:
     return "oidn" if oidn_available() else "guided"
 
 
+
+
+def _check_max_history(value) -> float:
+    """0 (no cap, the paper) or a cap in [1, 1e9]."""
+    v = check_range("max_history", value, 0.0, 1e9)
+    if 0.0 < v < 1.0:
+        raise ParameterError("max_history", value, "0 (no cap) or a number in [1, 1e9]")
+    return v
 
 
 def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[str, Any]:
@@ -144,14 +179,25 @@ def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[s
         "oidn_quality": check_choice("oidn_quality", o["oidn_quality"], OIDN_QUALITIES),
         "tonemap": check_choice("tonemap", o["tonemap"], list(post.TONEMAPPERS)),
         "exposure": check_range("exposure", o["exposure"], -64.0, 64.0),
+        "tonemap_samples": check_bool("tonemap_samples", o["tonemap_samples"]),
         "history": check_bool("history", o["history"]),
-        "max_history": check_range("max_history", o["max_history"], 1.0, 1e9),
+        "max_history": _check_max_history(o["max_history"]),
+        "sibson_inclusive": check_bool("sibson_inclusive", o["sibson_inclusive"]),
+        "edge_detector": check_choice("edge_detector", o["edge_detector"], EDGE_DETECTORS),
         "reprojection_tolerance": check_range("reprojection_tolerance",
                                               o["reprojection_tolerance"], 0.0, 1.0),
         "clamp": check_range("clamp", o["clamp"], 0.0, 3e38, lo_open=True),
         "timing": check_bool("timing", o["timing"]),
         "map_seed": check_int("map_seed", o["map_seed"], -1, 0xFFFFFFFF),
     }
+    if out["tonemap_samples"]:
+        # The history and the reconstruction then hold display values: demodulation and
+        # SVGF's variance estimate assume radiance.
+        if out["demodulate"]:
+            raise ParameterError("demodulate", True, "False with tonemap_samples = True")
+        if out["denoiser"] == "svgf":
+            raise ParameterError("denoiser", "svgf", "atrous, oidn or none with "
+                                 "tonemap_samples = True")
     if out["denoiser"] == "oidn":
         from .denoise import INSTALL_HINT, oidn_available
         if not oidn_available():

@@ -1,28 +1,34 @@
-r"""Reorder pass (Kwon et al. 2019, §3.2): make ray-tracing threads dense.
+r"""Reorder pass (Kwon et al. 2019, §3.2): the launch layout of the ray-tracing threads.
 
 Input is the sampling map (one flag per pixel, True = trace). Every mode returns a
-:class:`Reordered` with the trace wavefront, i.e. the pixel index of each ray-tracing thread in
-launch order. All modes trace the same pixel set; they differ in launch order and shape.
+:class:`Reordered`: the pixel each launched lane traces (``wavefront``), the mask of lanes
+that trace (``active``; None when every lane traces) and the layout's counts. All modes trace
+the same pixels; they differ in the shape of the launch, i.e. in how many lanes run idle.
 
 ``none``
-    The paper's "un-optimised" row: a full-frame wavefront of ``W*H`` lanes in which the
-    lanes of untraced pixels are masked off.
+    The paper's "un-optimised" row: ``W*H`` lanes, one per pixel, masked where the pixel is
+    not traced.
 ``rows`` (Strategy 1)
     Per row, trace pixels are pushed to the left and resample pixels to the right
-    (CSR-like); ``row_counts[v]`` is the number of trace pixels of row ``v``. Thread ``k`` of
-    row ``v`` traces iff ``k < row_counts[v]``.
+    (CSR-like, Fig. 3 b); ``row_counts[v]`` is the number of trace pixels of row ``v``. The
+    launch spans ``H x max(row_counts)`` lanes: lane ``(v, k)`` traces the ``k``-th trace
+    pixel of row ``v`` and is active only while ``k < row_counts[v]``.
 ``rows_blocks`` (Strategy 2)
-    Strategy 1, then inside every group of ``block_height`` rows trace pixels move from the
-    fullest rows to the emptiest, swapping with a resample pixel, until the counts differ by
-    at most one. Row ``j`` of a block with ``T`` trace pixels ends with
-    ``floor(T/B) + (j < T mod B)`` of them. A row keeps its own first pixels, only the
-    surplus moves (the minimum number of swaps), and the reordered map stays a permutation.
-``compact``
-    Global stream compaction into one dense wavefront (``dr.compress``).
+    Strategy 1, then inside every group of ``block_height`` rows the paper's loop moves the
+    last trace pixel of the fullest row behind the last one of the emptiest row until the
+    counts differ by at most one (Fig. 3 c). A block with ``T`` trace pixels in ``B`` rows
+    ends with ``floor(T/B)`` per row, the ``T mod B`` rows that held the most keeping one
+    more. That is the loop's result: the same counts and the same number of swaps
+    (``swaps``; no row both gives and receives, so the loop makes exactly the surplus
+    ``sum(max(0, count - final))`` moves). The moves are made in parallel. The launch spans
+    ``H x max(final counts)`` lanes, never more than Strategy 1's.
+``compact`` (an extension)
+    Global stream compaction (``dr.compress``): exactly one lane per traced pixel.
 
-For the three dense modes the wavefront has exactly as many lanes as traced pixels. The
-reordered sampling map ``R`` (the paper's ``Ts``/``R`` buffer) is a permutation of all pixels:
-``R[v*W + k]`` is the pixel handled by thread ``k`` of row ``v``.
+The reordered sampling map ``R`` (the paper's ``Ts``/``R`` buffer) is a permutation of all
+pixels: ``R[v*W + k]`` is the pixel handled by thread ``k`` of row ``v``. Sizing the
+``rows`` / ``rows_blocks`` launch reads the largest row count on the host, as
+``dr.compress`` does for ``compact``.
 """
 from __future__ import annotations
 
@@ -37,11 +43,17 @@ REORDER_MODES = ("none", "rows", "rows_blocks", "compact")
 
 
 class Reordered(NamedTuple):
-    wavefront: mi.UInt32            #: pixel index per trace thread (W*H lanes for ``none``)
-    active: mi.Bool | None          #: lane mask for ``none``; None for dense modes
+    wavefront: mi.UInt32            #: pixel traced by each launched lane
+    active: mi.Bool | None          #: lanes that trace; None when every lane does
     reordered_map: mi.UInt32 | None  #: R: slot -> pixel (``rows``/``rows_blocks``)
     row_counts: mi.UInt32 | None    #: trace threads per row after reordering
     mode: str
+    swaps: mi.UInt32 | None = None  #: Strategy 2's swap count (1 element), else None
+
+    @property
+    def lanes(self) -> int:
+        """Lanes launched (per sample per pixel)."""
+        return dr.width(self.wavefront)
 
 
 def _row_rank(flags: mi.Bool, width: int, height: int) -> tuple[mi.UInt32, mi.UInt32]:
@@ -83,9 +95,26 @@ def _search_sorted(cum: mi.UInt32, n: int, g: mi.UInt32) -> mi.UInt32:
     return lo
 
 
+def _rank_in_block(counts: mi.UInt32, first: mi.UInt32, size: mi.UInt32) -> mi.UInt32:
+    """Rank of each row inside its block, by count (descending), ties by row (descending)."""
+    rows = dr.arange(mi.UInt32, dr.width(counts))
+    c = counts
+
+    def body(j, rank):
+        other = first + j
+        oc = dr.gather(mi.UInt32, counts, other)
+        rank += mi.UInt32((oc > c) | ((oc == c) & (other > rows)))
+        return j + 1, rank
+
+    _, rank = dr.while_loop((mi.UInt32(0), dr.zeros(mi.UInt32, dr.width(counts))),
+                            lambda j, rank: j < size, body)
+    return rank
+
+
 def reorder_rows_blocks(sampling_map: mi.Bool, width: int, height: int, block_height: int
-                        ) -> tuple[mi.UInt32, mi.UInt32]:
-    """Strategy 2 on top of Strategy 1: ``R`` and the balanced ``row_counts``."""
+                        ) -> tuple[mi.UInt32, mi.UInt32, mi.UInt32]:
+    """Strategy 2 on top of Strategy 1: ``R``, the balanced ``row_counts`` and the number of
+    swaps the paper's loop makes."""
     rmap, counts = reorder_rows(sampling_map, width, height)
     rows = dr.arange(mi.UInt32, height)
     block = rows // block_height
@@ -99,7 +128,10 @@ def reorder_rows_blocks(sampling_map: mi.Bool, width: int, height: int, block_he
     last = first + size - 1
     before = dr.select(first > 0, dr.gather(mi.UInt32, incl, dr.maximum(first, 1) - 1), 0)
     total = dr.gather(mi.UInt32, incl, last) - before
-    target = total // size + mi.UInt32(local < total % size)
+    # The loop leaves floor(T/B) per row; the T mod B rows that held the most (ties: the
+    # later row, as the loop takes the first maximum) keep one more.
+    rank = _rank_in_block(counts, first, size)
+    target = total // size + mi.UInt32(rank < total % size)
     surplus = dr.select(counts > target, counts - target, 0)
     deficit = dr.select(target > counts, target - counts, 0)
     # Surplus and deficit match inside every block, so global prefixes pair them up.
@@ -122,7 +154,8 @@ def reorder_rows_blocks(sampling_map: mi.Bool, width: int, height: int, block_he
     out = mi.UInt32(rmap)
     dr.scatter(out, src_px, dst, moving)
     dr.scatter(out, dst_px, idx, moving)
-    return out, target
+    swaps = dr.sum(dr.select(counts > target, counts - target, 0))
+    return out, target, mi.UInt32(swaps)
 
 
 def reorder(sampling_map: mi.Bool, width: int, height: int, mode: str = "compact",
@@ -135,12 +168,18 @@ def reorder(sampling_map: mi.Bool, width: int, height: int, mode: str = "compact
         return Reordered(dr.arange(mi.UInt32, n), mi.Bool(sampling_map), None, None, mode)
     if mode == "compact":
         return Reordered(dr.compress(sampling_map), None, None, None, mode)
+    swaps = None
     if mode == "rows":
         rmap, counts = reorder_rows(sampling_map, width, height)
     else:
-        rmap, counts = reorder_rows_blocks(sampling_map, width, height, block_height)
-    idx = dr.arange(mi.UInt32, n)
-    y = idx // width
-    is_trace_slot = (idx - y * width) < dr.gather(mi.UInt32, counts, y)
-    slots = dr.compress(is_trace_slot)
-    return Reordered(dr.gather(mi.UInt32, rmap, slots), None, rmap, counts, mode)
+        rmap, counts, swaps = reorder_rows_blocks(sampling_map, width, height, block_height)
+    # The launch is rows x slots: its width is the largest row count (a host read).
+    slots = int(dr.max(counts)[0]) if height > 0 else 0
+    if slots == 0:
+        return Reordered(mi.UInt32(), mi.Bool(), rmap, counts, mode, swaps)
+    lane = dr.arange(mi.UInt32, height * slots)
+    v = lane // max(slots, 1)
+    k = lane - v * slots
+    active = k < dr.gather(mi.UInt32, counts, v)
+    wavefront = dr.gather(mi.UInt32, rmap, v * width + k)
+    return Reordered(wavefront, active, rmap, counts, mode, swaps)

@@ -16,7 +16,7 @@ previous pixel was background too. Without this, a background pixel next to a si
 whose filter footprint still covers the object, would never accumulate samples.
 
 **Shading with history** (Fig. 4). Per pixel, with history mean :math:`h`, count :math:`n`
-(capped at ``max_history``) and this frame's mean :math:`L` over ``spp`` samples:
+(capped at ``max_history``; 0 = no cap, as in the paper) and this frame's mean :math:`L` over ``spp`` samples:
 
 - traced and hit: :math:`(n h + s L)/(n + s)`, count :math:`\min(n + s, N_{max})`;
 - traced, miss: :math:`L`, count :math:`s`;
@@ -29,6 +29,8 @@ squared luminance of the samples (the second moment, for variance estimation, as
 is blended with the same weights.
 """
 from __future__ import annotations
+
+import math
 
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -160,7 +162,8 @@ def resolve(new: mi.Color3f, traced: mi.Bool, spp: int, reproj: ReprojectionMap,
     hit = reproj.hit
     h = dr.gather(mi.Color3f, history.mean, reproj.index, hit)
     h2 = dr.gather(mi.Float, history.moment2, reproj.index, hit)
-    cap = dr.opaque(mi.Float, max_history)
+    # max_history = 0: no cap, the running mean of every sample so far (the paper).
+    cap = dr.opaque(mi.Float, max_history if max_history > 0 else math.inf)
     n = dr.select(hit, dr.minimum(dr.gather(mi.Float, history.count, reproj.index, hit),
                                   dr.maximum(cap - s, 0.0)), 0.0)
     inv = dr.rcp(n + s)

@@ -11,8 +11,13 @@ diagonal. This :math:`w` gives :math:`P(0) = 1` and :math:`P(\theta) = \sigma_p`
 
 The paper prints Eq. (2) as :math:`w = (\sigma_p - 1)/\theta^2`. For :math:`\sigma_p < 1`
 that :math:`w` is negative, so :math:`P > 1` near the gaze and :math:`P` is infinite at
-:math:`d = 1/\sqrt{|w|}`. The form above keeps :math:`P \in (0, 1]` and is the one the
-authors' public implementation computes.
+:math:`d = 1/\sqrt{|w|}`. The form above keeps :math:`P \in (0, 1]`. The authors' public
+code computes it (``cuda/samplingStep.cu`` lines 145-147 of
+``ohseokkwon/Foveated-Rendering-using-Ray-Tracing``, distance over the full diagonal times
+2, i.e. over half the diagonal) but does not use it: line 151 overwrites the probability
+with Weier et al.'s linear falloff (1 inside θ, 0.05 beyond 2θ), and line 222 decides the
+rays with fixed 4x4 masks around a radius of 0.07 plus a saliency term instead. This module
+implements the text's Eq. (1) with the corrected :math:`w`.
 
 The sampling map is one uniform draw per pixel per frame (:math:`u_i < P(d_i)`), plus rays
 forced on depth discontinuities (the Voronoi fill would otherwise smear silhouettes), plus
@@ -69,17 +74,44 @@ def sampling_probability(d: mi.Float, w: mi.Float) -> mi.Float:
 
 
 def depth_edges(depth: mi.Float, hit: mi.Bool, width: int, height: int,
-                threshold: float) -> mi.Bool:
-    """Pixels on a depth discontinuity: relative depth difference to a 4-neighbour above
-    ``threshold``, or a hit next to a miss (background, depth = inf).
+                threshold: float, detector: str = "relative") -> mi.Bool:
+    """Pixels on a depth discontinuity, where a ray is forced.
 
-    Both sides of the discontinuity are marked. Infinite depths are never subtracted, so no
-    NaN arises against the background.
+    ``relative``: relative depth difference to a 4-neighbour above ``threshold``, or a hit
+    next to a miss (background, depth = inf). Both sides of the discontinuity are marked.
+    Infinite depths are never subtracted, so no NaN arises against the background.
+
+    ``sobel``: the authors' test (``edge_detect`` in ``cuda/device_include/
+    shared_helper_funcs.h``, lines 116-129): ``|Gx| + |Gy|`` of the 3x3 Sobel kernels on the
+    depth buffer (distance along the primary ray, scene units) above ``threshold`` (the
+    authors clamp the sum to [0, 1] and compare with 0.99). Taps outside the film are
+    skipped, as there; a miss counts as depth 0 (the authors' cleared depth buffer), so the
+    silhouette against the background is an edge.
     """
+    from .validate import check_choice
+    check_choice("edge_detector", detector, ("relative", "sobel"))
     _, x, y = pixel_coords(width, height)
     thr = dr.opaque(mi.Float, threshold)
-    edge = dr.zeros(mi.Bool, width * height)
     d0 = dr.select(hit, depth, 0.0)
+    if detector == "sobel":
+        gx = dr.zeros(mi.Float, width * height)
+        gy = dr.zeros(mi.Float, width * height)
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                if dx == 0 and dy == 0:
+                    continue
+                xi, yi = mi.Int32(x) + dx, mi.Int32(y) + dy
+                inside = (xi >= 0) & (xi < width) & (yi >= 0) & (yi < height)
+                nidx = mi.UInt32(mi.Int32(x) + dx) + mi.UInt32(mi.Int32(y) + dy) * width
+                nd = dr.gather(mi.Float, d0, nidx, inside)
+                wx = dx * (2 - abs(dy))     # Sobel: [-1 0 1; -2 0 2; -1 0 1]
+                wy = dy * (2 - abs(dx))
+                if wx:
+                    gx += wx * nd
+                if wy:
+                    gy += wy * nd
+        return dr.abs(gx) + dr.abs(gy) > thr
+    edge = dr.zeros(mi.Bool, width * height)
     for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
         inside = mi.Bool(True)
         if dx:

@@ -143,7 +143,7 @@ def test_constant_nested_integrator_is_broadcast(spp, sigma_p, preset):
     img = np.array(mi.render(scene, integrator=fov, spp=spp, seed=3))
     assert img.shape == (20, 24, 3)
     np.testing.assert_allclose(img, 0.5, rtol=1e-5)
-    assert fov.stats["lanes"] == fov.stats["rays"] * spp
+    assert fov.stats["lanes_active"] == fov.stats["rays"] * spp
 
 
 @pytest.mark.parametrize("name", ["prb", "prb_basic", "direct_projective", "prb_projective"])

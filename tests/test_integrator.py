@@ -103,23 +103,22 @@ def test_bad_python_options_one_line():
     assert integ.options == before, "a rejected change must leave the options untouched"
 
 
-@pytest.mark.parametrize("mode", ["rows", "rows_blocks", "compact"])
-def test_nested_sees_rays_times_spp_lanes(mode):
+@pytest.mark.parametrize("mode", ["none", "rows", "rows_blocks", "compact"])
+def test_nested_sees_the_launch_layout(mode):
     scene = cornell()
     rec = RecordingPath()
     integ = FoveatedIntegrator(nested=rec, theta=0.1, sigma_p=0.3, reorder=mode,
                                atrous_iterations=0)
     mi.render(scene, integrator=integ, spp=3)
-    rays = integ.stats["rays"]
-    assert rec.widths == [rays * 3]
-    assert rays < 48 * 40 // 2
-
-
-def test_unoptimised_mode_launches_full_frame():
-    rec = RecordingPath()
-    integ = FoveatedIntegrator(nested=rec, sigma_p=0.3, reorder="none", atrous_iterations=0)
-    mi.render(cornell(), integrator=integ, spp=2)
-    assert rec.widths == [48 * 40 * 2]
+    s = integ.stats
+    assert rec.widths == [s["lanes_launched"]]
+    assert s["lanes_active"] == s["rays"] * 3 and s["rays"] < 48 * 40 // 2
+    counts = integ.buffer("sampling_map").sum(1)
+    expected = {"none": 48 * 40, "rows": 40 * counts.max(), "compact": s["rays"]}
+    if mode in expected:
+        assert s["lanes_launched"] == expected[mode] * 3
+    else:
+        assert s["lanes_active"] <= s["lanes_launched"] <= 40 * counts.max() * 3
 
 
 @pytest.mark.parametrize("spp", [1, 4])

@@ -26,8 +26,12 @@ def test_modes_are_permutations_of_the_same_pixels(w, h, frac, bh, seed):
         got = traced_set(r)
         assert len(got) == len(want), mode              # no loss, no duplicate
         np.testing.assert_array_equal(np.sort(got), want)
-        if mode != "none":
-            assert r.active is None and len(r.wavefront.numpy()) == len(want)  # dense
+        lanes = {"none": w * h, "compact": len(want)}
+        if mode in lanes:
+            assert r.lanes == lanes[mode]
+        if r.row_counts is not None:
+            counts = r.row_counts.numpy()
+            assert r.lanes == h * (counts.max() if h else 0)  # rows x slots
         if r.reordered_map is not None:
             rmap = r.reordered_map.numpy()
             np.testing.assert_array_equal(np.sort(rmap), np.arange(w * h))
@@ -73,3 +77,43 @@ def test_rows_blocks_balances_each_block(bh):
 def test_unknown_mode_one_line():
     with pytest.raises(ParameterError, match=r"reorder = 'sorted' is invalid: expected one of"):
         reorder(mi.Bool([True]), 1, 1, "sorted")
+
+
+def paper_loop(counts, bh):
+    """The paper's Strategy 2 loop, one swap at a time: final counts and swap count."""
+    c = counts.astype(np.int64).copy()
+    swaps = 0
+    for b in range(0, len(c), bh):
+        blk = c[b:b + bh]
+        while blk.max() - blk.min() > 1:
+            blk[np.argmax(blk)] -= 1
+            blk[np.argmin(blk)] += 1
+            swaps += 1
+    return c, swaps
+
+
+@settings(max_examples=30, deadline=None)
+@given(w=st.integers(1, 40), h=st.integers(1, 24), bh=st.integers(1, 9),
+       seed=st.integers(0, 2**31))
+def test_rows_blocks_does_what_the_paper_loop_does(w, h, bh, seed):
+    rng = np.random.default_rng(seed)
+    p = rng.random(h)[:, None] * np.ones((1, w))     # rows of unequal density
+    m = (rng.random((h, w)) < p).ravel()
+    r = reorder(mi.Bool(m), w, h, "rows_blocks", block_height=bh)
+    want, swaps = paper_loop(m.reshape(h, w).sum(1), bh)
+    got = r.row_counts.numpy()
+    for b in range(0, h, bh):
+        assert sorted(got[b:b + bh]) == sorted(want[b:b + bh])
+    assert int(r.swaps.numpy()[0]) == swaps
+
+
+def test_launched_lanes_strategy2_le_strategy1_le_full():
+    """A foveated map: Strategy 2 launches fewer lanes than Strategy 1, which launches
+    fewer than the un-optimised W x H."""
+    from foveated_mi.sampling import sampling_map
+    W = H = 96
+    smap, _ = sampling_map(W, H, gaze=(0.5, 0.5), theta=0.1, sigma_p=0.8, seed=1)
+    lanes = {mode: reorder(smap, W, H, mode, block_height=8).lanes for mode in REORDER_MODES}
+    rays = int(np.count_nonzero(smap.numpy()))
+    assert lanes["compact"] == rays
+    assert rays <= lanes["rows_blocks"] < lanes["rows"] < lanes["none"] == W * H

@@ -198,7 +198,7 @@ def test_reference_file_optional_scene_and_missing_oidn(tmp_path, monkeypatch, c
     res = run_study(path, out=str(tmp_path / "o"), progress=False)
     out = capsys.readouterr().out
     assert "scene 'nowhere' skipped" in out and "uniform+oidn baselines skipped" in out
-    assert "pip install foveated_mi[denoise]" in out
+    assert "pip install -e '.[denoise]'" in out
     assert res.references_rendered == 0 and not (tmp_path / "o" / "references").exists()
     assert {r["method"] for r in res.rows} == {"foveated", "uniform"}
     assert {r["scene"] for r in res.rows} == {"cornell-box"}

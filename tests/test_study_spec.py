@@ -205,7 +205,7 @@ def test_missing_dask_names_the_extra(tmp_path, capsys, monkeypatch):
                    "--no-progress"])
     err = capsys.readouterr().err
     assert rc == 2 and err.count("\n") == 1
-    assert "--executor = 'dask'" in err and "pip install foveated_mi[cluster]" in err
+    assert "--executor = 'dask'" in err and "pip install -e '.[cluster]'" in err
 
 
 # ---------------------------------------------------------------------------------------------
@@ -296,6 +296,10 @@ def test_front_table_names_the_options_that_vary():
     assert lines[0].split()[-1] == "options" and len(lines) == 4     # header, rule, 2 rows
     assert lines[2].endswith("reorder=compact") and lines[3].endswith("reorder=none")
     assert "max_radius" not in text                                   # the same everywhere
+    # The preset names the pipeline ("foveated, stochastic" alone would hide it).
+    named = front_table([dict(r(1.0, 19.0, "compact"), config=json.dumps(
+        {"full_options": {"preset": "oidn", "reorder": "compact"}}))], "psnr")
+    assert "foveated oidn" in named.splitlines()[2]
 
 
 def test_uniform_history_rows_and_seeds_expand(tmp_path):

@@ -75,9 +75,13 @@ mapping round trip when neither the filter nor the PNG needs it.
  * - block_height
    - |int|
    - Rows per block of Strategy 2 (default 8)
- * - edge_threshold
-   - |float|
-   - Relative depth jump that forces a ray, >= 0; 0 disables forced edge rays (default 0.1)
+ * - edge_threshold, edge_detector
+   - |float|, |string|
+   - Depth edges that force a ray; 0 disables them. ``relative`` (default): relative depth
+     jump to a 4-neighbour above the threshold (default 0.1, also ``paper``). ``sobel``:
+     the test in the authors' code (which does not call it), ``|Gx| + |Gy|`` of the 3x3
+     Sobel filter on depth above the threshold (the authors use 0.99, in scene units).
+     ``stats`` reports ``edge_rays`` and ``edge_fraction``
  * - demodulate
    - |bool|
    - Reconstruct and filter irradiance, albedo multiplied back (:mod:`foveated_mi.demodulate`)
@@ -89,6 +93,10 @@ mapping round trip when neither the filter nor the PNG needs it.
  * - max_radius
    - |int|
    - Bound on the interpolation radius in pixels (default 32)
+ * - sibson_inclusive
+   - |bool|
+   - In-circle test of ``sibson``: ``d(q, p) <= r`` (default, the authors' shader) or
+     ``d(q, p) < r`` (false; the paper's text, ``paper``)
  * - jfa
    - |string|
    - Jump Flooding variant: ``jfa`` | ``1+jfa`` | ``jfa+1`` (default) | ``jfa+2``
@@ -102,12 +110,18 @@ mapping round trip when neither the filter nor the PNG needs it.
  * - tonemap, exposure
    - |string|, |float|
    - Tone-mapping operator and exposure in stops (filter domain and PNG output)
+ * - tonemap_samples
+   - |bool|
+   - Tone-map every traced sample before the film and the history, as the authors' code
+     does (``cuda/fov_path_trace_camera.cu`` line 169); the history and the reconstruction
+     then hold display values and the image is mapped back to radiance at the end. Off by
+     default and in ``paper`` (the text tone-maps the frame); not differentiable
  * - history
    - |bool|
    - Temporal reuse through reverse reprojection (default true)
  * - max_history
    - |float|
-   - Cap on the history sample count, >= 1 (default 32)
+   - Cap on the history sample count, >= 1 (default 32); 0 = no cap (``paper``)
  * - reprojection_tolerance
    - |float|
    - Relative depth tolerance of the reprojection test (default 0.02)
@@ -151,6 +165,10 @@ from ..validate import ParameterError, check_int
 #: A camera move after which fewer pixels than this fraction reproject into the history is a
 #: cut: no pixel of the frame reads the history.
 CUT_HIT_FRACTION = 0.1
+
+_adjoint.register_non_differentiable(
+    "tonemap_samples", lambda o: bool(o.get("tonemap_samples", False)),
+    "False for gradients (per-sample tone mapping is not part of the differentiated image)")
 
 @dataclass
 class Frame:
@@ -263,8 +281,11 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         """Change options between frames (validated as a whole; nothing changes on error)."""
         given = {**self._given, **options}
         new = validate_options(given, self._gradients)
-        if new["history"] != self._options["history"]:
-            self.reset()   # a history from frames ago would be stale
+        old = self._options
+        domain = ("tonemap_samples", "tonemap", "exposure") if new["tonemap_samples"] \
+            else ("tonemap_samples",)
+        if new["history"] != old["history"] or any(new[k] != old[k] for k in domain):
+            self.reset()   # a stale history, or one held in another domain
         self._given, self._options = given, new
 
     def __getattr__(self, name):
@@ -388,8 +409,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         with dr.suspend_grad():
             frame = self._prepare(scene, sensor, seed, spp, StageTimer(False))
             shade = self._shade(scene, frame)
-            shading = _shading.develop(shade, frame.reordered.wavefront, frame.spp,
-                                       sensor.film(), self._options["pixel_filter"])
+            shading = self._develop(shade, frame)
         return _PrimalFrame(frame, shading, id(scene))
 
     # -- the frame ------------------------------------------------------------------------
@@ -408,8 +428,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         timer = StageTimer(self._options["timing"])
         frame = self._prepare(scene, sensor, seed, spp, timer, state)
         shade = self._shade(scene, frame)
-        shading = _shading.develop(shade, frame.reordered.wavefront, frame.spp,
-                                   sensor.film(), self._options["pixel_filter"])
+        shading = self._develop(shade, frame)
         image, buffers = self._form_image(frame, shading, timer)
         self._finish_frame(frame, shade, buffers, timer)
         self._primal = _PrimalFrame(frame, shading, id(scene))
@@ -456,7 +475,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
 
             edges = None
             if o["edge_threshold"] > 0:
-                edges = _sampling.depth_edges(gb.depth, gb.hit, width, height, o["edge_threshold"])
+                edges = _sampling.depth_edges(gb.depth, gb.hit, width, height, o["edge_threshold"],
+                                              detector=o["edge_detector"])
             smap, prob = _sampling.sampling_map(width, height, gaze=o["gaze"], theta=o["theta"],
                                                 sigma_p=o["sigma_p"], seed=map_seed,
                                                 edges=edges)
@@ -486,6 +506,17 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                         seed=frame.seed, active=ro.active,
                                         clamp=self._options["clamp"],
                                         filter_sampler=frame.filter_sampler)
+
+    def _develop(self, shade: _shading.ShadingResult, frame: Frame) -> _shading.ShadingBuffer:
+        """The frame's samples into the sparse shading buffer; with ``tonemap_samples`` each
+        sample is tone-mapped first (the authors' order: display values are averaged)."""
+        o = self._options
+        if o["tonemap_samples"]:
+            shade = shade._replace(radiance=dr.select(
+                shade.ok, _postprocess_module().tonemap(shade.radiance, o["tonemap"],
+                                                        o["exposure"]), 0.0))
+        return _shading.develop(shade, frame.reordered.wavefront, frame.spp,
+                                frame.sensor.film(), o["pixel_filter"])
 
     def _form_image(self, frame: Frame, shading: _shading.ShadingBuffer, timer: StageTimer,
                     grad_pass: bool = False) -> tuple[mi.Color3f, dict[str, Any]]:
@@ -538,8 +569,14 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                     o["reconstruction"], radiance, resolved.mask, nearest, width, height,
                     max_radius=o["max_radius"], guide=guide, levels=o["guided_levels"],
                     target_samples=o["target_samples"], jitter=o["stochastic_jitter"],
-                    tries=o["stochastic_tries"],
+                    tries=o["stochastic_tries"], inclusive=o["sibson_inclusive"],
                     seed=_sampling.opaque_seed(frame.seed) ^ 0x6A09E667)
+        if o["tonemap_samples"]:
+            # Display values so far: back to radiance, so every later stage and buffer means
+            # what it means without the option (the à-trous pass maps them forth again,
+            # exactly: the round trip is the identity below the operator's cap).
+            filled = inverse_tonemap(filled, o["tonemap"], o["exposure"])
+            interpolated = inverse_tonemap(interpolated, o["tonemap"], o["exposure"])
         timer.mark("reconstruct", nearest, filled, interpolated)
 
         tonemapped = filtered = variance = None
@@ -612,7 +649,11 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         rays = dr.width(ro.wavefront) if ro.active is None else dr.count(frame.sampling_map)
         self._stats_raw = {
             "width": frame.width, "height": frame.height, "pixels": frame.width * frame.height,
-            "rays": rays, "spp": frame.spp, "lanes": dr.width(ro.wavefront) * frame.spp,
+            "rays": rays, "spp": frame.spp, "lanes": ro.lanes * frame.spp,
+            "lanes_launched": ro.lanes * frame.spp, "lanes_active": rays * frame.spp,
+            "reorder_swaps": ro.swaps if ro.swaps is not None else 0,
+            # Rays forced on depth edges (some the sampling probability would draw too).
+            "edge_rays": dr.count(frame.edges) if frame.edges is not None else 0,
             "frame": self._frame - 1,
             "history_hits": dr.count(reproj.hit), "resampled": dr.count(resolved.resampled),
             "holes": dr.count(~resolved.mask), "rejected_samples": shade.rejected,
@@ -636,6 +677,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                 s[k] = v
             if s:
                 s["ray_fraction"] = s["rays"] / s["pixels"]
+                s["edge_fraction"] = s["edge_rays"] / s["pixels"]
                 s["history_hit_rate"] = s["history_hits"] / s["pixels"]
             self._stats_cache = s
         return dict(self._stats_cache)

@@ -23,6 +23,24 @@ noise, so the colour distances that still indicate noise shrink. The normal dist
 divided by ``s^2`` as in the paper's listing. ``sigma = inf`` means weight 1 for that term,
 whatever the distance (no ``inf / inf`` or ``0 * inf`` is ever formed).
 
+**Where the numbers come from.** The paper (§3.5) names the filter, "the basic A-Trous
+Filtering method" of Dammertz et al., applied after tone mapping, and gives no level count
+and no sigma. The ``paper`` preset takes them from the authors' public code
+(``ohseokkwon/Foveated-Rendering-using-Ray-Tracing``, commit 37426a9):
+
+* **one level** (``main.cpp`` line 355: ``g_ATRenderer->render(1, ...)``);
+* **c_phi = n_phi = p_phi = 1** (``ATrous.cpp`` lines 53-55), used in ``shader/atFS.glsl``
+  (lines 69-81) as ``exp(-d^2 / phi)``. That is the form above with ``sigma^2 = phi``, so
+  ``sigma_color = sigma_normal = sigma_position = 1`` gives the same weights. The shader's
+  5x5 kernel is the B3-spline product above, its normal distance is divided by the step
+  squared as here, and its taps outside the screen are skipped as here.
+* From the second level on the two differ (no preset uses it): the authors keep ``c_phi``
+  and halve ``n_phi`` per level, this filter halves ``sigma_color`` (Dammertz et al.) and
+  keeps ``sigma_normal``. The library defaults (5 levels, sigmas 0.5 / 0.1 / 0.5) are this
+  project's own choice.
+* The authors filter their pull-push image of the shading buffer (``main.cpp`` 349-355);
+  the text, which the preset follows, filters the interpolated frame.
+
 Rules beyond the paper, so that no NaN can appear or spread:
 
 * **Borders**: taps outside the image are dropped and the weights renormalised by their

@@ -10,6 +10,9 @@ Mitsuba integrator by inverting the operator:
 - ``aces``: the positive root of
   :math:`(2.43y - 2.51)x^2 + (0.59y - 0.03)x + 0.14y = 0`, then :math:`/ 2^e`. The forward
   curve is clipped at 1 (:math:`x \approx 7.24`), so values there come back as 7.24.
+- ``uncharted2``: :math:`r = y^{1/2.2} U(11.2) + E/F`, then the non-negative root of
+  :math:`A(r-1)u^2 + B(r-C)u + D(rF-E) = 0` and :math:`x = u / 2 / 2^e`; inputs at the
+  curve's limit come back as the cap of the forward operator.
 """
 from __future__ import annotations
 
@@ -36,10 +39,25 @@ def inverse_aces(y: mi.Color3f) -> mi.Color3f:
     return dr.maximum((-b - disc) / (2.0 * a), 0.0)
 
 
+def inverse_uncharted2(y: mi.Color3f) -> mi.Color3f:
+    from .tonemap import U2, U2_BIAS, U2_EXPONENT, U2_WHITE, _u2, _U2_CAP
+    A, B, C, D, E, F = (U2[k] for k in "ABCDEF")
+    y_max = float(_u2(U2_BIAS * _U2_CAP) / _u2(U2_WHITE)) ** U2_EXPONENT
+    y = dr.clip(y, 0.0, y_max)
+    r = dr.power(y, 1.0 / U2_EXPONENT) * _u2(U2_WHITE) + E / F
+    a = A * (r - 1.0)
+    b = B * (r - C)
+    c = D * (r * F - E)
+    disc = dr.sqrt(dr.maximum(b * b - 4.0 * a * c, 0.0))
+    u = dr.maximum((-b - disc) / (2.0 * a), 0.0)
+    return dr.minimum(u / U2_BIAS, _U2_CAP)
+
+
 INVERSE_TONEMAPPERS = {
     "none": lambda y: y,
     "reinhard": inverse_reinhard,
     "aces": inverse_aces,
+    "uncharted2": inverse_uncharted2,
 }
 
 

@@ -7,8 +7,9 @@ whose noise is independent from pixel to pixel, which the stochastic reconstruct
 
 **A stage boundary.** OIDN runs outside Dr.Jit on materialised host buffers: this stage
 evaluates its inputs and synchronises, the one place where a frame leaves the JIT. It is
-optional (``pip install foveated_mi[denoise]``) and **not differentiable**: a gradient pass
-of a frame that used it raises (see :class:`foveated_mi.integrators.foveated.FoveatedIntegrator`).
+optional (``pip install -e '.[denoise]'`` from a clone) and **not differentiable**: a
+gradient pass of a frame that used it raises (see
+:class:`foveated_mi.integrators.foveated.FoveatedIntegrator`).
 """
 from __future__ import annotations
 

@@ -21,9 +21,22 @@ with the exposure in photographic stops. The operators act on each channel on it
     that factor is *not* applied here: pass ``exposure = log2(0.6) ≈ -0.737`` for it.
     The curve reaches 1 at x ≈ 7.24 and is monotone on [0, 7.24].
 
-Non-finite and negative input, for ``"reinhard"`` and ``"aces"``: NaN -> 0, negative
-values (``-inf`` included) -> 0, ``+inf`` -> 1. The output is then always finite and in
-[0, 1]. The rules are applied to the exposed value, per channel.
+``"uncharted2"``
+    The authors' operator (J. Hable's Uncharted 2 curve, ``Uncharted2ToneMapping`` in
+    ``cuda/device_include/shared_helper_funcs.h``, lines 354-373 of
+    ``ohseokkwon/Foveated-Rendering-using-Ray-Tracing``):
+    ``U(x) = (x (A x + C B) + D E) / (x (A x + B) + D F) - E / F`` with A = 0.15, B = 0.50,
+    C = 0.10, D = 0.20, E = 0.02, F = 0.30, then ``f(x) = (U(2 x) / U(11.2))^2.2`` (exposure
+    bias 2, white point 11.2 and the exponent 2.2 as written there). Monotone; it reaches 1
+    at x = 5.6 and tends to about 1.74. The authors apply it to every traced sample before
+    the history (``cuda/fov_path_trace_camera.cu``, line 169); here it is a frame operator
+    like the others, and the integrator's ``tonemap_samples`` option applies it (or any
+    operator) per sample instead (``benchmarks/bench_tonemap_fireflies.py`` compares them).
+
+Non-finite and negative input, for ``"reinhard"``, ``"aces"`` and ``"uncharted2"``: NaN -> 0,
+negative values (``-inf`` included) -> 0, ``+inf`` -> 1 (``"uncharted2"``: its value at the
+input cap 1e4, about 1.74). The output is then always finite, in [0, 1] (``"uncharted2"``:
+[0, 1.74]). The rules are applied to the exposed value, per channel.
 
 All operators are plain Dr.Jit arithmetic, so they are differentiable where the curve is
 (the clamps have zero derivative outside their range; NaN lanes get a zero gradient).
@@ -72,6 +85,24 @@ def tonemap_aces(x: mi.Color3f) -> mi.Color3f:
     return dr.minimum(y, 1.0)   # y >= 0 for x >= 0: only the top needs the clamp
 
 
+#: Uncharted 2 constants of the authors' code (A..F, exposure bias, white point, exponent).
+U2 = dict(A=0.15, B=0.50, C=0.10, D=0.20, E=0.02, F=0.30)
+U2_BIAS, U2_WHITE, U2_EXPONENT = 2.0, 11.2, 2.2
+_U2_CAP = 1e4
+
+
+def _u2(x):
+    A, B, C, D, E, F = (U2[k] for k in "ABCDEF")
+    return (x * (A * x + C * B) + D * E) / (x * (A * x + B) + D * F) - E / F
+
+
+def tonemap_uncharted2(x: mi.Color3f) -> mi.Color3f:
+    """The authors' Uncharted 2 operator; NaN/negative -> 0, +inf -> its limit."""
+    x = dr.minimum(_sanitize(x), _U2_CAP)
+    y = _u2(U2_BIAS * x) * (1.0 / _u2(U2_WHITE))
+    return dr.power(dr.maximum(y, 0.0), U2_EXPONENT)
+
+
 def as_color3f(name: str, value) -> mi.Color3f:
     """``value`` as an ``mi.Color3f`` (any 3-component Dr.Jit array is converted)."""
     if isinstance(value, mi.Color3f):
@@ -87,6 +118,7 @@ TONEMAPPERS = {
     "none": tonemap_none,
     "reinhard": tonemap_reinhard,
     "aces": tonemap_aces,
+    "uncharted2": tonemap_uncharted2,
 }
 
 

@@ -13,13 +13,15 @@ compared squared in integers (``|q - p|^2 <= r_p^2``), so the pixel sets are exa
     ``F(p)``: nearest-site colour (the paper's fill).
 ``sibson``
     the paper's approximate Sibson interpolation (§3.4, Fig. 5):
-    ``mean { F(q) : |q - p| <= r_p, q in the film }``. At a site ``r_p = 0`` and the output is
-    the site colour. Cost per pixel ~ ``pi r_p^2`` gathers, bounded through ``max_radius``.
+    ``mean { F(q) : |q - p| <= r_p, q in the film }`` (``inclusive=True``; ``inclusive=False``
+    is the text's ``|q - p| < r_p``, used by the ``paper`` preset). At a site ``r_p = 0`` and
+    the output is the site colour. Cost per pixel ~ ``pi r_p^2`` gathers, bounded through ``max_radius``.
 ``discrete_sibson``
-    exact discrete Sibson interpolation of Park et al., "Discrete Sibson Interpolation",
+    discrete Sibson interpolation of Park et al., "Discrete Sibson Interpolation",
     IEEE TVCG 12(2), 2006: every pixel ``q`` scatters ``F(q)`` to all ``p`` with
     ``|p - q| <= r_q``; the output at ``p`` is the mean of what ``p`` received (at least its own
-    contribution). Used as the accuracy reference.
+    contribution). Used as the accuracy reference. Exact only while every ``|q - s(q)|`` is
+    within ``max_radius``: a pixel farther from its site scatters over the capped disk.
 ``fast_sibson``
     ``sibson`` with the disk replaced by a square of the same pixel count (the 5-pixel plus is
     kept exactly), evaluated from a Float64 summed-area table
@@ -170,7 +172,7 @@ def voronoi(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: 
 
 
 def sibson(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: int, height: int,
-           *, max_radius: int = 32) -> mi.Color3f:
+           *, max_radius: int = 32, inclusive: bool = True) -> mi.Color3f:
     """Approximate Sibson interpolation of Kwon et al. 2019 (§3.4, Fig. 5), the paper's default.
 
     ``out(p) = sum_{q in D_p} F(q) / |D_p|`` with ``D_p = {q in film : |q - p|^2 <= r_p^2}`` and
@@ -180,9 +182,17 @@ def sibson(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: i
     once: a constant image stays exactly constant, a site (``r_p = 0``) keeps its colour
     exactly, and every output lies within the range of the site colours. Differentiable in
     both modes (the loop only accumulates sums: ``max_iterations=-1`` fast path).
+
+    ``inclusive=False`` is the paper's test as printed, ``d(q, p) < r`` (§3.4): the disk loses
+    its rim, ``|q - p|^2 <= r_p^2 - 1`` in integers; a site keeps its own colour (the
+    authors' shader falls back to the closest site when the disk is empty). ``True`` (``<=``)
+    is the authors' shader (``sibsonFS.glsl`` line 37: ``if (radius > dist_to_closest)
+    continue``).
     """
     filled, x, y, r2, has_site, width, height, radius = _prepare(shading, site_mask, nearest, width, height,
                                                                  max_radius)
+    if not inclusive:
+        r2 = dr.maximum(r2 - 1, 0)
     sums, count = _disk_sums(filled, x, y, r2, width, height, radius, "sibson_disk", max_iterations=-1)
     return _ratio(sums, mi.Float64(dr.maximum(count, 1)))  # count >= 1: p is in its own disk
 
@@ -217,7 +227,8 @@ class _DiscreteSibsonOp(dr.CustomOp):
 
 def discrete_sibson(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: int, height: int,
                     *, max_radius: int = 32) -> mi.Color3f:
-    """Exact discrete Sibson interpolation (Park et al. 2006), the accuracy reference.
+    """Discrete Sibson interpolation (Park et al. 2006), the accuracy reference; exact while
+    no pixel is farther than ``max_radius`` from its site (the disk is capped there).
 
     Every pixel ``q`` adds ``F(q)`` to every ``p`` in its disk ``{p : |p - q|^2 <= r_q^2}``
     (``r_q = min(|q - s(q)|, max_radius)``); ``out(p) = sum / count`` of what ``p`` received.

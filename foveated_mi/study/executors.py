@@ -34,7 +34,7 @@ EXECUTORS = ("local", "dask")
 CONNECT_TIMEOUT_S = 5
 #: Longest wait, in seconds, for the next Dask job to finish before the pending ones fail.
 TASK_TIMEOUT_S = 1800.0
-CLUSTER_HINT = "pip install foveated_mi[cluster]"
+CLUSTER_HINT = "pip install -e '.[cluster]' (from a clone)"
 
 Job = tuple[Any, Callable, tuple]
 

@@ -59,11 +59,22 @@ _STYLE = {"uniform": dict(marker="s", color="0.25", label="uniform"),
           "uniform+oidn": dict(marker="^", color="tab:red", label="uniform + OIDN")}
 
 
+def _foveated_name(r: dict[str, Any]) -> str:
+    """``foveated <preset>`` (e.g. ``foveated oidn``): a reconstruction alone does not say
+    which pipeline ran."""
+    import json
+    try:
+        preset = json.loads(r.get("config") or "{}").get("full_options", {}).get("preset")
+    except (TypeError, ValueError):
+        preset = None
+    return f"foveated {preset}" if preset else "foveated"
+
+
 def plot_pareto(rows: list[dict[str, Any]], metric: str, out_dir: str, *,
                 title: str | None = None) -> tuple[str, str]:
     """Write ``pareto.png`` and ``pareto.svg`` in ``out_dir`` (matplotlib, Agg canvas): one
     panel per scene, foveated
-    points as circles coloured by reconstruction, baselines as squares (uniform) and triangles
+    points as circles coloured by preset and reconstruction, baselines as squares (uniform) and triangles
     (uniform + OIDN), the front as a step line with ringed points. Returns the two paths."""
     # A bare Figure (Agg canvas) rather than pyplot: no global backend switch and no figure
     # left in pyplot's state, so a notebook's inline plots keep working.
@@ -79,20 +90,22 @@ def plot_pareto(rows: list[dict[str, Any]], metric: str, out_dir: str, *,
     nrows = math.ceil(n / cols)
     fig = Figure(figsize=(5.2 * cols, 4.2 * nrows))
     axes = fig.subplots(nrows, cols, squeeze=False)
-    recs = list(dict.fromkeys(r["reconstruction"] for r in rows if r["method"] == "foveated"))
+    recs = list(dict.fromkeys((_foveated_name(r), r["reconstruction"]) for r in rows
+                              if r["method"] == "foveated"))
     cmap = matplotlib.colormaps["tab10"]
     sign = -1.0 if metric in LOWER_IS_BETTER else 1.0
     for k, scene in enumerate(scenes):
         ax = axes[k // cols][k % cols]
         sub = [r for r in rows if r["scene"] == scene]
-        for rec_i, rec in enumerate(recs):
+        for rec_i, (name, rec) in enumerate(recs):
             pts = [(r["time_ms"], r[metric]) for r in sub
                    if r["method"] == "foveated" and r["reconstruction"] == rec
+                   and _foveated_name(r) == name
                    and math.isfinite(r["time_ms"]) and math.isfinite(r[metric])]
             if pts:
                 x, y = zip(*pts)
                 ax.scatter(x, y, s=22, marker="o", color=cmap(rec_i % 10), alpha=0.8,
-                           label=f"foveated, {rec}")
+                           label=f"{name}, {rec}")
         for r in sub:                  # later frames (history) carry their frame number
             if r["method"] == "foveated" and r["frame"] > 1 and \
                     math.isfinite(r["time_ms"]) and math.isfinite(r[metric]):
@@ -169,7 +182,8 @@ def front_table(rows: list[dict[str, Any]], metric: str) -> str:
     for scene, front in scene_fronts(rows, metric).items():
         for r in front:
             fov = r["method"] == "foveated"
-            line = (scene, r["method"], num(r["theta"], "g") if fov else "-",
+            line = (scene, _foveated_name(r) if fov else r["method"],
+                    num(r["theta"], "g") if fov else "-",
                     num(r["sigma_p"], "g") if fov else "-",
                     r["reconstruction"] if fov else "-", num(r["spp"], ".0f"),
                     num(r["frame"], ".0f"), num(r["time_ms"], ".2f"), num(r[metric], ".4f"))

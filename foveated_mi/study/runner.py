@@ -127,7 +127,7 @@ def run_study(study: str | os.PathLike | StudySpec, *, out: str | None = None,
     """
     import foveated_mi
     from .. import perceptual
-    from ..denoise import oidn_available
+    from ..denoise import INSTALL_HINT, oidn_available
     from ..variant import choose_variant
     from . import tasks as T
     from .executors import make_executor
@@ -155,7 +155,7 @@ def run_study(study: str | os.PathLike | StudySpec, *, out: str | None = None,
     if not have_oidn and any(u["denoise"] and u.get("denoiser", "oidn") == "oidn"
                              for u in spec.uniform):
         notes.append("note: uniform+oidn baselines skipped: pyoidn is not installed "
-                     "(pip install foveated_mi[denoise])")
+                     f"({INSTALL_HINT})")
     with_jod = bool(spec.perceptual.get("jod")) and perceptual.available()
     if spec.perceptual.get("jod") and not with_jod:
         notes.append("note: no jod column: FovVideoVDP (pyfvvdp, torch) is not installed "
@@ -233,7 +233,6 @@ def _references(spec, scenes, pending, file_refs, out_dir, variant, ex, progress
         paths[label] = path
         if os.path.isfile(path):
             arrays[label] = np.load(path, allow_pickle=False)
-            _filter_note(label, _read_meta(path).get("rfilter"), result, say)
             continue
         task = T.reference_task(scene, variant)
         task["threads"] = ex.threads
@@ -261,30 +260,9 @@ def _references(spec, scenes, pending, file_refs, out_dir, variant, ex, progress
                     json.dump(meta, f, indent=2)
                 arrays[label] = arr
                 result.references_rendered += 1
-                _filter_note(label, out["rfilter"], result, say)
         finally:
             bar.close()
     return {label: ex.scatter(arr) for label, arr in arrays.items()}
-
-
-def _read_meta(npy_path: str) -> dict:
-    try:
-        with open(os.path.splitext(npy_path)[0] + ".json") as f:
-            return json.load(f)
-    except (OSError, ValueError):
-        return {}
-
-
-def _filter_note(label: str, rfilter: str | None, result, say) -> None:
-    """The foveated integrator develops one box-filtered value per pixel; a film with a
-    wider reconstruction filter blurs the reference and the uniform baselines only."""
-    if rfilter and not rfilter.startswith("BoxFilter"):
-        note = (f"note: scene {label!r}: the film's filter is {rfilter}; the reference and the "
-                "uniform baselines are filtered by it, foveated frames are not (one box-"
-                "filtered value per pixel), which lowers foveated quality; use a box rfilter "
-                "for like-for-like comparisons")
-        result.notes.append(note)
-        say(note)
 
 
 def _run_tasks(pending, refs, ex, results, progress, result, say) -> None:
