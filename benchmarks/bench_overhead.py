@@ -41,7 +41,7 @@ import mitsuba as mi
 import numpy as np
 
 import foveated_mi
-from common import calibrate_theta, machine, md_table, median, write_json
+from common import calibrate_theta, machine, md_table, median, preset_edges, write_json
 
 SHARED = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "scenes")
 STAIRCASE = os.path.join(SHARED, "staircase", "scene.xml")
@@ -90,10 +90,8 @@ def _orbit(camera: dict, degrees: float) -> dict:
 
 
 def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int) -> dict | None:
-    from foveated_mi.gbuffer import render_gbuffer
     from foveated_mi.integrators.foveated import FoveatedIntegrator
     from foveated_mi.options import validate_options
-    from foveated_mi.sampling import depth_edges
     from foveated_mi.scenes import apply_camera, camera_of, load_scene
 
     if spec["scene"].endswith(".xml") and not os.path.exists(spec["scene"]):
@@ -111,13 +109,16 @@ def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int) -
     nested = scene.integrator()
     opts = dict(preset=spec["preset"], nested=nested, **spec.get("options", {}))
     if spec["fraction"] is not None:
-        # Calibrated with the preset's own edge rays, which count towards the fraction.
+        # Calibrated with the preset's own edge rays, which count towards the fraction; a film
+        # whose edge rays alone exceed it (tiny sizes) gets the smallest fovea instead.
         o = validate_options({"preset": spec["preset"]})
-        gb = render_gbuffer(scene, scene.sensors()[0])
-        edges = depth_edges(gb.depth, gb.hit, W, H, o["edge_threshold"]) \
-            if o["edge_threshold"] > 0 else None
-        opts["theta"] = calibrate_theta(W, H, spec["fraction"], sigma_p=o["sigma_p"],
-                                        edges=edges)
+        edges = preset_edges(scene, spec["preset"])
+        try:
+            opts["theta"] = calibrate_theta(W, H, spec["fraction"], sigma_p=o["sigma_p"],
+                                            edges=edges)
+        except ValueError as e:
+            print(f"{name}: {e}; theta = 1e-4")
+            opts["theta"] = 1e-4
     fov = FoveatedIntegrator(**opts)
     timed = FoveatedIntegrator(**opts, timing=True)
     camera = camera_of(scene)
