@@ -1,0 +1,112 @@
+"""Cameras of the built-in scenes: validation, ``look_at``, the project's film and sensor dicts,
+and moving or reading a loaded perspective sensor.
+
+A camera is a dict ``{origin, target, up, fov}`` (world space, ``fov`` in degrees along x).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import mitsuba as mi
+
+from ..validate import ParameterError, check_int, check_range
+
+__all__ = ["check_camera", "look_at", "film_dict", "sensor_dict", "apply_camera", "camera_of"]
+
+
+def _vec3(name: str, value: Any) -> list[float]:
+    allowed = "three finite numbers"
+    try:
+        v = [float(c) for c in value]
+    except (TypeError, ValueError):
+        raise ParameterError(name, value, allowed) from None
+    if len(v) != 3 or not all(math.isfinite(c) for c in v):
+        raise ParameterError(name, value, allowed)
+    return v
+
+
+def check_camera(camera: Any, name: str = "camera") -> dict[str, Any]:
+    """A validated copy of a camera dict ``{origin, target, up, fov}`` (all keys required)."""
+    keys = ("origin", "target", "up", "fov")
+    if not isinstance(camera, dict) or set(camera) - set(keys) or not set(keys) <= set(camera):
+        raise ParameterError(name, camera, "a dict with keys 'origin', 'target', 'up', 'fov'")
+    cam = {k: _vec3(f"{name}.{k}", camera[k]) for k in ("origin", "target", "up")}
+    cam["fov"] = check_range(f"{name}.fov", camera["fov"], 0.0, 180.0, lo_open=True,
+                             hi_open=True)
+    d = np.subtract(cam["target"], cam["origin"])
+    if np.linalg.norm(d) == 0.0:
+        raise ParameterError(f"{name}.target", camera["target"], "a point other than the origin")
+    if np.linalg.norm(np.cross(d, cam["up"])) <= 1e-9 * np.linalg.norm(d) * max(
+            np.linalg.norm(cam["up"]), 1e-30):
+        raise ParameterError(f"{name}.up", camera["up"],
+                             "a vector not parallel to the viewing direction")
+    return cam
+
+
+def look_at(camera: dict) -> "mi.ScalarTransform4f":
+    """Camera-to-world transform of a camera dict (Mitsuba's ``look_at``)."""
+    cam = check_camera(camera)
+    return mi.ScalarTransform4f().look_at(origin=cam["origin"], target=cam["target"],
+                                          up=cam["up"])
+
+
+def film_dict(width: int, height: int) -> dict:
+    """The project's film: HDR, box reconstruction filter (one sample per pixel), RGB."""
+    return {"type": "hdrfilm", "width": check_int("width", width, 1, 16384),
+            "height": check_int("height", height, 1, 16384), "rfilter": {"type": "box"},
+            "pixel_format": "rgb"}
+
+
+def sensor_dict(camera: dict, *, width: int = 256, height: int = 256, spp: int = 1) -> dict:
+    """A ``perspective`` sensor at ``camera`` with the project's film and an independent sampler."""
+    cam = check_camera(camera)
+    return {"type": "perspective", "fov": cam["fov"], "fov_axis": "x", "to_world": look_at(cam),
+            "near_clip": 1e-2, "far_clip": 1e4,
+            "sampler": {"type": "independent", "sample_count": check_int("spp", spp, 1)},
+            "film": film_dict(width, height)}
+
+
+def _sensor_of(scene_or_sensor: Any) -> "mi.Sensor":
+    if isinstance(scene_or_sensor, mi.Scene):
+        sensors = scene_or_sensor.sensors()
+        if not sensors:
+            raise ParameterError("scene", scene_or_sensor, "a scene with a sensor")
+        return sensors[0]
+    if isinstance(scene_or_sensor, mi.Sensor):
+        return scene_or_sensor
+    raise ParameterError("sensor", scene_or_sensor, "a mi.Scene or a mi.Sensor")
+
+
+def apply_camera(scene_or_sensor: Any, camera: dict) -> None:
+    """Move a perspective sensor (the scene's first) to ``camera`` in place.
+
+    Updates ``to_world`` and ``x_fov`` through :func:`mi.traverse`, so the scene, its
+    acceleration structure and compiled kernels are kept.
+    """
+    cam = check_camera(camera)
+    params = mi.traverse(_sensor_of(scene_or_sensor))
+    if "x_fov" not in params or "to_world" not in params:
+        raise ParameterError("sensor", scene_or_sensor, "a perspective sensor")
+    params["to_world"] = look_at(cam)
+    params["x_fov"] = cam["fov"]
+    params.update()
+
+
+def _camera_from_matrix(m: np.ndarray, fov: float) -> dict[str, Any]:
+    # look_at() stores the columns (left, up, forward, origin): invert that construction.
+    origin, up, forward = m[:3, 3], m[:3, 1], m[:3, 2]
+    return dict(origin=[float(c) for c in origin],
+                target=[float(c) for c in origin + forward],
+                up=[float(c) for c in up], fov=float(fov))
+
+
+def camera_of(scene_or_sensor: Any) -> dict[str, Any]:
+    """Camera dict ``{origin, target (one unit ahead), up, fov}`` of a loaded perspective sensor."""
+    sensor = _sensor_of(scene_or_sensor)
+    params = mi.traverse(sensor)
+    if "x_fov" not in params:
+        raise ParameterError("sensor", sensor, "a perspective sensor")
+    m = np.array(sensor.world_transform().matrix, dtype=np.float64).reshape(4, 4)
+    return _camera_from_matrix(m, float(params["x_fov"][0]))
