@@ -39,12 +39,12 @@ def main(argv=None):
     a = p.parse_args(argv)
     foveated_mi.set_variant(a.variant)
     from foveated_mi import reconstruct as rec
-    from foveated_mi.gbuffer import render_gbuffer
+    from foveated_mi.frame.gbuffer import render_gbuffer
     from foveated_mi.metrics import psnr, ssim
     from foveated_mi.postprocess import atrous, tonemap
     from foveated_mi.postprocess.inverse import inverse_tonemap
     from foveated_mi.render import to_display
-    from foveated_mi.sampling import depth_edges, sampling_map
+    from foveated_mi.frame.sampling import depth_edges, sampling_map
 
     W, H = a.size
     scene, ref_np = scene_with_reference(a.scene, W, H, max_depth=a.max_depth,

@@ -57,9 +57,9 @@ def preset_edges(scene, preset="paper", **options):
     """The edge rays the ``foveated`` integrator would force on ``scene``'s first sensor
     under ``preset`` (its edge detector and threshold; ``options`` override), or None when
     the threshold is 0."""
-    from foveated_mi.gbuffer import film_size, render_gbuffer
+    from foveated_mi.frame.gbuffer import film_size, render_gbuffer
     from foveated_mi.options import validate_options
-    from foveated_mi.sampling import depth_edges
+    from foveated_mi.frame.sampling import depth_edges
     o = validate_options({"preset": preset, **options})
     if o["edge_threshold"] <= 0:
         return None
@@ -73,7 +73,7 @@ def calibrate_theta(width, height, target, *, sigma_p, gaze=(0.5, 0.5), edges=No
     """θ whose sampling map (edge rays ``edges`` included, e.g. from :func:`preset_edges`)
     traces about ``target`` of the pixels. Raises ValueError when the edge rays alone
     exceed the target."""
-    from foveated_mi.sampling import sampling_map
+    from foveated_mi.frame.sampling import sampling_map
     if edges is not None:
         forced = dr.count(edges)[0] / (width * height)
         if forced > target:

@@ -137,18 +137,8 @@ def frame_options(args: argparse.Namespace) -> dict[str, Any]:
     return {k: getattr(args, k) for k in FRAME_OPTIONS if getattr(args, k, None) is not None}
 
 
-def format_table(rows: list[tuple[str, ...]]) -> str:
-    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    lines = []
-    for j, r in enumerate(rows):
-        lines.append("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in
-                               enumerate(zip(r, widths))))
-        if j == 0:
-            lines.append("  ".join("-" * w for w in widths))
-    return "\n".join(lines)
-
-
 def timing_table(stats: dict, full_ms: float | None = None) -> str:
+    from .io import format_table
     from .timing import STAGES
     rows = [("stage", "foveated ms") + (("full ms",) if full_ms is not None else ())]
     for k in STAGES:

@@ -48,7 +48,7 @@ from typing import Any
 from .paths import (CameraPath, FixedGaze, GazeCSV, GazeKeyframes, GazePath,
                     Saccades)
 from .options import DEFAULTS
-from .validate import ParameterError
+from .validate import ParameterError, TableContext
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -134,62 +134,6 @@ class SequenceConfig:
         return self.camera.cut_between(self.time(index - 1), self.time(index))
 
 
-class _Ctx:
-    """Error helper: every message names the file and the dotted key."""
-
-    def __init__(self, source: str):
-        self.source = source
-
-    def error(self, key: str, value: Any, allowed: str) -> ParameterError:
-        e = ParameterError(f"{self.source}: {key}", value, allowed)
-        e.key = key
-        return e
-
-    def rename(self, e: ParameterError, prefix: str | None = None) -> ParameterError:
-        """Re-issue an error raised by a path or integrator check under the file's name."""
-        key = e.name if prefix is None or e.name.startswith(prefix) else f"{prefix}.{e.name}"
-        return self.error(key, e.value, e.allowed)
-
-    def table(self, key: str, value: Any) -> dict:
-        if not isinstance(value, dict):
-            raise self.error(key, value, "a table")
-        return value
-
-    def known(self, key: str, table: dict, allowed: tuple[str, ...] | list[str]) -> None:
-        for k, v in table.items():
-            if k not in allowed:
-                name = f"{key}.{k}" if key else k
-                raise self.error(name, v, "a known key (unknown key; allowed here: "
-                                 + ", ".join(allowed) + ")")
-
-    def integer(self, key: str, value: Any, lo: int, hi: int | None = None) -> int:
-        allowed = f"an integer >= {lo}" + (f" and <= {hi}" if hi is not None else "")
-        if isinstance(value, bool) or not isinstance(value, int) or value < lo or \
-                (hi is not None and value > hi):
-            raise self.error(key, value, allowed)
-        return value
-
-    def number(self, key: str, value: Any, lo: float, lo_open: bool = False) -> float:
-        allowed = f"a finite number {'>' if lo_open else '>='} {lo:g}"
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-                not math.isfinite(value) or value < lo or (lo_open and value == lo):
-            raise self.error(key, value, allowed)
-        return float(value)
-
-    def boolean(self, key: str, value: Any) -> bool:
-        if not isinstance(value, bool):
-            raise self.error(key, value, "true or false")
-        return value
-
-    def string(self, key: str, value: Any, choices: tuple[str, ...] | None = None) -> str:
-        if choices is not None:
-            if not isinstance(value, str) or value not in choices:
-                raise self.error(key, value, "one of " + ", ".join(repr(c) for c in choices))
-        elif not isinstance(value, str):
-            raise self.error(key, value, "a string")
-        return value
-
-
 def read_toml(name: str, path: str | os.PathLike) -> tuple[dict, str]:
     """``(table, path)`` of a TOML file; a missing file or a syntax error is a
     :class:`ParameterError` naming ``name`` (``config``, ``study``)."""
@@ -217,7 +161,7 @@ def parse_config(data: dict, *, base_dir: str = ".", source: str = "<config>",
     """Validate an already-parsed TOML table; relative paths resolve against ``base_dir``."""
     from . import scenes
 
-    ctx = _Ctx(source)
+    ctx = TableContext(source)
     ctx.table("", data)
     ctx.known("", data, _TOP_KEYS)
     if "scene" not in data:
@@ -265,7 +209,7 @@ def parse_config(data: dict, *, base_dir: str = ".", source: str = "<config>",
                           source=source)
 
 
-def _foveated(ctx: _Ctx, table: Any) -> dict:
+def _foveated(ctx: TableContext, table: Any) -> dict:
     table = dict(ctx.table("foveated", table))
     if "gaze" in table:
         raise ctx.error("foveated.gaze", table["gaze"], "no gaze here: set it in the [gaze] table")
@@ -288,7 +232,7 @@ def _foveated(ctx: _Ctx, table: Any) -> dict:
     return table
 
 
-def _camera(ctx: _Ctx, table: Any, scene: str) -> CameraPath | None:
+def _camera(ctx: TableContext, table: Any, scene: str) -> CameraPath | None:
     if table is None:
         return None
     from .scenes import scene_camera
@@ -316,7 +260,7 @@ def _camera(ctx: _Ctx, table: Any, scene: str) -> CameraPath | None:
         raise ctx.rename(e, "camera") from None
 
 
-def _gaze(ctx: _Ctx, table: Any, base_dir: str) -> GazePath:
+def _gaze(ctx: TableContext, table: Any, base_dir: str) -> GazePath:
     table = dict(ctx.table("gaze", table))
     kind = ctx.string("gaze.type", table.pop("type", "fixed"), GAZE_TYPES)
     keys = {"fixed": ("x", "y"), "keyframes": ("keyframes", "interpolation"),
@@ -351,7 +295,7 @@ def _gaze(ctx: _Ctx, table: Any, base_dir: str) -> GazePath:
         raise   # a CSV error: already names file:line
 
 
-def _output(ctx: _Ctx, table: Any, default_dir: str) -> OutputConfig:
+def _output(ctx: TableContext, table: Any, default_dir: str) -> OutputConfig:
     table = ctx.table("output", table)
     ctx.known("output", table, ("dir", "video", "exr", "png"))
     return OutputConfig(dir=ctx.string("output.dir", table.get("dir", default_dir)),

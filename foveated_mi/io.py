@@ -358,3 +358,16 @@ def write_png(path: str | os.PathLike, linear_rgb: np.ndarray, *, exposure: floa
         pixels = pixels[:, :, 0]
     with atomic_write(path) as tmp:
         iio.imwrite(tmp, pixels, extension=".png")
+
+
+def format_table(rows: list[tuple[str, ...]]) -> str:
+    """Rows of strings as an aligned text table: the first row is the header, underlined;
+    the first column is left-aligned, the others right-aligned."""
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = []
+    for j, r in enumerate(rows):
+        lines.append("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in
+                               enumerate(zip(r, widths))))
+        if j == 0:
+            lines.append("  ".join("-" * w for w in widths))
+    return "\n".join(lines)

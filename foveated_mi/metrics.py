@@ -24,7 +24,7 @@ covariance). An image smaller than 7 px on a side uses the largest odd window
 ``<= min(H, W)``; below 3 px no window fits and SSIM is ``nan``.
 
 **Regions.** The fovea is the set of pixels whose centre lies closer to the gaze than θ, the
-distance being measured as in the sampling pass (:func:`foveated_mi.sampling.normalized_distance`):
+distance being measured as in the sampling pass (:func:`foveated_mi.frame.sampling.normalized_distance`):
 
 .. math::
 
@@ -133,7 +133,7 @@ def _check_shape(shape) -> tuple[int, int]:
 
 def normalized_distance(shape, gaze) -> np.ndarray:
     """(H, W) distance of each pixel centre to the gaze over half the film diagonal, in double
-    precision: the NumPy twin of :func:`foveated_mi.sampling.normalized_distance` (same
+    precision: the NumPy twin of :func:`foveated_mi.frame.sampling.normalized_distance` (same
     convention; the tests compare the two)."""
     h, w = _check_shape(shape)
     gx, gy = check_point2("gaze", gaze)
@@ -159,12 +159,12 @@ def eccentricity_weights(shape, gaze, theta, sigma_p) -> np.ndarray:
         \omega_i = \frac{P(d_i)}{\sum_j P(d_j)}, \qquad P(d) = \frac{1}{w d^2 + 1}
         = \frac{1/w}{d^2 + 1/w},
 
-    with ``w`` from :func:`foveated_mi.sampling.sampling_weight` (so ``P(θ) = σp``). They are
+    with ``w`` from :func:`foveated_mi.frame.sampling.sampling_weight` (so ``P(θ) = σp``). They are
     computed as ``m / (d_i^2 + 1/w)`` (``m`` the smallest denominator) and normalised, which
     keeps the limits exact: ``σp = 1`` (w = 0) gives uniform weights; a ``w`` that overflows
     (θ → 0) gives ``1/d^2`` weights, or all the weight on a pixel centred on the gaze.
     """
-    from .sampling import sampling_weight
+    from .frame.sampling import sampling_weight
 
     w = sampling_weight(theta, sigma_p)
     d2 = normalized_distance(shape, gaze) ** 2

@@ -142,8 +142,8 @@ def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[s
     a bad value."""
     from . import reconstruct as rec
     from . import postprocess as post
-    from .reorder import REORDER_MODES
-    from .shading import PIXEL_FILTERS
+    from .frame.reorder import REORDER_MODES
+    from .frame.shading import PIXEL_FILTERS
 
     unknown = set(options) - set(DEFAULTS)
     if unknown:

@@ -114,3 +114,60 @@ def check_sigma(name: str, value: Any) -> float:
     if not (v > 0) or math.isnan(v):
         raise ParameterError(name, value, allowed)
     return v
+
+
+class TableContext:
+    """Checks of a configuration file's tables: every error names the file and the dotted
+    key of the bad value (one line)."""
+
+    def __init__(self, source: str):
+        self.source = source
+
+    def error(self, key: str, value: Any, allowed: str) -> ParameterError:
+        e = ParameterError(f"{self.source}: {key}", value, allowed)
+        e.key = key
+        return e
+
+    def rename(self, e: ParameterError, prefix: str | None = None) -> ParameterError:
+        """Re-issue an error raised by a path or integrator check under the file's name."""
+        key = e.name if prefix is None or e.name.startswith(prefix) else f"{prefix}.{e.name}"
+        return self.error(key, e.value, e.allowed)
+
+    def table(self, key: str, value: Any) -> dict:
+        if not isinstance(value, dict):
+            raise self.error(key, value, "a table")
+        return value
+
+    def known(self, key: str, table: dict, allowed: tuple[str, ...] | list[str]) -> None:
+        for k, v in table.items():
+            if k not in allowed:
+                name = f"{key}.{k}" if key else k
+                raise self.error(name, v, "a known key (unknown key; allowed here: "
+                                 + ", ".join(allowed) + ")")
+
+    def integer(self, key: str, value: Any, lo: int, hi: int | None = None) -> int:
+        allowed = f"an integer >= {lo}" + (f" and <= {hi}" if hi is not None else "")
+        if isinstance(value, bool) or not isinstance(value, int) or value < lo or \
+                (hi is not None and value > hi):
+            raise self.error(key, value, allowed)
+        return value
+
+    def number(self, key: str, value: Any, lo: float, lo_open: bool = False) -> float:
+        allowed = f"a finite number {'>' if lo_open else '>='} {lo:g}"
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+                not math.isfinite(value) or value < lo or (lo_open and value == lo):
+            raise self.error(key, value, allowed)
+        return float(value)
+
+    def boolean(self, key: str, value: Any) -> bool:
+        if not isinstance(value, bool):
+            raise self.error(key, value, "true or false")
+        return value
+
+    def string(self, key: str, value: Any, choices: tuple[str, ...] | None = None) -> str:
+        if choices is not None:
+            if not isinstance(value, str) or value not in choices:
+                raise self.error(key, value, "one of " + ", ".join(repr(c) for c in choices))
+        elif not isinstance(value, str):
+            raise self.error(key, value, "a string")
+        return value

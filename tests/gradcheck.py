@@ -112,7 +112,7 @@ class Probe:
         through the image formation with every weight held at the primal frame's: the
         derivative the gradient pass computes, also where a weight depends on radiance
         (the à-trous colour weights)."""
-        from foveated_mi.adjoint import image_forward
+        from foveated_mi.frame.adjoint import image_forward
         eps = self.param.eps if eps is None else eps
         integ = self.scene.integrator()
         values = []

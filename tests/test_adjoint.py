@@ -5,13 +5,13 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from foveated_mi import reproject
-from foveated_mi.adjoint import (NON_DIFFERENTIABLE, check_differentiable, integrator_kind,
+from foveated_mi.frame import reproject
+from foveated_mi.frame.adjoint import (NON_DIFFERENTIABLE, check_differentiable, integrator_kind,
                                  register_non_differentiable)
-from foveated_mi.pixel_filter import FilterSampler, SplatFootprint
+from foveated_mi.frame.pixel_filter import FilterSampler, SplatFootprint
 from foveated_mi.postprocess import atrous
 from foveated_mi.reconstruct import RECONSTRUCTIONS, Guide, jump_flood, reconstruct
-from foveated_mi.traced_sensor import TracedSensors, flat_layout
+from foveated_mi.frame.traced_sensor import TracedSensors, flat_layout
 from foveated_mi.validate import ParameterError
 
 W, H = 24, 20
@@ -103,7 +103,7 @@ def test_atrous_adjoint_without_colour_weights_is_the_transpose():
                       sigma_normal=0.3, sigma_position=0.2, valid=valid)
 
     # (Linear, so A^T y is the same at any point; a literal zero buffer would not do here:
-    # see foveated_mi.adjoint._ad_copy.)
+    # see foveated_mi.frame.adjoint._ad_copy.)
     lhs, rhs = _dot(A(x), y), _dot(x, _vjp(A, x, y))
     assert abs(lhs - rhs) <= 1e-5 * abs(lhs)
 

@@ -120,7 +120,7 @@ def test_nan_inf_huge_samples_rejected_or_clamped(preset, method):
     img = np.array(mi.render(scene, integrator=integ))
     s = integ.stats
     # Poisoned picks lanes by launch index; a row layout launches idle lanes too.
-    from foveated_mi.reorder import reorder
+    from foveated_mi.frame.reorder import reorder
     o = integ.options
     ro = reorder(mi.Bool(integ.buffer("sampling_map").ravel()), 32, 24, o["reorder"],
                  o["block_height"])

@@ -7,7 +7,7 @@ import pytest
 
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.metrics import psnr
-from foveated_mi.pixel_filter import FilterSampler
+from foveated_mi.frame.pixel_filter import FilterSampler
 from foveated_mi.render import to_display
 
 

@@ -7,7 +7,7 @@ import drjit as dr
 import mitsuba as mi
 
 from foveated_mi.integrators.foveated import FoveatedIntegrator
-from foveated_mi.scene_state import GeometryCache, scene_state
+from foveated_mi.frame.scene_state import GeometryCache, scene_state
 from foveated_mi.scenes import apply_camera, camera_of, load_scene
 
 OPTS = dict(preset="paper", theta=0.2, sigma_p=0.5, history=False, pixel_filter="importance",

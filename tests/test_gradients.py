@@ -10,7 +10,7 @@ import pytest
 
 import gradcheck
 from gradcheck import BALL_GAZE, OPTION_SETS, Probe, agreement
-from foveated_mi import adjoint as _adjoint
+from foveated_mi.frame import adjoint as _adjoint
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.validate import ParameterError
 
@@ -22,7 +22,7 @@ FAST_GUIDING = {"proj_seed_spp": 16, "octree_extra_leaf_sample": 32}
 # test_every_image_formation_is_differentiated checks the held derivative with them on.
 HELD = {"sigma_color": float("inf"), "sigma_luminance": float("inf")}
 # Visibility: look at the ball, with the fovea around it, and the filter importance sampled
-# (with 'splat' the boundary term uses the full filter, see foveated_mi.adjoint).
+# (with 'splat' the boundary term uses the full filter, see foveated_mi.frame.adjoint).
 VISIBILITY = {"gaze": [*BALL_GAZE, 0.0], "theta": 0.3, "sigma_p": 0.5, "edge_threshold": 0.0,
               "atrous_iterations": 0, "pixel_filter": "importance"}
 

@@ -7,7 +7,7 @@ import drjit as dr
 import mitsuba as mi
 
 from foveated_mi.reconstruct.jfa import NO_SITE, jfa_steps, jump_flood
-from foveated_mi.sampling import largest_gap, sampling_map
+from foveated_mi.frame.sampling import largest_gap, sampling_map
 
 W, H = 96, 64
 

@@ -153,7 +153,7 @@ def test_fovea_mask_extreme_theta_and_far_gaze():
 @pytest.mark.parametrize("w,h,gaze", [(16, 16, (0.5, 0.5)), (13, 7, (0.1, 0.9)),
                                       (5, 11, (-0.4, 1.7))])
 def test_distance_twin_matches_the_sampling_pass(w, h, gaze):
-    from foveated_mi.sampling import normalized_distance
+    from foveated_mi.frame.sampling import normalized_distance
     idx = dr.arange(mi.UInt32, w * h)
     x, y = mi.Float(idx % w) + 0.5, mi.Float(idx // w) + 0.5
     d = normalized_distance(x, y, mi.Point2f(*gaze), w, h).numpy().reshape(h, w)
@@ -191,7 +191,7 @@ def test_compare_without_gaze_or_flip_keeps_every_key_as_nan():
 
 @pytest.mark.parametrize("gaze", [(0.5, 0.5), (0.0, 1.0), (0.8, 0.3)])
 def test_eccentricity_weights_follow_the_sampling_law(gaze):
-    from foveated_mi.sampling import sampling_probability, sampling_weight
+    from foveated_mi.frame.sampling import sampling_probability, sampling_weight
     h, w = 12, 20
     wts = M.eccentricity_weights((h, w), gaze, 0.1, 0.8)
     assert wts.shape == (h, w) and wts.sum() == pytest.approx(1.0, abs=1e-12)

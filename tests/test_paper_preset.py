@@ -10,7 +10,7 @@ import pytest
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.options import validate_options
 from foveated_mi.reconstruct.interpolate import sibson
-from foveated_mi.sampling import depth_edges
+from foveated_mi.frame.sampling import depth_edges
 from foveated_mi.validate import ParameterError
 
 

@@ -5,10 +5,10 @@ import mitsuba as mi
 import numpy as np
 
 from foveated_mi import reconstruct as rec
-from foveated_mi.gbuffer import render_gbuffer
+from foveated_mi.frame.gbuffer import render_gbuffer
 from foveated_mi.metrics import psnr
 from foveated_mi.render import to_display
-from foveated_mi.sampling import depth_edges, sampling_map
+from foveated_mi.frame.sampling import depth_edges, sampling_map
 from foveated_mi.scenes import load_scene
 
 

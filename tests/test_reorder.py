@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from foveated_mi.reorder import REORDER_MODES, reorder
+from foveated_mi.frame.reorder import REORDER_MODES, reorder
 from foveated_mi.validate import ParameterError
 
 
@@ -110,7 +110,7 @@ def test_rows_blocks_does_what_the_paper_loop_does(w, h, bh, seed):
 def test_launched_lanes_strategy2_le_strategy1_le_full():
     """A foveated map: Strategy 2 launches fewer lanes than Strategy 1, which launches
     fewer than the un-optimised W x H."""
-    from foveated_mi.sampling import sampling_map
+    from foveated_mi.frame.sampling import sampling_map
     W = H = 96
     smap, _ = sampling_map(W, H, gaze=(0.5, 0.5), theta=0.1, sigma_p=0.8, seed=1)
     lanes = {mode: reorder(smap, W, H, mode, block_height=8).lanes for mode in REORDER_MODES}

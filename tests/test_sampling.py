@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from foveated_mi import sampling
+from foveated_mi.frame import sampling
 from foveated_mi.validate import ParameterError
 
 

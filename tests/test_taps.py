@@ -6,7 +6,7 @@ import pytest
 import drjit as dr
 import mitsuba as mi
 
-from foveated_mi.taps import (HeldLevel, Surface, for_each_tap, gather4, held_filter, packet,
+from foveated_mi.frame._shared import (HeldLevel, Surface, for_each_tap, gather4, held_filter, packet,
                               surface_energy)
 
 W, H = 24, 16

@@ -7,11 +7,11 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from foveated_mi import sampling
-from foveated_mi.gbuffer import render_gbuffer
+from foveated_mi.frame import sampling
+from foveated_mi.frame.gbuffer import render_gbuffer
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.metrics import psnr
-from foveated_mi.reproject import roundtrip_error
+from foveated_mi.frame.reproject import roundtrip_error
 from foveated_mi.scenes import apply_camera, load_scene, scene_camera
 
 
@@ -161,7 +161,7 @@ def test_camera_teleport_rejects_history():
 
 from hypothesis import given, settings, strategies as st  # noqa: E402
 
-from foveated_mi.reproject import camera_state, reprojection_map, History  # noqa: E402
+from foveated_mi.frame.reproject import camera_state, reprojection_map, History  # noqa: E402
 
 
 @settings(max_examples=12, deadline=None)

@@ -2,12 +2,12 @@ r"""The ``foveated`` integrator: Kwon et al. 2019's pipeline around any sampling
 
 Per frame (Fig. 1 of the paper), each stage a pass of its own module:
 
-1. **Geometry** (:mod:`foveated_mi.gbuffer`): full-resolution G-buffer.
-2. **Sampling** (:mod:`foveated_mi.sampling`, §3.1): sampling map from
+1. **Geometry** (:mod:`foveated_mi.frame.gbuffer`): full-resolution G-buffer.
+2. **Sampling** (:mod:`foveated_mi.frame.sampling`, §3.1): sampling map from
    :math:`P(d) = 1/(w d^2 + 1)`, :math:`w = (1/\sigma_p - 1)/\theta^2`, plus depth edges;
-   reprojection map into the history (:mod:`foveated_mi.reproject`).
-3. **Reorder** (:mod:`foveated_mi.reorder`, §3.2): dense trace wavefront.
-4. **Sparse shading** (:mod:`foveated_mi.shading`, §3.3): the nested integrator traces
+   reprojection map into the history (:mod:`foveated_mi.frame.reproject`).
+3. **Reorder** (:mod:`foveated_mi.frame.reorder`, §3.2): dense trace wavefront.
+4. **Sparse shading** (:mod:`foveated_mi.frame.shading`, §3.3): the nested integrator traces
    ``rays * spp`` lanes only; other pixels resample the history.
 5. **Reconstruction** (:mod:`foveated_mi.reconstruct`, §3.4): Jump Flooding Voronoi fill and
    (approximate) Sibson interpolation.
@@ -24,7 +24,7 @@ frame ``t > 0`` uses ``sample_tea_32(s, t)[0]``, so the history converges under 
 ``map_seed >= 0`` pins the sampling map to that seed whatever the frame (the Monte Carlo
 samples still follow the frame seed).
 
-**Gradients** (:mod:`foveated_mi.adjoint`). ``mi.render(scene, params, ...)`` followed by
+**Gradients** (:mod:`foveated_mi.frame.adjoint`). ``mi.render(scene, params, ...)`` followed by
 ``dr.backward`` / ``dr.forward`` differentiates the *last primal frame* this integrator
 rendered: same sampling map, sites, weights and history, with the nested integrator's own
 adjoint (``prb``, ``direct_projective``, ...) on the traced pixels only, or plain AD for C++
@@ -71,7 +71,7 @@ mapping round trip when neither the filter nor the PNG needs it.
    - How samples honour the film's reconstruction filter: ``splat`` (default, Mitsuba's
      own estimator, identical to the nested integrator at sigma_p = 1) or ``importance``
      (filter importance sampling: independent, unbiased pixels); see
-     :mod:`foveated_mi.shading`
+     :mod:`foveated_mi.frame.shading`
  * - block_height
    - |int|
    - Rows per block of Strategy 2 (default 8)
@@ -84,7 +84,7 @@ mapping round trip when neither the filter nor the PNG needs it.
      ``stats`` reports ``edge_rays`` and ``edge_fraction``
  * - demodulate
    - |bool|
-   - Reconstruct and filter irradiance, albedo multiplied back (:mod:`foveated_mi.demodulate`)
+   - Reconstruct and filter irradiance, albedo multiplied back (:mod:`foveated_mi.frame.demodulate`)
  * - reconstruction
    - |string|
    - ``voronoi`` | ``sibson`` (default) | ``discrete_sibson`` | ``fast_sibson`` | ``guided``
@@ -147,17 +147,18 @@ from typing import Any
 import drjit as dr
 import mitsuba as mi
 
-from .. import adjoint as _adjoint
-from .. import gbuffer as _gbuffer
-from .. import reorder as _reorder
-from .. import reproject as _reproject
-from .. import sampling as _sampling
-from .. import shading as _shading
-from .. import variance as _variance
-from ..demodulate import demodulate, remodulate
+from ..frame import Frame
+from ..frame import adjoint as _adjoint
+from ..frame import gbuffer as _gbuffer
+from ..frame import reorder as _reorder
+from ..frame import reproject as _reproject
+from ..frame import sampling as _sampling
+from ..frame import shading as _shading
+from ..frame import variance as _variance
+from ..frame.demodulate import demodulate, remodulate
 from ..postprocess.inverse import inverse_tonemap
-from ..pixel_filter import FilterSampler
-from ..scene_state import GeometryCache, SceneState, scene_state
+from ..frame.pixel_filter import FilterSampler
+from ..frame.scene_state import GeometryCache, SceneState, scene_state
 from ..timing import StageTimer
 from ..options import DEFAULTS, NON_DIFFERENTIABLE_DENOISERS, PRESETS, validate_options  # noqa: F401
 from ..validate import ParameterError, check_int
@@ -171,30 +172,8 @@ _adjoint.register_non_differentiable(
     "False for gradients (per-sample tone mapping is not part of the differentiated image)")
 
 @dataclass
-class Frame:
-    """What a frame decided before tracing (the passes of :meth:`FoveatedIntegrator._prepare`).
-
-    A gradient pass reuses the primal frame's: same sampling map, sites and history."""
-    sensor: mi.Sensor
-    width: int
-    height: int
-    spp: int
-    seed: int | mi.UInt32                      #: Monte Carlo seed of the shading pass
-    map_seed: int | mi.UInt32                  #: seed of the sampling map
-    gbuffer: _gbuffer.GBuffer
-    edges: mi.Bool | None
-    sampling_map: mi.Bool
-    probability: mi.Float
-    reprojection: _reproject.ReprojectionMap
-    reordered: _reorder.Reordered
-    history: _reproject.History | None         #: history this frame read (a constant)
-    filter_sampler: FilterSampler
-    gbuffer_reused: bool = False               #: the G-buffer is the previous frame's
-
-
-@dataclass
 class _PrimalFrame:
-    """What a gradient pass needs of its primal frame (the seam of :mod:`foveated_mi.adjoint`)."""
+    """What a gradient pass needs of its primal frame (the seam of :mod:`foveated_mi.frame.adjoint`)."""
     frame: Frame
     shading: _shading.ShadingBuffer   #: traced pixels' values (the primal's, detached)
     scene_id: int
@@ -337,7 +316,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
 
     # -- differentiation ------------------------------------------------------------------
     def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
-        """Reverse mode (see :mod:`foveated_mi.adjoint`): ``grad_in`` (H, W, 3) is pulled back
+        """Reverse mode (see :mod:`foveated_mi.frame.adjoint`): ``grad_in`` (H, W, 3) is pulled back
         through the image formation to the traced pixels, then through the nested
         integrator's adjoint into the parameters' gradients. ``seed``/``spp`` are the
         gradient pass's (``mi.render``'s ``seed_grad``/``spp_grad``)."""

@@ -11,7 +11,7 @@ Pipeline order, as in the paper::
 """
 from __future__ import annotations
 
-from ..taps import B3_SPLINE
+from ..frame._shared import B3_SPLINE
 from .atrous import atrous, check_sigma
 from .oidn import oidn
 from .svgf import svgf

@@ -65,7 +65,7 @@ held at their primal values: level :math:`i` is the linear map
 :math:`c_{i+1}(p) = \sum_q W_i(p, q) c_i(q)` with :math:`W_i = h\,w_i / \sum h\,w_i` fixed,
 and the reverse mode applies :math:`W_i^{\mathsf T}`. This is what a foveated gradient pass
 needs (the image is linear in the traced radiance with every weight held; see
-:mod:`foveated_mi.adjoint`); it omits :math:`\partial w_i/\partial c`, the change of the
+:mod:`foveated_mi.frame.adjoint`); it omits :math:`\partial w_i/\partial c`, the change of the
 weights themselves, which a finite difference of the filter output would include. Forward and
 reverse mode are checked against each other and against the transposed filter in the tests.
 """
@@ -77,7 +77,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..validate import ParameterError, check_int, check_sigma  # noqa: F401 (re-exported)
-from ..taps import HeldLevel, Surface, gather4, held_filter, packet
+from ..frame._shared import HeldLevel, Surface, gather4, held_filter, packet
 from .tonemap import as_color3f
 
 
@@ -179,7 +179,7 @@ def _atrous_level(c: mi.Color3f, surface: Surface, width: int, height: int, *, s
                   inv_c: mi.Float, inv_n: mi.Float, inv_x: mi.Float) -> mi.Color3f:
     """One à-trous level: a symbolic loop over the 25 taps (one small kernel, not 25
     unrolled copies, which LLVM needs seconds to compile), with its weights held
-    (:func:`~foveated_mi.taps.held_filter`). A tap reads three packets: colour + finiteness,
+    (:func:`~foveated_mi.frame._shared.held_filter`). A tap reads three packets: colour + finiteness,
     normal, position + hit."""
     dr.schedule(c)   # the previous level's result: its own kernel, read by every tap
     cd = dr.detach(c)

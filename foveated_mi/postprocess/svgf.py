@@ -4,7 +4,7 @@ The à-trous wavelet filter of Dammertz et al. 2010 with the edge-stopping funct
 *Spatiotemporal Variance-Guided Filtering* (Schied et al., HPG 2017): the colour weight is
 scaled by the local standard deviation of the noise, so the filter smooths where the estimate
 is noisy and keeps differences that exceed the noise. It runs on demodulated irradiance
-(:mod:`foveated_mi.demodulate`), in linear units, before the albedo is multiplied back.
+(:mod:`foveated_mi.frame.demodulate`), in linear units, before the albedo is multiplied back.
 
 Level :math:`i` (tap spacing :math:`2^i`, B3-spline taps :math:`h`):
 
@@ -42,7 +42,7 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-from ..taps import HeldLevel, Surface, gather4, held_filter, packet, pixel_xy, surface_energy
+from ..frame._shared import HeldLevel, Surface, gather4, held_filter, packet, pixel_xy, surface_energy
 from ..validate import ParameterError, check_int, check_range
 
 _G3 = (0.25, 0.5, 0.25)
@@ -73,7 +73,7 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
     """Variance-guided à-trous filter of ``color`` (see the module docstring).
 
     ``variance`` is the noise variance of each pixel's value (e.g. from
-    :func:`foveated_mi.variance.estimate_variance`); 0 leaves a pixel's differences intact.
+    :func:`foveated_mi.frame.variance.estimate_variance`); 0 leaves a pixel's differences intact.
     """
     n = width * height
     iterations = check_int("iterations", iterations, 0, 16)
@@ -101,7 +101,7 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
 
 def _level(c: mi.Color3f, var: mi.Float, surface: Surface, width: int, height: int, *, step,
            sl, inv_n, inv_x) -> tuple[mi.Color3f, mi.Float]:
-    """One level, its weights held (:func:`~foveated_mi.taps.held_filter`), the variance
+    """One level, its weights held (:func:`~foveated_mi.frame._shared.held_filter`), the variance
     filtered alongside with the squared weights."""
     n = width * height
     dr.schedule(c, var)

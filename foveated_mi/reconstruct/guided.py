@@ -58,7 +58,7 @@ from typing import NamedTuple
 import drjit as dr
 import mitsuba as mi
 
-from ..taps import HeldLevel, Surface, gather4, held_filter, packet, surface_energy
+from ..frame._shared import HeldLevel, Surface, gather4, held_filter, packet, surface_energy
 from ..validate import ParameterError, check_int, check_range
 from .jfa import check_buffer, check_film, voronoi_fill
 
@@ -144,7 +144,7 @@ def _level(num: mi.Color3f, den: mi.Float, surface: Surface, width: int, height:
            ) -> tuple[mi.Color3f, mi.Float, mi.Float]:
     """One level of the cascade: a symbolic loop over the 25 taps (one kernel per level
     size, shared by all levels: the spacing is opaque), with its weights held
-    (:func:`~foveated_mi.taps.held_filter`): ``num`` carries the gradient, the sample weights
+    (:func:`~foveated_mi.frame._shared.held_filter`): ``num`` carries the gradient, the sample weights
     ``den`` and the kernel mass are accumulated alongside."""
     n = width * height
     dr.schedule(num, den)

@@ -39,10 +39,9 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from ..frame._shared import NO_SITE, pixel_xy
 from ..validate import ParameterError, check_choice, check_int
 
-#: Marks "no nearest site" (a frame without any site), as in docs/ARCHITECTURE.md.
-NO_SITE = 0xFFFFFFFF
 
 #: JFA step sequences, see the module docstring.
 JFA_VARIANTS = ("jfa", "1+jfa", "jfa+1", "jfa+2")
@@ -97,13 +96,6 @@ def jfa_steps(width: int, height: int, variant: str = "jfa+1",
     return steps
 
 
-def pixel_coords(width: int, height: int) -> tuple[mi.Int32, mi.Int32]:
-    """Integer pixel coordinates ``(x, y)`` of every pixel ``i = y * W + x``."""
-    i = dr.arange(mi.UInt32, width * height)
-    y = i // width
-    return mi.Int32(i - y * width), mi.Int32(y)
-
-
 def _pack(x: mi.Int32, y: mi.Int32) -> mi.UInt32:
     return mi.UInt32(x) | (mi.UInt32(y) << 16)
 
@@ -146,7 +138,7 @@ def jump_flood(site_mask: mi.Bool, width: int, height: int, variant: str = "jfa+
         width, height: film size in pixels (any size, not only powers of two).
         variant: step sequence, one of :data:`JFA_VARIANTS` (see module docstring).
         max_gap: a bound on the distance from any pixel to its nearest site, such as
-            :func:`foveated_mi.sampling.largest_gap` of the sampling law: no step longer
+            :func:`foveated_mi.frame.sampling.largest_gap` of the sampling law: no step longer
             than it is taken (steps longer than every gap only carry sites that later steps
             replace). Fallback: a pixel left without a site (the bound was wrong) searches
             square rings around itself, out to ``4 max_gap`` pixels; packets of pixels that
@@ -159,7 +151,7 @@ def jump_flood(site_mask: mi.Bool, width: int, height: int, variant: str = "jfa+
     width, height = check_film(width, height)
     check_choice("variant", variant, JFA_VARIANTS)
     check_buffer("site_mask", site_mask, width * height)
-    x, y = pixel_coords(width, height)
+    x, y = pixel_xy(width, height)
     seed = dr.select(mi.Bool(site_mask), _pack(x, y), NO_SITE)
     for k in jfa_steps(width, height, variant, max_gap):
         seed = _jfa_pass(seed, x, y, width, height, k)
@@ -218,7 +210,7 @@ def site_distance2(nearest: mi.UInt32, width: int, height: int):
     ``d2`` (``mi.Int32``) the squared distance ``|p - s|^2`` in pixels (0 where ``nearest`` is
     :data:`NO_SITE`) and ``has_site`` (``mi.Bool``).
     """
-    x, y = pixel_coords(width, height)
+    x, y = pixel_xy(width, height)
     nearest = mi.UInt32(nearest)
     has_site = nearest != NO_SITE
     sy = nearest // width

@@ -17,7 +17,7 @@ so the filled frame looks like a low-sample render whose noise the denoiser remo
 A traced pixel keeps its own value. The random numbers come from a per-pixel hash of the
 frame's seed, so a frame is reproducible and successive frames decorrelate.
 
-With demodulation (:mod:`foveated_mi.demodulate`) the chosen site's irradiance is multiplied by
+With demodulation (:mod:`foveated_mi.frame.demodulate`) the chosen site's irradiance is multiplied by
 the pixel's own albedo, so textures stay sharp. The output is a gather of site values with
 indices fixed by the G-buffer and the seed: linear in the values, with the scatter-add of the
 gather as adjoint (Dr.Jit's reverse mode).

@@ -167,10 +167,10 @@ def _varying_options(rows: list[dict[str, Any]]) -> list[str]:
 
 
 def front_table(rows: list[dict[str, Any]], metric: str) -> str:
-    """The fronts of every scene as an aligned text table (``foveated_mi.cli.format_table``);
+    """The fronts of every scene as an aligned text table (``foveated_mi.io.format_table``);
     foveated options that vary within the study are listed in an ``options`` column."""
     import json
-    from ..cli import format_table
+    from ..io import format_table
     varying = _varying_options(rows)
     header = ("scene", "method", "theta", "sigma_p", "reconstruction", "spp", "frame",
               "time ms", metric) + (("options",) if varying else ())

@@ -77,7 +77,8 @@ import os
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from ..config import _Ctx, read_toml
+from ..config import read_toml
+from ..validate import TableContext
 from ..metrics import COMPARE_KEYS
 from ..validate import ParameterError
 
@@ -173,7 +174,7 @@ def load_study(path: str | os.PathLike) -> StudySpec:
 def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
                 name: str = "study") -> StudySpec:
     """Validate an already-parsed TOML table; relative paths resolve against ``base_dir``."""
-    ctx = _Ctx(source)
+    ctx = TableContext(source)
     ctx.table("", data)
     ctx.known("", data, _TOP_KEYS)
     seeds = _seeds(ctx, data)
@@ -214,7 +215,7 @@ def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
 # pieces
 # ---------------------------------------------------------------------------------------------
 
-def _seeds(ctx: _Ctx, data: dict) -> tuple[int, ...]:
+def _seeds(ctx: TableContext, data: dict) -> tuple[int, ...]:
     hi = (1 << 32) - 1
     if "seeds" not in data:
         return (ctx.integer("seed", data.get("seed", 0), 0, hi),)
@@ -230,7 +231,7 @@ def _seeds(ctx: _Ctx, data: dict) -> tuple[int, ...]:
     return tuple(seeds)
 
 
-def _size(ctx: _Ctx, key: str, value: Any) -> tuple[int, int]:
+def _size(ctx: TableContext, key: str, value: Any) -> tuple[int, int]:
     if isinstance(value, int) and not isinstance(value, bool):
         value = [value, value]
     if not isinstance(value, list) or len(value) != 2:
@@ -239,7 +240,7 @@ def _size(ctx: _Ctx, key: str, value: Any) -> tuple[int, int]:
             ctx.integer(f"{key}[1]", value[1], 1, 16384))
 
 
-def _gaze(ctx: _Ctx, key: str, value: Any) -> tuple[float, float]:
+def _gaze(ctx: TableContext, key: str, value: Any) -> tuple[float, float]:
     from ..validate import check_point2
     try:
         return check_point2(key, value)
@@ -247,7 +248,7 @@ def _gaze(ctx: _Ctx, key: str, value: Any) -> tuple[float, float]:
         raise ctx.rename(e) from None
 
 
-def _integrator(ctx: _Ctx, key: str, value: Any) -> dict:
+def _integrator(ctx: TableContext, key: str, value: Any) -> dict:
     table = dict(ctx.table(key, value))
     ctx.string(f"{key}.type", table.get("type"))
     if table["type"] == "foveated":
@@ -256,7 +257,7 @@ def _integrator(ctx: _Ctx, key: str, value: Any) -> dict:
     return table
 
 
-def _reference(ctx: _Ctx, key: str, value: Any, base_dir: str,
+def _reference(ctx: TableContext, key: str, value: Any, base_dir: str,
                inherited: dict | None = None) -> dict:
     table = dict(ctx.table(key, value))
     ctx.known(key, table, _REFERENCE_KEYS)
@@ -283,7 +284,7 @@ def _reference(ctx: _Ctx, key: str, value: Any, base_dir: str,
                                 (1 << 32) - 1)}
 
 
-def _scene(ctx: _Ctx, key: str, table: Any, defaults: dict, base_dir: str) -> SceneSpec:
+def _scene(ctx: TableContext, key: str, table: Any, defaults: dict, base_dir: str) -> SceneSpec:
     from .. import scenes as builtin
 
     table = dict(ctx.table(key, table))
@@ -327,7 +328,7 @@ def _scene(ctx: _Ctx, key: str, table: Any, defaults: dict, base_dir: str) -> Sc
                      params=params, integrator=integ, reference=ref, optional=optional)
 
 
-def _metrics(ctx: _Ctx, table: Any) -> tuple[dict, dict]:
+def _metrics(ctx: TableContext, table: Any) -> tuple[dict, dict]:
     table = dict(ctx.table("metrics", table))
     ctx.known("metrics", table, tuple(DEFAULT_METRICS) + tuple(DEFAULT_PERCEPTUAL))
     perceptual = {"jod": ctx.boolean("metrics.jod", table.pop("jod", True))}
@@ -362,7 +363,7 @@ def _option_names() -> list[str]:
     return [k for k in getattr(fov, "DEFAULTS", {}) if k not in _FORBIDDEN] + list(_EXTRA_KEYS)
 
 
-def _check_keys(ctx: _Ctx, key: str, table: dict) -> None:
+def _check_keys(ctx: TableContext, key: str, table: dict) -> None:
     names = _option_names()
     for k, v in table.items():
         if k in _FORBIDDEN:
@@ -372,7 +373,7 @@ def _check_keys(ctx: _Ctx, key: str, table: dict) -> None:
                             + ", ".join(sorted(names)) + ")")
 
 
-def _check_options(ctx: _Ctx, key: str, options: dict, where: dict[str, str]) -> dict:
+def _check_options(ctx: TableContext, key: str, options: dict, where: dict[str, str]) -> dict:
     """Validate one configuration; ``where`` maps an option to its dotted TOML key."""
     fov = _option_module()
     opts = {k: v for k, v in options.items() if k not in _EXTRA_KEYS}
@@ -388,7 +389,7 @@ def _check_options(ctx: _Ctx, key: str, options: dict, where: dict[str, str]) ->
     return {"options": full, "given": {k: opts[k] for k in opts}, "spp": spp, "frames": frames}
 
 
-def _frames(ctx: _Ctx, key: str, value: Any) -> list[int]:
+def _frames(ctx: TableContext, key: str, value: Any) -> list[int]:
     if isinstance(value, int) and not isinstance(value, bool):
         value = [value]
     if not isinstance(value, list) or not value:
@@ -397,7 +398,7 @@ def _frames(ctx: _Ctx, key: str, value: Any) -> list[int]:
     return sorted(set(frames))
 
 
-def _foveated(ctx: _Ctx, table: Any) -> list[dict]:
+def _foveated(ctx: TableContext, table: Any) -> list[dict]:
     table = dict(ctx.table("foveated", table))
     ctx.known("foveated", table, ("defaults", "grid", "configs"))
     shared = dict(ctx.table("foveated.defaults", table.get("defaults", {})))
@@ -452,7 +453,7 @@ def _foveated(ctx: _Ctx, table: Any) -> list[dict]:
     return unique
 
 
-def _bools(ctx: _Ctx, key: str, value: Any) -> list[bool]:
+def _bools(ctx: TableContext, key: str, value: Any) -> list[bool]:
     values = value if isinstance(value, list) else [value]
     if not values:
         raise ctx.error(key, value, "true, false or a list of them")
@@ -460,7 +461,7 @@ def _bools(ctx: _Ctx, key: str, value: Any) -> list[bool]:
                               for i, v in enumerate(values)))
 
 
-def _uniform(ctx: _Ctx, table: Any, foveated: list[dict]) -> list[dict]:
+def _uniform(ctx: TableContext, table: Any, foveated: list[dict]) -> list[dict]:
     from ..options import DEFAULTS, PRESET_NAMES, PRESETS
     table = dict(ctx.table("uniform", table))
     if not table:

@@ -1,7 +1,7 @@
 r"""Gradients of a foveated frame: the seam, the image formation's adjoint, the nested adjoint.
 
 **The seam.** A frame is :math:`I = F(S)`, where :math:`S` is the developed shading buffer
-(:class:`foveated_mi.shading.ShadingBuffer`: one radiance estimate :math:`S(p)` per traced
+(:class:`foveated_mi.frame.shading.ShadingBuffer`: one radiance estimate :math:`S(p)` per traced
 pixel :math:`p`) and :math:`F` everything after it (history resolve, Jump Flooding,
 interpolation, tone mapping, à-trous, inverse tone mapping: ``FoveatedIntegrator._form_image``).
 The gradient pass holds every decision of the primal frame: sampling map, sites, interpolation
@@ -39,7 +39,7 @@ nested integrator's own method:
     forward). Memory grows with rays × spp × path length.
 ``adjoint`` (Python ``mi.ad.common.ADIntegrator``: ``prb``, ``prb_basic``, ...)
     The integrator's own ``render_backward(scene, params, δ, sensor, seed, spp)`` /
-    ``render_forward`` on a :class:`~foveated_mi.traced_sensor.TracedPixelSensor` over the
+    ``render_forward`` on a :class:`~foveated_mi.frame.traced_sensor.TracedPixelSensor` over the
     traced pixels, with :math:`\delta` the flat image of :math:`\delta S(p_k)`. Its rays are
     drawn from the footprint the frame's estimator uses (filter importance sampling for
     ``pixel_filter = 'importance'``, the splat kernel restricted to the traced neighbours for
@@ -76,10 +76,11 @@ from typing import Any, Callable
 import drjit as dr
 import mitsuba as mi
 
+from . import Frame
 from . import shading as _shading
 from .pixel_filter import FilterSampler, SplatFootprint
 from .traced_sensor import TracedSensors
-from .validate import ParameterError
+from ..validate import ParameterError
 
 # -- configurations that cannot be differentiated -------------------------------------------
 
@@ -209,7 +210,7 @@ class NestedAdjoint:
             self._footprints[key] = fp
         return fp
 
-    def _flat(self, frame, mask: mi.Bool, mode: str):
+    def _flat(self, frame: Frame, mask: mi.Bool, mode: str):
         """Traced pixels (host sync: the flat film's size is a Python int) and their sensor."""
         pixels = dr.compress(mask)
         if dr.width(pixels) == 0:
@@ -220,7 +221,7 @@ class NestedAdjoint:
         return pixels, sensor, layout
 
     # -- reverse mode
-    def backward(self, integrator, scene: mi.Scene, params, frame, mask: mi.Bool,
+    def backward(self, integrator, scene: mi.Scene, params, frame: Frame, mask: mi.Bool,
                  grad: mi.Color3f, seed, spp: int, options: dict[str, Any]) -> None:
         r"""Accumulate :math:`\sum_p \delta S(p)^{\mathsf T}\partial S(p)/\partial\pi` into the
         gradients of the scene parameters (``grad`` = :math:`\delta S`, one entry per pixel,
@@ -252,7 +253,7 @@ class NestedAdjoint:
                 integrator.render_backward(scene, params, full, src, seed, spp)
 
     # -- forward mode
-    def forward(self, integrator, scene: mi.Scene, params, frame, mask: mi.Bool, seed,
+    def forward(self, integrator, scene: mi.Scene, params, frame: Frame, mask: mi.Bool, seed,
                 spp: int, options: dict[str, Any]) -> mi.Color3f:
         r""":math:`\partial S(p)/\partial\pi\cdot\delta\pi` at the traced pixels (``mask``),
         zero elsewhere, for the tangents set on the scene parameters."""
@@ -282,7 +283,7 @@ class NestedAdjoint:
         return out
 
     @staticmethod
-    def _plain_value(integrator, scene, frame, seed, spp: int, options) -> mi.Color3f:
+    def _plain_value(integrator, scene, frame: Frame, seed, spp: int, options) -> mi.Color3f:
         """The frame's shading buffer traced again (gradients on): same wavefront, same
         camera-ray sampling and estimator, the gradient pass's seed and spp."""
         ro = frame.reordered

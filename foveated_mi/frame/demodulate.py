@@ -1,7 +1,7 @@
 r"""Albedo demodulation: reconstruct and filter irradiance, not radiance.
 
 With the G-buffer's diffuse albedo :math:`a` and its emitted radiance :math:`L_e` (both at full
-resolution, :func:`foveated_mi.gbuffer.render_gbuffer` with ``materials=True``), a pixel's
+resolution, :func:`foveated_mi.frame.gbuffer.render_gbuffer` with ``materials=True``), a pixel's
 radiance :math:`L` is split as
 
 .. math::

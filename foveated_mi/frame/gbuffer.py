@@ -6,7 +6,7 @@ buffers are deterministic and the reprojection of a static camera is the identit
 With ``materials=True`` the pass also evaluates, at the primary hit, the diffuse albedo of the
 BSDF (``bsdf.eval_diffuse_reflectance``, as Mitsuba's ``aov`` integrator does) and the
 radiance emitted towards the camera (an area emitter at the hit, or the environment on a
-miss). Demodulation (:mod:`foveated_mi.demodulate`) divides the traced radiance by the
+miss). Demodulation (:mod:`foveated_mi.frame.demodulate`) divides the traced radiance by the
 albedo so that textures come from this full-resolution buffer, not from sparse samples.
 """
 from __future__ import annotations
@@ -15,6 +15,8 @@ from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
+
+from ._shared import pixel_coords
 
 
 class GBuffer(NamedTuple):
@@ -26,14 +28,6 @@ class GBuffer(NamedTuple):
     direction: mi.Vector3f  #: unit direction of the primary ray (reprojects the background)
     albedo: mi.Color3f | None = None    #: diffuse albedo at the hit (0 on a miss)
     emission: mi.Color3f | None = None  #: emitted radiance towards the camera
-
-
-def pixel_coords(width: int, height: int) -> tuple[mi.UInt32, mi.UInt32, mi.UInt32]:
-    """Pixel index ``i = y * W + x`` and its ``(x, y)`` for the whole film."""
-    idx = dr.arange(mi.UInt32, width * height)
-    y = idx // width
-    x = idx - y * width
-    return idx, x, y
 
 
 def film_size(sensor: mi.Sensor) -> tuple[int, int]:
@@ -55,7 +49,7 @@ def render_gbuffer(scene: mi.Scene, sensor: mi.Sensor, *, materials: bool = Fals
     ``emission`` only with ``materials=True``).
 
     Runs without gradient tracking: visibility is discrete, and the albedo and emission are
-    used as fixed weights of the image formation (see :mod:`foveated_mi.demodulate`).
+    used as fixed weights of the image formation (see :mod:`foveated_mi.frame.demodulate`).
     """
     width, height = film_size(sensor)
     with dr.suspend_grad():

@@ -11,9 +11,9 @@ foveated frame's traced pixels only. It follows ``mi.ad.loaders.FlatSensor`` (Mi
   gradient;
 - a ray of flat pixel :math:`k` takes its jitter :math:`u \in [0,1)^2` from the flat film
   position and goes through the source sensor at a position drawn by the frame's footprint
-  sampler: the filter's importance sampler (:class:`~foveated_mi.pixel_filter.FilterSampler`,
+  sampler: the filter's importance sampler (:class:`~foveated_mi.frame.pixel_filter.FilterSampler`,
   ``pixel_filter = 'importance'``) or the splat estimator's kernel
-  (:class:`~foveated_mi.pixel_filter.SplatFootprint`, ``'splat'``). The returned weight is the
+  (:class:`~foveated_mi.frame.pixel_filter.SplatFootprint`, ``'splat'``). The returned weight is the
   source sensor's times the sample's signed filter weight, so the box-filtered mean of flat
   pixel :math:`k` estimates the filtered value :math:`I(p_k)` that the foveated frame shows,
   and its derivative estimates :math:`\partial I(p_k)/\partial\pi`.
@@ -65,7 +65,7 @@ def _sensor_class() -> type:
         return cls
 
     class TracedPixelSensor(mi.Sensor):
-        """See the module docstring of :mod:`foveated_mi.traced_sensor`."""
+        """See the module docstring of :mod:`foveated_mi.frame.traced_sensor`."""
 
         def __init__(self, props):
             mi.Sensor.__init__(self, props)

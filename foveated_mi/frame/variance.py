@@ -26,9 +26,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .reconstruct.jfa import NO_SITE
-from .shading import luminance
-from .taps import Surface, for_each_tap, gather4, packet
+from ._shared import NO_SITE, Surface, for_each_tap, gather4, luminance, packet
 
 #: Below this many samples a pixel's own moments are replaced by the spatial estimate.
 MIN_TEMPORAL_SAMPLES = 4.0

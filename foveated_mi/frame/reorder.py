@@ -37,7 +37,7 @@ from typing import NamedTuple
 import drjit as dr
 import mitsuba as mi
 
-from .validate import check_choice, check_int
+from ..validate import check_choice, check_int
 
 REORDER_MODES = ("none", "rows", "rows_blocks", "compact")
 

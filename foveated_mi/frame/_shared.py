@@ -1,4 +1,5 @@
-"""The 5x5 tap walk shared by the edge-avoiding filters, and the packed buffers they read.
+"""Kernels shared by the passes: pixel coordinates, luminance, the 5x5 tap walk of the
+edge-avoiding filters with the B3 spline, the packed buffers they read and the surface test.
 
 The à-trous filter, SVGF, the guided reconstruction and the spatial variance estimate each
 visit the 25 taps ``q = p + s (dx, dy)``, ``dx, dy in -2..2``, of every pixel ``p``.
@@ -15,7 +16,7 @@ through them like through the buffers they hold.
 
 **Held weights.** A filter level is a :class:`HeldLevel`: its pixel data and its weight
 function. :func:`held_filter` runs it forward, and differentiates it as the linear map it is
-once its weights are held (what the gradient pass of :mod:`foveated_mi.adjoint` needs): the
+once its weights are held (what the gradient pass of :mod:`foveated_mi.frame.adjoint` needs): the
 tangent reruns the level on the tangent, and the adjoint walks the same taps from the other
 end, with gathers only, where Dr.Jit's own reverse mode of the tap loop would scatter every
 tap's adjoint atomically (``python benchmarks/bench_backward.py`` measures the gradient step).
@@ -27,6 +28,9 @@ from typing import Any, Callable, NamedTuple
 import drjit as dr
 import mitsuba as mi
 
+#: Marks "no nearest site" in a Jump Flooding map (a frame without any site).
+NO_SITE = 0xFFFFFFFF
+
 #: One-dimensional B3-spline taps (the 5x5 kernel is their outer product).
 B3_SPLINE = (1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0)
 
@@ -35,6 +39,19 @@ def b3(d: mi.Int32) -> mi.Float:
     """B3-spline tap ``h1[d + 2]`` for ``d in -2..2``."""
     a = dr.abs(d)
     return dr.select(a == 0, B3_SPLINE[2], dr.select(a == 1, B3_SPLINE[1], B3_SPLINE[0]))
+
+
+def pixel_coords(width: int, height: int) -> tuple[mi.UInt32, mi.UInt32, mi.UInt32]:
+    """Pixel index ``i = y * W + x`` and its ``(x, y)`` for the whole film."""
+    idx = dr.arange(mi.UInt32, width * height)
+    y = idx // width
+    x = idx - y * width
+    return idx, x, y
+
+
+def luminance(c: mi.Color3f) -> mi.Float:
+    """Rec. 709 luminance (Mitsuba's RGB primaries)."""
+    return dr.fma(c.x, 0.212671, dr.fma(c.y, 0.715160, c.z * 0.072169))
 
 
 def pixel_xy(width: int, height: int) -> tuple[mi.Int32, mi.Int32]:

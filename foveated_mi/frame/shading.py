@@ -18,7 +18,7 @@ on the same film (Mitsuba's default filter is ``gaussian``), never to a box-filt
     A traced pixel without traced neighbours sees only its own samples: its footprint is
     the filter clipped to its neighbourhood (a slightly sharper kernel).
 ``importance`` (:func:`develop_mean`)
-    Filter importance sampling (:mod:`foveated_mi.pixel_filter`): each sample's offset is
+    Filter importance sampling (:mod:`foveated_mi.frame.pixel_filter`): each sample's offset is
     drawn from the filter and a traced pixel holds the (signed-)weighted mean of its own
     samples. Every pixel is an unbiased estimate of the filtered image and independent of
     its neighbours, at a higher variance than splatting when neighbours are traced (their
@@ -45,6 +45,7 @@ from typing import NamedTuple
 import drjit as dr
 import mitsuba as mi
 
+from ._shared import luminance
 from .pixel_filter import FilterSample, FilterSampler
 
 
@@ -61,11 +62,6 @@ class ShadingBuffer(NamedTuple):
     mask: mi.Bool       #: pixel was traced and holds a value
     moment2: mi.Float   #: mean squared luminance of the pixel's samples
     count: mi.Float     #: accepted samples behind ``value``
-
-
-def luminance(c: mi.Color3f) -> mi.Float:
-    """Rec. 709 luminance (Mitsuba's RGB primaries)."""
-    return dr.fma(c.x, 0.212671, dr.fma(c.y, 0.715160, c.z * 0.072169))
 
 
 class ShadingResult(NamedTuple):

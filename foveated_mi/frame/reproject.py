@@ -38,7 +38,7 @@ from typing import NamedTuple
 import drjit as dr
 import mitsuba as mi
 
-from .gbuffer import pixel_coords
+from ._shared import pixel_coords
 
 
 @dataclass

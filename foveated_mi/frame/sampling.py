@@ -30,8 +30,8 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-from .gbuffer import pixel_coords
-from .validate import check_range
+from ._shared import pixel_coords
+from ..validate import check_range
 
 #: Parameter ranges; the README's table of extremes is generated from the same numbers.
 THETA_RANGE = (0.0, math.inf)      # open at 0
@@ -88,7 +88,7 @@ def depth_edges(depth: mi.Float, hit: mi.Bool, width: int, height: int,
     skipped, as there; a miss counts as depth 0 (the authors' cleared depth buffer), so the
     silhouette against the background is an edge.
     """
-    from .validate import check_choice
+    from ..validate import check_choice
     check_choice("edge_detector", detector, ("relative", "sobel"))
     _, x, y = pixel_coords(width, height)
     thr = dr.opaque(mi.Float, threshold)

@@ -1,0 +1,57 @@
+"""The passes of one foveated frame (Kwon et al. 2019, Fig. 1), one module each, in order.
+
+==  =====================  =====================================  ============================
+#   pass                   module                                 paper
+==  =====================  =====================================  ============================
+1   geometry               :mod:`.gbuffer` (+ :mod:`.scene_state`)  Fig. 1, full-res G-buffer
+2   sampling               :mod:`.sampling`                         §3.1 sampling map, edges
+3   reprojection           :mod:`.reproject`                        §3.1 reprojection map
+4   reorder                :mod:`.reorder`                          §3.2 Strategies 1 and 2
+5   sparse shading         :mod:`.shading` (+ :mod:`.pixel_filter`)  §3.3 shading buffer
+6   history resolve        :mod:`.reproject`                        Fig. 4 history
+7   demodulation           :mod:`.demodulate`                       (noise-aware presets)
+8   reconstruction         :mod:`foveated_mi.reconstruct`           §3.4 JFA, Sibson
+9   variance               :mod:`.variance`                         (SVGF)
+10  post-processing        :mod:`foveated_mi.postprocess`           §3.5 tone map, à-trous
+--  gradient pass          :mod:`.adjoint` (+ :mod:`.traced_sensor`)  the seam at shading
+==  =====================  =====================================  ============================
+
+:mod:`._shared` holds the kernels several passes use (pixel coordinates, luminance, the 5x5
+tap walker, packets, the surface test). :class:`Frame` is what the first passes decide for
+the rest of the frame; the integrator (:mod:`foveated_mi.integrators.foveated`) only runs the
+passes in this order.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:   # the passes import each other and the method packages; types only here
+    import mitsuba as mi
+
+    from .gbuffer import GBuffer
+    from .pixel_filter import FilterSampler
+    from .reorder import Reordered
+    from .reproject import History, ReprojectionMap
+
+
+@dataclass
+class Frame:
+    """What a frame decided before tracing (geometry, sampling, reprojection and reorder).
+
+    A gradient pass reuses the primal frame's: same sampling map, sites and history."""
+    sensor: mi.Sensor
+    width: int
+    height: int
+    spp: int
+    seed: int | mi.UInt32                      #: Monte Carlo seed of the shading pass
+    map_seed: int | mi.UInt32                  #: seed of the sampling map
+    gbuffer: GBuffer
+    edges: mi.Bool | None
+    sampling_map: mi.Bool
+    probability: mi.Float
+    reprojection: ReprojectionMap
+    reordered: Reordered
+    history: History | None                    #: history this frame read (a constant)
+    filter_sampler: FilterSampler
+    gbuffer_reused: bool = False               #: the G-buffer is the previous frame's
