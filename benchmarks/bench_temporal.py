@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import sys
 
-import drjit as dr
 import mitsuba as mi
 
 import foveated_mi

@@ -13,7 +13,6 @@ import resource
 import sys
 import time
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 

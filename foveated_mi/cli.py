@@ -9,7 +9,6 @@ import argparse
 import json
 import os
 import sys
-import time
 from typing import Any, Sequence
 
 EXIT_USAGE = 2
@@ -153,7 +152,7 @@ def timing_table(stats: dict, full_ms: float | None = None) -> str:
 def cmd_render(args: argparse.Namespace) -> int:
     import foveated_mi
     from .validate import ParameterError, check_int
-    from .integrators.foveated import validate_options
+    from .options import validate_options
 
     opts = validate_options(frame_options(args))      # fail fast, before any loading
     spp = check_int("--spp", args.spp, 1)

@@ -39,7 +39,6 @@ is allowed; its ``key`` attribute holds the dotted key.
 from __future__ import annotations
 
 import inspect
-import math
 import os
 import sys
 from dataclasses import dataclass, field
@@ -221,7 +220,7 @@ def _foveated(ctx: TableContext, table: Any) -> dict:
             allowed = " or ".join(dict.fromkeys(names[t] for t in types))
             raise ctx.error(f"foveated.{key}", value, allowed)
     try:   # the integrator's own range checks, when its module is importable
-        from .integrators.foveated import validate_options
+        from .options import validate_options
     except Exception:  # pragma: no cover - integrator under construction
         validate_options = None
     if validate_options is not None:

@@ -52,7 +52,6 @@ normalised to sum 1. :func:`eccentricity_weighted_psnr` is the PSNR of the weigh
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 

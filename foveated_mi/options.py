@@ -45,7 +45,6 @@ See ``benchmarks/bench_equal_time.py`` and the README for the measurements behin
 """
 from __future__ import annotations
 
-import math
 from typing import Any
 
 from .validate import (ParameterError, check_bool, check_choice, check_int, check_point2,

@@ -45,7 +45,7 @@ def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
 def run_sequence(cfg: SequenceConfig, *, out_dir: str | None = None, compare_full: bool = False,
                  progress: bool = True) -> list[dict[str, Any]]:
     """Render ``cfg`` and return the per-frame stats. Ctrl-C keeps what is written."""
-    from .io import atomic_write, encode_srgb8
+    from .io import encode_srgb8
     from .render import FrameRenderer
     from .scenes import apply_camera, load_scene
 

@@ -1,7 +1,6 @@
 """The overhead benchmark runs end to end at a tiny size and reports a consistent table."""
 import json
 import os
-import sys
 
 import pytest
 

@@ -1,6 +1,5 @@
 """The film's reconstruction filter is honoured (filter importance sampling), and nested
 integrators of every kind (constant-returning, Python AD integrators) shade the wavefront."""
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest

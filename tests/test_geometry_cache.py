@@ -1,9 +1,7 @@
 """The G-buffer of a still camera is reused, and every change that could alter it recomputes
 it: each frame after a change equals a frame rendered from scratch."""
 import numpy as np
-import pytest
 
-import drjit as dr
 import mitsuba as mi
 
 from foveated_mi.integrators.foveated import FoveatedIntegrator

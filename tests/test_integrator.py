@@ -5,7 +5,6 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-import foveated_mi
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.validate import ParameterError
 

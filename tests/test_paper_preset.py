@@ -2,7 +2,6 @@
 authors' code does it."""
 import math
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest

@@ -3,7 +3,6 @@ camera cut resets the history so the next frame equals a fresh first frame."""
 import json
 
 import numpy as np
-import pytest
 
 from foveated_mi.cli import main
 from foveated_mi.config import load_config

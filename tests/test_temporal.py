@@ -5,7 +5,6 @@ import math
 import drjit as dr
 import mitsuba as mi
 import numpy as np
-import pytest
 
 from foveated_mi.frame import sampling
 from foveated_mi.frame.gbuffer import render_gbuffer

@@ -122,7 +122,6 @@ def reorder_rows_blocks(sampling_map: mi.Bool, width: int, height: int, block_he
     # max(., 1): the LLVM backend also evaluates padding lanes, where this can be 0 and an
     # integer division would trap (SIGFPE).
     size = dr.maximum(dr.minimum(first + block_height, height) - first, 1)
-    local = rows - first
     # Total trace pixels per block, read at each row through a prefix sum over rows.
     incl = dr.cumsum(counts)
     last = first + size - 1

@@ -140,7 +140,6 @@ mapping round trip when neither the filter nor the PNG needs it.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -160,7 +159,7 @@ from ..postprocess.inverse import inverse_tonemap
 from ..frame.pixel_filter import FilterSampler
 from ..frame.scene_state import GeometryCache, SceneState, scene_state
 from ..timing import StageTimer
-from ..options import DEFAULTS, NON_DIFFERENTIABLE_DENOISERS, PRESETS, validate_options  # noqa: F401
+from ..options import DEFAULTS, NON_DIFFERENTIABLE_DENOISERS, validate_options
 from ..validate import ParameterError, check_int
 
 #: A camera move after which fewer pixels than this fraction reproject into the history is a
