@@ -24,15 +24,14 @@ passes in this order.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:   # the passes import each other and the method packages; types only here
-    import mitsuba as mi
+import mitsuba as mi
 
-    from .gbuffer import GBuffer
-    from .pixel_filter import FilterSampler
-    from .reorder import Reordered
-    from .reproject import History, ReprojectionMap
+# Dr.Jit reads Frame's field types when it traverses one (a gradient pass holds a Frame).
+from .gbuffer import GBuffer
+from .pixel_filter import FilterSampler
+from .reorder import Reordered
+from .reproject import History, ReprojectionMap
 
 
 @dataclass
