@@ -13,13 +13,14 @@ gradient pass of a frame that used it raises (see
 
 **Device.** :func:`foveated_mi.denoise.resolve_device` picks OIDN's device: on a ``cuda_*``
 variant its CUDA device when pyoidn offers one, else its CPU device;
-``$FOVEATED_MI_OIDN_DEVICE`` (or ``device=``) forces ``cpu`` or ``cuda``. On the CPU device
-the buffers go through host memory as NumPy arrays. On the CUDA device OIDN reads and writes
-Dr.Jit's own arrays in place (their addresses from DLPack): the colour and guides are
-interleaved to ``RGBRGB...`` by one kernel, OIDN filters on the GPU, and the result is read
-back by another, with no copy to the host; the stage still synchronises once, so that the
-inputs are complete when OIDN starts. The first call on a device logs the device, and
-:func:`foveated_mi.denoise.last_device` names the last one used.
+``$FOVEATED_MI_OIDN_DEVICE`` (or ``device=``) forces ``cpu`` or ``cuda``. Where the device
+can read Dr.Jit's memory (the CUDA device on a CUDA variant, the CPU device on an LLVM one),
+OIDN reads and writes Dr.Jit's own arrays in place (their addresses from DLPack): the colour
+and guides are interleaved to ``RGBRGB...`` by one kernel, OIDN filters, and the result is
+read back by another, with no NumPy array and no copy between host and GPU. The stage still
+synchronises once, so that the inputs are complete when OIDN starts. Only the CPU device
+forced on a CUDA variant goes through host memory (NumPy). The first call on a device logs
+the device, and :func:`foveated_mi.denoise.last_device` names the last one used.
 """
 from __future__ import annotations
 
@@ -104,10 +105,11 @@ def oidn(color: mi.Color3f, albedo: mi.Color3f | None, normal: mi.Vector3f | Non
     variant = mi.variant()
     kind = _dn.resolve_device(variant, device)
     c = dr.select(dr.isfinite(color), dr.detach(color), 0.0)
-    if kind == "cuda":
+    if (kind == "cuda") == variant.startswith("cuda_"):   # OIDN can read Dr.Jit's memory
         _dn._used(kind, variant)
         return _denoise_in_place(c, albedo, normal, width, height, kind=kind, quality=quality,
                                  clean_aux=clean_aux)
+    # OIDN's CPU device on a CUDA variant: through host memory.
     aux = [a for a in (albedo, normal) if a is not None]
     dr.eval(c, *aux)
     out = denoise(_host(c, width, height),
