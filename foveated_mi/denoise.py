@@ -12,9 +12,10 @@ filter per filter type for the whole process and only rebinds the images and re-
 filter per call. A wrapper that instead kept a ``pyoidn.Device`` / ``pyoidn.Filter`` with
 persistent image buffers of a fixed size (copy in, ``execute()``, copy out) measured the same
 (2-core machine, colour + albedo + normal, median of 5): 64x64 5.8 ms both, 256x256 82.1 vs
-82.1 ms, 640x360 295 vs 298 ms; outputs bit-identical. So this module calls
-``pyoidn.denoise`` and keeps no state of its own. Only the first call of a process pays for
-the device (about 15 ms more at 128x128).
+82.1 ms, 640x360 295 vs 298 ms; outputs bit-identical. So :func:`denoise` on the CPU device
+calls ``pyoidn.denoise``. Only the first call of a process pays for the device (about 15 ms
+more at 128x128). The other paths below (OIDN buffers, memory owned by Dr.Jit) keep one
+device and one filter per device kind in the same way (:func:`run_filter`).
 
 **Device choice.** OIDN runs on its CPU device, or on its CUDA device on a ``cuda_*`` variant
 when ``pyoidn`` reports one (:func:`oidn_cuda_available`): :func:`choose_device` decides,

@@ -5,7 +5,7 @@ G-buffer's albedo and normal (:func:`foveated_mi.denoise.denoise`). It is traine
 whose noise is independent from pixel to pixel, which the stochastic reconstruction
 (:mod:`foveated_mi.reconstruct.stochastic`) provides in the sparse periphery.
 
-**A stage boundary.** OIDN runs outside Dr.Jit on materialised host buffers: this stage
+**A stage boundary.** OIDN runs outside Dr.Jit on materialised buffers: this stage
 evaluates its inputs and synchronises, the one place where a frame leaves the JIT. It is
 optional (``pip install -e '.[denoise]'`` from a clone) and **not differentiable**: a
 gradient pass of a frame that used it raises (see
@@ -24,11 +24,11 @@ the device, and :func:`foveated_mi.denoise.last_device` names the last one used.
 """
 from __future__ import annotations
 
+import ctypes
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
-
-import ctypes
 
 from .. import denoise as _dn
 from ..denoise import denoise
