@@ -56,8 +56,9 @@ _capsule_pointer.restype = ctypes.c_void_p
 _capsule_pointer.argtypes = [ctypes.py_object, ctypes.c_char_p]
 
 
-def _address(v: mi.Float) -> tuple[int, int, int, object]:
-    """``(address, bytes, CUDA device id, capsule)`` of an evaluated flat ``mi.Float``.
+def _address(v: mi.Float) -> tuple[int, int, tuple[int, int], object]:
+    """``(address, bytes, (DLPack device type, device id), capsule)`` of an evaluated flat
+    ``mi.Float`` (device type 1: host memory, 2: CUDA memory).
 
     The capsule keeps the memory alive; the array must stay unchanged while it is used."""
     cap = v.__dlpack__()
@@ -66,7 +67,7 @@ def _address(v: mi.Float) -> tuple[int, int, int, object]:
     if t.ndim != 1 or (t.code, t.bits, t.lanes) != (2, 32, 1) or t.shape[0] != n \
             or (bool(t.strides) and t.strides[0] != 1):
         raise RuntimeError("Dr.Jit exported an unexpected DLPack layout for a Float array")
-    return t.data + t.byte_offset, 4 * n, int(t.device.id), cap
+    return t.data + t.byte_offset, 4 * n, (int(t.device.type), int(t.device.id)), cap
 
 
 def _denoise_in_place(c: mi.Color3f, albedo, normal, width: int, height: int, *, kind: str,
@@ -85,7 +86,11 @@ def _denoise_in_place(c: mi.Color3f, albedo, normal, width: int, height: int, *,
     dr.eval(*flat.values())
     dr.sync_thread()                    # the inputs are complete before OIDN reads them
     held = {name: _address(v) for name, v in {**flat, "output": out}.items()}
-    device_id = held["output"][2]
+    where = {h[2][0] for h in held.values()}
+    if where != {2 if kind == "cuda" else 1}:
+        raise RuntimeError(f"OIDN's {kind.upper()} device cannot read Dr.Jit's arrays on "
+                           f"the {mi.variant()} variant (DLPack device types {sorted(where)})")
+    device_id = held["output"][2][1]
     _dn.run_filter(kind, {name: h[:2] for name, h in held.items()}, width, height,
                    device_id=device_id, hdr=True, quality=quality, clean_aux=clean_aux)
     return dr.unravel(mi.Color3f, out, order="F")
