@@ -244,7 +244,8 @@ def _image(name: str, value, shape: tuple[int, ...] | None) -> np.ndarray:
 
 
 def denoise(color, albedo=None, normal=None, *, hdr: bool = True,
-            quality: str = "high", clean_aux: bool = False, device: str | None = None) -> np.ndarray:
+            quality: str = "high", clean_aux: bool = False,
+            device: str | None = None) -> np.ndarray:
     """Denoised copy of ``color`` (float32, (H, W, 3)) by OIDN's ``RT`` filter.
 
     ``albedo`` and ``normal`` (same shape) guide the filter; OIDN requires albedo whenever

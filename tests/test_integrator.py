@@ -192,13 +192,13 @@ PER_FRAME_SCALARS = {
 }
 
 
-def _new_kernels_after_warmup(preset, scalars):
+def _new_kernels_after_warmup(preset, scalars, **options):
     """Kernels launched by frames 3-5 that frames 0-2 did not launch, while ``scalars`` (and
     the seed) change every frame. A kernel is known by its hash (its source): a scalar that
     reaches a kernel as a literal makes a new one per value, even where the kernel cache on
     disk already holds it from an earlier run (so cache hits alone would not tell)."""
     scene = cornell()
-    integ = FoveatedIntegrator(preset=preset, sigma_p=0.6)
+    integ = FoveatedIntegrator(preset=preset, sigma_p=0.6, **options)
     seen, new = set(), []
     with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
         for k in range(6):
@@ -222,14 +222,27 @@ def _new_kernels_after_warmup(preset, scalars):
 def test_per_frame_scalars_compile_nothing_new(preset):
     """Gaze, theta, seed, exposure, the filters' sigmas, clamp and the history's scalars
     changed on every frame: from frame 3 on, every kernel comes from the cache (on CUDA as
-    on LLVM: a Python literal would be a new kernel on both)."""
-    new = _new_kernels_after_warmup(preset, PER_FRAME_SCALARS)
+    on LLVM: a Python literal would be a new kernel on both). The launch layout is
+    ``compact`` here; the row layouts are the next test."""
+    new = _new_kernels_after_warmup(preset, PER_FRAME_SCALARS, reorder="compact")
     assert not new, f"{len(new)} new kernels after warm-up ({preset})"
 
 
-@pytest.mark.xfail(strict=True, reason="target_samples enters the guided reconstruction and "
-                   "the variance estimate as a literal (reconstruct/guided.py, "
-                   "integrators/foveated.py), not through dr.opaque")
+@pytest.mark.xfail(strict=True, raises=AssertionError,
+                   reason="the row layouts' launch width (the largest row count, read on "
+                   "the host) enters the kernels as a literal in reorder.reorder, so a frame "
+                   "whose largest row count is new compiles the trace kernel again")
+@pytest.mark.parametrize("layout", ["rows", "rows_blocks"])
+def test_row_layout_launch_compiles_nothing_new(layout):
+    new = _new_kernels_after_warmup("paper", {"gaze": PER_FRAME_SCALARS["gaze"]},
+                                    reorder=layout)
+    assert not new, f"{len(new)} new kernels after warm-up ({layout})"
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError,
+                   reason="target_samples enters the guided reconstruction and the variance "
+                   "estimate as a literal (reconstruct/guided.py, integrators/foveated.py), "
+                   "not through dr.opaque")
 def test_target_samples_compiles_nothing_new():
     new = _new_kernels_after_warmup("guided", {"target_samples": [32.0, 16.0, 24.0, 8.0, 20.0,
                                                                   12.0]})
