@@ -227,10 +227,6 @@ def test_per_frame_scalars_compile_nothing_new(preset):
     assert not new, f"{len(new)} new kernels after warm-up ({preset})"
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError,
-                   reason="the row layouts' launch width (the largest row count, read on "
-                   "the host) enters the kernels as a literal in reorder.reorder, so a frame "
-                   "whose largest row count is new compiles the trace kernel again")
 @pytest.mark.parametrize("layout", ["rows", "rows_blocks"])
 def test_row_layout_launch_compiles_nothing_new(layout):
     new = _new_kernels_after_warmup("paper", {"gaze": PER_FRAME_SCALARS["gaze"]},
@@ -238,10 +234,6 @@ def test_row_layout_launch_compiles_nothing_new(layout):
     assert not new, f"{len(new)} new kernels after warm-up ({layout})"
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError,
-                   reason="target_samples enters the guided reconstruction and the variance "
-                   "estimate as a literal (reconstruct/guided.py, integrators/foveated.py), "
-                   "not through dr.opaque")
 def test_target_samples_compiles_nothing_new():
     new = _new_kernels_after_warmup("guided", {"target_samples": [32.0, 16.0, 24.0, 8.0, 20.0,
                                                                   12.0]})

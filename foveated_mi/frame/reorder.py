@@ -177,8 +177,10 @@ def reorder(sampling_map: mi.Bool, width: int, height: int, mode: str = "compact
     if slots == 0:
         return Reordered(mi.UInt32(), mi.Bool(), rmap, counts, mode, swaps)
     lane = dr.arange(mi.UInt32, height * slots)
-    v = lane // max(slots, 1)
-    k = lane - v * slots
+    # An opaque width: a new largest row count compiles nothing new.
+    width_k = dr.opaque(mi.UInt32, slots)
+    v = lane // width_k
+    k = lane - v * width_k
     active = k < dr.gather(mi.UInt32, counts, v)
     wavefront = dr.gather(mi.UInt32, rmap, v * width + k)
     return Reordered(wavefront, active, rmap, counts, mode, swaps)

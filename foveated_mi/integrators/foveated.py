@@ -565,7 +565,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                 _variance.sample_variance(resolved.shading, resolved.moment2, resolved.count,
                                           resolved.mask, gb.normal, gb.hit, width, height),
                 resolved.count, resolved.mask, nearest,
-                samples=(dr.full(mi.Float, o["target_samples"], n)
+                samples=(dr.opaque(mi.Float, o["target_samples"]) + dr.zeros(mi.Float, n)
                          if o["reconstruction"] == "guided" else None),
                 albedo=gb.albedo if o["demodulate"] else None)
             image = filtered = post.svgf(interpolated, variance, gb.normal, gb.position, gb.hit,
@@ -588,8 +588,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                    sigma_position=o["sigma_position"], valid=gb.hit)
             image = inverse_tonemap(filtered, o["tonemap"], o["exposure"])
         elif o["denoiser"] == "oidn" and not grad_pass:
-            # A stage boundary (host round trip) and not differentiable: a gradient pass
-            # differentiates the frame without it.
+            # A stage boundary (OIDN runs outside Dr.Jit, on the frame's buffers) and not
+            # differentiable: a gradient pass of such a frame raises before it gets here.
             image = filtered = post.oidn(image, gb.albedo, gb.normal, width, height,
                                          quality=o["oidn_quality"])
         timer.mark("post", image)

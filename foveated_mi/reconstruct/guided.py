@@ -98,7 +98,8 @@ def guided(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: i
                         ("guide.hit", guide.hit), ("guide.weight", guide.weight)):
         check_buffer(name, value, n)
     levels = check_int("levels", levels, 1, 12)
-    target = check_range("target_samples", target_samples, 0.0, 1e9, lo_open=True)
+    target = dr.opaque(mi.Float, check_range("target_samples", target_samples, 0.0, 1e9,
+                                             lo_open=True))
     inv_n = 1.0 / check_range("sigma_normal", sigma_normal, 0.0, None, lo_open=True) ** 2
     inv_x = 1.0 / check_range("sigma_plane", sigma_plane, 0.0, None, lo_open=True) ** 2
 
