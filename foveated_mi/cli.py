@@ -21,57 +21,32 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _add_frame_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--preset", help="auto | paper | oidn | guided: a tuned group of defaults "
-                   "(auto: oidn when pyoidn is installed, else guided)")
-    p.add_argument("--theta", type=float, help="foveal radius (fraction of half the diagonal)")
-    p.add_argument("--sigma-p", type=float, dest="sigma_p", help="P(theta), in (0, 1]")
-    p.add_argument("--gaze", type=float, nargs=2, metavar=("X", "Y"),
-                   help="gaze in normalised film coordinates, origin top-left")
-    p.add_argument("--reorder", help="none | rows | rows_blocks | compact")
-    p.add_argument("--pixel-filter", dest="pixel_filter",
-                   help="splat | importance: how samples honour the film's filter")
-    p.add_argument("--block-height", type=int, dest="block_height")
-    p.add_argument("--edge-threshold", type=float, dest="edge_threshold")
-    p.add_argument("--edge-detector", dest="edge_detector",
-                   help="relative | sobel: the depth-edge test that forces rays")
-    p.add_argument("--reconstruction", help="voronoi | sibson | discrete_sibson | fast_sibson | "
-                   "guided | stochastic")
-    p.add_argument("--demodulate", action=argparse.BooleanOptionalAction, default=None,
-                   help="reconstruct and filter irradiance (radiance / G-buffer albedo)")
-    p.add_argument("--target-samples", type=float, dest="target_samples",
-                   help="samples a guided reconstruction averages per pixel")
-    p.add_argument("--guided-levels", type=int, dest="guided_levels")
-    p.add_argument("--stochastic-jitter", type=float, dest="stochastic_jitter")
-    p.add_argument("--stochastic-tries", type=int, dest="stochastic_tries")
-    p.add_argument("--denoiser", help="none | atrous | svgf | oidn")
-    p.add_argument("--sigma-luminance", type=float, dest="sigma_luminance",
-                   help="svgf colour sigma, in noise standard deviations")
-    p.add_argument("--oidn-quality", dest="oidn_quality", help="high | balanced | fast")
-    p.add_argument("--max-radius", type=int, dest="max_radius")
-    p.add_argument("--jfa", help="jfa | 1+jfa | jfa+1 | jfa+2")
-    p.add_argument("--sibson-inclusive", action=argparse.BooleanOptionalAction, default=None,
-                   dest="sibson_inclusive", help="sibson's in-circle test: <= (or the text's <)")
-    p.add_argument("--atrous-iterations", type=int, dest="atrous_iterations")
-    p.add_argument("--sigma-color", type=float, dest="sigma_color")
-    p.add_argument("--sigma-normal", type=float, dest="sigma_normal")
-    p.add_argument("--sigma-position", type=float, dest="sigma_position")
-    p.add_argument("--tonemap", help="none | reinhard | aces | uncharted2")
-    p.add_argument("--tonemap-samples", action=argparse.BooleanOptionalAction, default=None,
-                   dest="tonemap_samples", help="tone-map every sample before the history")
-    p.add_argument("--max-history", type=float, dest="max_history",
-                   help="cap on the history sample count (0: no cap)")
-    p.add_argument("--exposure", type=float, help="exposure in stops")
-    p.add_argument("--clamp", type=float, help="largest accepted sample component")
-    p.add_argument("--map-seed", type=int, dest="map_seed",
-                   help="pin the sampling map to this seed (0 .. 2^32-1; -1 follows the frame seed)")
+    """One flag per option of the schema (:data:`foveated_mi.options.SCHEMA`): ``--name`` with
+    dashes, the option's help, its allowed values (a registry's current ones) and default."""
+    from .options import SCHEMA
+    for name in FRAME_OPTIONS:
+        opt = SCHEMA[name]
+        allowed = "" if opt.kind == "bool" else opt.range_text() + "; "
+        kwargs: dict[str, Any] = {"dest": name, "help": f"{opt.help} ({allowed}default "
+                                  f"{opt.default_text()})".replace("%", "%%")}
+        if opt.kind == "bool":
+            kwargs.update(action=argparse.BooleanOptionalAction, default=None)
+        elif opt.kind == "point":
+            kwargs.update(type=float, nargs=2, metavar=("X", "Y"))
+        elif opt.kind in ("float", "sigma"):
+            kwargs["type"] = float
+        elif opt.kind == "int":
+            kwargs["type"] = int
+        p.add_argument("--" + name.replace("_", "-"), **kwargs)
 
 
-FRAME_OPTIONS = ("preset", "theta", "sigma_p", "gaze", "reorder", "pixel_filter", "block_height",
-                 "edge_threshold", "edge_detector", "demodulate", "reconstruction", "max_radius", "target_samples",
-                 "guided_levels", "stochastic_jitter", "stochastic_tries", "jfa", "sibson_inclusive", "denoiser",
-                 "atrous_iterations", "sigma_color", "sigma_normal", "sigma_position",
-                 "sigma_luminance", "oidn_quality", "tonemap", "tonemap_samples", "max_history", "exposure", "clamp",
-                 "map_seed")
+def _frame_options() -> tuple[str, ...]:
+    from .options import SCHEMA
+    return tuple(name for name, opt in SCHEMA.items() if opt.cli)
+
+
+#: Options the ``render`` command takes as flags (every option of the schema but ``timing``).
+FRAME_OPTIONS = _frame_options()
 
 
 def build_parser() -> argparse.ArgumentParser:

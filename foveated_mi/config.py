@@ -46,7 +46,7 @@ from typing import Any
 
 from .paths import (CameraPath, FixedGaze, GazeCSV, GazeKeyframes, GazePath,
                     Saccades)
-from .options import DEFAULTS
+from .options import SCHEMA
 from .validate import ParameterError, TableContext
 
 if sys.version_info >= (3, 11):
@@ -60,21 +60,11 @@ __all__ = ["SequenceConfig", "OutputConfig", "load_config", "parse_config", "VID
 VIDEO_FORMATS = ("mp4", "gif", "none")
 GAZE_TYPES = ("fixed", "keyframes", "saccades", "csv")
 
-#: Options of the ``foveated`` integrator a config may set, with their TOML types
-#: (value ranges are checked by the integrator's own validation when it is importable).
-def _toml_types(default: Any) -> tuple[type, ...]:
-    if isinstance(default, bool):
-        return (bool,)
-    if isinstance(default, float):
-        return (int, float)
-    return (type(default),)
-
-
-#: Options of the ``foveated`` integrator a config may set, with their TOML types, derived
-#: from the integrator's defaults (the gaze comes from ``[gaze]``; value ranges are checked by
-#: the integrator's own validation).
+#: Options of the ``foveated`` integrator a config may set, with their TOML types, from the
+#: option schema (the gaze comes from ``[gaze]``; value ranges are checked by the
+#: integrator's own validation).
 FOVEATED_KEYS: dict[str, tuple[type, ...]] = {
-    name: _toml_types(default) for name, default in DEFAULTS.items() if name != "gaze"}
+    name: opt.toml_types() for name, opt in SCHEMA.items() if opt.kind != "point"}
 
 _TOP_KEYS = ("scene", "description", "frames", "fps", "size", "spp", "seed", "scene_params",
              "integrator", "foveated", "camera", "gaze", "output")

@@ -45,48 +45,244 @@ See ``benchmarks/bench_equal_time.py`` and the README for the measurements behin
 """
 from __future__ import annotations
 
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Callable, Iterable
 
 from .validate import (ParameterError, check_bool, check_choice, check_int, check_point2,
                        check_range, check_sigma)
 
+# -- the option schema -----------------------------------------------------------------------
+
+#: Mitsuba XML type of each kind of option (the docstring's parameter table).
+XML_TYPES = {"float": "|float|", "int": "|int|", "bool": "|bool|", "string": "|string|",
+             "point": "|point|", "sigma": "|float|"}
+
+
+@dataclass(frozen=True)
+class Option:
+    """One option of the ``foveated`` integrator: everything the validation, the CLI, the
+    configuration files and the docs know of it.
+
+    ``kind``: ``float``, ``int``, ``bool``, ``string`` (one of ``choices``), ``point`` (two
+    numbers) or ``sigma`` (a number > 0, ``inf`` disables the weight). ``choices`` is a tuple
+    or a function returning the names (a registry, read when asked). ``check`` replaces the
+    kind's check. ``differentiable`` is ``True`` or a predicate on the value that holds where
+    a gradient pass can differentiate the frame; ``gradient`` says then what is allowed."""
+    name: str
+    default: Any
+    kind: str
+    help: str
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    choices: tuple[str, ...] | Callable[[], Iterable[str]] | None = None
+    check: Callable[[str, Any], Any] | None = None
+    allowed: str | None = None          #: the range in words, where the kind's text is not it
+    differentiable: bool | Callable[[Any], bool] = True
+    gradient: str = ""
+    cli: bool = True
+    doc: str | None = None              #: longer RST text for the parameter table
+
+    def names(self) -> list[str]:
+        """The allowed values of a ``string`` option (a registry's current names)."""
+        c = self.choices
+        return list(c() if callable(c) else c)
+
+    def validate(self, value: Any) -> Any:
+        """The value, normalised; :class:`ParameterError` (one line) when it is not allowed."""
+        if self.check is not None:
+            return self.check(self.name, value)
+        if self.kind == "float":
+            return check_range(self.name, value, self.lo, self.hi, lo_open=self.lo_open)
+        if self.kind == "int":
+            return check_int(self.name, value, self.lo, self.hi)
+        if self.kind == "bool":
+            return check_bool(self.name, value)
+        if self.kind == "point":
+            return check_point2(self.name, value)
+        if self.kind == "sigma":
+            return check_sigma(self.name, value)
+        return check_choice(self.name, value, self.names())
+
+    def range_text(self) -> str:
+        """The allowed values in words (the parameter table and the CLI help)."""
+        if self.allowed is not None:
+            return self.allowed
+        if self.kind == "string":
+            return " | ".join(self.names())
+        if self.kind == "bool":
+            return "true | false"
+        if self.kind == "sigma":
+            return "> 0, or inf to disable this weight"
+        if self.kind == "point":
+            return "two finite numbers (x, y)"
+        fmt = (lambda v: str(v)) if self.kind == "int" else (lambda v: f"{v:g}")
+        lo = "" if self.lo is None else f"{'>' if self.lo_open else '>='} {fmt(self.lo)}"
+        hi = "" if self.hi is None else f"<= {fmt(self.hi)}"
+        what = "an integer" if self.kind == "int" else "a number"
+        return " ".join(p for p in (what, lo, "and" if lo and hi else "", hi) if p)
+
+    def default_text(self) -> str:
+        d = self.default
+        if isinstance(d, bool):
+            return "true" if d else "false"
+        if isinstance(d, tuple):
+            return ", ".join(f"{v:g}" for v in d)
+        return f"{d:g}" if isinstance(d, float) else str(d)
+
+    def is_differentiable(self, value: Any) -> bool:
+        d = self.differentiable
+        return d if isinstance(d, bool) else bool(d(value))
+
+    def toml_types(self) -> tuple[type, ...]:
+        """The TOML value types a configuration file may give."""
+        return {"float": (int, float), "sigma": (int, float), "int": (int,), "bool": (bool,),
+                "string": (str,), "point": (list,)}[self.kind]
+
+
+def _reorder_modes():
+    from .frame.reorder import REORDER_MODES
+    return REORDER_MODES
+
+
+def _pixel_filters():
+    from .frame.shading import PIXEL_FILTERS
+    return PIXEL_FILTERS
+
+
+def _jfa_variants():
+    from .reconstruct import JFA_VARIANTS
+    return JFA_VARIANTS
+
+
+def reconstructions():
+    """The reconstruction registry (:data:`foveated_mi.reconstruct.RECONSTRUCTIONS`)."""
+    from .reconstruct import RECONSTRUCTIONS
+    return RECONSTRUCTIONS
+
+
+def denoisers():
+    """The denoiser registry (:data:`foveated_mi.postprocess.DENOISERS`)."""
+    from .postprocess import DENOISERS
+    return DENOISERS
+
+
+def tonemappers():
+    """The tone mapper registry (:data:`foveated_mi.postprocess.TONEMAPPERS`)."""
+    from .postprocess import TONEMAPPERS
+    return TONEMAPPERS
+
+
+def _check_max_history(name: str, value) -> float:
+    """0 (no cap, the paper) or a cap in [1, 1e9]."""
+    v = check_range(name, value, 0.0, 1e9)
+    if 0.0 < v < 1.0:
+        raise ParameterError(name, value, "0 (no cap) or a number in [1, 1e9]")
+    return v
+
+
+_SCHEMA: tuple[Option, ...] = (
+    Option("preset", "auto", "string", "a tuned group of defaults (auto: oidn when pyoidn is "
+           "installed, else guided); options given explicitly win",
+           choices=lambda: PRESET_NAMES,
+           doc="``auto`` (default: ``oidn`` when ``pyoidn`` imports, else ``guided``; "
+           "``guided`` for a nested AD integrator or a differentiated ``mi.render``) | "
+           "``oidn`` | ``guided`` | ``paper``: a tuned group of the defaults below (see "
+           ":mod:`foveated_mi.options`); options given explicitly win"),
+    Option("theta", 0.1, "float", "foveal radius θ in units of half the film diagonal",
+           lo=0.0, lo_open=True),
+    Option("sigma_p", 0.8, "float", "probability P(θ); 1 traces every pixel",
+           lo=0.0, hi=1.0, lo_open=True),
+    Option("gaze", (0.5, 0.5), "point", "gaze in normalised film coordinates, origin top-left",
+           doc="Gaze in normalised film coordinates, origin top-left; outside [0, 1]^2 is "
+           "legal (the viewer looks off-screen). Mitsuba's XML ``<point>`` needs a ``z`` "
+           "attribute, which is ignored"),
+    Option("reorder", "compact", "string", "ray reordering (§3.2): the trace wavefront's "
+           "layout", choices=_reorder_modes),
+    Option("pixel_filter", "splat", "string", "how samples honour the film's filter",
+           choices=_pixel_filters,
+           doc="How samples honour the film's reconstruction filter: ``splat`` (Mitsuba's "
+           "own estimator, identical to the nested integrator at sigma_p = 1) or "
+           "``importance`` (filter importance sampling: independent, unbiased pixels); see "
+           ":mod:`foveated_mi.frame.shading`"),
+    Option("block_height", 8, "int", "rows per block of Strategy 2", lo=1),
+    Option("edge_threshold", 0.1, "float", "depth edges that force a ray (0 disables them)",
+           lo=0.0, doc="Depth edges that force a ray; 0 disables them (see "
+           "``edge_detector``). ``stats`` reports ``edge_rays`` and ``edge_fraction``"),
+    Option("demodulate", False, "bool", "reconstruct and filter irradiance (radiance / "
+           "G-buffer albedo)", doc="Reconstruct and filter irradiance, albedo multiplied "
+           "back (:mod:`foveated_mi.frame.demodulate`)"),
+    Option("reconstruction", "sibson", "string", "interpolation of the sparse shading buffer "
+           "(§3.4)", choices=lambda: reconstructions(),
+           doc="Interpolation of the sparse shading buffer (§3.4); ``guided`` and "
+           "``stochastic`` use the G-buffer (``target_samples``, ``guided_levels``, "
+           "``stochastic_jitter``, ``stochastic_tries``)"),
+    Option("max_radius", 32, "int", "bound on the interpolation radius in pixels",
+           lo=1, hi=4096),
+    Option("target_samples", 32.0, "float", "samples a guided reconstruction averages per "
+           "pixel", lo=0.0, hi=1e9, lo_open=True),
+    Option("guided_levels", 5, "int", "pyramid levels of the guided reconstruction",
+           lo=1, hi=12),
+    Option("stochastic_jitter", 4.0, "float", "jitter radius (pixels) of the stochastic fill",
+           lo=0.0, hi=1e4),
+    Option("stochastic_tries", 3, "int", "same-surface retries of the stochastic fill",
+           lo=0, hi=64),
+    Option("jfa", "jfa+1", "string", "Jump Flooding variant", choices=_jfa_variants),
+    Option("denoiser", "atrous", "string", "the post-processing filter (§3.5)",
+           choices=lambda: denoisers(),
+           differentiable=lambda v: denoisers()[v].differentiable,
+           gradient="a differentiable denoiser",
+           doc="The post-processing filter (§3.5): ``atrous`` the edge-avoiding à-trous "
+           "filter, ``svgf`` variance-guided (``sigma_luminance``), ``oidn`` Intel Open Image "
+           "Denoise (``oidn_quality``; not differentiable), ``none``; a registered denoiser "
+           "(:func:`foveated_mi.postprocess.register_denoiser`) is one more choice"),
+    Option("atrous_iterations", 5, "int", "levels of the à-trous / SVGF filter (0: no filter)",
+           lo=0, hi=16),
+    Option("sigma_color", 0.5, "sigma", "à-trous colour sigma"),
+    Option("sigma_normal", 0.1, "sigma", "à-trous normal sigma"),
+    Option("sigma_position", 0.5, "sigma", "à-trous position sigma"),
+    Option("sigma_luminance", 4.0, "sigma", "SVGF colour sigma, in noise standard deviations"),
+    Option("oidn_quality", "high", "string", "OIDN's quality setting",
+           choices=("high", "balanced", "fast")),
+    Option("tonemap", "reinhard", "string", "tone-mapping operator (filter domain and PNG "
+           "output)", choices=lambda: tonemappers()),
+    Option("exposure", 0.0, "float", "exposure in stops", lo=-64.0, hi=64.0),
+    Option("tonemap_samples", False, "bool", "tone-map every sample before the history",
+           differentiable=lambda v: not v,
+           gradient="False for gradients (per-sample tone mapping is not part of the "
+           "differentiated image)",
+           doc="Tone-map every traced sample before the film and the history, as the "
+           "authors' code does (``cuda/fov_path_trace_camera.cu`` line 169); the history and "
+           "the reconstruction then hold display values and the image is mapped back to "
+           "radiance at the end. Off by default and in ``paper`` (the text tone-maps the "
+           "frame); not differentiable, not with ``demodulate`` or ``svgf``"),
+    Option("history", True, "bool", "temporal reuse through reverse reprojection"),
+    Option("max_history", 32.0, "float", "cap on the history sample count (0: no cap)",
+           check=_check_max_history, allowed="0 (no cap) or a number in [1, 1e9]"),
+    Option("sibson_inclusive", True, "bool", "sibson's in-circle test: <= (or the text's <)",
+           doc="In-circle test of ``sibson``: ``d(q, p) <= r`` (true, the authors' shader) "
+           "or ``d(q, p) < r`` (false; the paper's text, ``paper``)"),
+    Option("edge_detector", "relative", "string", "the depth-edge test that forces rays",
+           choices=("relative", "sobel"),
+           doc="``relative``: relative depth jump to a 4-neighbour above ``edge_threshold``. "
+           "``sobel``: the test in the authors' code (which does not call it), "
+           "``|Gx| + |Gy|`` of the 3x3 Sobel filter on depth above the threshold (the "
+           "authors use 0.99, in scene units)"),
+    Option("reprojection_tolerance", 0.02, "float", "relative depth tolerance of the "
+           "reprojection test", lo=0.0, hi=1.0),
+    Option("clamp", 1e4, "float", "largest accepted sample component; larger samples are "
+           "scaled down", lo=0.0, hi=3e38, lo_open=True),
+    Option("timing", False, "bool", "synchronise at stage boundaries and report wall time per "
+           "stage", cli=False),
+    Option("map_seed", -1, "int", "pin the sampling map to this seed (-1 follows the frame "
+           "seed)", lo=-1, hi=0xFFFFFFFF),
+)
+
+#: Option name -> :class:`Option`, in the order of validation, the CLI and the docs.
+SCHEMA: dict[str, Option] = {o.name: o for o in _SCHEMA}
+
 #: The paper's pipeline; every option of the integrator, with its default.
-DEFAULTS: dict[str, Any] = {
-    "preset": "auto",
-    "theta": 0.1,
-    "sigma_p": 0.8,
-    "gaze": (0.5, 0.5),
-    "reorder": "compact",
-    "pixel_filter": "splat",
-    "block_height": 8,
-    "edge_threshold": 0.1,
-    "demodulate": False,
-    "reconstruction": "sibson",
-    "max_radius": 32,
-    "target_samples": 32.0,
-    "guided_levels": 5,
-    "stochastic_jitter": 4.0,
-    "stochastic_tries": 3,
-    "jfa": "jfa+1",
-    "denoiser": "atrous",
-    "atrous_iterations": 5,
-    "sigma_color": 0.5,
-    "sigma_normal": 0.1,
-    "sigma_position": 0.5,
-    "sigma_luminance": 4.0,
-    "oidn_quality": "high",
-    "tonemap": "reinhard",
-    "exposure": 0.0,
-    "tonemap_samples": False,
-    "history": True,
-    "max_history": 32.0,
-    "sibson_inclusive": True,
-    "edge_detector": "relative",
-    "reprojection_tolerance": 0.02,
-    "clamp": 1e4,
-    "timing": False,
-    "map_seed": -1,
-}
+DEFAULTS: dict[str, Any] = {o.name: o.default for o in _SCHEMA}
 
 #: Preset name -> the defaults it replaces (see the module docstring).
 PRESETS: dict[str, dict[str, Any]] = {
@@ -102,11 +298,6 @@ PRESETS: dict[str, dict[str, Any]] = {
     "guided": {"demodulate": True, "reconstruction": "guided", "denoiser": "svgf"},
 }
 PRESET_NAMES = ("auto", *PRESETS)
-DENOISERS = ("none", "atrous", "svgf", "oidn")
-EDGE_DETECTORS = ("relative", "sobel")
-OIDN_QUALITIES = ("high", "balanced", "fast")
-#: Denoisers a gradient pass cannot differentiate (it runs the frame without them).
-NON_DIFFERENTIABLE_DENOISERS = frozenset({"oidn"})
 
 
 def resolve_preset(preset: str, gradients: bool = False) -> str:
@@ -123,15 +314,7 @@ def resolve_preset(preset: str, gradients: bool = False) -> str:
     return "oidn" if oidn_available() else "guided"
 
 
-
-
-def _check_max_history(value) -> float:
-    """0 (no cap, the paper) or a cap in [1, 1e9]."""
-    v = check_range("max_history", value, 0.0, 1e9)
-    if 0.0 < v < 1.0:
-        raise ParameterError("max_history", value, "0 (no cap) or a number in [1, 1e9]")
-    return v
-
+# -- validation -----------------------------------------------------------------------------
 
 def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[str, Any]:
     """Check every option and return them all, normalised, with the preset resolved
@@ -139,67 +322,60 @@ def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[s
 
     Raises :class:`~foveated_mi.validate.ParameterError` (one line) for an unknown option or
     a bad value."""
-    from . import reconstruct as rec
-    from . import postprocess as post
-    from .frame.reorder import REORDER_MODES
-    from .frame.shading import PIXEL_FILTERS
-
-    unknown = set(options) - set(DEFAULTS)
+    unknown = set(options) - set(SCHEMA)
     if unknown:
         name = sorted(unknown)[0]
-        raise ParameterError(name, options[name], "one of " + ", ".join(sorted(DEFAULTS)))
+        raise ParameterError(name, options[name], "one of " + ", ".join(sorted(SCHEMA)))
     preset = resolve_preset(options.get("preset", DEFAULTS["preset"]), gradients)
-    o = {**DEFAULTS, **PRESETS[preset], **options}
-    out = {
-        "preset": preset,
-        "theta": check_range("theta", o["theta"], 0.0, None, lo_open=True),
-        "sigma_p": check_range("sigma_p", o["sigma_p"], 0.0, 1.0, lo_open=True),
-        "gaze": check_point2("gaze", o["gaze"]),
-        "reorder": check_choice("reorder", o["reorder"], REORDER_MODES),
-        "pixel_filter": check_choice("pixel_filter", o["pixel_filter"], PIXEL_FILTERS),
-        "block_height": check_int("block_height", o["block_height"], 1),
-        "edge_threshold": check_range("edge_threshold", o["edge_threshold"], 0.0),
-        "demodulate": check_bool("demodulate", o["demodulate"]),
-        "reconstruction": check_choice("reconstruction", o["reconstruction"],
-                                       list(rec.RECONSTRUCTIONS)),
-        "max_radius": check_int("max_radius", o["max_radius"], 1, 4096),
-        "target_samples": check_range("target_samples", o["target_samples"], 0.0, 1e9,
-                                      lo_open=True),
-        "guided_levels": check_int("guided_levels", o["guided_levels"], 1, 12),
-        "stochastic_jitter": check_range("stochastic_jitter", o["stochastic_jitter"], 0.0, 1e4),
-        "stochastic_tries": check_int("stochastic_tries", o["stochastic_tries"], 0, 64),
-        "jfa": check_choice("jfa", o["jfa"], rec.JFA_VARIANTS),
-        "denoiser": check_choice("denoiser", o["denoiser"], DENOISERS),
-        "atrous_iterations": check_int("atrous_iterations", o["atrous_iterations"], 0, 16),
-        "sigma_color": check_sigma("sigma_color", o["sigma_color"]),
-        "sigma_normal": check_sigma("sigma_normal", o["sigma_normal"]),
-        "sigma_position": check_sigma("sigma_position", o["sigma_position"]),
-        "sigma_luminance": check_sigma("sigma_luminance", o["sigma_luminance"]),
-        "oidn_quality": check_choice("oidn_quality", o["oidn_quality"], OIDN_QUALITIES),
-        "tonemap": check_choice("tonemap", o["tonemap"], list(post.TONEMAPPERS)),
-        "exposure": check_range("exposure", o["exposure"], -64.0, 64.0),
-        "tonemap_samples": check_bool("tonemap_samples", o["tonemap_samples"]),
-        "history": check_bool("history", o["history"]),
-        "max_history": _check_max_history(o["max_history"]),
-        "sibson_inclusive": check_bool("sibson_inclusive", o["sibson_inclusive"]),
-        "edge_detector": check_choice("edge_detector", o["edge_detector"], EDGE_DETECTORS),
-        "reprojection_tolerance": check_range("reprojection_tolerance",
-                                              o["reprojection_tolerance"], 0.0, 1.0),
-        "clamp": check_range("clamp", o["clamp"], 0.0, 3e38, lo_open=True),
-        "timing": check_bool("timing", o["timing"]),
-        "map_seed": check_int("map_seed", o["map_seed"], -1, 0xFFFFFFFF),
-    }
+    defaults = {name: opt.default for name, opt in SCHEMA.items()}
+    merged = {**defaults, **PRESETS[preset], "preset": preset, **options}
+    out = {name: opt.validate(merged[name]) for name, opt in SCHEMA.items()}
+    out["preset"] = preset
+    _check_combination(out)
+    return out
+
+
+def _check_combination(out: dict[str, Any]) -> None:
+    """Checks of one option against another, and of the denoiser's requirements."""
+    entry = denoisers()[out["denoiser"]]
     if out["tonemap_samples"]:
         # The history and the reconstruction then hold display values: demodulation and
-        # SVGF's variance estimate assume radiance.
+        # a denoiser that models the noise of radiance (SVGF's variance) assume radiance.
         if out["demodulate"]:
             raise ParameterError("demodulate", True, "False with tonemap_samples = True")
-        if out["denoiser"] == "svgf":
-            raise ParameterError("denoiser", "svgf", "atrous, oidn or none with "
+        if not entry.display_values:
+            ok = [n for n, d in denoisers().items() if d.display_values and n != "none"]
+            raise ParameterError("denoiser", out["denoiser"], ", ".join(ok) + " or none with "
                                  "tonemap_samples = True")
-    if out["denoiser"] == "oidn":
-        from .denoise import INSTALL_HINT, oidn_available
-        if not oidn_available():
-            raise ParameterError("denoiser", "oidn", f"pyoidn installed ({INSTALL_HINT}), or "
-                                 "another of " + ", ".join(DENOISERS))
-    return out
+    if entry.available is not None and not entry.available():
+        raise ParameterError("denoiser", out["denoiser"], f"{entry.requirement}, or another "
+                             "of " + ", ".join(denoisers()))
+
+
+# -- what a gradient pass cannot differentiate ----------------------------------------------
+
+def non_differentiable() -> dict[str, tuple[Callable[[dict], bool], str]]:
+    """Option -> (predicate on the validated options that holds where a gradient pass cannot
+    differentiate the frame, what it needs instead), from the schema. Options whose choices
+    come from a registry come last: the pipeline's own options are reported first."""
+    opts = [o for o in _SCHEMA if o.differentiable is not True]
+    opts.sort(key=lambda o: callable(o.choices))
+    return {o.name: (lambda options, o=o: not o.is_differentiable(
+        options.get(o.name, o.default)), o.gradient) for o in opts}
+
+
+# -- docs -----------------------------------------------------------------------------------
+
+def parameter_table() -> str:
+    """The ``.. pluginparameters::`` table of the integrator's docstring, from the schema
+    (registered methods included)."""
+    lines = [".. pluginparameters::", ""]
+    for o in _SCHEMA:
+        text = o.doc if o.doc is not None else o.help[0].upper() + o.help[1:]
+        grad = "" if o.differentiable is True else f"; gradients: {o.gradient}"
+        lines += [f" * - {o.name}", f"   - {XML_TYPES[o.kind]}",
+                  f"   - {text}. Allowed: {o.range_text()}; default ``{o.default_text()}``"
+                  + grad]
+    lines += [" * - (nested)", "   - |integrator|",
+              "   - Any sampling integrator (default ``path``); XML allows it unnamed", ""]
+    return "\n".join(lines)

@@ -78,18 +78,9 @@ def test_grid_and_list_expand_to_the_product_plus_the_list(tmp_path):
 
 
 def test_options_come_from_the_integrator_not_a_fixed_list(tmp_path, monkeypatch):
-    from foveated_mi.integrators import foveated
-    monkeypatch.setitem(foveated.DEFAULTS, "new_option", 3)
-    orig = foveated.validate_options
-
-    def validate(options):
-        new = options.pop("new_option", 3)
-        if not isinstance(new, int) or new < 0:
-            raise ParameterError("new_option", new, "an integer >= 0")
-        out = orig(options)
-        out["new_option"] = new
-        return out
-    monkeypatch.setattr(foveated, "validate_options", validate)
+    from foveated_mi import options
+    monkeypatch.setitem(options.SCHEMA, "new_option",
+                        options.Option("new_option", 3, "int", "a test option", lo=0))
     spec = load_study(write(tmp_path, BASE + "new_option = [1, 2]\n"))
     assert [c["options"]["new_option"] for c in spec.foveated] == [1, 2, 1, 2]
     with pytest.raises(ParameterError, match=r"foveated\.grid\.new_option\[1\] = -1"):

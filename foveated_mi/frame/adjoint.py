@@ -64,9 +64,10 @@ sample count, and a projective integrator's ``sppc``/``sppp``/``sppi`` apply as 
 
 **Not covered.** The clamp of the primal (``clamp``) and its rejection of non-finite samples
 are not differentiated: the adjoint is that of the unclamped estimator (Mitsuba's
-integrators have no clamp). A stage that cannot be differentiated registers a predicate
-with :func:`register_non_differentiable`; :func:`check_differentiable` then refuses the
-configuration in one line.
+integrators have no clamp). What cannot be differentiated is declared in the option schema
+(:data:`foveated_mi.options.SCHEMA`: an option's ``differentiable`` predicate, a denoiser's
+registration); :func:`check_differentiable` then refuses the configuration in one line.
+:func:`register_non_differentiable` adds a predicate of its own (tests).
 """
 from __future__ import annotations
 
@@ -80,19 +81,23 @@ from . import Frame
 from . import shading as _shading
 from .pixel_filter import FilterSampler, SplatFootprint
 from .traced_sensor import TracedSensors
+from ..options import non_differentiable
 from ..validate import ParameterError
 
 # -- configurations that cannot be differentiated -------------------------------------------
 
-#: option -> (predicate on the validated options, what a differentiable run needs).
-NON_DIFFERENTIABLE: dict[str, tuple[Callable[[dict], bool], str]] = {}
+#: option -> (predicate on the validated options, what a differentiable run needs), from the
+#: option schema (:func:`foveated_mi.options.non_differentiable`: ``tonemap_samples``, and a
+#: denoiser registered with ``differentiable=False``).
+NON_DIFFERENTIABLE: dict[str, tuple[Callable[[dict], bool], str]] = non_differentiable()
 
 
 def register_non_differentiable(option: str, predicate: Callable[[dict], bool],
                                 allowed: str) -> None:
     """Declare that options for which ``predicate(options)`` holds make a frame
-    non-differentiable, e.g. ``register_non_differentiable("denoiser", lambda o:
-    o["denoiser"] == "oidn", "'none' for gradients (OIDN is not differentiable)")``."""
+    non-differentiable, e.g. ``register_non_differentiable("exposure", lambda o:
+    o["exposure"] > 3, "<= 3 for gradients")``. The product's own rules live in the option
+    schema."""
     NON_DIFFERENTIABLE[option] = (predicate, allowed)
 
 

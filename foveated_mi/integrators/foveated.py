@@ -43,100 +43,8 @@ reprojection when ``history`` is off or on the first frame, no Jump Flooding or 
 when ``sigma_p = 1`` (every pixel is traced), no filter when ``atrous_iterations = 0``, no tone
 mapping round trip when neither the filter nor the PNG needs it.
 
-.. pluginparameters::
+The parameters (generated from :data:`foveated_mi.options.SCHEMA`):
 
- * - preset
-   - |string|
-   - ``auto`` (default: ``oidn`` when ``pyoidn`` imports, else ``guided``; ``guided`` for a
-     nested AD integrator or a differentiated ``mi.render``) | ``oidn`` |
-     ``guided`` | ``paper``: a tuned group of the defaults below (see
-     :mod:`foveated_mi.options`); options given explicitly win. The defaults listed here are
-     the paper's (``preset = "paper"``)
- * - theta
-   - |float|
-   - Foveal radius θ in units of half the film diagonal, > 0 (default 0.1)
- * - sigma_p
-   - |float|
-   - Probability :math:`P(\theta)`, in (0, 1] (default 0.8); 1 traces every pixel
- * - gaze
-   - |point|
-   - Gaze in normalised film coordinates, origin top-left (default 0.5, 0.5); outside
-     [0, 1]^2 is legal (the viewer looks off-screen). Mitsuba's XML ``<point>`` needs a ``z``
-     attribute, which is ignored.
- * - reorder
-   - |string|
-   - ``none`` | ``rows`` | ``rows_blocks`` | ``compact`` (default)
- * - pixel_filter
-   - |string|
-   - How samples honour the film's reconstruction filter: ``splat`` (default, Mitsuba's
-     own estimator, identical to the nested integrator at sigma_p = 1) or ``importance``
-     (filter importance sampling: independent, unbiased pixels); see
-     :mod:`foveated_mi.frame.shading`
- * - block_height
-   - |int|
-   - Rows per block of Strategy 2 (default 8)
- * - edge_threshold, edge_detector
-   - |float|, |string|
-   - Depth edges that force a ray; 0 disables them. ``relative`` (default): relative depth
-     jump to a 4-neighbour above the threshold (default 0.1, also ``paper``). ``sobel``:
-     the test in the authors' code (which does not call it), ``|Gx| + |Gy|`` of the 3x3
-     Sobel filter on depth above the threshold (the authors use 0.99, in scene units).
-     ``stats`` reports ``edge_rays`` and ``edge_fraction``
- * - demodulate
-   - |bool|
-   - Reconstruct and filter irradiance, albedo multiplied back (:mod:`foveated_mi.frame.demodulate`)
- * - reconstruction
-   - |string|
-   - ``voronoi`` | ``sibson`` (default) | ``discrete_sibson`` | ``fast_sibson`` | ``guided``
-     | ``stochastic`` (with ``target_samples``, ``guided_levels``, ``stochastic_jitter``,
-     ``stochastic_tries``)
- * - max_radius
-   - |int|
-   - Bound on the interpolation radius in pixels (default 32)
- * - sibson_inclusive
-   - |bool|
-   - In-circle test of ``sibson``: ``d(q, p) <= r`` (default, the authors' shader) or
-     ``d(q, p) < r`` (false; the paper's text, ``paper``)
- * - jfa
-   - |string|
-   - Jump Flooding variant: ``jfa`` | ``1+jfa`` | ``jfa+1`` (default) | ``jfa+2``
- * - denoiser
-   - |string|
-   - ``atrous`` (default) | ``svgf`` (variance-guided, ``sigma_luminance``) | ``oidn``
-     (``oidn_quality``; not differentiable) | ``none``
- * - atrous_iterations, sigma_color, sigma_normal, sigma_position
-   - |int|, |float|
-   - Edge-avoiding à-trous filter (Dammertz et al. 2010); 0 iterations turns the filter off
- * - tonemap, exposure
-   - |string|, |float|
-   - Tone-mapping operator and exposure in stops (filter domain and PNG output)
- * - tonemap_samples
-   - |bool|
-   - Tone-map every traced sample before the film and the history, as the authors' code
-     does (``cuda/fov_path_trace_camera.cu`` line 169); the history and the reconstruction
-     then hold display values and the image is mapped back to radiance at the end. Off by
-     default and in ``paper`` (the text tone-maps the frame); not differentiable
- * - history
-   - |bool|
-   - Temporal reuse through reverse reprojection (default true)
- * - max_history
-   - |float|
-   - Cap on the history sample count, >= 1 (default 32); 0 = no cap (``paper``)
- * - reprojection_tolerance
-   - |float|
-   - Relative depth tolerance of the reprojection test (default 0.02)
- * - clamp
-   - |float|
-   - Largest accepted sample component; larger samples are scaled down (default 1e4)
- * - timing
-   - |bool|
-   - Synchronise at stage boundaries and report wall time per stage (default false)
- * - map_seed
-   - |int|
-   - Seed of the sampling map, 0 .. 2^32-1; -1 (default) follows the frame seed (below)
- * - (nested)
-   - |integrator|
-   - Any sampling integrator (default ``path``); XML allows it unnamed
 """
 from __future__ import annotations
 
@@ -153,22 +61,21 @@ from ..frame import reorder as _reorder
 from ..frame import reproject as _reproject
 from ..frame import sampling as _sampling
 from ..frame import shading as _shading
-from ..frame import variance as _variance
-from ..frame.demodulate import demodulate, remodulate
-from ..postprocess.inverse import inverse_tonemap
+from ..frame._shared import NO_SITE
 from ..frame.pixel_filter import FilterSampler
+from ..frame.post import post_pass
+from ..frame.reconstruction import reconstruction_pass
 from ..frame.scene_state import GeometryCache, SceneState, scene_state
+from ..options import SCHEMA, parameter_table, validate_options
+from ..postprocess import DENOISERS, tonemap
 from ..timing import StageTimer
-from ..options import DEFAULTS, NON_DIFFERENTIABLE_DENOISERS, validate_options
 from ..validate import ParameterError, check_int
+
+__doc__ += parameter_table()
 
 #: A camera move after which fewer pixels than this fraction reproject into the history is a
 #: cut: no pixel of the frame reads the history.
 CUT_HIT_FRACTION = 0.1
-
-_adjoint.register_non_differentiable(
-    "tonemap_samples", lambda o: bool(o.get("tonemap_samples", False)),
-    "False for gradients (per-sample tone mapping is not part of the differentiated image)")
 
 @dataclass
 class _PrimalFrame:
@@ -184,16 +91,6 @@ def _tensor_to_color(tensor, frame: Frame, name: str) -> mi.Color3f:
         raise ParameterError(name, f"<tensor of shape {shape}>",
                              f"a tensor of shape {(frame.height, frame.width, 3)}")
     return dr.unravel(mi.Color3f, tensor.array)
-
-
-def _reconstruct_module():
-    from .. import reconstruct
-    return reconstruct
-
-
-def _postprocess_module():
-    from .. import postprocess
-    return postprocess
 
 
 class FoveatedIntegrator(mi.SamplingIntegrator):
@@ -217,15 +114,15 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                         raise ParameterError(f"nested integrator {name!r}", type(obj).__name__,
                                              "a single nested integrator")
                     nested = obj
-                elif name in DEFAULTS:
+                elif name in SCHEMA:
                     v = props.get(name)
-                    if name == "gaze":
+                    if SCHEMA[name].kind == "point":      # an XML <point>: x and y
                         v = (float(v[0]), float(v[1]))
                     options[name] = v
                 else:
                     raise ParameterError(name, props.get(name),
                                          "a parameter of the foveated integrator: "
-                                         + ", ".join(sorted(DEFAULTS)))
+                                         + ", ".join(sorted(SCHEMA)))
         if nested is None:
             nested = mi.load_dict({"type": "path"})
         self.nested: mi.SamplingIntegrator = nested
@@ -273,7 +170,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         raise AttributeError(name)
 
     def __setattr__(self, name, value):
-        if name in DEFAULTS and "_options" in self.__dict__:
+        if name in SCHEMA and "_options" in self.__dict__:
             self.set_options(**{name: value})
         else:
             super().__setattr__(name, value)
@@ -339,10 +236,13 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         return mi.TensorXf(dr.ravel(image), shape=(frame.height, frame.width, 3))
 
     def _check_differentiable(self) -> None:
-        _adjoint.check_differentiable(self._options)
-        denoiser = self._options["denoiser"]
-        if denoiser in NON_DIFFERENTIABLE_DENOISERS:
+        try:
+            _adjoint.check_differentiable(self._options)
+        except ParameterError as e:
+            if e.name != "denoiser":
+                raise
             # A gradient of another image than the one shown would mislead an optimisation.
+            denoiser = e.value
             how = ("preset = 'auto' chose it for a frame rendered without gradients; render "
                    "the frame with mi.render(scene, params, ...) or set preset='guided'"
                    if self._given.get("preset", "auto") == "auto"
@@ -350,7 +250,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                    "preset='guided' (or denoiser='svgf', 'atrous' or 'none') for gradients")
             raise ParameterError("denoiser", denoiser,
                                  f"a differentiable denoiser ({denoiser} is not "
-                                 f"differentiable): {how}")
+                                 f"differentiable): {how}") from None
 
     def _prepare_gradients(self) -> None:
         """Called by a primal frame that ``mi.render`` will differentiate: from now on the
@@ -426,7 +326,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         with dr.suspend_grad():
             # A still camera over an unchanged scene reuses the last G-buffer.
             gb, reused = self._geometry.gbuffer(
-                scene, sensor, materials=o["demodulate"] or o["denoiser"] == "oidn", state=state)
+                scene, sensor, materials=o["demodulate"] or DENOISERS[o["denoiser"]].materials,
+                state=state)
             # Everything the G-buffer holds is evaluated with the pass: a lazy albedo would
             # re-run the BSDF dispatch in every later kernel, and would point into the scene
             # after the scene is gone (a gradient pass can outlive it).
@@ -491,8 +392,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         o = self._options
         if o["tonemap_samples"]:
             shade = shade._replace(radiance=dr.select(
-                shade.ok, _postprocess_module().tonemap(shade.radiance, o["tonemap"],
-                                                        o["exposure"]), 0.0))
+                shade.ok, tonemap(shade.radiance, o["tonemap"], o["exposure"]), 0.0))
         return _shading.develop(shade, frame.reordered.wavefront, frame.spp,
                                 frame.sensor.film(), o["pixel_filter"])
 
@@ -507,96 +407,23 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         function of ``shading.value``: a gradient pass runs this again on the primal frame's
         state, with the primal values carrying the gradient.
         """
-        o = self._options
+        o, gb = self._options, frame.gbuffer
         width, height = frame.width, frame.height
-        n = width * height
-        rec, post = _reconstruct_module(), _postprocess_module()
-        gb = frame.gbuffer
-        new, traced = shading.value, shading.mask
-        resolved = _reproject.resolve(new, traced, frame.spp, frame.reprojection,
+        # History resolve (Fig. 4): this frame's samples blended with the reprojected history.
+        resolved = _reproject.resolve(shading.value, shading.mask, frame.spp, frame.reprojection,
                                       frame.history, o["max_history"], shading.moment2)
         timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
-
-        radiance = resolved.shading
-        if o["demodulate"]:
-            radiance = demodulate(radiance, gb.albedo, gb.emission)
-        guided = rec.uses_guide(o["reconstruction"])
-        # sigma_p = 1 traces every pixel: a paper interpolation is then the identity (a pixel
-        # whose samples were all rejected stays 0, or keeps its history); a guided
-        # reconstruction still averages noisy samples.
-        every_pixel = o["sigma_p"] >= 1.0 and not guided
-        with dr.suspend_grad():
-            if every_pixel:
-                nearest = dr.arange(mi.UInt32, n)
-            else:
-                # No jump longer than the sampling law's largest gap (host scalars, no sync).
-                gap = _sampling.largest_gap(width, height, gaze=o["gaze"], theta=o["theta"],
-                                            sigma_p=o["sigma_p"])
-                nearest = rec.jump_flood(resolved.mask, width, height, variant=o["jfa"],
-                                         max_gap=gap)
-        if every_pixel:
-            filled = interpolated = radiance
-        else:
-            filled = rec.voronoi_fill(radiance, nearest)
-            if o["reconstruction"] == "voronoi":
-                interpolated = filled
-            else:
-                guide = rec.Guide(normal=gb.normal, position=gb.position, hit=gb.hit,
-                                  weight=resolved.count) if guided else None
-                interpolated = rec.reconstruct(
-                    o["reconstruction"], radiance, resolved.mask, nearest, width, height,
-                    max_radius=o["max_radius"], guide=guide, levels=o["guided_levels"],
-                    target_samples=o["target_samples"], jitter=o["stochastic_jitter"],
-                    tries=o["stochastic_tries"], inclusive=o["sibson_inclusive"],
-                    seed=_sampling.opaque_seed(frame.seed) ^ 0x6A09E667)
-        if o["tonemap_samples"]:
-            # Display values so far: back to radiance, so every later stage and buffer means
-            # what it means without the option (the à-trous pass maps them forth again,
-            # exactly: the round trip is the identity below the operator's cap).
-            filled = inverse_tonemap(filled, o["tonemap"], o["exposure"])
-            interpolated = inverse_tonemap(interpolated, o["tonemap"], o["exposure"])
-        timer.mark("reconstruct", nearest, filled, interpolated)
-
-        tonemapped = filtered = variance = None
-        image = interpolated
-        levels = o["atrous_iterations"]
-        if o["denoiser"] == "svgf" and levels > 0:
-            variance = _variance.estimate_variance(
-                _variance.sample_variance(resolved.shading, resolved.moment2, resolved.count,
-                                          resolved.mask, gb.normal, gb.hit, width, height),
-                resolved.count, resolved.mask, nearest,
-                samples=(dr.opaque(mi.Float, o["target_samples"]) + dr.zeros(mi.Float, n)
-                         if o["reconstruction"] == "guided" else None),
-                albedo=gb.albedo if o["demodulate"] else None)
-            image = filtered = post.svgf(interpolated, variance, gb.normal, gb.position, gb.hit,
-                                         width, height, iterations=levels,
-                                         sigma_luminance=o["sigma_luminance"])
-        if o["demodulate"]:
-            filled = remodulate(filled, gb.albedo, gb.emission)
-            interpolated = remodulate(interpolated, gb.albedo, gb.emission)
-            # Spreading E from a dark site to a brighter albedo scales it by a_q / a_min:
-            # keep the clamp's promise that nothing above it reaches the image.
-            image = dr.minimum(remodulate(image, gb.albedo, gb.emission),
-                               dr.opaque(mi.Float, o["clamp"]))
-            if filtered is not None:
-                filtered = image
-        if o["denoiser"] == "atrous" and levels > 0:
-            tonemapped = post.tonemap(image, o["tonemap"], o["exposure"])
-            filtered = post.atrous(tonemapped, gb.normal, gb.position, width, height,
-                                   iterations=levels,
-                                   sigma_color=o["sigma_color"], sigma_normal=o["sigma_normal"],
-                                   sigma_position=o["sigma_position"], valid=gb.hit)
-            image = inverse_tonemap(filtered, o["tonemap"], o["exposure"])
-        elif o["denoiser"] == "oidn" and not grad_pass:
-            # A stage boundary (OIDN runs outside Dr.Jit, on the frame's buffers) and not
-            # differentiable: a gradient pass of such a frame raises before it gets here.
-            image = filtered = post.oidn(image, gb.albedo, gb.normal, width, height,
-                                         quality=o["oidn_quality"])
-        timer.mark("post", image)
-        buffers = {"traced": traced, "resolved": resolved, "nearest": nearest,
-                   "filled": filled, "interpolated": interpolated, "tonemapped": tonemapped,
-                   "filtered": filtered, "variance": variance, "image": image}
-        return image, buffers
+        # Reconstruction (§3.4): nearest sites, Voronoi fill and interpolation.
+        recon = reconstruction_pass(resolved, gb, frame.seed, width, height, o)
+        timer.mark("reconstruct", recon.nearest, recon.filled, recon.interpolated)
+        # Post-processing (§3.5): the registered denoiser, the albedo multiplied back.
+        post = post_pass(recon, resolved, gb, width, height, o, grad_pass)
+        timer.mark("post", post.image)
+        buffers = {"traced": shading.mask, "resolved": resolved, "nearest": recon.nearest,
+                   "filled": post.filled, "interpolated": post.interpolated,
+                   "tonemapped": post.tonemapped, "filtered": post.filtered,
+                   "variance": post.variance, "image": post.image}
+        return post.image, buffers
 
     def _finish_frame(self, frame: Frame, shade: _shading.ShadingResult,
                       buffers: dict[str, Any], timer: StageTimer) -> None:
@@ -675,7 +502,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             return None
         if name == "nearest":
             idx = v.numpy().astype(np.int64)
-            none = idx == _reconstruct_module().NO_SITE
+            none = idx == NO_SITE
             out = np.stack([idx % w, idx // w], -1).astype(np.float32)
             out[none] = -1
             return out.reshape(h, w, 2)

@@ -8,14 +8,22 @@ Pipeline order, as in the paper::
 
     tonemapped = tonemap(interpolated, operator, exposure)
     filtered   = atrous(tonemapped, normal, position, width, height, valid=hit)
+
+Denoisers and tone mappers are registries (:data:`DENOISERS`, :data:`TONEMAPPERS`): each
+registers in one line beside its code (:func:`register_denoiser`,
+:func:`register_tonemapper`).
 """
 from __future__ import annotations
 
 from ..frame._shared import B3_SPLINE
+from .registry import (DENOISERS, DenoiseInput, Denoised, register_denoiser,
+                       unregister_denoiser)
+from .tonemap import MAX_EXPOSURE, TONEMAPPERS, check_exposure, register_tonemapper, tonemap
+# Registration order is the order of the choices: none, atrous, svgf, oidn.
 from .atrous import atrous, check_sigma
-from .oidn import oidn
 from .svgf import svgf
-from .tonemap import MAX_EXPOSURE, TONEMAPPERS, check_exposure, tonemap
+from .oidn import oidn
 
-__all__ = ["B3_SPLINE", "MAX_EXPOSURE", "TONEMAPPERS", "atrous", "check_exposure", "check_sigma",
-           "oidn", "svgf", "tonemap"]
+__all__ = ["B3_SPLINE", "DENOISERS", "DenoiseInput", "Denoised", "MAX_EXPOSURE", "TONEMAPPERS",
+           "atrous", "check_exposure", "check_sigma", "oidn", "register_denoiser",
+           "register_tonemapper", "svgf", "tonemap", "unregister_denoiser"]

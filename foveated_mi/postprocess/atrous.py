@@ -78,7 +78,9 @@ import mitsuba as mi
 
 from ..validate import ParameterError, check_int, check_sigma  # noqa: F401 (re-exported)
 from ..frame._shared import HeldLevel, Surface, gather4, held_filter, packet
-from .tonemap import as_color3f
+from .inverse import inverse_tonemap
+from .registry import DenoiseInput, Denoised, register_denoiser
+from .tonemap import as_color3f, tonemap
 
 
 
@@ -206,3 +208,22 @@ def _atrous_level(c: mi.Color3f, surface: Surface, width: int, height: int, *, s
 
     y, = held_filter(c, HeldLevel(width, height, step, at, weight, label="atrous_taps"))
     return y
+
+
+def atrous_stage(ctx: DenoiseInput) -> Denoised:
+    """The ``atrous`` denoiser of a frame (paper §3.5): tone mapping, the à-trous filter in
+    the display domain, and the inverse tone map back to radiance."""
+    o, gb = ctx.options, ctx.gbuffer
+    levels = o["atrous_iterations"]
+    if levels == 0:
+        return Denoised(ctx.image)
+    tonemapped = tonemap(ctx.image, o["tonemap"], o["exposure"])
+    filtered = atrous(tonemapped, gb.normal, gb.position, ctx.width, ctx.height,
+                      iterations=levels, sigma_color=o["sigma_color"],
+                      sigma_normal=o["sigma_normal"], sigma_position=o["sigma_position"],
+                      valid=gb.hit)
+    image = inverse_tonemap(filtered, o["tonemap"], o["exposure"])
+    return Denoised(image, filtered=filtered, tonemapped=tonemapped)
+
+
+register_denoiser("atrous", atrous_stage, differentiable=True)

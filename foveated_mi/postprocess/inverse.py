@@ -13,6 +13,9 @@ Mitsuba integrator by inverting the operator:
 - ``uncharted2``: :math:`r = y^{1/2.2} U(11.2) + E/F`, then the non-negative root of
   :math:`A(r-1)u^2 + B(r-C)u + D(rF-E) = 0` and :math:`x = u / 2 / 2^e`; inputs at the
   curve's limit come back as the cap of the forward operator.
+
+Each inverse sits beside its operator in :mod:`foveated_mi.postprocess.tonemap`, registered
+with it (:func:`~foveated_mi.postprocess.tonemap.register_tonemapper`).
 """
 from __future__ import annotations
 
@@ -20,45 +23,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..validate import check_choice
-from .tonemap import TONEMAPPERS, check_exposure
-
-_Y_MAX = 1.0 - 2.0 ** -24
-
-
-def inverse_reinhard(y: mi.Color3f) -> mi.Color3f:
-    y = dr.clip(y, 0.0, _Y_MAX)
-    return y / (1.0 - y)
-
-
-def inverse_aces(y: mi.Color3f) -> mi.Color3f:
-    y = dr.clip(y, 0.0, 1.0)
-    a = 2.43 * y - 2.51
-    b = 0.59 * y - 0.03
-    c = 0.14 * y
-    disc = dr.sqrt(dr.maximum(b * b - 4.0 * a * c, 0.0))
-    return dr.maximum((-b - disc) / (2.0 * a), 0.0)
-
-
-def inverse_uncharted2(y: mi.Color3f) -> mi.Color3f:
-    from .tonemap import U2, U2_BIAS, U2_EXPONENT, U2_WHITE, _u2, _U2_CAP
-    A, B, C, D, E, F = (U2[k] for k in "ABCDEF")
-    y_max = float(_u2(U2_BIAS * _U2_CAP) / _u2(U2_WHITE)) ** U2_EXPONENT
-    y = dr.clip(y, 0.0, y_max)
-    r = dr.power(y, 1.0 / U2_EXPONENT) * _u2(U2_WHITE) + E / F
-    a = A * (r - 1.0)
-    b = B * (r - C)
-    c = D * (r * F - E)
-    disc = dr.sqrt(dr.maximum(b * b - 4.0 * a * c, 0.0))
-    u = dr.maximum((-b - disc) / (2.0 * a), 0.0)
-    return dr.minimum(u / U2_BIAS, _U2_CAP)
-
-
-INVERSE_TONEMAPPERS = {
-    "none": lambda y: y,
-    "reinhard": inverse_reinhard,
-    "aces": inverse_aces,
-    "uncharted2": inverse_uncharted2,
-}
+from .tonemap import INVERSE_TONEMAPPERS, TONEMAPPERS, check_exposure
 
 
 def inverse_tonemap(color: mi.Color3f, operator: str = "reinhard",

@@ -33,6 +33,7 @@ import numpy as np
 from .. import denoise as _dn
 from ..denoise import denoise
 from ..validate import ParameterError, check_choice
+from .registry import DenoiseInput, Denoised, register_denoiser
 
 
 def _host(v, width: int, height: int) -> np.ndarray:
@@ -123,3 +124,17 @@ def oidn(color: mi.Color3f, albedo: mi.Color3f | None, normal: mi.Vector3f | Non
                   hdr=True, quality=quality, clean_aux=clean_aux, device="cpu")
     return mi.Color3f(mi.Float(out[..., 0].ravel()), mi.Float(out[..., 1].ravel()),
                       mi.Float(out[..., 2].ravel()))
+
+
+def oidn_stage(ctx: DenoiseInput) -> Denoised:
+    """The ``oidn`` denoiser of a frame: :func:`oidn` on the radiance, guided by the
+    G-buffer's albedo and normal (a stage boundary)."""
+    gb = ctx.gbuffer
+    image = oidn(ctx.image, gb.albedo, gb.normal, ctx.width, ctx.height,
+                 quality=ctx.options["oidn_quality"])
+    return Denoised(image, filtered=image)
+
+
+register_denoiser("oidn", oidn_stage, differentiable=False, materials=True,
+                  available=lambda: _dn.oidn_available(),
+                  requirement=f"pyoidn installed ({_dn.INSTALL_HINT})")

@@ -42,8 +42,10 @@ import math
 import drjit as dr
 import mitsuba as mi
 
+from ..frame import variance as _variance
 from ..frame._shared import HeldLevel, Surface, gather4, held_filter, packet, pixel_xy, surface_energy
 from ..validate import ParameterError, check_int, check_range
+from .registry import DenoiseInput, Denoised, register_denoiser
 
 _G3 = (0.25, 0.5, 0.25)
 #: Floor of the colour weight's denominator (keeps the zero-variance case finite).
@@ -138,3 +140,28 @@ def _level(c: mi.Color3f, var: mi.Float, surface: Surface, width: int, height: i
     has = w_acc > 0
     inv = dr.rcp(dr.select(has, w_acc, 1.0))
     return y, dr.select(has, v_acc * inv * inv, var)
+
+
+def svgf_stage(ctx: DenoiseInput) -> Denoised:
+    """The ``svgf`` denoiser of a frame: the noise variance of each pixel's value
+    (:mod:`foveated_mi.frame.variance`), then :func:`svgf` on the reconstruction's values."""
+    o, gb, res = ctx.options, ctx.gbuffer, ctx.resolved
+    levels = o["atrous_iterations"]
+    if levels == 0:
+        return Denoised(ctx.image)
+    width, height = ctx.width, ctx.height
+    variance = _variance.estimate_variance(
+        _variance.sample_variance(res.shading, res.moment2, res.count, res.mask, gb.normal,
+                                  gb.hit, width, height),
+        res.count, res.mask, ctx.nearest,
+        samples=(dr.opaque(mi.Float, o["target_samples"]) + dr.zeros(mi.Float, width * height)
+                 if o["reconstruction"] == "guided" else None),
+        albedo=gb.albedo if o["demodulate"] else None)
+    filtered = svgf(ctx.image, variance, gb.normal, gb.position, gb.hit, width, height,
+                    iterations=levels, sigma_luminance=o["sigma_luminance"])
+    return Denoised(filtered, filtered=filtered, variance=variance)
+
+
+# Models the noise of radiance, so not on display values (tonemap_samples).
+register_denoiser("svgf", svgf_stage, differentiable=True, demodulated=True,
+                  display_values=False)

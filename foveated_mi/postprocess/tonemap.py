@@ -57,6 +57,20 @@ MAX_EXPOSURE = 64.0
 # and the cap keeps inf / inf and x^2 overflow from producing NaN.
 _REINHARD_CAP = 1e30
 _ACES_CAP = 1e4
+_Y_MAX = 1.0 - 2.0 ** -24
+
+#: Operator name -> function of the exposed linear colour, in registration order.
+TONEMAPPERS: dict = {}
+#: Operator name -> its inverse (:func:`foveated_mi.postprocess.inverse.inverse_tonemap`).
+INVERSE_TONEMAPPERS: dict = {}
+
+
+def register_tonemapper(name: str, fn, inverse) -> None:
+    """Make ``fn`` the tone-mapping operator ``name`` (``tonemap = name``); ``inverse`` maps
+    its display values back (the à-trous round trip, ``tonemap_samples``). The options, the
+    CLI and the docs learn of it from :data:`TONEMAPPERS`."""
+    TONEMAPPERS[name] = fn
+    INVERSE_TONEMAPPERS[name] = inverse
 
 
 def _sanitize(x):
@@ -70,6 +84,9 @@ def tonemap_none(x: mi.Color3f) -> mi.Color3f:
     return x
 
 
+register_tonemapper("none", tonemap_none, lambda y: y)
+
+
 def tonemap_reinhard(x: mi.Color3f) -> mi.Color3f:
     """Per-channel Reinhard ``x / (1 + x)``; NaN/negative -> 0, +inf -> 1."""
     x = dr.minimum(_sanitize(x), _REINHARD_CAP)
@@ -78,11 +95,31 @@ def tonemap_reinhard(x: mi.Color3f) -> mi.Color3f:
     return x / (1.0 + x)
 
 
+def inverse_reinhard(y: mi.Color3f) -> mi.Color3f:
+    y = dr.clip(y, 0.0, _Y_MAX)
+    return y / (1.0 - y)
+
+
+register_tonemapper("reinhard", tonemap_reinhard, inverse_reinhard)
+
+
 def tonemap_aces(x: mi.Color3f) -> mi.Color3f:
     """Narkowicz (2015) ACES fit; NaN/negative -> 0, +inf -> 1."""
     x = dr.minimum(_sanitize(x), _ACES_CAP)
     y = (x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)
     return dr.minimum(y, 1.0)   # y >= 0 for x >= 0: only the top needs the clamp
+
+
+def inverse_aces(y: mi.Color3f) -> mi.Color3f:
+    y = dr.clip(y, 0.0, 1.0)
+    a = 2.43 * y - 2.51
+    b = 0.59 * y - 0.03
+    c = 0.14 * y
+    disc = dr.sqrt(dr.maximum(b * b - 4.0 * a * c, 0.0))
+    return dr.maximum((-b - disc) / (2.0 * a), 0.0)
+
+
+register_tonemapper("aces", tonemap_aces, inverse_aces)
 
 
 #: Uncharted 2 constants of the authors' code (A..F, exposure bias, white point, exponent).
@@ -103,6 +140,22 @@ def tonemap_uncharted2(x: mi.Color3f) -> mi.Color3f:
     return dr.power(dr.maximum(y, 0.0), U2_EXPONENT)
 
 
+def inverse_uncharted2(y: mi.Color3f) -> mi.Color3f:
+    A, B, C, D, E, F = (U2[k] for k in "ABCDEF")
+    y_max = float(_u2(U2_BIAS * _U2_CAP) / _u2(U2_WHITE)) ** U2_EXPONENT
+    y = dr.clip(y, 0.0, y_max)
+    r = dr.power(y, 1.0 / U2_EXPONENT) * _u2(U2_WHITE) + E / F
+    a = A * (r - 1.0)
+    b = B * (r - C)
+    c = D * (r * F - E)
+    disc = dr.sqrt(dr.maximum(b * b - 4.0 * a * c, 0.0))
+    u = dr.maximum((-b - disc) / (2.0 * a), 0.0)
+    return dr.minimum(u / U2_BIAS, _U2_CAP)
+
+
+register_tonemapper("uncharted2", tonemap_uncharted2, inverse_uncharted2)
+
+
 def as_color3f(name: str, value) -> mi.Color3f:
     """``value`` as an ``mi.Color3f`` (any 3-component Dr.Jit array is converted)."""
     if isinstance(value, mi.Color3f):
@@ -110,16 +163,6 @@ def as_color3f(name: str, value) -> mi.Color3f:
     if dr.is_array_v(value) and dr.size_v(value) == 3 and dr.depth_v(value) == 2:
         return mi.Color3f(value)
     raise ParameterError(name, type(value).__name__, "an mi.Color3f (3 x N Dr.Jit array)")
-
-
-#: Operator name -> function of the exposed linear colour. A new operator is one function
-#: plus one line here.
-TONEMAPPERS = {
-    "none": tonemap_none,
-    "reinhard": tonemap_reinhard,
-    "aces": tonemap_aces,
-    "uncharted2": tonemap_uncharted2,
-}
 
 
 def check_exposure(exposure) -> float:

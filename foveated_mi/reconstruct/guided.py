@@ -61,6 +61,7 @@ import mitsuba as mi
 from ..frame._shared import HeldLevel, Surface, gather4, held_filter, packet, surface_energy
 from ..validate import ParameterError, check_int, check_range
 from .jfa import check_buffer, check_film, voronoi_fill
+from .registry import register_reconstruction
 
 
 class Guide(NamedTuple):
@@ -167,3 +168,6 @@ def _level(num: mi.Color3f, den: mi.Float, surface: Surface, width: int, height:
     # the 25-tap loop again.
     dr.schedule(n_acc, d_acc, g_acc)
     return n_acc, d_acc, g_acc
+
+
+register_reconstruction("guided", guided)

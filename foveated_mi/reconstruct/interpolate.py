@@ -42,6 +42,7 @@ import mitsuba as mi
 
 from ..validate import check_int
 from .jfa import check_buffer, check_film, site_distance2, voronoi_fill
+from .registry import register_reconstruction
 from .sat import box_sum, interleave_rgb0, summed_area_table
 
 
@@ -325,3 +326,9 @@ def fast_sibson(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, wid
     hi = dr.gather(mi.Color3f, hi, mi.UInt32(0))
     out = dr.replace_grad(dr.minimum(dr.maximum(dr.detach(out), lo), hi), out)
     return dr.select(r2 == 0, mi.Color3f(centre.x, centre.y, centre.z), out)
+
+
+register_reconstruction("voronoi", voronoi)
+register_reconstruction("sibson", sibson)
+register_reconstruction("discrete_sibson", discrete_sibson)
+register_reconstruction("fast_sibson", fast_sibson)

@@ -4,7 +4,8 @@ Every method has the signature ``fn(shading, site_mask, nearest, width, height, 
 max_radius=32, ...) -> mi.Color3f``. A method that also declares a ``guide`` keyword gets the
 frame's :class:`~foveated_mi.reconstruct.guided.Guide` (G-buffer and sample counts); the
 dispatcher passes each method only the keyword parameters it declares. A new method is one
-function plus one line here.
+function plus one registration line beside it, ``register_reconstruction("name", fn)``; the
+options, the CLI and the docs learn of it from :data:`RECONSTRUCTIONS`.
 """
 from __future__ import annotations
 
@@ -13,18 +14,14 @@ import inspect
 import mitsuba as mi
 
 from ..validate import check_choice, check_int
-from .guided import Guide, guided
-from .interpolate import discrete_sibson, fast_sibson, sibson, voronoi
-from .stochastic import stochastic
 
-RECONSTRUCTIONS = {
-    "voronoi": voronoi,
-    "sibson": sibson,
-    "discrete_sibson": discrete_sibson,
-    "fast_sibson": fast_sibson,
-    "guided": guided,
-    "stochastic": stochastic,
-}
+#: Method name -> function, in registration order.
+RECONSTRUCTIONS: dict = {}
+
+
+def register_reconstruction(name: str, fn) -> None:
+    """Make ``fn`` the reconstruction method ``name`` (``reconstruction = name``)."""
+    RECONSTRUCTIONS[name] = fn
 
 
 def uses_guide(method: str) -> bool:
@@ -33,7 +30,7 @@ def uses_guide(method: str) -> bool:
 
 
 def reconstruct(method: str, shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32,
-                width: int, height: int, *, max_radius: int = 32, guide: Guide | None = None,
+                width: int, height: int, *, max_radius: int = 32, guide=None,
                 **params) -> mi.Color3f:
     """Interpolate with the method named ``method`` (a key of :data:`RECONSTRUCTIONS`).
 

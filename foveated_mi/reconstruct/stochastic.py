@@ -32,6 +32,7 @@ import mitsuba as mi
 from ..validate import ParameterError, check_int, check_range
 from .guided import Guide
 from .jfa import NO_SITE, check_buffer, check_film
+from .registry import register_reconstruction
 
 #: Candidate on the same surface: cosine between normals and relative tangent-plane distance.
 SAME_SURFACE_COS = 0.9
@@ -100,3 +101,6 @@ def stochastic(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, widt
     finite = dr.isfinite(value.x) & dr.isfinite(value.y) & dr.isfinite(value.z)
     value = dr.select(finite, value, 0.0)
     return dr.gather(mi.Color3f, value, chosen, has_site)
+
+
+register_reconstruction("stochastic", stochastic)

@@ -351,16 +351,11 @@ def _metrics(ctx: TableContext, table: Any) -> tuple[dict, dict]:
     return out, perceptual
 
 
-def _option_module():
-    from ..integrators import foveated
-    return foveated
-
-
 def _option_names() -> list[str]:
-    """Keys a configuration may set: the integrator's options (from its own defaults) but
-    gaze and timing, plus spp and frames."""
-    fov = _option_module()
-    return [k for k in getattr(fov, "DEFAULTS", {}) if k not in _FORBIDDEN] + list(_EXTRA_KEYS)
+    """Keys a configuration may set: the integrator's options (the option schema) but gaze
+    and timing, plus spp and frames."""
+    from ..options import SCHEMA
+    return [k for k in SCHEMA if k not in _FORBIDDEN] + list(_EXTRA_KEYS)
 
 
 def _check_keys(ctx: TableContext, key: str, table: dict) -> None:
@@ -368,17 +363,17 @@ def _check_keys(ctx: TableContext, key: str, table: dict) -> None:
     for k, v in table.items():
         if k in _FORBIDDEN:
             raise ctx.error(f"{key}.{k}", v, _FORBIDDEN[k])
-        if len(names) > len(_EXTRA_KEYS) and k not in names:
+        if k not in names:
             raise ctx.error(f"{key}.{k}", v, "a known key (unknown option; allowed: "
                             + ", ".join(sorted(names)) + ")")
 
 
 def _check_options(ctx: TableContext, key: str, options: dict, where: dict[str, str]) -> dict:
     """Validate one configuration; ``where`` maps an option to its dotted TOML key."""
-    fov = _option_module()
+    from ..options import validate_options
     opts = {k: v for k, v in options.items() if k not in _EXTRA_KEYS}
     try:
-        full = fov.validate_options(dict(opts))
+        full = validate_options(dict(opts))
     except ParameterError as e:
         raise ctx.error(where.get(e.name, f"{key}.{e.name}"), e.value, e.allowed) from None
     full.pop("gaze", None)

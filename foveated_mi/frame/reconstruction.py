@@ -1,0 +1,87 @@
+"""Reconstruction pass (Kwon et al. 2019, §3.4): the resolved shading buffer to a full image.
+
+From the resolved shading buffer (:func:`foveated_mi.frame.reproject.resolve`) and the
+G-buffer: with ``demodulate`` the values become irradiance
+(:mod:`foveated_mi.frame.demodulate`), Jump Flooding finds each pixel's nearest site
+(``nearest``), the Voronoi fill copies its value (``filled``) and the method of
+``reconstruction`` (:data:`foveated_mi.reconstruct.RECONSTRUCTIONS`) interpolates
+(``interpolated``). With ``tonemap_samples`` the values are display values, mapped back to
+radiance here so that every later buffer means what it means without the option.
+
+Every weight here comes from the G-buffer, the sampling map or detached values: the result
+is a fixed function of the shading values (:mod:`foveated_mi.frame.adjoint`).
+"""
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import drjit as dr
+import mitsuba as mi
+
+from .. import reconstruct as rec
+from ..postprocess.inverse import inverse_tonemap
+from . import sampling as _sampling
+from .demodulate import demodulate
+from .gbuffer import GBuffer
+from .reproject import Resolved
+
+
+class Reconstruction(NamedTuple):
+    nearest: mi.UInt32          #: each pixel's nearest site (Jump Flooding)
+    filled: mi.Color3f          #: Voronoi fill
+    interpolated: mi.Color3f    #: the reconstruction method's image
+
+
+def reconstruction_pass(resolved: Resolved, gb: GBuffer, seed, width: int, height: int,
+                        o: dict[str, Any]) -> Reconstruction:
+    """``nearest``, ``filled`` and ``interpolated`` of a frame (module docstring); ``o``: the
+    integrator's options, ``seed``: the frame's Monte Carlo seed."""
+    radiance = resolved.shading
+    if o["demodulate"]:
+        radiance = demodulate(radiance, gb.albedo, gb.emission)
+    guided = rec.uses_guide(o["reconstruction"])
+    # sigma_p = 1 traces every pixel: a paper interpolation is then the identity (a pixel
+    # whose samples were all rejected stays 0, or keeps its history); a guided
+    # reconstruction still averages noisy samples.
+    every_pixel = o["sigma_p"] >= 1.0 and not guided
+    nearest = _nearest_sites(resolved.mask, width, height, o, every_pixel)
+    if every_pixel:
+        filled = interpolated = radiance
+    else:
+        filled = rec.voronoi_fill(radiance, nearest)
+        interpolated = filled if o["reconstruction"] == "voronoi" else _interpolate(
+            radiance, resolved, nearest, gb if guided else None, seed, width, height, o)
+    if o["tonemap_samples"]:
+        # Display values so far: back to radiance, so every later stage and buffer means
+        # what it means without the option (the à-trous pass maps them forth again,
+        # exactly: the round trip is the identity below the operator's cap).
+        filled = inverse_tonemap(filled, o["tonemap"], o["exposure"])
+        interpolated = inverse_tonemap(interpolated, o["tonemap"], o["exposure"])
+    return Reconstruction(nearest, filled, interpolated)
+
+
+def _nearest_sites(mask: mi.Bool, width: int, height: int, o: dict[str, Any],
+                   every_pixel: bool) -> mi.UInt32:
+    """Each pixel's nearest site by Jump Flooding (each pixel its own site when every pixel
+    is traced)."""
+    with dr.suspend_grad():
+        if every_pixel:
+            return dr.arange(mi.UInt32, width * height)
+        # No jump longer than the sampling law's largest gap (host scalars, no sync).
+        gap = _sampling.largest_gap(width, height, gaze=o["gaze"], theta=o["theta"],
+                                    sigma_p=o["sigma_p"])
+        return rec.jump_flood(mask, width, height, variant=o["jfa"], max_gap=gap)
+
+
+def _interpolate(values: mi.Color3f, resolved: Resolved, nearest: mi.UInt32,
+                 gb: GBuffer | None, seed, width: int, height: int,
+                 o: dict[str, Any]) -> mi.Color3f:
+    """The reconstruction method's image (``gb``: the G-buffer for guided methods)."""
+    guide = None if gb is None else rec.Guide(normal=gb.normal, position=gb.position,
+                                              hit=gb.hit, weight=resolved.count)
+    return rec.reconstruct(
+        o["reconstruction"], values, resolved.mask, nearest, width, height,
+        max_radius=o["max_radius"], guide=guide, levels=o["guided_levels"],
+        target_samples=o["target_samples"], jitter=o["stochastic_jitter"],
+        tries=o["stochastic_tries"], inclusive=o["sibson_inclusive"],
+        seed=_sampling.opaque_seed(seed) ^ 0x6A09E667)

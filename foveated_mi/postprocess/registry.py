@@ -1,0 +1,84 @@
+"""The denoiser registry: one uniform call per frame, one registration line per denoiser.
+
+A denoiser is a function of a :class:`DenoiseInput` (the reconstructed image, the G-buffer,
+the resolved shading buffer with its moments, the nearest sites, the film size, the options
+and whether this is a gradient pass) returning the filtered image, or a :class:`Denoised`
+with its intermediate buffers. It registers beside its code, as ``mi.register_integrator``
+does::
+
+    register_denoiser("svgf", svgf_stage, differentiable=True, demodulated=True)
+
+The options (validation, CLI flags, the docstring's parameter table) and the gradient pass
+learn of it from :data:`DENOISERS`. The post-processing pass
+(:func:`foveated_mi.frame.post.post_pass`) calls ``DENOISERS[name].fn(ctx)`` once per frame.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable, NamedTuple
+
+import mitsuba as mi
+
+
+class DenoiseInput(NamedTuple):
+    """What a denoiser may read of the frame (all flat per-pixel Dr.Jit buffers)."""
+    image: mi.Color3f            #: the reconstructed image, in the denoiser's domain
+    gbuffer: Any                 #: :class:`foveated_mi.frame.gbuffer.GBuffer`
+    resolved: Any                #: the resolved shading buffer (mean, moments, counts, mask)
+    nearest: mi.UInt32           #: each pixel's nearest site
+    width: int
+    height: int
+    options: dict[str, Any]      #: the integrator's validated options
+    grad_pass: bool = False      #: a gradient pass runs the image formation again
+
+
+class Denoised(NamedTuple):
+    """A denoiser's result: the image and the buffers it kept (``None`` where it has none)."""
+    image: mi.Color3f
+    filtered: mi.Color3f | None = None
+    tonemapped: mi.Color3f | None = None
+    variance: mi.Float | None = None
+
+
+class Denoiser(NamedTuple):
+    """A registered denoiser (see :func:`register_denoiser`)."""
+    fn: Callable[[DenoiseInput], "mi.Color3f | Denoised"]
+    differentiable: bool
+    demodulated: bool
+    materials: bool
+    display_values: bool
+    available: Callable[[], bool] | None
+    requirement: str
+
+
+#: Denoiser name -> :class:`Denoiser`, in registration order.
+DENOISERS: dict[str, Denoiser] = {}
+
+
+def register_denoiser(name: str, fn: Callable[[DenoiseInput], Any], *, differentiable: bool,
+                      demodulated: bool = False, materials: bool = False,
+                      display_values: bool = True, available: Callable[[], bool] | None = None,
+                      requirement: str = "") -> None:
+    """Make ``fn`` the denoiser ``name`` (the option value ``denoiser = name``).
+
+    ``differentiable``: a gradient pass may differentiate it (else a gradient pass of a
+    frame that used it raises, and the image formation skips it when run for gradients).
+    ``demodulated``: it filters the reconstruction's own values (irradiance with
+    ``demodulate``) before the albedo is multiplied back; else it filters radiance.
+    ``materials``: it reads the G-buffer's albedo and emission. ``display_values``: it also
+    works on tone-mapped samples (``tonemap_samples``). ``available``: whether its
+    dependency is installed; ``requirement`` says what to install."""
+    DENOISERS[name] = Denoiser(fn, bool(differentiable), bool(demodulated), bool(materials),
+                               bool(display_values), available, requirement)
+
+
+def unregister_denoiser(name: str) -> None:
+    """Remove the denoiser ``name`` (tests; a frame that uses it no longer validates)."""
+    DENOISERS.pop(name, None)
+
+
+def as_denoised(result: Any) -> Denoised:
+    """A denoiser's result as a :class:`Denoised` (a bare image is its filtered image)."""
+    return result if isinstance(result, Denoised) else Denoised(result, filtered=result)
+
+
+register_denoiser("none", lambda ctx: Denoised(ctx.image), differentiable=True)
