@@ -1,0 +1,86 @@
+"""A denoiser registered in one line is known to the options, the CLI, the docs, the gradient
+pass and the frame, without other edits; unregistered, it is gone again."""
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import gradcheck
+from foveated_mi.options import parameter_table, validate_options
+from foveated_mi.postprocess import DENOISERS, register_denoiser, unregister_denoiser
+from foveated_mi.validate import ParameterError
+from gradcheck import Probe
+
+
+CALLS = []
+
+
+def identity_stage(ctx):
+    CALLS.append(ctx.grad_pass)
+    return ctx.image
+
+
+@pytest.fixture
+def identity():
+    CALLS.clear()
+    register_denoiser("identity", identity_stage, differentiable=True)
+    yield "identity"
+    unregister_denoiser("identity")
+
+
+def _denoiser_row(table: str) -> str:
+    return table.split(" * - denoiser\n", 1)[1].split(" * - ", 1)[0]
+
+
+def test_validation_accepts_it_and_lists_it(identity):
+    assert validate_options({"denoiser": identity})["denoiser"] == identity
+    with pytest.raises(ParameterError) as e:
+        validate_options({"denoiser": "no-such-denoiser"})
+    msg = str(e.value)
+    assert "\n" not in msg and "'identity'" in msg and "'svgf'" in msg
+
+
+def test_cli_parses_and_lists_it(identity, capsys):
+    from foveated_mi.cli import build_parser, frame_options
+    args = build_parser().parse_args(["render", "cornell-box", "--denoiser", identity])
+    assert frame_options(args)["denoiser"] == identity
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["render", "--help"])
+    help_text = capsys.readouterr().out
+    assert "--denoiser" in help_text and identity in help_text
+
+
+def test_parameter_table_lists_it(identity):
+    assert identity in _denoiser_row(parameter_table())
+
+
+def test_a_frame_with_it_equals_the_unfiltered_frame(identity):
+    images = {}
+    for name in ("none", identity):
+        sc = gradcheck.scene("path", sigma_p=0.5, denoiser=name)
+        images[name] = np.array(mi.render(sc, seed=3, spp=2))
+        assert sc.integrator().stats["denoiser"] == name
+    assert np.isfinite(images["none"]).all() and images["none"].max() > 0
+    assert np.array_equal(images[identity], images["none"])
+    assert CALLS == [False]          # called once, by the primal frame
+
+
+def test_the_gradient_pass_runs_it_and_learns_its_differentiability(identity):
+    grads = {}
+    for name in ("none", identity):
+        grads[name] = Probe(gradcheck.scene("prb", denoiser=name), "albedo").reverse(0, 4)
+    assert grads["none"] != 0 and np.isfinite(grads["none"])
+    assert grads[identity] == pytest.approx(grads["none"], rel=1e-5)
+    assert CALLS == [False, True]    # the primal frame, then the gradient pass
+    # The same denoiser registered as not differentiable: the gradient pass refuses it.
+    register_denoiser(identity, lambda ctx: ctx.image, differentiable=False)
+    with pytest.raises(ParameterError, match="identity is not differentiable"):
+        Probe(gradcheck.scene("prb", denoiser=identity), "albedo").reverse(0, 4)
+
+
+def test_unregistered_it_is_gone():
+    register_denoiser("identity", lambda ctx: ctx.image, differentiable=True)
+    unregister_denoiser("identity")
+    assert "identity" not in DENOISERS
+    assert "identity" not in _denoiser_row(parameter_table())
+    with pytest.raises(ParameterError, match="denoiser = 'identity' is invalid"):
+        validate_options({"denoiser": "identity"})
