@@ -45,16 +45,14 @@ def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
 def run_sequence(cfg: SequenceConfig, *, out_dir: str | None = None, compare_full: bool = False,
                  progress: bool = True) -> list[dict[str, Any]]:
     """Render ``cfg`` and return the per-frame stats. Ctrl-C keeps what is written."""
-    from .io import encode_srgb8
     from .render import FrameRenderer
-    from .scenes import apply_camera, load_scene
+    from .scenes import load_scene
 
     out_dir = out_dir or cfg.output.dir
     os.makedirs(out_dir, exist_ok=True)
     scene = load_scene(cfg.scene, width=cfg.width, height=cfg.height, spp=cfg.spp,
                        integrator=cfg.integrator, camera=cfg.camera_at(0), **cfg.scene_params)
     fr = FrameRenderer(scene, {**cfg.foveated, "timing": True}, spp=cfg.spp)
-    integ = fr.integrator
     stats_path = os.path.join(out_dir, "stats.jsonl")
     tmp_stats = stats_path + ".partial"
     video, all_stats = [], []
@@ -66,29 +64,10 @@ def run_sequence(cfg: SequenceConfig, *, out_dir: str | None = None, compare_ful
     try:
         with open(tmp_stats, "w") as log:
             for i in range(cfg.frames):
-                cam = cfg.camera_at(i)
-                if cam is not None and i > 0:
-                    apply_camera(scene, cam)
-                if cfg.cut_before(i):
-                    integ.reset()
-                integ.gaze = cfg.gaze_at(i)
-                t0 = time.perf_counter()
-                res = fr.render_frame(seed=cfg.seed, compare_full=compare_full)
-                stats = {"frame": i, "time_s": cfg.time(i), "gaze": list(integ.gaze),
-                         **{k: v for k, v in res.stats.items() if k not in ("frame", "gaze")}}
-                stats["wall_ms"] = (time.perf_counter() - t0) * 1e3
-                name = os.path.join(out_dir, f"frame_{i:04d}")
-                if cfg.output.exr:
-                    res.write(name + ".exr") if cfg.output.png else _write_exr_only(res, name)
-                elif cfg.output.png:
-                    from .io import write_png
-                    write_png(name + ".png", res.image, exposure=res.exposure, tonemap=res.tonemap)
+                stats = _render_frame(cfg, i, scene, fr, out_dir, compare_full, video)
                 log.write(json.dumps(stats) + "\n")
                 log.flush()
                 all_stats.append(stats)
-                if cfg.output.video != "none":
-                    video.append(encode_srgb8(res.image, exposure=res.exposure,
-                                              tonemap=res.tonemap))
                 if bar is not None:
                     bar.set_postfix(ms=f"{stats['timings_ms']['total']:.0f}",
                                     hit=f"{stats['history_hit_rate']:.2f}")
@@ -113,6 +92,35 @@ def run_sequence(cfg: SequenceConfig, *, out_dir: str | None = None, compare_ful
     if interrupted:
         raise KeyboardInterrupt
     return all_stats
+
+
+def _render_frame(cfg: SequenceConfig, i: int, scene, fr, out_dir: str, compare_full: bool,
+                  video: list) -> dict[str, Any]:
+    """Frame ``i``: camera, cut and gaze of the config, the render, its files (and its video
+    frame appended to ``video``). Returns its stats."""
+    from .io import encode_srgb8
+    from .scenes import apply_camera
+    integ = fr.integrator
+    cam = cfg.camera_at(i)
+    if cam is not None and i > 0:
+        apply_camera(scene, cam)
+    if cfg.cut_before(i):
+        integ.reset()
+    integ.gaze = cfg.gaze_at(i)
+    t0 = time.perf_counter()
+    res = fr.render_frame(seed=cfg.seed, compare_full=compare_full)
+    stats = {"frame": i, "time_s": cfg.time(i), "gaze": list(integ.gaze),
+             **{k: v for k, v in res.stats.items() if k not in ("frame", "gaze")}}
+    stats["wall_ms"] = (time.perf_counter() - t0) * 1e3
+    name = os.path.join(out_dir, f"frame_{i:04d}")
+    if cfg.output.exr:
+        res.write(name + ".exr") if cfg.output.png else _write_exr_only(res, name)
+    elif cfg.output.png:
+        from .io import write_png
+        write_png(name + ".png", res.image, exposure=res.exposure, tonemap=res.tonemap)
+    if cfg.output.video != "none":
+        video.append(encode_srgb8(res.image, exposure=res.exposure, tonemap=res.tonemap))
+    return stats
 
 
 def _write_exr_only(res, name: str) -> None:

@@ -207,13 +207,32 @@ def develop_splat(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.
     ``samples.radiance`` (the weights depend only on the sample positions)."""
     width, height = (int(v) for v in film.crop_size())
     n = width * height
+    ray_of, pos, lum2, border = _splat_sources(samples, pixels, film)
+    acc, m2, wsum = _splat_gather(samples, pixels, spp, film, ray_of, pos, lum2, border)
+    if spp > 1:
+        acc, m2, wsum = (dr.block_sum(v, spp) for v in (acc, m2, wsum))
+    m2, wsum = dr.detach(m2), dr.detach(wsum)
+    accepted = dr.block_sum(mi.Float(samples.ok), spp) if spp > 1 else mi.Float(samples.ok)
+    holds = (accepted > 0) & (wsum > 0)
+    inv = dr.rcp(dr.select(holds, wsum, 1.0))
+    value, mask = scatter_to_film(acc * inv, holds, pixels, n)
+    moment = dr.zeros(mi.Float, n)
+    count = dr.zeros(mi.Float, n)
+    dr.scatter(moment, m2 * inv, pixels, holds)
+    dr.scatter(count, accepted, pixels, holds)
+    return ShadingBuffer(value, mask, moment, count)
+
+
+def _splat_sources(samples: ShadingResult, pixels: mi.UInt32, film: mi.Film):
+    """What every traced pixel's gather reads: the ray of each pixel (:data:`_NO_RAY` where
+    none), each sample's position in image-block pixels and its squared luminance, and the
+    block's border."""
+    width, height = (int(v) for v in film.crop_size())
+    n = width * height
     rfilter = film.rfilter()
-    radius = float(rfilter.radius())
     border = int(rfilter.border_size()) if film.sample_border() else 0
     off = film.crop_offset()
     rays = dr.width(pixels)
-    # Samples of pixel q lie in [q, q + 1): they reach pixel centres within radius + 1/2.
-    reach = max(0, math.ceil(radius + 0.5) - 1)
     ray_of = dr.full(mi.UInt32, _NO_RAY, n)
     dr.scatter(ray_of, dr.arange(mi.UInt32, rays), pixels)
     L = samples.radiance
@@ -223,7 +242,20 @@ def develop_splat(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.
     shift = mi.Point2f(float(off[0] - border) + 0.5, float(off[1] - border) + 0.5)
     pos = mi.Point2f(samples.position.x + float(off[0]), samples.position.y + float(off[1])) - shift
     dr.schedule(ray_of, pos, lum2)
+    return ray_of, pos, lum2, border
 
+
+def _splat_gather(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.Film,
+                  ray_of, pos, lum2, border: int):
+    """Per lane (ray x sample index): the filter-weighted sums of the samples of the same
+    index that reach its pixel, from the traced pixels within the filter's reach."""
+    width, height = (int(v) for v in film.crop_size())
+    rfilter = film.rfilter()
+    radius = float(rfilter.radius())
+    # Samples of pixel q lie in [q, q + 1): they reach pixel centres within radius + 1/2.
+    reach = max(0, math.ceil(radius + 0.5) - 1)
+    L = samples.radiance
+    rays = dr.width(pixels)
     lane = dr.arange(mi.UInt32, rays * spp)
     ray = lane // spp if spp > 1 else lane
     k = lane - ray * spp
@@ -251,18 +283,7 @@ def develop_splat(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.
             acc += dr.gather(mi.Color3f, L, src, valid) * w
             m2 += dr.gather(mi.Float, lum2, src, valid) * w
             wsum += w
-    if spp > 1:
-        acc, m2, wsum = (dr.block_sum(v, spp) for v in (acc, m2, wsum))
-    m2, wsum = dr.detach(m2), dr.detach(wsum)
-    accepted = dr.block_sum(mi.Float(samples.ok), spp) if spp > 1 else mi.Float(samples.ok)
-    holds = (accepted > 0) & (wsum > 0)
-    inv = dr.rcp(dr.select(holds, wsum, 1.0))
-    value, mask = scatter_to_film(acc * inv, holds, pixels, n)
-    moment = dr.zeros(mi.Float, n)
-    count = dr.zeros(mi.Float, n)
-    dr.scatter(moment, m2 * inv, pixels, holds)
-    dr.scatter(count, accepted, pixels, holds)
-    return ShadingBuffer(value, mask, moment, count)
+    return acc, m2, wsum
 
 
 def develop(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.Film,

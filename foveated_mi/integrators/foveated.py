@@ -304,10 +304,15 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             # the exact preset before this primal frame, which the gradient pass reuses.
             self._prepare_gradients()
         timer = StageTimer(self._options["timing"])
+        # Decisions before tracing: G-buffer, reprojection, sampling map, wavefront.
         frame = self._prepare(scene, sensor, seed, spp, timer, state)
+        # Sparse shading (§3.3): the nested integrator traces the wavefront only.
         shade = self._shade(scene, frame)
+        # The samples into the sparse shading buffer (the seam of the gradient pass).
         shading = self._develop(shade, frame)
+        # History resolve, reconstruction and post-processing.
         image, buffers = self._form_image(frame, shading, timer)
+        # The history, buffers and stats of this frame, and the frame a gradient pass reuses.
         self._finish_frame(frame, shade, buffers, timer)
         self._primal = _PrimalFrame(frame, shading, id(scene))
         return mi.TensorXf(dr.ravel(image), shape=(frame.height, frame.width, 3))
@@ -340,27 +345,10 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             cut = None
             if history is not None and self._camera_moved:
                 reproj, cut = _reproject.unless_cut(reproj, CUT_HIT_FRACTION)
-            # Without history a frame is a pure function of (scene, seed). With history,
-            # frame 0 uses the caller's seed as is (so sigma_p = 1 reproduces a plain render)
-            # and later frames decorrelate, so that the history converges under a fixed seed.
-            frame_seed = seed if (self._frame == 0 or not o["history"]) else \
-                int(mi.sample_tea_32(seed, self._frame)[0])
-            if cut is not None:
-                # After a cut the frame is a first frame, seeded as a fresh integrator's:
-                # chosen on the device, like the cut itself.
-                frame_seed = dr.select(cut, dr.opaque(mi.UInt32, seed),
-                                       dr.opaque(mi.UInt32, frame_seed))
+            frame_seed = self._frame_seed(seed, cut)
             map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
-
-            edges = None
-            if o["edge_threshold"] > 0:
-                edges = _sampling.depth_edges(gb.depth, gb.hit, width, height, o["edge_threshold"],
-                                              detector=o["edge_detector"])
-            smap, prob = _sampling.sampling_map(width, height, gaze=o["gaze"], theta=o["theta"],
-                                                sigma_p=o["sigma_p"], seed=map_seed,
-                                                edges=edges)
+            edges, smap, prob = _sampling.sampling_pass(gb, width, height, o, map_seed)
             timer.mark("sampling", smap, prob, reproj.hit, reproj.index, edges)
-
             ro = _reorder.reorder(smap, width, height, o["reorder"], o["block_height"])
             timer.mark("reorder", ro.wavefront)
         return Frame(sensor=sensor, width=width, height=height, spp=spp, seed=frame_seed,
@@ -368,6 +356,20 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                      probability=prob, reprojection=reproj, reordered=ro, history=history,
                      filter_sampler=self._filter_sampler(sensor, o["pixel_filter"]),
                      gbuffer_reused=reused)
+
+    def _frame_seed(self, seed: int, cut):
+        """The frame's Monte Carlo seed. Without history a frame is a pure function of
+        (scene, seed). With history, frame 0 uses the caller's seed as is (so sigma_p = 1
+        reproduces a plain render) and later frames decorrelate, so that the history
+        converges under a fixed seed."""
+        frame_seed = seed if (self._frame == 0 or not self._options["history"]) else \
+            int(mi.sample_tea_32(seed, self._frame)[0])
+        if cut is not None:
+            # After a cut the frame is a first frame, seeded as a fresh integrator's:
+            # chosen on the device, like the cut itself.
+            frame_seed = dr.select(cut, dr.opaque(mi.UInt32, seed),
+                                   dr.opaque(mi.UInt32, frame_seed))
+        return frame_seed
 
     def _filter_sampler(self, sensor: mi.Sensor, mode: str) -> FilterSampler:
         film = sensor.film()

@@ -110,6 +110,28 @@ def _check_buffer(name: str, value, n: int, kind: str):
         raise ParameterError(name, got, f"{kind} with width*height = {n} entries")
 
 
+def _check_buffers(color, normal, position, valid, n: int) -> None:
+    _check_buffer("color", color, n, "an mi.Color3f")
+    _check_buffer("normal", normal, n, "an mi.Array3f")
+    _check_buffer("position", position, n, "an mi.Array3f")
+    if valid is not None and not isinstance(valid, mi.Bool):
+        raise ParameterError("valid", type(valid).__name__, "an mi.Bool or None")
+    if valid is not None:
+        _check_buffer("valid", valid, n, "an mi.Bool")
+
+
+def _surface(normal, position, valid: mi.Bool | None) -> Surface:
+    """The G-buffer the weights read; a pixel with non-finite geometry is not valid."""
+    normal = mi.Array3f(normal)
+    position = mi.Array3f(position)
+    geo_ok = _all_finite(position) & _all_finite(normal)
+    if valid is None:
+        valid = geo_ok & (dr.squared_norm(normal) > 0.0)
+    else:
+        valid = valid & geo_ok
+    return Surface.of(normal, position, valid)
+
+
 def atrous(color: mi.Color3f, normal: mi.Array3f, position: mi.Array3f, width: int, height: int,
            *, iterations: int = 5, sigma_color: float = 0.5, sigma_normal: float = 0.5,
            sigma_position: float = 0.5, valid: mi.Bool | None = None) -> mi.Color3f:
@@ -138,26 +160,11 @@ def atrous(color: mi.Color3f, normal: mi.Array3f, position: mi.Array3f, width: i
     sigma_color = check_sigma("sigma_color", sigma_color)
     sigma_normal = check_sigma("sigma_normal", sigma_normal)
     sigma_position = check_sigma("sigma_position", sigma_position)
-    n = width * height
     color = as_color3f("color", color)
-    _check_buffer("color", color, n, "an mi.Color3f")
-    _check_buffer("normal", normal, n, "an mi.Array3f")
-    _check_buffer("position", position, n, "an mi.Array3f")
-    if valid is not None and not isinstance(valid, mi.Bool):
-        raise ParameterError("valid", type(valid).__name__, "an mi.Bool or None")
-    if valid is not None:
-        _check_buffer("valid", valid, n, "an mi.Bool")
+    _check_buffers(color, normal, position, valid, width * height)
     if iterations == 0:
         return color
-
-    normal = mi.Array3f(normal)
-    position = mi.Array3f(position)
-    geo_ok = _all_finite(position) & _all_finite(normal)
-    if valid is None:
-        valid = geo_ok & (dr.squared_norm(normal) > 0.0)
-    else:
-        valid = valid & geo_ok
-    surface = Surface.of(normal, position, valid)
+    surface = _surface(normal, position, valid)
 
     # Sigmas and the tap spacing enter as opaque scalars: every level, and every change
     # of a sigma, reuses one compiled kernel.

@@ -123,24 +123,27 @@ def _quads(p: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.stack([p, p + u, p + u + v, p + v], axis=1)
 
 
-def _voxel_city_mesh(size: int, seed: int) -> "mi.Mesh":
+def _base_colour(k: np.ndarray) -> np.ndarray:
+    """Colour of each cell kind (ground kinds, then one facade per building kind)."""
+    out = np.empty((k.size, 3), dtype=np.float32)
+    b = k >= _BUILDING
+    out[~b] = _KIND_COLOURS[k[~b]]
+    out[b] = _FACADES[k[b] - _BUILDING]
+    return out
+
+
+def _voxel_city_quads(size: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Corners (Q, 4, 3) in voxel units and colours (Q, 3) of the city's visible faces."""
     h, kind = voxel_city_heights(size, seed)
     n = size
     ii, jj = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
     ii, jj, hh, kk = ii.ravel(), jj.ravel(), h.ravel(), kind.ravel()
     ex, ey, ez = np.eye(3, dtype=np.float64)
 
-    def base_colour(k: np.ndarray) -> np.ndarray:
-        out = np.empty((k.size, 3), dtype=np.float32)
-        b = k >= _BUILDING
-        out[~b] = _KIND_COLOURS[k[~b]]
-        out[b] = _FACADES[k[b] - _BUILDING]
-        return out
-
     # Tops: one per cell (roofs are a darker facade colour).
     p = np.stack([ii, hh, jj], axis=1).astype(np.float64)
     corners = [_quads(p, np.broadcast_to(ez, p.shape), np.broadcast_to(ex, p.shape))]
-    top = base_colour(kk)
+    top = _base_colour(kk)
     top[kk >= _BUILDING] *= 0.6
     colours = [top]
 
@@ -160,16 +163,19 @@ def _voxel_city_mesh(size: int, seed: int) -> "mi.Mesh":
                  + np.repeat(hh - cnt, cnt))
         p = np.stack([ii[cell], level, jj[cell]], axis=1).astype(np.float64) + off
         corners.append(_quads(p, np.broadcast_to(u, p.shape), np.broadcast_to(v, p.shape)))
-        col = base_colour(kk[cell])
+        col = _base_colour(kk[cell])
         # Windows: every third storey, every other voxel along the facade; some lit.
         win = (kk[cell] >= _BUILDING) & (level % 3 == 1) & (along[cell] % 2 == 0)
         lit = hash_rng.random(total) < 0.2
         col[win] = _GLASS
         col[win & lit] = _LIT
         colours.append(col)
+    return np.concatenate(corners), np.concatenate(colours)
 
-    corners = np.concatenate(corners)            # (Q, 4, 3) in voxel units
-    colours = np.concatenate(colours)            # (Q, 3)
+
+def _voxel_city_mesh(size: int, seed: int) -> "mi.Mesh":
+    corners, colours = _voxel_city_quads(size, seed)     # (Q, 4, 3) voxel units, (Q, 3)
+    n = size
     q = corners.shape[0]
     # Voxel grid -> world: centred at the origin, CITY_EXTENT wide, y up.
     scale = CITY_EXTENT / n

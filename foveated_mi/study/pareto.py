@@ -78,8 +78,6 @@ def plot_pareto(rows: list[dict[str, Any]], metric: str, out_dir: str, *,
     (uniform + OIDN), the front as a step line with ringed points. Returns the two paths."""
     # A bare Figure (Agg canvas) rather than pyplot: no global backend switch and no figure
     # left in pyplot's state, so a notebook's inline plots keep working.
-    import matplotlib
-    import matplotlib.ticker
     from matplotlib.figure import Figure
     from ..io import atomic_write
 
@@ -92,50 +90,12 @@ def plot_pareto(rows: list[dict[str, Any]], metric: str, out_dir: str, *,
     axes = fig.subplots(nrows, cols, squeeze=False)
     recs = list(dict.fromkeys((_foveated_name(r), r["reconstruction"]) for r in rows
                               if r["method"] == "foveated"))
-    cmap = matplotlib.colormaps["tab10"]
-    sign = -1.0 if metric in LOWER_IS_BETTER else 1.0
     for k, scene in enumerate(scenes):
         ax = axes[k // cols][k % cols]
         sub = [r for r in rows if r["scene"] == scene]
-        for rec_i, (name, rec) in enumerate(recs):
-            pts = [(r["time_ms"], r[metric]) for r in sub
-                   if r["method"] == "foveated" and r["reconstruction"] == rec
-                   and _foveated_name(r) == name
-                   and math.isfinite(r["time_ms"]) and math.isfinite(r[metric])]
-            if pts:
-                x, y = zip(*pts)
-                ax.scatter(x, y, s=22, marker="o", color=cmap(rec_i % 10), alpha=0.8,
-                           label=f"{name}, {rec}")
-        for r in sub:                  # later frames (history) carry their frame number
-            if r["method"] == "foveated" and r["frame"] > 1 and \
-                    math.isfinite(r["time_ms"]) and math.isfinite(r[metric]):
-                ax.annotate(f"f{int(r['frame'])}", (r["time_ms"], r[metric]), fontsize=6,
-                            xytext=(3, 3), textcoords="offset points", alpha=0.7)
-        for method, style in _STYLE.items():
-            pts = [(r["time_ms"], r[metric]) for r in sub if r["method"] == method
-                   and math.isfinite(r["time_ms"]) and math.isfinite(r[metric])]
-            if pts:
-                x, y = zip(*pts)
-                ax.scatter(x, y, s=40, edgecolor="black", linewidth=0.5, **style)
-        front = fronts.get(scene, [])
-        if front:
-            fx = [r["time_ms"] for r in front]
-            fy = [r[metric] for r in front]
-            ax.step(fx, fy, where="post", color="black", linewidth=1.0, alpha=0.7,
-                    label="Pareto front")
-            ax.scatter(fx, fy, s=90, facecolor="none", edgecolor="black", linewidth=1.2)
-        ax.set_xscale("log")
-        fmt = matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}")
-        ax.xaxis.set_major_formatter(fmt)
-        xs = [r["time_ms"] for r in sub if math.isfinite(r["time_ms"]) and r["time_ms"] > 0]
-        if xs and max(xs) / min(xs) < 30:   # less than ~1.5 decades: label minor ticks too
-            ax.xaxis.set_minor_formatter(fmt)
-        ax.set_xlabel("time per frame (ms, log scale)")
-        ax.set_ylabel(metric + (" (lower is better)" if sign < 0 else ""))
-        ax.set_title(scene)
-        ax.grid(True, which="both", alpha=0.3)
-        if k == 0:
-            ax.legend(fontsize=7, loc="best")
+        _scatter_points(ax, sub, metric, recs)
+        _draw_front(ax, fronts.get(scene, []), metric)
+        _label_panel(ax, sub, metric, scene, legend=k == 0)
     for k in range(n, nrows * cols):
         axes[k // cols][k % cols].axis("off")
     if title:
@@ -149,6 +109,62 @@ def plot_pareto(rows: list[dict[str, Any]], metric: str, out_dir: str, *,
             fig.savefig(tmp, format=ext, dpi=120)
         paths.append(path)
     return paths[0], paths[1]
+
+
+def _finite(r: dict[str, Any], metric: str) -> bool:
+    return math.isfinite(r["time_ms"]) and math.isfinite(r[metric])
+
+
+def _scatter_points(ax, sub: list[dict[str, Any]], metric: str, recs: list) -> None:
+    """One scene's foveated points (circles by preset and reconstruction, later frames
+    numbered) and baselines (:data:`_STYLE`)."""
+    import matplotlib
+    cmap = matplotlib.colormaps["tab10"]
+    for rec_i, (name, rec) in enumerate(recs):
+        pts = [(r["time_ms"], r[metric]) for r in sub
+               if r["method"] == "foveated" and r["reconstruction"] == rec
+               and _foveated_name(r) == name and _finite(r, metric)]
+        if pts:
+            x, y = zip(*pts)
+            ax.scatter(x, y, s=22, marker="o", color=cmap(rec_i % 10), alpha=0.8,
+                       label=f"{name}, {rec}")
+    for r in sub:                  # later frames (history) carry their frame number
+        if r["method"] == "foveated" and r["frame"] > 1 and _finite(r, metric):
+            ax.annotate(f"f{int(r['frame'])}", (r["time_ms"], r[metric]), fontsize=6,
+                        xytext=(3, 3), textcoords="offset points", alpha=0.7)
+    for method, style in _STYLE.items():
+        pts = [(r["time_ms"], r[metric]) for r in sub if r["method"] == method
+               and _finite(r, metric)]
+        if pts:
+            x, y = zip(*pts)
+            ax.scatter(x, y, s=40, edgecolor="black", linewidth=0.5, **style)
+
+
+def _draw_front(ax, front: list[dict[str, Any]], metric: str) -> None:
+    """The Pareto front as a step line with ringed points."""
+    if front:
+        fx = [r["time_ms"] for r in front]
+        fy = [r[metric] for r in front]
+        ax.step(fx, fy, where="post", color="black", linewidth=1.0, alpha=0.7,
+                label="Pareto front")
+        ax.scatter(fx, fy, s=90, facecolor="none", edgecolor="black", linewidth=1.2)
+
+
+def _label_panel(ax, sub: list[dict[str, Any]], metric: str, scene: str, legend: bool) -> None:
+    """Log time axis, labels, title, grid (and the legend on the first panel)."""
+    import matplotlib.ticker
+    ax.set_xscale("log")
+    fmt = matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}")
+    ax.xaxis.set_major_formatter(fmt)
+    xs = [r["time_ms"] for r in sub if math.isfinite(r["time_ms"]) and r["time_ms"] > 0]
+    if xs and max(xs) / min(xs) < 30:   # less than ~1.5 decades: label minor ticks too
+        ax.xaxis.set_minor_formatter(fmt)
+    ax.set_xlabel("time per frame (ms, log scale)")
+    ax.set_ylabel(metric + (" (lower is better)" if metric in LOWER_IS_BETTER else ""))
+    ax.set_title(scene)
+    ax.grid(True, which="both", alpha=0.3)
+    if legend:
+        ax.legend(fontsize=7, loc="best")
 
 
 def _varying_options(rows: list[dict[str, Any]]) -> list[str]:

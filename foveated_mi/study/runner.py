@@ -125,41 +125,14 @@ def run_study(study: str | os.PathLike | StudySpec, *, out: str | None = None,
     :attr:`StudyResult.failed` (one line each) and the others go on. ``task_timeout``
     (seconds, Dask only): when no task finishes for that long the pending ones fail.
     """
-    import foveated_mi
-    from .. import perceptual
-    from ..denoise import INSTALL_HINT, oidn_available
-    from ..variant import choose_variant
     from . import tasks as T
     from .executors import make_executor
-    from .pareto import front_table, plot_pareto, scene_fronts
-    from .results import ResultsFile, columns, read_rows
 
     say = echo or (lambda s: None)
-    spec = study if isinstance(study, StudySpec) else load_study(study)
-    spec = spec.with_size(_size_arg(size))
-    if metric is not None and metric not in QUALITY_COLUMNS:
-        raise ParameterError("--metric", metric, "one of " + ", ".join(QUALITY_COLUMNS))
-    metric = metric or spec.metric
-    out_dir = out if out is not None else os.path.join("out", "studies", spec.name)
-    if executor == "local" or scheduler is None:
-        v = foveated_mi.set_variant(variant)   # the client renders (or starts the workers)
-    else:
-        v = choose_variant(variant)            # a remote cluster renders; validate the name
-
-    notes = []
-    for s in spec.scenes:
-        if s.missing:
-            notes.append(f"note: scene {s.label!r} skipped: optional XML file {s.name} "
-                         "not found")
-    have_oidn = oidn_available()
-    if not have_oidn and any(u["denoise"] and u.get("denoiser", "oidn") == "oidn"
-                             for u in spec.uniform):
-        notes.append("note: uniform+oidn baselines skipped: pyoidn is not installed "
-                     f"({INSTALL_HINT})")
-    with_jod = bool(spec.perceptual.get("jod")) and perceptual.available()
-    if spec.perceptual.get("jod") and not with_jod:
-        notes.append("note: no jod column: FovVideoVDP (pyfvvdp, torch) is not installed "
-                     f"({perceptual.INSTALL_HINT})")
+    spec, metric, out_dir, v = _prepare_study(study, out, executor, scheduler, size, metric,
+                                              variant)
+    # What this machine cannot run is skipped with a note, not an error.
+    notes, have_oidn, with_jod = _notes(spec)
     for n in notes:
         say(n)
     tasks = [{**t, "jod": with_jod} for t in T.expand_tasks(spec, v, denoise_available=have_oidn)]
@@ -176,30 +149,88 @@ def run_study(study: str | os.PathLike | StudySpec, *, out: str | None = None,
     result = StudyResult(spec=spec, out_dir=out_dir, results_path=results_path, metric=metric,
                          rows=[], tasks_total=len(tasks), notes=notes)
     try:
-        extra = perceptual.COLUMNS if with_jod else ()
-        with ResultsFile(results_path, columns(extra)) as results:
-            if results.repaired_bytes:
-                say(f"note: {results_path}: removed a partly written last line "
-                    f"({results.repaired_bytes} bytes)")
-            pending = []
-            for t in tasks:
-                todo = [f for f in t["frames"] if (t["task_id"], f) not in results.done]
-                if todo:
-                    pending.append({**t, "frames_todo": todo, "threads": ex.threads})
-            result.tasks_skipped = len(tasks) - len(pending)
-            say(f"study {spec.name}: {len(tasks)} tasks on {len(scenes)} scene(s), "
-                f"{result.tasks_skipped} already done, {len(pending)} to run "
-                f"({executor}, {v}) -> {out_dir}")
-            refs = _references(spec, scenes, pending, file_refs, out_dir, v, ex, progress,
-                               result, say)
-            _run_tasks(pending, refs, ex, results, progress, result, say)
+        # Tasks already in results.csv are skipped: a study resumes where it stopped.
+        _execute(tasks, scenes, file_refs, ex, with_jod, v, executor, progress, result, say)
     finally:
         ex.close()
+    _report(result, tasks, say)
+    return result
 
+
+def _prepare_study(study, out, executor, scheduler, size, metric, variant):
+    """The parsed study (at ``size``), its quality axis, output folder and variant."""
+    import foveated_mi
+    from ..variant import choose_variant
+    spec = study if isinstance(study, StudySpec) else load_study(study)
+    spec = spec.with_size(_size_arg(size))
+    if metric is not None and metric not in QUALITY_COLUMNS:
+        raise ParameterError("--metric", metric, "one of " + ", ".join(QUALITY_COLUMNS))
+    metric = metric or spec.metric
+    out_dir = out if out is not None else os.path.join("out", "studies", spec.name)
+    if executor == "local" or scheduler is None:
+        v = foveated_mi.set_variant(variant)   # the client renders (or starts the workers)
+    else:
+        v = choose_variant(variant)            # a remote cluster renders; validate the name
+    return spec, metric, out_dir, v
+
+
+def _notes(spec: StudySpec) -> tuple[list[str], bool, bool]:
+    """Notes on what is skipped (missing optional scenes, OIDN, FovVideoVDP), whether OIDN
+    and the JOD column are available."""
+    from .. import perceptual
+    from ..denoise import INSTALL_HINT, oidn_available
+    notes = []
+    for s in spec.scenes:
+        if s.missing:
+            notes.append(f"note: scene {s.label!r} skipped: optional XML file {s.name} "
+                         "not found")
+    have_oidn = oidn_available()
+    if not have_oidn and any(u["denoise"] and u.get("denoiser", "oidn") == "oidn"
+                             for u in spec.uniform):
+        notes.append("note: uniform+oidn baselines skipped: pyoidn is not installed "
+                     f"({INSTALL_HINT})")
+    with_jod = bool(spec.perceptual.get("jod")) and perceptual.available()
+    if spec.perceptual.get("jod") and not with_jod:
+        notes.append("note: no jod column: FovVideoVDP (pyfvvdp, torch) is not installed "
+                     f"({perceptual.INSTALL_HINT})")
+    return notes, have_oidn, with_jod
+
+
+def _execute(tasks, scenes, file_refs, ex, with_jod, v, executor, progress,
+             result: StudyResult, say) -> None:
+    """The references, then the tasks' frames not yet in ``results.csv``, appended to it."""
+    from .. import perceptual
+    from .results import ResultsFile, columns
+    extra = perceptual.COLUMNS if with_jod else ()
+    spec, results_path = result.spec, result.results_path
+    with ResultsFile(results_path, columns(extra)) as results:
+        if results.repaired_bytes:
+            say(f"note: {results_path}: removed a partly written last line "
+                f"({results.repaired_bytes} bytes)")
+        pending = []
+        for t in tasks:
+            todo = [f for f in t["frames"] if (t["task_id"], f) not in results.done]
+            if todo:
+                pending.append({**t, "frames_todo": todo, "threads": ex.threads})
+        result.tasks_skipped = len(tasks) - len(pending)
+        say(f"study {spec.name}: {len(tasks)} tasks on {len(scenes)} scene(s), "
+            f"{result.tasks_skipped} already done, {len(pending)} to run "
+            f"({executor}, {v}) -> {result.out_dir}")
+        refs = _references(spec, scenes, pending, file_refs, result.out_dir, v, ex, progress,
+                           result, say)
+        _run_tasks(pending, refs, ex, results, progress, result, say)
+
+
+def _report(result: StudyResult, tasks, say) -> None:
+    """The study's rows, Pareto plot and front table (written, and said)."""
+    from .pareto import front_table, plot_pareto, scene_fronts
+    from .results import read_rows
+    metric, results_path = result.metric, result.results_path
     ids = {t["task_id"] for t in tasks}
     result.rows = [r for r in read_rows(results_path) if r["task_id"] in ids]
-    result.png, result.svg = plot_pareto(result.rows, metric, out_dir,
-                                         title=f"{spec.name}: {metric} against time per frame")
+    result.png, result.svg = plot_pareto(result.rows, metric, result.out_dir,
+                                         title=f"{result.spec.name}: {metric} against time "
+                                         "per frame")
     result.front = scene_fronts(result.rows, metric)
     result.front_text = front_table(result.rows, metric)
     say(f"wrote {results_path} ({len(result.rows)} rows, {result.new_rows} new), "
@@ -210,7 +241,6 @@ def run_study(study: str | os.PathLike | StudySpec, *, out: str | None = None,
     say(result.front_text)
     for line in result.failed:
         say(line)
-    return result
 
 
 def _references(spec, scenes, pending, file_refs, out_dir, variant, ex, progress, result,
