@@ -10,14 +10,16 @@
 5   sparse shading         :mod:`.shading` (+ :mod:`.pixel_filter`)  §3.3 shading buffer
 6   history resolve        :mod:`.reproject`                        Fig. 4 history
 7   demodulation           :mod:`.demodulate`                       (noise-aware presets)
-8   reconstruction         :mod:`foveated_mi.reconstruct`           §3.4 JFA, Sibson
+8   reconstruction         :mod:`.reconstruction`                   §3.4 JFA, Sibson
 9   variance               :mod:`.variance`                         (SVGF)
-10  post-processing        :mod:`foveated_mi.postprocess`           §3.5 tone map, à-trous
+10  post-processing        :mod:`.post`                             §3.5 tone map, à-trous
 --  gradient pass          :mod:`.adjoint` (+ :mod:`.traced_sensor`)  the seam at shading
 ==  =====================  =====================================  ============================
 
 :mod:`._shared` holds the kernels several passes use (pixel coordinates, luminance, the 5x5
-tap walker, packets, the surface test). :class:`Frame` is what the first passes decide for
+tap walker, packets, the surface test). The reconstruction and post-processing passes call
+the registered methods of :mod:`foveated_mi.reconstruct` and :mod:`foveated_mi.postprocess`.
+:class:`Frame` is what the first passes decide for
 the rest of the frame; the integrator (:mod:`foveated_mi.integrators.foveated`) only runs the
 passes in this order.
 """
