@@ -24,12 +24,12 @@ import numpy as np
 import pytest
 
 from foveated_mi import denoise as D
-from foveated_mi import reproject
-from foveated_mi.pixel_filter import FilterSampler, SplatFootprint
+from foveated_mi.frame import reproject
+from foveated_mi.frame.pixel_filter import FilterSampler, SplatFootprint
 from foveated_mi.reconstruct import (interleave_rgb0, jump_flood, reconstruct,
                                      summed_area_table)
-from foveated_mi.reorder import reorder
-from foveated_mi.traced_sensor import TracedSensors, flat_layout
+from foveated_mi.frame.reorder import reorder
+from foveated_mi.frame.traced_sensor import TracedSensors, flat_layout
 from foveated_mi.validate import ParameterError
 
 W, H = 32, 24
