@@ -1,4 +1,11 @@
-r"""Options of the ``foveated`` integrator: defaults, presets and validation.
+r"""Options of the ``foveated`` integrator: the option schema, presets and validation.
+
+:data:`SCHEMA` is the one table of options (:class:`Option`: name, default, kind, range or
+choices, help, differentiability). :data:`DEFAULTS`, :func:`validate_options`, the CLI flags
+(:mod:`foveated_mi.cli`), the TOML keys of sequence and study files, the integrator's
+parameter table (:func:`parameter_table`) and what a gradient pass refuses
+(:func:`non_differentiable`) derive from it. The choices of ``reconstruction``, ``denoiser``
+and ``tonemap`` are their registries' names, read when asked.
 
 ``DEFAULTS`` is the paper's pipeline (Kwon et al. 2019). A *preset* replaces a group of
 defaults by a configuration tuned together; any option given explicitly wins over both:
