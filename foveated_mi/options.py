@@ -44,6 +44,7 @@ DEFAULTS: dict[str, Any] = {
     "pixel_filter": "splat",
     "block_height": 8,
     "edge_threshold": 0.1,
+    "emission_edges": False,
     "demodulate": False,
     "reconstruction": "sibson",
     "max_radius": 32,
@@ -73,8 +74,9 @@ DEFAULTS: dict[str, Any] = {
 PRESETS: dict[str, dict[str, Any]] = {
     "paper": {},
     "oidn": {"theta": 0.25, "sigma_p": 0.8, "demodulate": True, "reconstruction": "stochastic",
-             "denoiser": "oidn"},
-    "guided": {"demodulate": True, "reconstruction": "guided", "denoiser": "svgf"},
+             "denoiser": "oidn", "emission_edges": True},
+    "guided": {"demodulate": True, "reconstruction": "guided", "denoiser": "svgf",
+               "emission_edges": True},
 }
 PRESET_NAMES = ("auto", *PRESETS)
 DENOISERS = ("none", "atrous", "svgf", "oidn")
@@ -125,6 +127,7 @@ def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[s
         "pixel_filter": check_choice("pixel_filter", o["pixel_filter"], PIXEL_FILTERS),
         "block_height": check_int("block_height", o["block_height"], 1),
         "edge_threshold": check_range("edge_threshold", o["edge_threshold"], 0.0),
+        "emission_edges": check_bool("emission_edges", o["emission_edges"]),
         "demodulate": check_bool("demodulate", o["demodulate"]),
         "reconstruction": check_choice("reconstruction", o["reconstruction"],
                                        list(rec.RECONSTRUCTIONS)),

@@ -172,6 +172,8 @@ class Frame:
     history: _reproject.History | None         #: history this frame read (a constant)
     filter_sampler: FilterSampler
     gbuffer_reused: bool = False               #: the G-buffer is the previous frame's
+    fill_seed: int = 0                         #: seed of the stochastic fill (the render's)
+    emission_edges: mi.Bool | None = None      #: footprints across an emitter's edge
 
 
 @dataclass
@@ -252,6 +254,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._stats_cache: dict[str, Any] | None = None
         self._filter_samplers: dict[tuple, FilterSampler] = {}
         self._geometry = GeometryCache()
+        self._emission_cache: tuple | None = None
 
     # -- options --------------------------------------------------------------------------
     @property
@@ -289,6 +292,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._history = None
         self._frame = 0
         self._geometry.clear()
+        self._emission_cache = None
 
     @property
     def frame(self) -> int:
@@ -429,7 +433,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         with dr.suspend_grad():
             # A still camera over an unchanged scene reuses the last G-buffer.
             gb, reused = self._geometry.gbuffer(
-                scene, sensor, materials=o["demodulate"] or o["denoiser"] == "oidn", state=state)
+                scene, sensor, materials=o["demodulate"] or o["denoiser"] == "oidn"
+                or o["emission_edges"], state=state)
             # Everything the G-buffer holds is evaluated with the pass: a lazy albedo would
             # re-run the BSDF dispatch in every later kernel, and would point into the scene
             # after the scene is gone (a gradient pass can outlive it).
@@ -454,9 +459,14 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                        dr.opaque(mi.UInt32, frame_seed))
             map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
 
-            edges = None
+            edges = emitting = None
             if o["edge_threshold"] > 0:
                 edges = _sampling.depth_edges(gb.depth, gb.hit, width, height, o["edge_threshold"])
+            if o["emission_edges"]:
+                # Traced every frame, like a depth edge: their sparse estimate converges only
+                # where every pixel within the filter's reach is traced too.
+                emitting = self._emission_edges(gb, sensor, width, height)
+                edges = emitting if edges is None else edges | emitting
             smap, prob = _sampling.sampling_map(width, height, gaze=o["gaze"], theta=o["theta"],
                                                 sigma_p=o["sigma_p"], seed=map_seed,
                                                 edges=edges)
@@ -468,7 +478,20 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                      map_seed=map_seed, gbuffer=gb, edges=edges, sampling_map=smap,
                      probability=prob, reprojection=reproj, reordered=ro, history=history,
                      filter_sampler=self._filter_sampler(sensor, o["pixel_filter"]),
-                     gbuffer_reused=reused)
+                     gbuffer_reused=reused, fill_seed=seed, emission_edges=emitting)
+
+    def _emission_edges(self, gb: _gbuffer.GBuffer, sensor: mi.Sensor, width: int,
+                        height: int) -> mi.Bool:
+        """:func:`foveated_mi.gbuffer.emission_edges` of ``gb``, kept while the G-buffer is
+        reused (a still camera)."""
+        reach = _gbuffer.filter_reach(sensor.film())
+        cached = self._emission_cache
+        if cached is not None and cached[0] is gb.emission and cached[1] == reach:
+            return cached[2]
+        mask = _gbuffer.emission_edges(gb.emission, width, height, reach)
+        dr.schedule(mask)
+        self._emission_cache = (gb.emission, reach, mask)
+        return mask
 
     def _filter_sampler(self, sensor: mi.Sensor, mode: str) -> FilterSampler:
         film = sensor.film()
@@ -533,13 +556,16 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                 interpolated = filled
             else:
                 guide = rec.Guide(normal=gb.normal, position=gb.position, hit=gb.hit,
-                                  weight=resolved.count) if guided else None
+                                  weight=resolved.count,
+                                  emission_edge=frame.emission_edges) if guided else None
                 interpolated = rec.reconstruct(
                     o["reconstruction"], radiance, resolved.mask, nearest, width, height,
                     max_radius=o["max_radius"], guide=guide, levels=o["guided_levels"],
                     target_samples=o["target_samples"], jitter=o["stochastic_jitter"],
                     tries=o["stochastic_tries"],
-                    seed=_sampling.opaque_seed(frame.seed) ^ 0x6A09E667)
+                    # The render's seed, not the frame's: over a still view the fill keeps its
+                    # choices, so the frame changes only where new samples arrive.
+                    seed=_sampling.opaque_seed(frame.fill_seed) ^ 0x6A09E667)
         timer.mark("reconstruct", nearest, filled, interpolated)
 
         tonemapped = filtered = variance = None
