@@ -601,8 +601,9 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         elif o["denoiser"] == "oidn" and not grad_pass:
             # A stage boundary (host round trip) and not differentiable: a gradient pass
             # differentiates the frame without it.
-            image = filtered = post.oidn(image, gb.albedo, gb.normal, width, height,
-                                         quality=o["oidn_quality"])
+            image = filtered = dr.minimum(
+                post.oidn(image, gb.albedo, gb.normal, width, height, quality=o["oidn_quality"]),
+                dr.opaque(mi.Float, o["clamp"]))   # the network may overshoot its input
         timer.mark("post", image)
         buffers = {"traced": traced, "resolved": resolved, "nearest": nearest,
                    "filled": filled, "interpolated": interpolated, "tonemapped": tonemapped,
