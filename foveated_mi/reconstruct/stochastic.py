@@ -13,7 +13,9 @@ so the filled frame looks like a low-sample render whose noise the denoiser remo
    (both hit or both miss; for hits :math:`n_p \cdot n_c > 0.9` and
    :math:`|n_p \cdot (x_c - x_p)| < 0.2\,|x_c - x_p|`; with ``Guide.emission_edge``, both
    or neither with a filter footprint across an emitter's edge) is taken.
-3. Without one, :math:`p` takes its nearest site (the Voronoi fill).
+3. Without one, :math:`p` takes its nearest site (the Voronoi fill); with
+   ``Guide.emission_edge``, the first candidate on its side of an emitter's edge when the
+   nearest site is across it.
 
 A traced pixel keeps its own value. The random numbers come from a per-pixel hash of
 ``seed``, so a frame is reproducible. The ``foveated`` integrator passes the render's seed,
@@ -98,6 +100,12 @@ def stochastic(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, widt
 
     chosen = dr.select(site_mask, idx, nearest)
     done = mi.Bool(site_mask) | ~has_site
+    edge = None if guide.emission_edge is None else mi.Bool(guide.emission_edge)
+    if edge is not None:
+        # Fallback when no candidate is on the same surface: the nearest site, unless it lies
+        # across an emitter's edge from the pixel and a candidate does not.
+        own = dr.gather(mi.Bool, edge, idx)
+        settled = done | (dr.gather(mi.Bool, edge, nearest, has_site) == own)
     for t in range(tries):
         u1, u2 = mi.sample_tea_32(idx, seed + ((t * 0x9E3779B9) & 0xFFFFFFFF))
         rho = radius * dr.sqrt(mi.Float(u1) * 2.0 ** -32)
@@ -106,6 +114,10 @@ def stochastic(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, widt
         qy = dr.clip(dr.round(mi.Float(y) + rho * dr.sin(phi)), 0, height - 1)
         cand = dr.gather(mi.UInt32, nearest, mi.UInt32(qy) * width + mi.UInt32(qx), ~done)
         ok = ~done & (cand != NO_SITE)
+        if edge is not None:
+            alike = ok & ~settled & (dr.gather(mi.Bool, edge, cand, ok) == own)
+            chosen = dr.select(alike, cand, chosen)
+            settled |= alike
         ok &= same_surface(idx, dr.select(ok, cand, 0), guide, ok)
         chosen = dr.select(ok, cand, chosen)
         done |= ok
