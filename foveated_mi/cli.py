@@ -33,6 +33,10 @@ def _add_frame_options(p: argparse.ArgumentParser) -> None:
                    help="splat | importance: how samples honour the film's filter")
     p.add_argument("--block-height", type=int, dest="block_height")
     p.add_argument("--edge-threshold", type=float, dest="edge_threshold")
+    p.add_argument("--emission-edges", action=argparse.BooleanOptionalAction, default=None,
+                   dest="emission_edges",
+                   help="trace every frame the pixels whose filter footprint crosses an "
+                   "emitter's edge")
     p.add_argument("--reconstruction", help="voronoi | sibson | discrete_sibson | fast_sibson | "
                    "guided | stochastic")
     p.add_argument("--demodulate", action=argparse.BooleanOptionalAction, default=None,
@@ -60,7 +64,7 @@ def _add_frame_options(p: argparse.ArgumentParser) -> None:
 
 
 FRAME_OPTIONS = ("preset", "theta", "sigma_p", "gaze", "reorder", "pixel_filter", "block_height",
-                 "edge_threshold", "demodulate", "reconstruction", "max_radius", "target_samples",
+                 "edge_threshold", "emission_edges", "demodulate", "reconstruction", "max_radius", "target_samples",
                  "guided_levels", "stochastic_jitter", "stochastic_tries", "jfa", "denoiser",
                  "atrous_iterations", "sigma_color", "sigma_normal", "sigma_position",
                  "sigma_luminance", "oidn_quality", "tonemap", "exposure", "clamp",

@@ -6,15 +6,16 @@ defaults by a configuration tuned together; any option given explicitly wins ove
 ``paper``
     The paper as published: sampling map with θ = 0.1, σp = 0.8, approximate Sibson
     interpolation of radiance, the edge-avoiding à-trous filter in the tone-mapped domain.
+    Rays are forced at depth edges only (``emission_edges`` off).
 ``oidn``
     For a Monte Carlo nested integrator, best measured at equal time with Intel Open Image
     Denoise installed (``pip install foveated_mi[denoise]``): wider sampling (θ = 0.25),
     albedo demodulation, the stochastic surface-aware fill and OIDN. Not differentiable
-    (a gradient pass raises).
+    (a gradient pass raises). Emission edges are traced every frame (``emission_edges``).
 ``guided``
     The differentiable noise-aware pipeline, no extra dependency: albedo demodulation, the
     G-buffer-guided sparse reconstruction and the variance-guided à-trous filter (SVGF), which
-    stops smoothing where the history has converged. In ``benchmarks/bench_equal_time.py``
+    stops smoothing where the history has converged; emission edges traced every frame. In ``benchmarks/bench_equal_time.py``
     (640x360, frame 16, still gaze) ``guided`` at 2 spp is ahead of ``paper`` at 4 spp by
     +2.9 / +6.1 dB (frame / fovea) on the staircase in 337 against 371 ms, and by
     +2.1 / +8.5 dB on voxel-city in 272 against 228 ms.

@@ -197,3 +197,14 @@ def test_stochastic_fill_keeps_its_choices_over_a_still_view(cornell):
         prev = cur
     # Measured: 0.29 rising to 0.76 (a fill drawn afresh every frame: 0.02 to 0.05).
     assert len(kept) == 9 and np.mean(kept) > 0.4 and min(kept) > 0.2, kept
+
+
+def test_still_view_benchmark_runs_end_to_end(monkeypatch, capsys):
+    import os
+    monkeypatch.syspath_prepend(os.path.join(os.path.dirname(__file__), "..", "benchmarks"))
+    import bench_still_view
+    bench_still_view.main(["--size", "16x12", "--frames", "5", "--seeds", "1", "--ref-spp",
+                           "16", "--configs", "guided", "paper"])
+    rows = [r for r in capsys.readouterr().out.splitlines() if r.startswith("| guided")
+            or r.startswith("| paper")]
+    assert len(rows) == 2 and all(len(r.split("|")[5].split()) == 5 for r in rows)

@@ -22,7 +22,8 @@ Monte Carlo samples and its sampling map, so a frame is a pure function of the s
 ``s``. With ``history`` on, frame 0 (after :meth:`~FoveatedIntegrator.reset`) uses ``s`` and
 frame ``t > 0`` uses ``sample_tea_32(s, t)[0]``, so the history converges under a fixed ``s``.
 ``map_seed >= 0`` pins the sampling map to that seed whatever the frame (the Monte Carlo
-samples still follow the frame seed).
+samples still follow the frame seed). The stochastic fill always uses ``s``: over a still view
+it keeps its choices, and the frame changes only where new samples arrive.
 
 **Gradients** (:mod:`foveated_mi.adjoint`). ``mi.render(scene, params, ...)`` followed by
 ``dr.backward`` / ``dr.forward`` differentiates the *last primal frame* this integrator
@@ -78,6 +79,14 @@ mapping round trip when neither the filter nor the PNG needs it.
  * - edge_threshold
    - |float|
    - Relative depth jump that forces a ray, >= 0; 0 disables forced edge rays (default 0.1)
+ * - emission_edges
+   - |bool|
+   - Also force rays, every frame, at the pixels whose film-filter footprint holds both
+     emitted radiance (a light or the environment seen directly, from the G-buffer) and none,
+     and keep their values off other pixels in the ``guided`` and ``stochastic``
+     reconstructions (default false; true in the ``oidn`` and ``guided`` presets). A sparse
+     estimate of such a pixel never converges: it depends on which neighbours were traced
+     with it. See :func:`foveated_mi.gbuffer.emission_edges`
  * - demodulate
    - |bool|
    - Reconstruct and filter irradiance, albedo multiplied back (:mod:`foveated_mi.demodulate`)
