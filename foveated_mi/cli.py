@@ -34,6 +34,10 @@ def _add_frame_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--edge-threshold", type=float, dest="edge_threshold")
     p.add_argument("--edge-detector", dest="edge_detector",
                    help="relative | sobel: the depth-edge test that forces rays")
+    p.add_argument("--emission-edges", action=argparse.BooleanOptionalAction, default=None,
+                   dest="emission_edges",
+                   help="trace every frame the pixels whose filter footprint crosses an "
+                   "emitter's edge")
     p.add_argument("--reconstruction", help="voronoi | sibson | discrete_sibson | fast_sibson | "
                    "guided | stochastic")
     p.add_argument("--demodulate", action=argparse.BooleanOptionalAction, default=None,
@@ -67,8 +71,9 @@ def _add_frame_options(p: argparse.ArgumentParser) -> None:
 
 
 FRAME_OPTIONS = ("preset", "theta", "sigma_p", "gaze", "reorder", "pixel_filter", "block_height",
-                 "edge_threshold", "edge_detector", "demodulate", "reconstruction", "max_radius", "target_samples",
-                 "guided_levels", "stochastic_jitter", "stochastic_tries", "jfa", "sibson_inclusive", "denoiser",
+                 "edge_threshold", "edge_detector", "emission_edges", "demodulate", "reconstruction",
+                 "max_radius", "target_samples", "guided_levels", "stochastic_jitter",
+                 "stochastic_tries", "jfa", "sibson_inclusive", "denoiser",
                  "atrous_iterations", "sigma_color", "sigma_normal", "sigma_position",
                  "sigma_luminance", "oidn_quality", "tonemap", "tonemap_samples", "max_history", "exposure", "clamp",
                  "map_seed")

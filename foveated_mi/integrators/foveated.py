@@ -22,7 +22,8 @@ Monte Carlo samples and its sampling map, so a frame is a pure function of the s
 ``s``. With ``history`` on, frame 0 (after :meth:`~FoveatedIntegrator.reset`) uses ``s`` and
 frame ``t > 0`` uses ``sample_tea_32(s, t)[0]``, so the history converges under a fixed ``s``.
 ``map_seed >= 0`` pins the sampling map to that seed whatever the frame (the Monte Carlo
-samples still follow the frame seed).
+samples still follow the frame seed). The stochastic fill always uses ``s``: over a still view
+it keeps its choices, and the frame changes only where new samples arrive.
 
 **Gradients** (:mod:`foveated_mi.frame.adjoint`). ``mi.render(scene, params, ...)`` followed by
 ``dr.backward`` / ``dr.forward`` differentiates the *last primal frame* this integrator
@@ -82,6 +83,14 @@ mapping round trip when neither the filter nor the PNG needs it.
      the test in the authors' code (which does not call it), ``|Gx| + |Gy|`` of the 3x3
      Sobel filter on depth above the threshold (the authors use 0.99, in scene units).
      ``stats`` reports ``edge_rays`` and ``edge_fraction``
+ * - emission_edges
+   - |bool|
+   - Also force rays, every frame, at the pixels whose film-filter footprint holds both
+     emitted radiance (a light or the environment seen directly, from the G-buffer) and none,
+     and keep their values off other pixels in the ``guided`` and ``stochastic``
+     reconstructions (default false; true in the ``oidn`` and ``guided`` presets). A sparse
+     estimate of such a pixel never converges: it depends on which neighbours were traced
+     with it. See :func:`foveated_mi.frame.gbuffer.emission_edges`
  * - demodulate
    - |bool|
    - Reconstruct and filter irradiance, albedo multiplied back (:mod:`foveated_mi.frame.demodulate`)
@@ -248,6 +257,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._stats_cache: dict[str, Any] | None = None
         self._filter_samplers: dict[tuple, FilterSampler] = {}
         self._geometry = GeometryCache()
+        self._emission_cache: tuple | None = None
 
     # -- options --------------------------------------------------------------------------
     @property
@@ -288,6 +298,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._history = None
         self._frame = 0
         self._geometry.clear()
+        self._emission_cache = None
 
     @property
     def frame(self) -> int:
@@ -426,7 +437,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         with dr.suspend_grad():
             # A still camera over an unchanged scene reuses the last G-buffer.
             gb, reused = self._geometry.gbuffer(
-                scene, sensor, materials=o["demodulate"] or o["denoiser"] == "oidn", state=state)
+                scene, sensor, materials=o["demodulate"] or o["denoiser"] == "oidn"
+                or o["emission_edges"], state=state)
             # Everything the G-buffer holds is evaluated with the pass: a lazy albedo would
             # re-run the BSDF dispatch in every later kernel, and would point into the scene
             # after the scene is gone (a gradient pass can outlive it).
@@ -451,10 +463,15 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                        dr.opaque(mi.UInt32, frame_seed))
             map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
 
-            edges = None
+            edges = emitting = None
             if o["edge_threshold"] > 0:
                 edges = _sampling.depth_edges(gb.depth, gb.hit, width, height, o["edge_threshold"],
                                               detector=o["edge_detector"])
+            if o["emission_edges"]:
+                # Traced every frame, like a depth edge: their sparse estimate converges only
+                # where every pixel within the filter's reach is traced too.
+                emitting = self._emission_edges(gb, sensor, width, height)
+                edges = emitting if edges is None else edges | emitting
             smap, prob = _sampling.sampling_map(width, height, gaze=o["gaze"], theta=o["theta"],
                                                 sigma_p=o["sigma_p"], seed=map_seed,
                                                 edges=edges)
@@ -466,7 +483,20 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                      map_seed=map_seed, gbuffer=gb, edges=edges, sampling_map=smap,
                      probability=prob, reprojection=reproj, reordered=ro, history=history,
                      filter_sampler=self._filter_sampler(sensor, o["pixel_filter"]),
-                     gbuffer_reused=reused)
+                     gbuffer_reused=reused, fill_seed=seed, emission_edges=emitting)
+
+    def _emission_edges(self, gb: _gbuffer.GBuffer, sensor: mi.Sensor, width: int,
+                        height: int) -> mi.Bool:
+        """:func:`foveated_mi.frame.gbuffer.emission_edges` of ``gb``, kept while the G-buffer is
+        reused (a still camera)."""
+        reach = _gbuffer.filter_reach(sensor.film())
+        cached = self._emission_cache
+        if cached is not None and cached[0] is gb.emission and cached[1] == reach:
+            return cached[2]
+        mask = _gbuffer.emission_edges(gb.emission, width, height, reach)
+        dr.schedule(mask)
+        self._emission_cache = (gb.emission, reach, mask)
+        return mask
 
     def _filter_sampler(self, sensor: mi.Sensor, mode: str) -> FilterSampler:
         film = sensor.film()
@@ -542,13 +572,16 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                 interpolated = filled
             else:
                 guide = rec.Guide(normal=gb.normal, position=gb.position, hit=gb.hit,
-                                  weight=resolved.count) if guided else None
+                                  weight=resolved.count,
+                                  emission_edge=frame.emission_edges) if guided else None
                 interpolated = rec.reconstruct(
                     o["reconstruction"], radiance, resolved.mask, nearest, width, height,
                     max_radius=o["max_radius"], guide=guide, levels=o["guided_levels"],
                     target_samples=o["target_samples"], jitter=o["stochastic_jitter"],
                     tries=o["stochastic_tries"], inclusive=o["sibson_inclusive"],
-                    seed=_sampling.opaque_seed(frame.seed) ^ 0x6A09E667)
+                    # The render's seed, not the frame's: over a still view the fill keeps its
+                    # choices, so the frame changes only where new samples arrive.
+                    seed=_sampling.opaque_seed(frame.fill_seed) ^ 0x6A09E667)
         if o["tonemap_samples"]:
             # Display values so far: back to radiance, so every later stage and buffer means
             # what it means without the option (the à-trous pass maps them forth again,
@@ -590,8 +623,9 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         elif o["denoiser"] == "oidn" and not grad_pass:
             # A stage boundary (OIDN runs outside Dr.Jit, on the frame's buffers) and not
             # differentiable: a gradient pass of such a frame raises before it gets here.
-            image = filtered = post.oidn(image, gb.albedo, gb.normal, width, height,
-                                         quality=o["oidn_quality"])
+            image = filtered = dr.minimum(
+                post.oidn(image, gb.albedo, gb.normal, width, height, quality=o["oidn_quality"]),
+                dr.opaque(mi.Float, o["clamp"]))   # the network may overshoot its input
         timer.mark("post", image)
         buffers = {"traced": traced, "resolved": resolved, "nearest": nearest,
                    "filled": filled, "interpolated": interpolated, "tonemapped": tonemapped,
