@@ -65,8 +65,9 @@ CASES = [
     Case("prb", "emitter", {"pixel_filter": "importance"}),
     Case("direct_projective", "albedo"),
     Case("direct_projective", "emitter"),
-    Case("direct_projective", "translation", VISIBILITY, grad_spp=128, grad_seeds=6,
-         fd_spp=1024, fd_seeds=6),
+    # The boundary term by finite differences takes ~30 s: `make test-all`.
+    pytest.param(Case("direct_projective", "translation", VISIBILITY, grad_spp=128,
+                      grad_seeds=6, fd_spp=1024, fd_seeds=6), marks=pytest.mark.slow),
     Case("prb_projective", "albedo", {"reconstruction": "fast_sibson"}),
 ]
 
