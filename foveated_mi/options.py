@@ -29,17 +29,19 @@ defaults by a configuration tuned together; any option given explicitly wins ove
     ``edge_threshold = 0.99``; the preset keeps the relative depth jump (0.1), because the
     Sobel test in scene units marks 38 % (voxel-monument) to 78 % (voxel-city) of a 256²
     frame as edges, above every ray budget of the paper's Table 1 (3.3 % to 19.8 %).
+    Rays are forced at depth edges only (``emission_edges`` off).
 ``oidn``
     For a Monte Carlo nested integrator, best measured at equal time with Intel Open Image
     Denoise installed (``pip install -e '.[denoise]'`` from a clone): wider sampling (θ = 0.25),
     albedo demodulation, the stochastic surface-aware fill and OIDN. Not differentiable
-    (a gradient pass raises).
+    (a gradient pass raises). Emission edges are traced every frame (``emission_edges``).
 ``guided``
     The differentiable noise-aware pipeline, no extra dependency: albedo demodulation, the
     G-buffer-guided sparse reconstruction and the variance-guided à-trous filter (SVGF), which
-    stops smoothing where the history has converged. In ``benchmarks/bench_equal_time.py``
-    (640x360, frame 16, still gaze; measured against the earlier ``paper`` pipeline: compact
-    reorder, capped history, five à-trous levels) ``guided`` at 2 spp is ahead of it at 4 spp by
+    stops smoothing where the history has converged; emission edges traced every frame. In
+    ``benchmarks/bench_equal_time.py`` (640x360, frame 16, still gaze; measured against the
+    earlier ``paper`` pipeline: compact reorder, capped history, five à-trous levels)
+    ``guided`` at 2 spp is ahead of it at 4 spp by
     +2.9 / +6.1 dB (frame / fovea) on the staircase in 337 against 371 ms, and by
     +2.1 / +8.5 dB on voxel-city in 272 against 228 ms.
 ``auto`` (default)
@@ -216,6 +218,14 @@ _SCHEMA: tuple[Option, ...] = (
     Option("edge_threshold", 0.1, "float", "depth edges that force a ray (0 disables them)",
            lo=0.0, doc="Depth edges that force a ray; 0 disables them (see "
            "``edge_detector``). ``stats`` reports ``edge_rays`` and ``edge_fraction``"),
+    Option("emission_edges", False, "bool", "trace every frame the pixels whose filter "
+           "footprint crosses an emitter's edge",
+           doc="Also force rays, every frame, at the pixels whose film-filter footprint holds "
+           "both emitted radiance (a light or the environment seen directly, from the "
+           "G-buffer) and none, and keep their values off other pixels in the ``guided`` and "
+           "``stochastic`` reconstructions (true in the ``oidn`` and ``guided`` presets). A "
+           "sparse estimate of such a pixel never converges: it depends on which neighbours "
+           "were traced with it. See :func:`foveated_mi.frame.gbuffer.emission_edges`"),
     Option("demodulate", False, "bool", "reconstruct and filter irradiance (radiance / "
            "G-buffer albedo)", doc="Reconstruct and filter irradiance, albedo multiplied "
            "back (:mod:`foveated_mi.frame.demodulate`)"),
@@ -301,8 +311,9 @@ PRESETS: dict[str, dict[str, Any]] = {
               "atrous_iterations": 1, "sigma_color": 1.0, "sigma_normal": 1.0,
               "sigma_position": 1.0, "tonemap": "uncharted2"},
     "oidn": {"theta": 0.25, "sigma_p": 0.8, "demodulate": True, "reconstruction": "stochastic",
-             "denoiser": "oidn"},
-    "guided": {"demodulate": True, "reconstruction": "guided", "denoiser": "svgf"},
+             "denoiser": "oidn", "emission_edges": True},
+    "guided": {"demodulate": True, "reconstruction": "guided", "denoiser": "svgf",
+               "emission_edges": True},
 }
 PRESET_NAMES = ("auto", *PRESETS)
 

@@ -66,9 +66,12 @@ def test_reconstruction_adjoint_is_the_transpose(method, density):
     y = _color(rng.standard_normal((3, N)))
 
     normal, position, valid = _gbuffer()
-    # Unequal sample counts and a depth step, so that a guided method's weights matter.
+    # Unequal sample counts, a depth step and an emitter's edge (a strip of columns), so
+    # that a guided method's weights matter.
+    col = np.arange(N) % W
     guide = Guide(normal=mi.Normal3f(normal), position=mi.Point3f(position), hit=valid,
-                  weight=dr.select(mask, mi.Float(rng.integers(1, 9, N).astype(np.float32)), 0.0))
+                  weight=dr.select(mask, mi.Float(rng.integers(1, 9, N).astype(np.float32)), 0.0),
+                  emission_edge=mi.Bool((col >= W // 4) & (col < W // 4 + 3)))
 
     def A(v):
         return reconstruct(method, v, mask, nearest, W, H, max_radius=8, guide=guide,

@@ -17,7 +17,7 @@ def bench(monkeypatch):
 def test_tiny_run_reports_stages_kernels_and_speedup(bench, tmp_path, capsys):
     out = tmp_path / "overhead.json"
     assert bench.main(["--cases", "voxel-static", "--scale", "0.03125", "--frames", "1",
-                       "--warmup", "2", "--out", str(out)]) == 0
+                       "--warmup", "3", "--out", str(out)]) == 0
     r = json.loads(out.read_text())["results"][0]
     assert r["size"] == [32, 32] and r["preset"] == "paper"
     assert r["full_ms"] > 0 and r["frame_ms"] > 0

@@ -77,7 +77,7 @@ def test_one_ray_frame_is_finite_and_nonempty(preset):
     scene = sphere_scene(40, 30)
     opts = dict(reconstruction="sibson", max_radius=8) if preset == "paper" else {}
     integ = FoveatedIntegrator(preset=preset, theta=1e-6, sigma_p=1e-6, edge_threshold=0.0,
-                               atrous_iterations=0, **opts)
+                               emission_edges=False, atrous_iterations=0, **opts)
     img = np.array(mi.render(scene, integrator=integ))
     assert integ.stats["rays"] == 1 and integ.stats["lanes_active"] == 1
     assert np.all(np.isfinite(img)) and np.all(img >= 0)

@@ -32,7 +32,9 @@ PAPER_NOTEBOOKS = {
 }
 
 
-@pytest.mark.parametrize("name", sorted(PAPER_NOTEBOOKS))
+# Fig. 9 in `make test`; the heavier studies in `make test-all` (each runs a whole study).
+@pytest.mark.parametrize("name", [n if n == "paper_fig9" else pytest.param(n, marks=pytest.mark.slow)
+                                  for n in sorted(PAPER_NOTEBOOKS)])
 def test_paper_notebooks_execute_at_a_tiny_size(tmp_path, monkeypatch, name):
     monkeypatch.setenv("FOVEATED_MI_NB_SIZE", "32")
     monkeypatch.setenv("FOVEATED_MI_NB_OUT", str(tmp_path / "out"))
@@ -52,6 +54,7 @@ def test_paper_notebooks_execute_at_a_tiny_size(tmp_path, monkeypatch, name):
     assert os.listdir(tmp_path / "out")                     # results went where we said
 
 
+@pytest.mark.slow
 def test_inverse_rendering_notebook_executes_at_a_tiny_size(tmp_path, monkeypatch):
     """foveated(prb) and full-frame prb both lower the albedo error, and the notebook states
     the half-wall-time target's outcome from its own numbers."""

@@ -57,6 +57,7 @@ def study_file(tmp_path, text, name="study.toml"):
     return str(p)
 
 
+@pytest.mark.slow   # the EXR study below compares local and dask in `make test`
 @needs_dask
 def test_local_and_dask_give_identical_quality_columns(tmp_path):
     path = study_file(tmp_path, TWO)
@@ -115,6 +116,7 @@ def test_killed_study_resumes_without_duplicates(tmp_path):
     assert "already done" in rc.stdout
 
 
+@pytest.mark.slow
 @needs_dask
 def test_dead_worker_loses_only_its_running_task(tmp_path, monkeypatch):
     """On an existing cluster (--scheduler), a worker process that dies in the middle of a

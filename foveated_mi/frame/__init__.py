@@ -56,3 +56,5 @@ class Frame:
     history: History | None                    #: history this frame read (a constant)
     filter_sampler: FilterSampler
     gbuffer_reused: bool = False               #: the G-buffer is the previous frame's
+    fill_seed: int = 0                         #: seed of the stochastic fill (the render's)
+    emission_edges: mi.Bool | None = None      #: footprints across an emitter's edge

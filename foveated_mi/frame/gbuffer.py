@@ -11,11 +11,13 @@ albedo so that textures come from this full-resolution buffer, not from sparse s
 """
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
 
+from ..validate import check_int
 from ._shared import pixel_coords
 
 
@@ -85,3 +87,39 @@ def surface_radiometry(scene: mi.Scene, si: mi.SurfaceInteraction3f, hit: mi.Boo
     emission = emission + dr.zeros(mi.Color3f, dr.width(hit))
     clean = lambda c: dr.select(dr.isfinite(c) & (c > 0.0), c, 0.0)  # noqa: E731
     return clean(albedo), clean(emission)
+
+
+def filter_reach(film: mi.Film) -> int:
+    """Pixels, along each axis, from a pixel to the farthest pixel centre whose samples its
+    reconstruction filter weighs (at least 1: a pixel's own box may straddle an edge)."""
+    return max(1, math.ceil(float(film.rfilter().radius()) + 0.5) - 1)
+
+
+def emission_edges(emission: mi.Color3f, width: int, height: int, reach: int) -> mi.Bool:
+    """Pixels whose filter footprint straddles the edge of an emitter: within ``reach``
+    pixels (a square window) lie both a pixel that sees emitted radiance and one that does
+    not (the pixel centres of the G-buffer's ``emission``).
+
+    Such a pixel's radiance mixes a light's emission, often orders of magnitude brighter,
+    with its own surface's, by sub-pixel coverage; a sparse estimate of it is a lottery over
+    which samples reach it, and its value describes no surface it could be spread to."""
+    reach = check_int("reach", reach, 0, 64)
+    emits = (emission.x > 0) | (emission.y > 0) | (emission.z > 0)
+    _, x, y = pixel_coords(width, height)
+    x, y = mi.Int32(x), mi.Int32(y)
+    # Separable window: rows then columns, each an any and an all.
+    some, every = emits, emits
+    for axis in (0, 1):
+        s_acc, e_acc = some, every
+        for d in range(-reach, reach + 1):
+            if d == 0:
+                continue
+            if axis == 0:
+                q = mi.UInt32(y * width + dr.clip(x + d, 0, width - 1))
+            else:
+                q = mi.UInt32(dr.clip(y + d, 0, height - 1) * width + x)
+            s_acc = s_acc | dr.gather(mi.Bool, some, q)
+            e_acc = e_acc & dr.gather(mi.Bool, every, q)
+        some, every = s_acc, e_acc
+        dr.schedule(some, every)
+    return some & ~every

@@ -32,10 +32,14 @@ class Reconstruction(NamedTuple):
     interpolated: mi.Color3f    #: the reconstruction method's image
 
 
-def reconstruction_pass(resolved: Resolved, gb: GBuffer, seed, width: int, height: int,
-                        o: dict[str, Any]) -> Reconstruction:
+def reconstruction_pass(resolved: Resolved, gb: GBuffer, width: int, height: int,
+                        o: dict[str, Any], *, seed, emission_edges: mi.Bool | None = None
+                        ) -> Reconstruction:
     """``nearest``, ``filled`` and ``interpolated`` of a frame (module docstring); ``o``: the
-    integrator's options, ``seed``: the frame's Monte Carlo seed."""
+    integrator's options; ``seed``: the stochastic fill's (the render's seed, not the
+    frame's: over a still view the fill keeps its choices, so the frame changes only where
+    new samples arrive); ``emission_edges``: pixels that lend values only to each other in
+    the guided methods."""
     radiance = resolved.shading
     if o["demodulate"]:
         radiance = demodulate(radiance, gb.albedo, gb.emission)
@@ -49,8 +53,11 @@ def reconstruction_pass(resolved: Resolved, gb: GBuffer, seed, width: int, heigh
         filled = interpolated = radiance
     else:
         filled = rec.voronoi_fill(radiance, nearest)
+        guide = rec.Guide(normal=gb.normal, position=gb.position, hit=gb.hit,
+                          weight=resolved.count, emission_edge=emission_edges) \
+            if guided else None
         interpolated = filled if o["reconstruction"] == "voronoi" else _interpolate(
-            radiance, resolved, nearest, gb if guided else None, seed, width, height, o)
+            radiance, resolved.mask, nearest, guide, seed, width, height, o)
     if o["tonemap_samples"]:
         # Display values so far: back to radiance, so every later stage and buffer means
         # what it means without the option (the à-trous pass maps them forth again,
@@ -73,14 +80,11 @@ def _nearest_sites(mask: mi.Bool, width: int, height: int, o: dict[str, Any],
         return rec.jump_flood(mask, width, height, variant=o["jfa"], max_gap=gap)
 
 
-def _interpolate(values: mi.Color3f, resolved: Resolved, nearest: mi.UInt32,
-                 gb: GBuffer | None, seed, width: int, height: int,
-                 o: dict[str, Any]) -> mi.Color3f:
-    """The reconstruction method's image (``gb``: the G-buffer for guided methods)."""
-    guide = None if gb is None else rec.Guide(normal=gb.normal, position=gb.position,
-                                              hit=gb.hit, weight=resolved.count)
+def _interpolate(values: mi.Color3f, mask: mi.Bool, nearest: mi.UInt32, guide, seed,
+                 width: int, height: int, o: dict[str, Any]) -> mi.Color3f:
+    """The reconstruction method's image (``guide``: for guided methods)."""
     return rec.reconstruct(
-        o["reconstruction"], values, resolved.mask, nearest, width, height,
+        o["reconstruction"], values, mask, nearest, width, height,
         max_radius=o["max_radius"], guide=guide, levels=o["guided_levels"],
         target_samples=o["target_samples"], jitter=o["stochastic_jitter"],
         tries=o["stochastic_tries"], inclusive=o["sibson_inclusive"],

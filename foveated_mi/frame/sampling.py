@@ -202,14 +202,16 @@ def expected_fraction(width: int, height: int, *, gaze: tuple[float, float], the
     return float(np.mean(p))
 
 
-def sampling_pass(gb, width: int, height: int, o: dict, seed):
-    """The sampling pass of a frame: depth edges (none when ``edge_threshold = 0``) and the
-    sampling map of the options ``o`` drawn with ``seed``. Returns ``(edges, sampling_map,
-    probability)``."""
+def sampling_pass(gb, width: int, height: int, o: dict, seed, emitting: mi.Bool | None = None):
+    """The sampling pass of a frame: depth edges (none when ``edge_threshold = 0``), plus the
+    emission edges ``emitting`` when given, and the sampling map of the options ``o`` drawn
+    with ``seed``. Returns ``(edges, sampling_map, probability)``."""
     edges = None
     if o["edge_threshold"] > 0:
         edges = depth_edges(gb.depth, gb.hit, width, height, o["edge_threshold"],
                             detector=o["edge_detector"])
+    if emitting is not None:
+        edges = emitting if edges is None else edges | emitting
     smap, prob = sampling_map(width, height, gaze=o["gaze"], theta=o["theta"],
                               sigma_p=o["sigma_p"], seed=seed, edges=edges)
     return edges, smap, prob

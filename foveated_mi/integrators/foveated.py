@@ -22,7 +22,8 @@ Monte Carlo samples and its sampling map, so a frame is a pure function of the s
 ``s``. With ``history`` on, frame 0 (after :meth:`~FoveatedIntegrator.reset`) uses ``s`` and
 frame ``t > 0`` uses ``sample_tea_32(s, t)[0]``, so the history converges under a fixed ``s``.
 ``map_seed >= 0`` pins the sampling map to that seed whatever the frame (the Monte Carlo
-samples still follow the frame seed).
+samples still follow the frame seed). The stochastic fill always uses ``s``: over a still view
+it keeps its choices, and the frame changes only where new samples arrive.
 
 **Gradients** (:mod:`foveated_mi.frame.adjoint`). ``mi.render(scene, params, ...)`` followed by
 ``dr.backward`` / ``dr.forward`` differentiates the *last primal frame* this integrator
@@ -145,6 +146,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._stats_cache: dict[str, Any] | None = None
         self._filter_samplers: dict[tuple, FilterSampler] = {}
         self._geometry = GeometryCache()
+        self._emission_cache: tuple | None = None
 
     # -- options --------------------------------------------------------------------------
     @property
@@ -185,6 +187,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._history = None
         self._frame = 0
         self._geometry.clear()
+        self._emission_cache = None
 
     @property
     def frame(self) -> int:
@@ -331,8 +334,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         with dr.suspend_grad():
             # A still camera over an unchanged scene reuses the last G-buffer.
             gb, reused = self._geometry.gbuffer(
-                scene, sensor, materials=o["demodulate"] or DENOISERS[o["denoiser"]].materials,
-                state=state)
+                scene, sensor, materials=o["demodulate"] or o["emission_edges"]
+                or DENOISERS[o["denoiser"]].materials, state=state)
             # Everything the G-buffer holds is evaluated with the pass: a lazy albedo would
             # re-run the BSDF dispatch in every later kernel, and would point into the scene
             # after the scene is gone (a gradient pass can outlive it).
@@ -347,7 +350,11 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                 reproj, cut = _reproject.unless_cut(reproj, CUT_HIT_FRACTION)
             frame_seed = self._frame_seed(seed, cut)
             map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
-            edges, smap, prob = _sampling.sampling_pass(gb, width, height, o, map_seed)
+            # Traced every frame, like a depth edge: their sparse estimate converges only
+            # where every pixel within the filter's reach is traced too.
+            emitting = self._emission_edges(gb, sensor, width, height) \
+                if o["emission_edges"] else None
+            edges, smap, prob = _sampling.sampling_pass(gb, width, height, o, map_seed, emitting)
             timer.mark("sampling", smap, prob, reproj.hit, reproj.index, edges)
             ro = _reorder.reorder(smap, width, height, o["reorder"], o["block_height"])
             timer.mark("reorder", ro.wavefront)
@@ -355,7 +362,20 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                      map_seed=map_seed, gbuffer=gb, edges=edges, sampling_map=smap,
                      probability=prob, reprojection=reproj, reordered=ro, history=history,
                      filter_sampler=self._filter_sampler(sensor, o["pixel_filter"]),
-                     gbuffer_reused=reused)
+                     gbuffer_reused=reused, fill_seed=seed, emission_edges=emitting)
+
+    def _emission_edges(self, gb: _gbuffer.GBuffer, sensor: mi.Sensor, width: int,
+                        height: int) -> mi.Bool:
+        """:func:`foveated_mi.frame.gbuffer.emission_edges` of ``gb``, kept while the G-buffer is
+        reused (a still camera)."""
+        reach = _gbuffer.filter_reach(sensor.film())
+        cached = self._emission_cache
+        if cached is not None and cached[0] is gb.emission and cached[1] == reach:
+            return cached[2]
+        mask = _gbuffer.emission_edges(gb.emission, width, height, reach)
+        dr.schedule(mask)
+        self._emission_cache = (gb.emission, reach, mask)
+        return mask
 
     def _frame_seed(self, seed: int, cut):
         """The frame's Monte Carlo seed. Without history a frame is a pure function of
@@ -416,7 +436,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                       frame.history, o["max_history"], shading.moment2)
         timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
         # Reconstruction (§3.4): nearest sites, Voronoi fill and interpolation.
-        recon = reconstruction_pass(resolved, gb, frame.seed, width, height, o)
+        recon = reconstruction_pass(resolved, gb, width, height, o, seed=frame.fill_seed,
+                                    emission_edges=frame.emission_edges)
         timer.mark("reconstruct", recon.nearest, recon.filled, recon.interpolated)
         # Post-processing (§3.5): the registered denoiser, the albedo multiplied back.
         post = post_pass(recon, resolved, gb, width, height, o, grad_pass)

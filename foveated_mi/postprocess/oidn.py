@@ -130,8 +130,9 @@ def oidn_stage(ctx: DenoiseInput) -> Denoised:
     """The ``oidn`` denoiser of a frame: :func:`oidn` on the radiance, guided by the
     G-buffer's albedo and normal (a stage boundary)."""
     gb = ctx.gbuffer
-    image = oidn(ctx.image, gb.albedo, gb.normal, ctx.width, ctx.height,
-                 quality=ctx.options["oidn_quality"])
+    image = dr.minimum(oidn(ctx.image, gb.albedo, gb.normal, ctx.width, ctx.height,
+                            quality=ctx.options["oidn_quality"]),
+                       dr.opaque(mi.Float, ctx.options["clamp"]))   # the network may overshoot
     return Denoised(image, filtered=image)
 
 

@@ -25,7 +25,11 @@ the G-buffer only, never the noisy colour:
                    - \frac{(n_p \cdot (x_q - x_p))^2}{\sigma_x^2\, |x_q - x_p|^2}\Big),
 
 normal difference and distance to the tangent plane of :math:`p` relative to the distance
-(scale-free: a slanted plane is one surface at any depth; a step or a corner is not).
+(scale-free: a slanted plane is one surface at any depth; a step or a corner is not). With
+``Guide.emission_edge`` given, :math:`g = 0` between a pixel whose filter footprint straddles
+an emitter's edge and one whose footprint does not: the former's radiance holds a share of
+the light's emission (by sub-pixel coverage), which spread over the surface around the light
+would paint a glow on it.
 
 **Choosing the scale per pixel.** :math:`\bar D_{i}(p) = D_i(p) / \sum_t h_t g` is the local
 sample density at level :math:`i`; the cascade kernel after level :math:`i` has a variance of
@@ -70,6 +74,10 @@ class Guide(NamedTuple):
     position: mi.Point3f    #: G-buffer world position
     hit: mi.Bool            #: primary ray hit a surface
     weight: mi.Float        #: samples behind each pixel's value (0 where it holds none)
+    #: pixels whose filter footprint straddles an emitter's edge
+    #: (:func:`foveated_mi.frame.gbuffer.emission_edges`): their values mix a light's emission into
+    #: their surface's, so they lend values only to each other. ``None``: no such pixels.
+    emission_edge: mi.Bool | None = None
 
 
 #: Accumulated weights at or below this count as no sample (far below any real weight).
@@ -78,6 +86,24 @@ MIN_WEIGHT = 1e-20
 def level_variance(level: int) -> float:
     """Per-axis variance (px²) of the cascade kernel after levels ``0 .. level``."""
     return (4.0 ** (level + 1) - 1.0) / 3.0
+
+
+def _check_inputs(shading, site_mask, nearest, width, height, guide: Guide | None):
+    """The film size and the guide's emission edges (detached, or None), checked."""
+    width, height = check_film(width, height)
+    n = width * height
+    if guide is None:
+        raise ParameterError("guide", None, "a reconstruct.Guide (G-buffer normals, positions, "
+                             "hits and sample counts) for reconstruction 'guided'")
+    for name, value in (("shading", shading), ("site_mask", site_mask), ("nearest", nearest),
+                        ("guide.normal", guide.normal), ("guide.position", guide.position),
+                        ("guide.hit", guide.hit), ("guide.weight", guide.weight)):
+        check_buffer(name, value, n)
+    edge = guide.emission_edge
+    if edge is not None:
+        check_buffer("guide.emission_edge", edge, n)
+        edge = dr.detach(mi.Bool(edge))
+    return width, height, edge
 
 
 def guided(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: int,
@@ -89,15 +115,7 @@ def guided(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: i
     ``max_radius`` is accepted for the registry's uniform signature; the reach is set by
     ``levels`` (about ``2^(levels+1)`` px).
     """
-    width, height = check_film(width, height)
-    n = width * height
-    if guide is None:
-        raise ParameterError("guide", None, "a reconstruct.Guide (G-buffer normals, positions, "
-                             "hits and sample counts) for reconstruction 'guided'")
-    for name, value in (("shading", shading), ("site_mask", site_mask), ("nearest", nearest),
-                        ("guide.normal", guide.normal), ("guide.position", guide.position),
-                        ("guide.hit", guide.hit), ("guide.weight", guide.weight)):
-        check_buffer(name, value, n)
+    width, height, edge = _check_inputs(shading, site_mask, nearest, width, height, guide)
     levels = check_int("levels", levels, 1, 12)
     target = dr.opaque(mi.Float, check_range("target_samples", target_samples, 0.0, 1e9,
                                              lo_open=True))
@@ -122,7 +140,7 @@ def guided(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: i
     for level in range(levels):
         num, den, gsum = _level(num, den, surface, width, height,
                                 step=dr.opaque(mi.Int32, 1 << level), inv_n=opaque(inv_n),
-                                inv_x=opaque(inv_x))
+                                inv_x=opaque(inv_x), edge=edge)
         # A weight below this is a denormal in the making: kernels flush those to zero or
         # not, so forward and reverse passes could disagree on which pixels have a value.
         has = den > MIN_WEIGHT
@@ -142,7 +160,7 @@ def guided(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: i
 
 
 def _level(num: mi.Color3f, den: mi.Float, surface: Surface, width: int, height: int, *,
-           step: mi.Int32, inv_n: mi.Float, inv_x: mi.Float
+           step: mi.Int32, inv_n: mi.Float, inv_x: mi.Float, edge: mi.Bool | None = None
            ) -> tuple[mi.Color3f, mi.Float, mi.Float]:
     """One level of the cascade: a symbolic loop over the 25 taps (one kernel per level
     size, shared by all levels: the spacing is opaque), with its weights held
@@ -150,16 +168,21 @@ def _level(num: mi.Color3f, den: mi.Float, surface: Surface, width: int, height:
     ``den`` and the kernel mass are accumulated alongside."""
     n = width * height
     dr.schedule(num, den)
-    dpk = packet(dr.detach(den), dr.zeros(mi.Float, n), dr.zeros(mi.Float, n),
-                 dr.zeros(mi.Float, n))
+    # The emitter-edge flag rides in the sample-weight packet (1: on an emitter's edge).
+    dpk = packet(dr.detach(den), dr.select(edge, 1.0, 0.0) if edge is not None
+                 else dr.zeros(mi.Float, n), dr.zeros(mi.Float, n), dr.zeros(mi.Float, n))
     dr.schedule(dpk)
 
     def at(q, active):
-        return (*surface.at(q, active), gather4(dpk, q, active).x)
+        d4 = gather4(dpk, q, active)
+        return (*surface.at(q, active), d4.x, d4.y > 0.0)
 
     def weight(P, Q, tap):
         e = surface_energy(P[:3], Q[:3], inv_n, inv_x)
-        return dr.select(tap.inside & (P[2] == Q[2]), tap.b3 * dr.exp(-e), 0.0)
+        ok = tap.inside & (P[2] == Q[2])
+        if edge is not None:   # an emitter's edge mixes only with itself
+            ok &= P[4] == Q[4]
+        return dr.select(ok, tap.b3 * dr.exp(-e), 0.0)
 
     n_acc, d_acc, g_acc = held_filter(num, HeldLevel(
         width, height, step, at, weight, normalized=False,

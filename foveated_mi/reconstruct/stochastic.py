@@ -11,11 +11,18 @@ so the filled frame looks like a low-sample render whose noise the denoiser remo
    in the disc of radius :math:`k\,(r_p + \tfrac12)` (:math:`k` = ``jitter``) and its nearest
    site :math:`c` is a candidate. The first candidate on the same surface as :math:`p`
    (both hit or both miss; for hits :math:`n_p \cdot n_c > 0.9` and
-   :math:`|n_p \cdot (x_c - x_p)| < 0.2\,|x_c - x_p|`) is taken.
-3. Without one, :math:`p` takes its nearest site (the Voronoi fill).
+   :math:`|n_p \cdot (x_c - x_p)| < 0.2\,|x_c - x_p|`; with ``Guide.emission_edge``, both
+   or neither with a filter footprint across an emitter's edge) is taken.
+3. Without one, :math:`p` takes its nearest site (the Voronoi fill); with
+   ``Guide.emission_edge``, the first candidate on its side of an emitter's edge when the
+   nearest site is across it.
 
-A traced pixel keeps its own value. The random numbers come from a per-pixel hash of the
-frame's seed, so a frame is reproducible and successive frames decorrelate.
+A traced pixel keeps its own value. The random numbers come from a per-pixel hash of
+``seed``, so a frame is reproducible. The ``foveated`` integrator passes the render's seed,
+the same for every frame of a history: over a still view each pixel keeps its choice until a
+new site appears near it, so the frame changes only where new samples arrive (a fill drawn
+afresh every frame made a learned denoiser's output, and the PSNR of a still view, jump by
+up to 2.4 dB from frame to frame).
 
 With demodulation (:mod:`foveated_mi.frame.demodulate`) the chosen site's irradiance is multiplied by
 the pixel's own albedo, so textures stay sharp. The output is a gather of site values with
@@ -51,7 +58,13 @@ def same_surface(p: mi.UInt32, q: mi.UInt32, guide: Guide, valid: mi.Bool) -> mi
     d = xq - xp
     plane = dr.abs(dr.dot(np_, d)) <= SAME_SURFACE_PLANE * dr.norm(d)
     surface = (dr.dot(np_, nq) > SAME_SURFACE_COS) & plane
-    return valid & (hp == hq) & (~hp | surface)
+    same = valid & (hp == hq) & (~hp | surface)
+    if guide.emission_edge is not None:
+        # A footprint across an emitter's edge holds a share of the light: it stands in only
+        # for another such footprint.
+        edge = mi.Bool(guide.emission_edge)
+        same &= dr.gather(mi.Bool, edge, p) == dr.gather(mi.Bool, edge, q, valid)
+    return same
 
 
 def stochastic(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: int,
@@ -71,6 +84,8 @@ def stochastic(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, widt
                         ("guide.normal", guide.normal), ("guide.position", guide.position),
                         ("guide.hit", guide.hit)):
         check_buffer(name, value, n)
+    if guide.emission_edge is not None:
+        check_buffer("guide.emission_edge", guide.emission_edge, n)
     jitter = check_range("jitter", jitter, 0.0, 1e4)
     tries = check_int("tries", tries, 0, 64)
     seed = seed if isinstance(seed, mi.UInt32) else dr.opaque(mi.UInt32, int(seed) & 0xFFFFFFFF)
@@ -86,6 +101,12 @@ def stochastic(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, widt
 
     chosen = dr.select(site_mask, idx, nearest)
     done = mi.Bool(site_mask) | ~has_site
+    edge = None if guide.emission_edge is None else mi.Bool(guide.emission_edge)
+    if edge is not None:
+        # Fallback when no candidate is on the same surface: the nearest site, unless it lies
+        # across an emitter's edge from the pixel and a candidate does not.
+        own = dr.gather(mi.Bool, edge, idx)
+        settled = done | (dr.gather(mi.Bool, edge, nearest, has_site) == own)
     for t in range(tries):
         u1, u2 = mi.sample_tea_32(idx, seed + ((t * 0x9E3779B9) & 0xFFFFFFFF))
         rho = radius * dr.sqrt(mi.Float(u1) * 2.0 ** -32)
@@ -94,6 +115,10 @@ def stochastic(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, widt
         qy = dr.clip(dr.round(mi.Float(y) + rho * dr.sin(phi)), 0, height - 1)
         cand = dr.gather(mi.UInt32, nearest, mi.UInt32(qy) * width + mi.UInt32(qx), ~done)
         ok = ~done & (cand != NO_SITE)
+        if edge is not None:
+            alike = ok & ~settled & (dr.gather(mi.Bool, edge, cand, ok) == own)
+            chosen = dr.select(alike, cand, chosen)
+            settled |= alike
         ok &= same_surface(idx, dr.select(ok, cand, 0), guide, ok)
         chosen = dr.select(ok, cand, chosen)
         done |= ok
