@@ -35,15 +35,19 @@ def check_finite(name: str, value: Any) -> float:
     return v
 
 
+def _bounds(*parts: str | None) -> str:
+    """`` >= lo and <= hi`` from the bounds given (empty without any)."""
+    given = [p for p in parts if p]
+    return " " + " and ".join(given) if given else ""
+
+
 def check_range(name: str, value: Any, lo: float | None = None, hi: float | None = None,
                 lo_open: bool = False, hi_open: bool = False) -> float:
     """A finite float inside [lo, hi] (or open ends)."""
-    parts = []
-    if lo is not None:
-        parts.append(f"{'>' if lo_open else '>='} {lo:g}")
-    if hi is not None:
-        parts.append(f"{'<' if hi_open else '<='} {hi:g}")
-    allowed = "a finite number" + (" " + " and ".join(parts) if parts else "")
+    allowed = "a finite number" + _bounds(f"{'>' if lo_open else '>='} {lo:g}" if lo is not None
+                                          else None,
+                                          f"{'<' if hi_open else '<='} {hi:g}" if hi is not None
+                                          else None)
     v = _as_float(name, value, allowed)
     ok = math.isfinite(v)
     if ok and lo is not None:
@@ -56,12 +60,8 @@ def check_range(name: str, value: Any, lo: float | None = None, hi: float | None
 
 
 def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = None) -> int:
-    parts = []
-    if lo is not None:
-        parts.append(f">= {lo}")
-    if hi is not None:
-        parts.append(f"<= {hi}")
-    allowed = "an integer" + (" " + " and ".join(parts) if parts else "")
+    allowed = "an integer" + _bounds(f">= {lo}" if lo is not None else None,
+                                     f"<= {hi}" if hi is not None else None)
     if isinstance(value, bool):
         raise ParameterError(name, value, allowed)
     try:

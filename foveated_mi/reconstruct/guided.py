@@ -88,16 +88,22 @@ def level_variance(level: int) -> float:
     return (4.0 ** (level + 1) - 1.0) / 3.0
 
 
-def _check_inputs(shading, site_mask, nearest, width, height, guide: Guide | None):
-    """The film size and the guide's emission edges (detached, or None), checked."""
+def check_guided_inputs(method: str, shading, site_mask, nearest, width, height,
+                        guide: Guide | None, *, weights: bool) -> tuple[int, int, mi.Bool | None]:
+    """The film size and the guide's emission edges (detached, or None) of a guided
+    reconstruction ``method``, every buffer checked (``weights``: the guide's sample counts
+    are used too)."""
     width, height = check_film(width, height)
     n = width * height
     if guide is None:
-        raise ParameterError("guide", None, "a reconstruct.Guide (G-buffer normals, positions, "
-                             "hits and sample counts) for reconstruction 'guided'")
-    for name, value in (("shading", shading), ("site_mask", site_mask), ("nearest", nearest),
-                        ("guide.normal", guide.normal), ("guide.position", guide.position),
-                        ("guide.hit", guide.hit), ("guide.weight", guide.weight)):
+        what = "normals, positions, hits and sample counts" if weights else \
+            "normals, positions and hits"
+        raise ParameterError("guide", None, f"a reconstruct.Guide (G-buffer {what}) for "
+                             f"reconstruction {method!r}")
+    buffers = [("shading", shading), ("site_mask", site_mask), ("nearest", nearest),
+               ("guide.normal", guide.normal), ("guide.position", guide.position),
+               ("guide.hit", guide.hit)] + ([("guide.weight", guide.weight)] if weights else [])
+    for name, value in buffers:
         check_buffer(name, value, n)
     edge = guide.emission_edge
     if edge is not None:
@@ -115,7 +121,9 @@ def guided(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: i
     ``max_radius`` is accepted for the registry's uniform signature; the reach is set by
     ``levels`` (about ``2^(levels+1)`` px).
     """
-    width, height, edge = _check_inputs(shading, site_mask, nearest, width, height, guide)
+    width, height, edge = check_guided_inputs("guided", shading, site_mask, nearest, width,
+                                              height, guide,
+                                              weights=True)
     levels = check_int("levels", levels, 1, 12)
     target = dr.opaque(mi.Float, check_range("target_samples", target_samples, 0.0, 1e9,
                                              lo_open=True))

@@ -36,9 +36,9 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-from ..validate import ParameterError, check_int, check_range
-from .guided import Guide
-from .jfa import NO_SITE, check_buffer, check_film
+from ..validate import check_int, check_range
+from .guided import Guide, check_guided_inputs
+from .jfa import NO_SITE
 from .registry import register_reconstruction
 
 #: Candidate on the same surface: cosine between normals and relative tangent-plane distance.
@@ -75,17 +75,9 @@ def stochastic(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, widt
     ``seed`` may be a Python int or an opaque ``mi.UInt32`` (per-frame, no recompilation).
     ``max_radius`` is accepted for the registry's uniform signature.
     """
-    width, height = check_film(width, height)
+    width, height, _ = check_guided_inputs("stochastic", shading, site_mask, nearest, width,
+                                           height, guide, weights=False)
     n = width * height
-    if guide is None:
-        raise ParameterError("guide", None, "a reconstruct.Guide (G-buffer normals, positions "
-                             "and hits) for reconstruction 'stochastic'")
-    for name, value in (("shading", shading), ("site_mask", site_mask), ("nearest", nearest),
-                        ("guide.normal", guide.normal), ("guide.position", guide.position),
-                        ("guide.hit", guide.hit)):
-        check_buffer(name, value, n)
-    if guide.emission_edge is not None:
-        check_buffer("guide.emission_edge", guide.emission_edge, n)
     jitter = check_range("jitter", jitter, 0.0, 1e4)
     tries = check_int("tries", tries, 0, 64)
     seed = seed if isinstance(seed, mi.UInt32) else dr.opaque(mi.UInt32, int(seed) & 0xFFFFFFFF)

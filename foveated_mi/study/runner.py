@@ -269,34 +269,40 @@ def _references(spec, scenes, pending, file_refs, out_dir, variant, ex, progress
         jobs.append((label, T.run_reference_task, (task,)))
     if jobs:
         os.makedirs(ref_dir, exist_ok=True)
-        from tqdm import tqdm
-        bar = tqdm(total=len(jobs), unit="ref", desc="references", disable=not progress,
-                   file=sys.stderr)
-        try:
-            for label, out, err in ex.run(jobs):
-                bar.update(1)
-                if err is not None:
-                    result.failed.append(f"reference of {label} failed: {_one_line(err)}")
-                    continue
-                arr = out["image"]
-                with atomic_write(paths[label], "wb") as f:
-                    np.save(f, arr)
-                scene = scenes[label]
-                meta = {"scene": scene.name, "label": label, "size": list(scene.size),
-                        "params": scene.params, "integrator": scene.integrator,
-                        "spp": scene.reference["spp"], "seed": scene.reference["seed"],
-                        "variant": variant, "rfilter": out["rfilter"]}
-                with atomic_write(os.path.splitext(paths[label])[0] + ".json", "w") as f:
-                    json.dump(meta, f, indent=2)
-                arrays[label] = arr
-                result.references_rendered += 1
-        finally:
-            bar.close()
+    for label, out, err in _progress(ex, jobs, "ref", "references", progress):
+        if err is not None:
+            result.failed.append(f"reference of {label} failed: {_one_line(err)}")
+            continue
+        arr = out["image"]
+        with atomic_write(paths[label], "wb") as f:
+            np.save(f, arr)
+        scene = scenes[label]
+        meta = {"scene": scene.name, "label": label, "size": list(scene.size),
+                "params": scene.params, "integrator": scene.integrator,
+                "spp": scene.reference["spp"], "seed": scene.reference["seed"],
+                "variant": variant, "rfilter": out["rfilter"]}
+        with atomic_write(os.path.splitext(paths[label])[0] + ".json", "w") as f:
+            json.dump(meta, f, indent=2)
+        arrays[label] = arr
+        result.references_rendered += 1
     return {label: ex.scatter(arr) for label, arr in arrays.items()}
 
 
-def _run_tasks(pending, refs, ex, results, progress, result, say) -> None:
+def _progress(ex, jobs, unit: str, desc: str, progress: bool):
+    """``ex.run(jobs)``'s results, one progress-bar step each."""
+    if not jobs:
+        return
     from tqdm import tqdm
+    bar = tqdm(total=len(jobs), unit=unit, desc=desc, disable=not progress, file=sys.stderr)
+    try:
+        for item in ex.run(jobs):
+            bar.update(1)
+            yield item
+    finally:
+        bar.close()
+
+
+def _run_tasks(pending, refs, ex, results, progress, result, say) -> None:
     from . import tasks as T
 
     jobs = []
@@ -307,19 +313,13 @@ def _run_tasks(pending, refs, ex, results, progress, result, say) -> None:
             continue
         jobs.append((t["task_id"], T.run_task, (t, refs[t["label"]])))
     by_id = {t["task_id"]: t for t in pending}
-    bar = tqdm(total=len(jobs), unit="task", desc="tasks", disable=not progress,
-               file=sys.stderr)
-    try:
-        for tid, rows, err in ex.run(jobs):
-            bar.update(1)
-            if err is not None:
-                result.failed.append(f"task {tid} ({_describe(by_id[tid])}) failed: "
-                                     f"{_one_line(err)}")
-                continue
-            for row in rows:
-                results.append(row)
-                result.new_rows += 1
-            result.tasks_run += 1
-    finally:
-        bar.close()
+    for tid, rows, err in _progress(ex, jobs, "task", "tasks", progress):
+        if err is not None:
+            result.failed.append(f"task {tid} ({_describe(by_id[tid])}) failed: "
+                                 f"{_one_line(err)}")
+            continue
+        for row in rows:
+            results.append(row)
+            result.new_rows += 1
+        result.tasks_run += 1
 
