@@ -1,4 +1,4 @@
-"""Benchmark: reconstruction quality against the full render (issue 3; paper Fig. 7).
+"""Benchmark: reconstruction quality against the full render (the paper's Fig. 7).
 
     python benchmarks/bench_quality.py --scene voxel-city --size 1024 1024
 

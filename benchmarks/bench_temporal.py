@@ -1,4 +1,4 @@
-"""Benchmark: temporal reuse (issue 4) under a steady gaze.
+"""Benchmark: temporal reuse under a steady gaze.
 
     python benchmarks/bench_temporal.py --scene voxel-city --size 1024 1024 --theta 0.1
 

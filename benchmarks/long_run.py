@@ -1,4 +1,4 @@
-"""Long run (issue 5): a small moving-gaze sequence for many frames.
+"""Long run: a small moving-gaze sequence for many frames.
 
     python benchmarks/long_run.py --frames 500 --size 64 64
 

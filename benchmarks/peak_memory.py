@@ -1,4 +1,4 @@
-"""Peak memory of one 2048x2048 frame (issue 5: film sizes up to 2048^2 within 24 GB).
+"""Peak memory of one 2048x2048 frame (film sizes up to 2048^2 within 24 GB).
 
     python benchmarks/peak_memory.py --size 2048 2048
 
