@@ -16,7 +16,9 @@
 --  gradient pass          :mod:`.adjoint` (+ :mod:`.traced_sensor`)  the seam at shading
 ==  =====================  =====================================  ============================
 
-:mod:`._shared` holds the kernels several passes use (pixel coordinates, luminance, the 5x5
+Reconstruction and post-processing call the methods registered in
+:mod:`foveated_mi.reconstruct` and :mod:`foveated_mi.postprocess`. :mod:`._shared` holds
+the kernels several passes use (pixel coordinates, luminance, the 5x5
 tap walker, packets, the surface test). The reconstruction and post-processing passes call
 the registered methods of :mod:`foveated_mi.reconstruct` and :mod:`foveated_mi.postprocess`.
 :class:`Frame` is what the first passes decide for
