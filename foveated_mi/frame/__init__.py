@@ -1,29 +1,22 @@
 """The passes of one foveated frame (Kwon et al. 2019, Fig. 1), one module each, in order.
 
-==  =====================  =====================================  ============================
-#   pass                   module                                 paper
-==  =====================  =====================================  ============================
-1   geometry               :mod:`.gbuffer` (+ :mod:`.scene_state`)  Fig. 1, full-res G-buffer
-2   sampling               :mod:`.sampling`                         §3.1 sampling map, edges
-3   reprojection           :mod:`.reproject`                        §3.1 reprojection map
-4   reorder                :mod:`.reorder`                          §3.2 Strategies 1 and 2
-5   sparse shading         :mod:`.shading` (+ :mod:`.pixel_filter`)  §3.3 shading buffer
-6   history resolve        :mod:`.reproject`                        Fig. 4 history
-7   demodulation           :mod:`.demodulate`                       (noise-aware presets)
-8   reconstruction         :mod:`.reconstruction`                   §3.4 JFA, Sibson
-9   variance               :mod:`.variance`                         (SVGF)
-10  post-processing        :mod:`.post`                             §3.5 tone map, à-trous
---  gradient pass          :mod:`.adjoint` (+ :mod:`.traced_sensor`)  the seam at shading
-==  =====================  =====================================  ============================
+1. geometry: :mod:`.gbuffer`, with :mod:`.scene_state` (Fig. 1, the full-resolution G-buffer)
+2. sampling: :mod:`.sampling` (§3.1, the sampling map and its forced edge rays)
+3. reprojection: :mod:`.reproject` (§3.1, the reprojection map)
+4. reorder: :mod:`.reorder` (§3.2, Strategies 1 and 2)
+5. sparse shading: :mod:`.shading`, with :mod:`.pixel_filter` (§3.3, the shading buffer)
+6. history resolve: :mod:`.reproject` (Fig. 4, the history)
+7. demodulation: :mod:`.demodulate` (noise-aware presets)
+8. reconstruction: :mod:`.reconstruction` (§3.4, Jump Flooding and Sibson)
+9. variance: :mod:`.variance` (SVGF)
+10. post-processing: :mod:`.post` (§3.5, tone mapping and à-trous)
 
+The gradient pass, :mod:`.adjoint` with :mod:`.traced_sensor`, sits at the shading seam.
 Reconstruction and post-processing call the methods registered in
-:mod:`foveated_mi.reconstruct` and :mod:`foveated_mi.postprocess`. :mod:`._shared` holds
-the kernels several passes use (pixel coordinates, luminance, the 5x5
-tap walker, packets, the surface test). The reconstruction and post-processing passes call
-the registered methods of :mod:`foveated_mi.reconstruct` and :mod:`foveated_mi.postprocess`.
-:class:`Frame` is what the first passes decide for
-the rest of the frame; the integrator (:mod:`foveated_mi.integrators.foveated`) only runs the
-passes in this order.
+:mod:`foveated_mi.reconstruct` and :mod:`foveated_mi.postprocess`. :mod:`._shared` holds the
+kernels several passes use (pixel coordinates, luminance, the 5x5 tap walker, packets, the
+surface test). :class:`Frame` is what the first passes decide for the rest of the frame; the
+integrator (:mod:`foveated_mi.integrators.foveated`) only runs the passes in this order.
 """
 from __future__ import annotations
 
