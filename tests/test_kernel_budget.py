@@ -1,0 +1,38 @@
+"""Kernels per frame: from frame 3 on a still or moving frame compiles nothing, launches the
+same number of kernels every frame, and no more than the frame-time benchmark reports
+(``benchmarks/bench_overhead.py``, README "Frame time": 32 / 35 for `paper` still / moving at
+1024², 45 for `guided`; here `guided` also traces the light's edges: 42 / 46)."""
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from foveated_mi.integrators.foveated import FoveatedIntegrator
+from foveated_mi.scenes import apply_camera, camera_of, load_scene
+
+#: The most JIT kernels one frame may launch, per preset (measured as in the docstring).
+BUDGET = {"paper": 35, "guided": 46}
+
+
+@pytest.mark.parametrize("preset", ["paper", "guided"])
+@pytest.mark.parametrize("moving", [False, True], ids=["still", "moving"])
+def test_frames_launch_a_steady_budget_of_kernels(preset, moving):
+    scene = load_scene("cornell-box", width=48, height=40, spp=1,
+                       integrator={"type": "path", "max_depth": 3})
+    integ = FoveatedIntegrator(preset=preset, nested=scene.integrator())
+    cam = camera_of(scene)
+    launched, compiled = [], []
+    for k in range(6):
+        if moving:
+            cam = {**cam, "origin": [cam["origin"][0] + 0.02, *cam["origin"][1:]]}
+            apply_camera(scene, cam)
+        with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+            dr.kernel_history_clear()
+            np.array(mi.render(scene, integrator=integ, spp=1, seed=k))
+            hist = dr.kernel_history([dr.KernelType.JIT])
+        launched.append(len(hist))
+        compiled.append(sum(1 for h in hist if not h.get("cache_hit", True)))
+    steady = launched[3:]
+    assert all(0 < n <= BUDGET[preset] for n in steady), launched
+    assert len(set(steady)) == 1, launched
+    assert compiled[3:] == [0, 0, 0], compiled
