@@ -118,3 +118,36 @@ def test_cache_serves_the_same_arrays_only_for_the_same_key():
     assert (reused_a, reused_b) == (False, True) and a is b
     c, reused_c = cache.gbuffer(scene, sensor, materials=True)
     assert not reused_c and c.albedo is not None
+
+
+def test_host_held_values_are_compared_by_value():
+    # A scalar transform holds no Dr.Jit variable: its token is its value, so a change shows.
+    from foveated_mi.frame.scene_state import _token
+    a = _token(mi.ScalarTransform4f().translate([1.0, 0.0, 0.0]))
+    assert a == _token(mi.ScalarTransform4f().translate([1.0, 0.0, 0.0]))
+    assert a != _token(mi.ScalarTransform4f().translate([2.0, 0.0, 0.0]))
+    x, y = mi.Float(1.0), mi.Float(2.0)
+    assert _token(x) != _token(y)                              # two variables, two tokens
+
+
+def test_a_state_keeps_the_variables_it_names():
+    # Dr.Jit reuses a freed variable's index: a kept state must keep its variables alive, or
+    # a parameter replaced twice between frames comes back under its old index (measured:
+    # without it, the third of three updates of a colour reuses the first one's indices).
+    scene = _scene()
+    params = mi.traverse(scene)
+    key = next(k for k in params.keys() if k.endswith("reflectance.value"))
+
+    def update(factor):
+        params[key] = mi.Color3f(params[key]) * factor
+        params.update()
+
+    update(0.5)
+    state = scene_state(scene, scene.sensors()[0])
+    for factor in (0.25, 2.0):     # a value other than the state's (equal literals share an index)
+        update(factor)
+    assert _token_of(scene_state(scene, scene.sensors()[0]), key) != _token_of(state, key)
+
+
+def _token_of(state, key):
+    return dict(p for p in state.scene[1:])[key]

@@ -134,10 +134,8 @@ def unless_cut(reproj: ReprojectionMap, fraction: float) -> tuple[ReprojectionMa
     n = dr.width(reproj.hit)
     hits = dr.zeros(mi.UInt32, 1)
     dr.scatter_reduce(dr.ReduceOp.Add, hits, mi.UInt32(1), mi.UInt32(0), reproj.hit)
-    total = dr.gather(mi.UInt32, hits, dr.zeros(mi.UInt32, n))
-    keep = mi.Float(total) >= dr.opaque(mi.Float, fraction * n)
     cut = mi.Float(dr.gather(mi.UInt32, hits, mi.UInt32(0))) < dr.opaque(mi.Float, fraction * n)
-    return reproj._replace(hit=reproj.hit & keep), cut
+    return reproj._replace(hit=reproj.hit & ~cut), cut
 
 
 class Resolved(NamedTuple):

@@ -13,7 +13,8 @@ camera over an unchanged scene reuse its G-buffer, the largest pass a static vie
 """
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from dataclasses import dataclass, field
+from typing import Any
 
 import drjit as dr
 import mitsuba as mi
@@ -25,38 +26,56 @@ CAMERA_TYPES = ("Sensor", "Film", "Sampler", "ReconstructionFilter")
 
 
 def _token(value: Any) -> Any:
-    if dr.is_array_v(value) or hasattr(value, "matrix") or hasattr(type(value), "DRJIT_STRUCT"):
-        if dr.is_jit_v(type(value)) or hasattr(type(value), "DRJIT_STRUCT") or \
-                hasattr(value, "matrix"):
-            try:
-                return tuple(i & 0xFFFFFFFF for i in dr.detail.collect_indices(value))
-            except Exception:  # noqa: BLE001 - an exotic type: its identity
-                return ("id", id(value))
-        return repr(value)                      # scalar Dr.Jit arrays (film size, offsets)
+    """The Dr.Jit variables a parameter holds (JIT part of each index), or, for a value held
+    on the host (a Python or scalar Dr.Jit value, a scalar transform), the value itself."""
+    if dr.is_jit_v(type(value)) or hasattr(type(value), "DRJIT_STRUCT"):
+        try:
+            indices = dr.detail.collect_indices(value)
+        except Exception:  # noqa: BLE001 - an exotic type: its identity
+            return ("id", id(value))
+        if indices:
+            return tuple(i & 0xFFFFFFFF for i in indices)
     return value if isinstance(value, (bool, int, float, str, type(None))) else repr(value)
 
 
-class SceneState(NamedTuple):
+def _own(value: Any) -> Any:
+    """A handle of our own on ``value``'s variables: what ``mi.traverse`` returns is a view of
+    the object's member, which ``params.update()`` re-points at the new variables."""
+    if dr.is_array_v(value) or hasattr(type(value), "DRJIT_STRUCT"):
+        try:
+            return type(value)(value)
+        except Exception:  # noqa: BLE001 - a type without a copy constructor: the view
+            return value
+    return value
+
+
+@dataclass(frozen=True)
+class SceneState:
     scene: tuple           #: the scene and every parameter but the camera's
     camera: tuple          #: the sensor, its crop, its parameters and pose
     differentiated: bool   #: some parameter requires gradients
+    #: Handles on the parameters' variables. Dr.Jit reuses a freed variable's index, so whoever
+    #: keeps a state to compare against keeps these too: no index it names can be reused.
+    held: tuple = field(default=(), compare=False, repr=False)
 
 
 def scene_state(scene: mi.Scene, sensor: mi.Sensor) -> SceneState:
     """The :class:`SceneState` of ``scene`` seen through ``sensor`` (no device read)."""
     params = mi.traverse(scene)
-    scene_part, camera_part, grads = [id(scene)], [id(sensor)], False
+    scene_part, camera_part, grads, held = [id(scene)], [id(sensor)], False, []
     with dr.resume_grad():
         for key in params.keys():
             value = params[key]
+            held.append(_own(value))
             node = params.properties[key][2]
             is_camera = any(c.__name__ in CAMERA_TYPES for c in type(node).__mro__)
             (camera_part if is_camera else scene_part).append((key, _token(value)))
             grads = grads or (dr.is_diff_v(value) and dr.grad_enabled(value))
     film = sensor.film()
-    camera_part += [tuple(film.crop_size()), tuple(film.crop_offset()),
-                    _token(sensor.world_transform())]
-    return SceneState(tuple(scene_part), tuple(camera_part), bool(grads))
+    world = sensor.world_transform()
+    held.append(_own(world))
+    camera_part += [tuple(film.crop_size()), tuple(film.crop_offset()), _token(world)]
+    return SceneState(tuple(scene_part), tuple(camera_part), bool(grads), tuple(held))
 
 
 class GeometryCache:
@@ -65,10 +84,12 @@ class GeometryCache:
 
     def __init__(self):
         self._key: tuple | None = None
+        self._held: tuple = ()
         self._value: GBuffer | None = None
 
     def clear(self) -> None:
         self._key = self._value = None
+        self._held = ()
 
     def gbuffer(self, scene: mi.Scene, sensor: mi.Sensor, *, materials: bool,
                 state: SceneState | None = None) -> tuple[GBuffer, bool]:
@@ -78,5 +99,5 @@ class GeometryCache:
         if self._value is not None and key == self._key:
             return self._value, True
         self._value = render_gbuffer(scene, sensor, materials=materials)
-        self._key = key
+        self._key, self._held = key, state.held
         return self._value, False

@@ -135,6 +135,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._history: _reproject.History | None = None
         self._scene_ref = None
         self._scene_state = self._camera_state = None
+        self._held: tuple = ()     # keeps the variables the states above name alive
         self._camera_moved = False
         # What the primal frame used, for its gradient pass to reuse.
         self._frame = 0
@@ -212,6 +213,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             self._scene_ref = id(scene)
         self._camera_moved = state.camera != self._camera_state
         self._scene_state, self._camera_state = state.scene, state.camera
+        self._held = state.held
 
     # -- differentiation ------------------------------------------------------------------
     def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
