@@ -65,6 +65,14 @@ def _f(v, fmt=".1f") -> str:
     return "-" if v is None else format(v, fmt)
 
 
+def _num(text, fmt=".1f") -> str:
+    """A CSV cell as a rounded number, or as it is when it is not one."""
+    try:
+        return format(float(text), fmt)
+    except (TypeError, ValueError):
+        return "-" if text in (None, "") else str(text)
+
+
 def summarise(out: str, variant: str) -> str:
     steps = read_steps(out)
     gpu = _read(os.path.join(out, "gpu.txt"), "unknown")
@@ -116,8 +124,22 @@ def summarise(out: str, variant: str) -> str:
             rows = list(csv.DictReader(f))
         md += ["", "## Equal-time cell", "", "| method | spp | frame | time ms | PSNR fovea | PSNR |",
                "|---|---|---|---|---|---|"]
-        md += [f"| {r.get('method')} | {r.get('spp')} | {r.get('frame')} | {r.get('time_ms')} "
-               f"| {r.get('psnr_fovea')} | {r.get('psnr')} |" for r in rows]
+        md += [f"| {r.get('method')} | {r.get('spp')} | {r.get('frame')} | {_num(r.get('time_ms'))} "
+               f"| {_num(r.get('psnr_fovea'), '.2f')} | {_num(r.get('psnr'), '.2f')} |" for r in rows]
+    overhead = (_json(os.path.join(out, "overhead.json")) or {}).get("results") or []
+    if overhead:
+        stages = list(overhead[0].get("stages_ms", {}))
+        md += ["", "## Frame time per stage (bench_overhead; medians, ms)", "",
+               "| case | size | preset | rays | full | foveated | speed-up | "
+               + " | ".join(stages) + " | overhead x full |",
+               "|---|---|---|---|---|---|---|" + "---|" * len(stages) + "---|"]
+        for r in overhead:
+            size = r.get("size") or ["?", "?"]
+            md.append(f"| {r.get('case')} | {size[0]}x{size[1]} | {r.get('preset')} | "
+                      f"{_f(100 * r['ray_fraction'] if r.get('ray_fraction') is not None else None)} % | "
+                      f"{_f(r.get('full_ms'))} | {_f(r.get('frame_ms'))} | x{_f(r.get('speedup'), '.2f')} | "
+                      + " | ".join(_f(r.get("stages_ms", {}).get(s)) for s in stages)
+                      + f" | {_f(r.get('overhead_x_full'), '.2f')} |")
     for name in ("overhead.json", os.path.join("table1", "results.csv")):
         if os.path.exists(os.path.join(out, name)):
             md += ["", f"Also written: `{name}`."]
@@ -130,7 +152,7 @@ def summarise(out: str, variant: str) -> str:
         f.write(text)
     with open(os.path.join(out, "summary.json"), "w") as f:
         json.dump({"gpu": gpu, "variant": variant, "steps": steps, "reorder": reorder,
-                   "backward": backward, "tests": tests_last.strip(),
+                   "backward": backward, "overhead": overhead, "tests": tests_last.strip(),
                    "failed": [s["step"] for s in failed]}, f, indent=2)
     return text
 

@@ -5,16 +5,20 @@
 #   scripts/gpu_bench.sh --local OUTDIR    (the same steps on llvm_ad_rgb at tiny sizes, with a
 #                                           wheelhouse built for this machine's Python)
 #
-# Installs the wheelhouse into a fresh venv with `pip install --no-index`, prints the GPU and
+# Installs the wheelhouse offline (`pip install --no-index`) over the host Python, prints the GPU and
 # driver, then runs each step under its own time limit (one failing step does not stop the
 # others): Ray reordering at 1024² and 2048², per-stage overhead, Table 1, one equal-time
 # study cell, the gradient step at 1024², and the test suite on the CUDA variant. Results go
 # to OUTDIR: each benchmark's JSON, steps.csv, reorder.csv, summary.json and summary.md (one
-# page: device, driver, each step's status and time, key figures). The limits add up to less
-# than 8 minutes, and a deadline for the whole run caps them.
+# page: device, driver, each step's status and time, key figures). Each step has its own time
+# limit, and a deadline for the whole run (default 470 s, for 8 minutes with the install) caps
+# them. Scenes the wheelhouse carries (scenes/*.tar.xz) are unpacked into ../shared/scenes.
 #
 # Environment: PYTHON (default python3.12, else python3), WHEELHOUSE_DIR (.wheelhouse),
-# GPU_BENCH_VENV (venv folder; default a fresh temporary one), GPU_BENCH_VARIANT (cuda_ad_rgb),
+# GPU_BENCH_VENV (install folder; default a fresh temporary one), GPU_BENCH_SYSTEM_SITE (1, the
+# default: the wheels go into a folder put first on PYTHONPATH, so the host Python's own
+# packages, such as a CUDA image's NumPy, scikit-image and pytest, fill what the wheelhouse
+# left out (see WHEELHOUSE_HOST_HAS); 0: a fresh isolated venv), GPU_BENCH_VARIANT (cuda_ad_rgb),
 # GPU_BENCH_DEADLINE (seconds for the whole run, default 470), GPU_BENCH_TESTS (pytest
 # targets, default tests), GPU_BENCH_MAXFAIL (5).
 set -u
@@ -37,12 +41,12 @@ echo "step,status,seconds,limit_s,note" > "$STEPS"
 
 if [ $LOCAL = 1 ]; then
   VARIANT=${GPU_BENCH_VARIANT:-llvm_ad_rgb}
-  S1=64; S2=96; SB=32; ST1=64; SCELL=32; REPEATS=1
+  S1=64; S2=96; SB=32; ST1=64; SCELL=32; REPEATS=1; OSCALE=0.0625; RFRAC=0.35
   TESTS=${GPU_BENCH_TESTS:-tests/test_sampling.py}
   [ -z "${DRJIT_LIBLLVM_PATH:-}" ] && [ -f .venv/llvm-path ] && export DRJIT_LIBLLVM_PATH=$(cat .venv/llvm-path)
 else
   VARIANT=${GPU_BENCH_VARIANT:-cuda_ad_rgb}
-  S1=1024; S2=2048; SB=1024; ST1=2048; SCELL=1024; REPEATS=2
+  S1=1024; S2=2048; SB=1024; ST1=2048; SCELL=1024; REPEATS=2; OSCALE=1; RFRAC=0.10
   TESTS=${GPU_BENCH_TESTS:-tests}
 fi
 export FOVEATED_MI_VARIANT=$VARIANT
@@ -93,6 +97,20 @@ print(" ".join(m)); sys.exit(1 if m else 0)' "$@" 2>/dev/null); rc=$?
 install() {
   local whl=("$WH"/*.whl)
   [ -e "${whl[0]}" ] || { echo "no wheels in $WH: run scripts/wheelhouse.sh first" >&2; return 1; }
+  if [ "${GPU_BENCH_SYSTEM_SITE:-1}" = 1 ]; then
+    # An overlay on the host Python rather than a venv: a venv made from a venv's Python (as
+    # on CUDA images) would see the base install's packages, not that venv's.
+    local py site=$VENV/site; py=$(command -v "$PYTHON") || { echo "no $PYTHON" >&2; return 1; }
+    mkdir -p "$VENV/bin" "$site"
+    if "$py" -m pip --version >/dev/null 2>&1; then
+      "$py" -m pip install -q --disable-pip-version-check --no-index --no-deps --target "$site" "${whl[@]}" || return 1
+    else
+      echo "pip unavailable: unpacking the wheels into $site"
+      for w in "${whl[@]}"; do "$py" -m zipfile -e "$w" "$site" || return 1; done
+    fi
+    printf '#!/bin/sh\nPYTHONPATH="%s${PYTHONPATH:+:$PYTHONPATH}" exec "%s" "$@"\n' "$site" "$py" > "$VPY"
+    chmod +x "$VPY"; return 0
+  fi
   if "$PYTHON" -m venv "$VENV" 2>/dev/null && "$VPY" -m pip --version >/dev/null 2>&1; then
     "$VPY" -m pip install -q --disable-pip-version-check --no-index --find-links "$WH" --no-deps "${whl[@]}"
   else
@@ -104,13 +122,17 @@ install() {
   fi
 }
 
-json_flag() {  # json_flag SCRIPT: "--out" if the script has it (benchmarks written by others)
-  "$VPY" "$1" --help 2>/dev/null | grep -q -- "--out" && echo yes
-}
-
 log "output: $OUT; variant $VARIANT; python $PYTHON; wheelhouse $WH; venv $VENV"
 export WH VENV VPY PYTHON
 step install 90 "pip install --no-index of $WH" bash -c "$(declare -f install); install"
+# Scenes the wheelhouse carries go where the benchmarks look for them (../shared/scenes).
+if ls "$WH"/scenes/*.tar.xz >/dev/null 2>&1; then
+  step scenes 60 "unpack $WH/scenes into ../shared/scenes" bash -c '
+    d=$(dirname "$0")/../shared/scenes; mkdir -p "$d" || exit 1
+    for a in "$1"/scenes/*.tar.xz; do n=$(basename "$a" .tar.xz)
+      if [ -f "$d/$n/scene.xml" ]; then echo "$n: already there"; else tar -C "$d" -xJf "$a" && echo "$n: unpacked"; fi
+    done' "$ROOT" "$WH"
+fi
 "$VPY" -c 'import sys; print(sys.version.split()[0])' > "$OUT/python.txt" 2>/dev/null || echo "?" > "$OUT/python.txt"
 
 if command -v nvidia-smi >/dev/null 2>&1; then
@@ -128,16 +150,16 @@ print(mi.variant(), mi.__version__, dr.__version__)"
 
 B=benchmarks
 step reorder_$S1 45 "bench_reorder $S1² (every mode)" "$VPY" $B/bench_reorder.py \
-  --size $S1 $S1 --variant "$VARIANT" --frames 5 --warmup 2 --out "$OUT/reorder_$S1.json"
+  --size $S1 $S1 --fraction $RFRAC --variant "$VARIANT" --frames 5 --warmup 2 --out "$OUT/reorder_$S1.json"
 step reorder_$S2 60 "bench_reorder $S2² (every mode)" "$VPY" $B/bench_reorder.py \
-  --size $S2 $S2 --variant "$VARIANT" --frames 3 --warmup 1 --out "$OUT/reorder_$S2.json"
+  --size $S2 $S2 --fraction $RFRAC --variant "$VARIANT" --frames 3 --warmup 1 --out "$OUT/reorder_$S2.json"
 
 if [ -f $B/bench_overhead.py ]; then
-  if [ "$(json_flag $B/bench_overhead.py)" = yes ]; then
-    step overhead 40 "bench_overhead (per-stage table)" "$VPY" $B/bench_overhead.py --out "$OUT/overhead.json"
-  else
-    step overhead 40 "bench_overhead (per-stage table)" "$VPY" $B/bench_overhead.py
-  fi
+  # Every case whose scene is here (a case without its scene is skipped with a line).
+  CASES=${GPU_BENCH_OVERHEAD_CASES:-voxel-static voxel-moving staircase-guided staircase-oidn table1-rungholt table1-vokselia table1-eye-exam}
+  [ $LOCAL = 1 ] && CASES=${GPU_BENCH_OVERHEAD_CASES:-voxel-static}
+  step overhead 75 "bench_overhead (per-stage table: $CASES)" "$VPY" $B/bench_overhead.py \
+    --cases $CASES --scale $OSCALE --out "$OUT/overhead.json"
 else
   skip overhead "benchmarks/bench_overhead.py not in this tree"
 fi
@@ -171,7 +193,7 @@ else
 fi
 
 if missing=$(have_modules pytest); then
-  step tests 90 "pytest $TESTS on $VARIANT" env PYTHONPATH="$ROOT/scripts" "$VPY" -m pytest -q \
+  step tests 120 "pytest $TESTS on $VARIANT" env PYTHONPATH="$ROOT/scripts" "$VPY" -m pytest -q \
     -p no:cacheprovider -p _offline_pytest --maxfail="${GPU_BENCH_MAXFAIL:-5}" \
     --junitxml="$OUT/tests.xml" $TESTS
 else

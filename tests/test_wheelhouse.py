@@ -123,10 +123,11 @@ def test_strip_tests_drops_only_test_folders(tmp_path):
         z.writestr("numpy/__init__.py", "")
         z.writestr("numpy/testing/__init__.py", "")
         z.writestr("numpy/_core/tests/test_a.py", "")
+        z.writestr("numpy/htmlcov/index.html", "")
         z.writestr("numpy-2.0.dist-info/METADATA", "Name: numpy\n")
         z.writestr("numpy-2.0.dist-info/RECORD", "")
     dst, dropped = wh.strip_tests(str(src), str(tmp_path / "out"))
-    assert dropped == ["numpy/_core/tests/test_a.py"]
+    assert sorted(dropped) == ["numpy/_core/tests/test_a.py", "numpy/htmlcov/index.html"]
     assert "numpy/testing/__init__.py" in zipfile.ZipFile(dst).namelist()
     assert wh.verify_record(dst) == 4
 
