@@ -3,14 +3,16 @@
     PYTHONPATH=scripts python -m pytest -p _offline_pytest ...
 
 A test file whose top-level imports name a module that is not installed is not collected, and
-a test that fails with ``ModuleNotFoundError`` for a module that is not installed is reported
-as skipped, naming the module, so that failures left are the ones worth reading. Used by
+a test that fails with ``ModuleNotFoundError`` for a module that is not installed, or with the
+project's one-line error for an optional dependency that is missing (``... expected pyoidn
+installed ...``), is reported as skipped, naming the module, so that failures left are the ones worth reading. Used by
 ``scripts/gpu_bench.sh``.
 """
 from __future__ import annotations
 
 import ast
 import importlib.util
+import re
 
 import pytest
 
@@ -47,9 +49,16 @@ def pytest_ignore_collect(collection_path, config):
 def pytest_runtest_makereport(item, call):
     outcome = yield
     rep = outcome.get_result()
-    if call.excinfo is not None and rep.failed and call.excinfo.errisinstance(ModuleNotFoundError):
+    if call.excinfo is None or not rep.failed:
+        return
+    name = ""
+    if call.excinfo.errisinstance(ModuleNotFoundError):
         name = (getattr(call.excinfo.value, "name", None) or "").split(".")[0]
-        if name and importlib.util.find_spec(name) is None:
+    elif call.excinfo.errisinstance(ValueError):
+        m = re.search(r"expected (\w+) installed", str(call.excinfo.value))
+        name = m.group(1) if m else ""
+    if name:
+        if importlib.util.find_spec(name) is None:
             rep.outcome = "skipped"
             rep.longrepr = (str(item.path), item.location[1] or 0,
                             f"Skipped: needs {name} (not installed here)")

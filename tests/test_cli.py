@@ -1,6 +1,7 @@
 """The `foveated-mi` command line end to end, in-process (same interpreter, same JIT cache)."""
 import json
 import os
+import shutil
 import subprocess
 import sys
 
@@ -84,6 +85,8 @@ def test_failed_run_keeps_previous_output(tmp_path, capsys):
 
 def test_console_script_installed():
     exe = os.path.join(os.path.dirname(sys.executable), "foveated-mi")
+    if not os.path.exists(exe):  # installed elsewhere (pip --target, as scripts/gpu_bench.sh)
+        exe = shutil.which("foveated-mi") or exe
     r = subprocess.run([exe, "render", "cornell-box", "--theta", "-3"], capture_output=True,
                        text=True, timeout=120)
     assert r.returncode == 2

@@ -218,7 +218,7 @@ class _DiscreteSibsonOp(dr.CustomOp):
 
     def backward(self):
         g = mi.Color3f(self.grad_out())
-        inv = mi.Float(dr.rcp(self.count))
+        inv = mi.Float(1.0 / self.count)  # not dr.rcp: an approximation on CUDA, Float64 too
         sums, _ = _disk_sums(g * inv, *self.geometry, "discrete_sibson_adjoint")
         self.set_grad_in("filled", mi.Color3f(mi.Float(sums[0]), mi.Float(sums[1]), mi.Float(sums[2])))
 
@@ -316,8 +316,10 @@ def fast_sibson(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, wid
         + mi.Array4f64(dr.gather(mi.Array4f, quads, i + width, down))
     area = area + mi.Float64(dr.select(up, 1.0, 0.0) + dr.select(down, 1.0, 0.0))
     # One reciprocal instead of three divisions: the Float64 rounding of c * m * (1 / m) is far
-    # below half a Float32 ulp, so a constant image still rounds back to exactly c.
-    inv = dr.rcp(area)
+    # below half a Float32 ulp, so a constant image still rounds back to exactly c. A division,
+    # not dr.rcp: under fast math CUDA's Float64 rcp is rcp.approx (about 20 bits; 10 Float32
+    # ulps measured on an H200), a division stays div.rn.
+    inv = 1.0 / area
     out = mi.Color3f(mi.Float((s.x + extra.x) * inv), mi.Float((s.y + extra.y) * inv),
                      mi.Float((s.z + extra.z) * inv))
     # Range clamp against SAT rounding (bounds found by the table's column walk; without sites
