@@ -143,6 +143,10 @@ def summarise(out: str, variant: str) -> str:
     for name in ("overhead.json", os.path.join("table1", "results.csv")):
         if os.path.exists(os.path.join(out, name)):
             md += ["", f"Also written: `{name}`."]
+    parity_log = _read(os.path.join(out, "logs", "tests_parity.log")).splitlines()
+    parity_last = next((l for l in reversed(parity_log) if l.strip() and not l.startswith("not collected")), "")
+    if parity_last:
+        md += ["", "## Backend parity and kernel budget tests", "", f"`{parity_last.strip()}`"]
     if tests_last:
         md += ["", "## Tests", "", f"`{tests_last.strip()}`"]
         if not_collected:
@@ -152,7 +156,7 @@ def summarise(out: str, variant: str) -> str:
         f.write(text)
     with open(os.path.join(out, "summary.json"), "w") as f:
         json.dump({"gpu": gpu, "variant": variant, "steps": steps, "reorder": reorder,
-                   "backward": backward, "overhead": overhead, "tests": tests_last.strip(),
+                   "backward": backward, "overhead": overhead, "tests": tests_last.strip(), "tests_parity": parity_last.strip(),
                    "failed": [s["step"] for s in failed]}, f, indent=2)
     return text
 

@@ -20,7 +20,8 @@
 # packages, such as a CUDA image's NumPy, scikit-image and pytest, fill what the wheelhouse
 # left out (see WHEELHOUSE_HOST_HAS); 0: a fresh isolated venv), GPU_BENCH_VARIANT (cuda_ad_rgb),
 # GPU_BENCH_DEADLINE (seconds for the whole run, default 470), GPU_BENCH_TESTS (pytest
-# targets, default tests), GPU_BENCH_MAXFAIL (25).
+# targets, default tests), GPU_BENCH_PARITY_TESTS (run first: the backend-parity and kernel-budget
+# tests), GPU_BENCH_MAXFAIL (25).
 set -u
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
@@ -43,11 +44,13 @@ if [ $LOCAL = 1 ]; then
   VARIANT=${GPU_BENCH_VARIANT:-llvm_ad_rgb}
   S1=64; S2=96; SB=32; ST1=64; SCELL=32; REPEATS=1; OSCALE=0.0625; RFRAC=0.35
   TESTS=${GPU_BENCH_TESTS:-tests/test_sampling.py}
+  PARITY=${GPU_BENCH_PARITY_TESTS:-tests/test_backend_parity.py}
   [ -z "${DRJIT_LIBLLVM_PATH:-}" ] && [ -f .venv/llvm-path ] && export DRJIT_LIBLLVM_PATH=$(cat .venv/llvm-path)
 else
   VARIANT=${GPU_BENCH_VARIANT:-cuda_ad_rgb}
   S1=1024; S2=2048; SB=1024; ST1=2048; SCELL=1024; REPEATS=2; OSCALE=1; RFRAC=0.10
   TESTS=${GPU_BENCH_TESTS:-tests}
+  PARITY=${GPU_BENCH_PARITY_TESTS:-tests/test_backend_parity.py tests/test_kernel_budget.py}
 fi
 export FOVEATED_MI_VARIANT=$VARIANT
 if [ -z "${PYTHON:-}" ]; then
@@ -167,7 +170,7 @@ fi
 
 STUDY_MODULES=(skimage colour flip_evaluator tqdm)
 if missing=$(have_modules "${STUDY_MODULES[@]}"); then
-  step table1 120 "paper_table1 study at $ST1²" "$VPY" -c \
+  step table1 150 "paper_table1 study at $ST1²" "$VPY" -c \
     'import sys; from foveated_mi.cli import main; sys.exit(main(sys.argv[1:]))' study \
     configs/studies/paper_table1.toml --size $ST1 $ST1 --variant "$VARIANT" --out "$OUT/table1" --no-progress
 else
@@ -194,9 +197,12 @@ else
 fi
 
 if missing=$(have_modules pytest); then
-  step tests 120 "pytest $TESTS on $VARIANT" env PYTHONPATH="$ROOT/scripts" "$VPY" -m pytest -q \
-    -p no:cacheprovider -p _offline_pytest --maxfail="${GPU_BENCH_MAXFAIL:-25}" \
-    --junitxml="$OUT/tests.xml" $TESTS
+  # What can differ on the device first (a few seconds), then the whole suite in the time left
+  # (on a cold CUDA kernel cache it needs more than 2 minutes: every test compiles kernels).
+  PYTEST=(env PYTHONPATH="$ROOT/scripts" "$VPY" -m pytest -q -p no:cacheprovider -p _offline_pytest
+          --maxfail="${GPU_BENCH_MAXFAIL:-25}")
+  step tests_parity 90 "pytest $PARITY on $VARIANT" "${PYTEST[@]}" --junitxml="$OUT/tests_parity.xml" $PARITY
+  step tests 120 "pytest $TESTS on $VARIANT" "${PYTEST[@]}" --junitxml="$OUT/tests.xml" $TESTS
 else
   skip tests "pytest is not in the wheelhouse"
 fi
