@@ -117,3 +117,27 @@ def test_launched_lanes_strategy2_le_strategy1_le_full():
     rays = int(np.count_nonzero(smap.numpy()))
     assert lanes["compact"] == rays
     assert rays <= lanes["rows_blocks"] < lanes["rows"] < lanes["none"] == W * H
+
+
+@settings(max_examples=40, deadline=None)
+@given(w=st.integers(1, 40), h=st.integers(1, 24), frac=st.floats(0.0, 1.0),
+       bh=st.integers(1, 9), seed=st.integers(0, 2**31))
+def test_row_launch_reads_the_reordered_map(w, h, frac, bh, seed):
+    """The launch is gathered from the compacted trace pixels, R is built only on request:
+    lane (v, k) traces R[v*W + k] for every active lane, and R is built lazily."""
+    m = np.random.default_rng(seed).random(w * h) < frac
+    for mode in ("rows", "rows_blocks"):
+        r = reorder(mi.Bool(m), w, h, mode, block_height=bh)
+        assert r._map is None, "R must not be built by the launch"
+        counts = r.row_counts.numpy()
+        rmap = r.reordered_map.numpy().reshape(h, w)
+        slots = counts.max() if h else 0
+        if slots == 0:
+            assert r.lanes == 0
+            continue
+        wf = r.wavefront.numpy().reshape(h, slots)
+        act = r.active.numpy().reshape(h, slots)
+        for v in range(h):
+            c = counts[v]
+            assert np.all(act[v, :c]) and not np.any(act[v, c:])
+            np.testing.assert_array_equal(wf[v, :c], rmap[v, :c], err_msg=f"{mode} row {v}")

@@ -32,7 +32,7 @@ pixels: ``R[v*W + k]`` is the pixel handled by thread ``k`` of row ``v``. Sizing
 """
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Callable
 
 import drjit as dr
 import mitsuba as mi
@@ -42,13 +42,30 @@ from ..validate import check_choice, check_int
 REORDER_MODES = ("none", "rows", "rows_blocks", "compact")
 
 
-class Reordered(NamedTuple):
-    wavefront: mi.UInt32            #: pixel traced by each launched lane
-    active: mi.Bool | None          #: lanes that trace; None when every lane does
-    reordered_map: mi.UInt32 | None  #: R: slot -> pixel (``rows``/``rows_blocks``)
-    row_counts: mi.UInt32 | None    #: trace threads per row after reordering
-    mode: str
-    swaps: mi.UInt32 | None = None  #: Strategy 2's swap count (1 element), else None
+class Reordered:
+    """A launch layout: the pixel each lane traces, the lanes that trace and the row counts.
+
+    ``reordered_map`` (the paper's ``R``) is built on first use only: the launch itself is
+    gathered from the compacted trace pixels, so a frame that does not look at ``R`` does
+    not pay for its full-frame scatter."""
+    __slots__ = ("wavefront", "active", "row_counts", "mode", "swaps", "_build_map", "_map")
+
+    def __init__(self, wavefront: mi.UInt32, active: mi.Bool | None, row_counts: mi.UInt32 | None,
+                 mode: str, swaps: mi.UInt32 | None = None,
+                 build_map: Callable[[], mi.UInt32] | None = None):
+        self.wavefront = wavefront      #: pixel traced by each launched lane
+        self.active = active            #: lanes that trace; None when every lane does
+        self.row_counts = row_counts    #: trace threads per row after reordering
+        self.mode = mode
+        self.swaps = swaps              #: Strategy 2's swap count (1 element), else None
+        self._build_map, self._map = build_map, None
+
+    @property
+    def reordered_map(self) -> mi.UInt32 | None:
+        """R: slot -> pixel (``rows``/``rows_blocks``), else None."""
+        if self._map is None and self._build_map is not None:
+            self._map = self._build_map()
+        return self._map
 
     @property
     def lanes(self) -> int:
@@ -82,13 +99,15 @@ def reorder_rows(sampling_map: mi.Bool, width: int, height: int
     return rmap, counts
 
 
-def _search_sorted(cum: mi.UInt32, n: int, g: mi.UInt32) -> mi.UInt32:
-    """Largest ``r`` in [0, n) with ``cum[r] <= g`` for non-decreasing ``cum``."""
+def _search_sorted(cum: mi.UInt32, n: int, g: mi.UInt32, active: mi.Bool | bool = True
+                   ) -> mi.UInt32:
+    """Largest ``r`` in [0, n) with ``cum[r] <= g`` for non-decreasing ``cum`` (0 where not
+    ``active``)."""
     lo = dr.zeros(mi.UInt32, dr.width(g))
     step = 1 << max(n - 1, 1).bit_length()
     while step:
         cand = lo + step
-        ok = cand < n
+        ok = active & (cand < n)
         ok &= dr.gather(mi.UInt32, cum, dr.minimum(cand, n - 1), ok) <= g
         lo = dr.select(ok, cand, lo)
         step >>= 1
@@ -111,11 +130,10 @@ def _rank_in_block(counts: mi.UInt32, first: mi.UInt32, size: mi.UInt32) -> mi.U
     return rank
 
 
-def reorder_rows_blocks(sampling_map: mi.Bool, width: int, height: int, block_height: int
-                        ) -> tuple[mi.UInt32, mi.UInt32, mi.UInt32]:
-    """Strategy 2 on top of Strategy 1: ``R``, the balanced ``row_counts`` and the number of
-    swaps the paper's loop makes."""
-    rmap, counts = reorder_rows(sampling_map, width, height)
+def _balanced_counts(counts: mi.UInt32, height: int, block_height: int) -> mi.UInt32:
+    """Strategy 2's final row counts: a block with ``T`` trace pixels in ``B`` rows ends with
+    ``floor(T/B)`` per row, the ``T mod B`` rows that held the most (ties: the later row, as
+    the loop takes the first maximum) keeping one more."""
     rows = dr.arange(mi.UInt32, height)
     block = rows // block_height
     first = block * block_height
@@ -127,15 +145,26 @@ def reorder_rows_blocks(sampling_map: mi.Bool, width: int, height: int, block_he
     last = first + size - 1
     before = dr.select(first > 0, dr.gather(mi.UInt32, incl, dr.maximum(first, 1) - 1), 0)
     total = dr.gather(mi.UInt32, incl, last) - before
-    # The loop leaves floor(T/B) per row; the T mod B rows that held the most (ties: the
-    # later row, as the loop takes the first maximum) keep one more.
     rank = _rank_in_block(counts, first, size)
-    target = total // size + mi.UInt32(rank < total % size)
+    return total // size + mi.UInt32(rank < total % size)
+
+
+def _surplus_deficit(counts: mi.UInt32, target: mi.UInt32):
+    """Per row: pixels to give, pixels to receive, and their exclusive prefix sums (surplus
+    and deficit match inside every block, so global prefixes pair them up in row order)."""
     surplus = dr.select(counts > target, counts - target, 0)
     deficit = dr.select(target > counts, target - counts, 0)
-    # Surplus and deficit match inside every block, so global prefixes pair them up.
-    s_cum = dr.prefix_sum(surplus)
-    d_cum = dr.prefix_sum(deficit)
+    return surplus, deficit, dr.prefix_sum(surplus), dr.prefix_sum(deficit)
+
+
+def reorder_rows_blocks(sampling_map: mi.Bool, width: int, height: int, block_height: int
+                        ) -> tuple[mi.UInt32, mi.UInt32, mi.UInt32]:
+    """Strategy 2 on top of Strategy 1 as a full map: ``R``, the balanced ``row_counts`` and
+    the number of swaps the paper's loop makes. (The launch gathers the same layout from the
+    compacted trace pixels, :func:`reorder`.)"""
+    rmap, counts = reorder_rows(sampling_map, width, height)
+    target = _balanced_counts(counts, height, block_height)
+    surplus, _, s_cum, d_cum = _surplus_deficit(counts, target)
 
     # One lane per slot that may hold a surplus trace pixel: slots [target, count) of a row.
     idx = dr.arange(mi.UInt32, width * height)
@@ -153,8 +182,50 @@ def reorder_rows_blocks(sampling_map: mi.Bool, width: int, height: int, block_he
     out = mi.UInt32(rmap)
     dr.scatter(out, src_px, dst, moving)
     dr.scatter(out, dst_px, idx, moving)
-    swaps = dr.sum(dr.select(counts > target, counts - target, 0))
-    return out, target, mi.UInt32(swaps)
+    return out, target, mi.UInt32(dr.sum(surplus))
+
+
+def _row_launch(sampling_map: mi.Bool, width: int, height: int, mode: str, block_height: int
+                ) -> Reordered:
+    """The rows x slots launch of Strategy 1 or 2, gathered from the compacted trace pixels:
+    lane ``(v, k)`` traces the ``k``-th trace pixel of row ``v``; under Strategy 2 the slots
+    ``[count, target)`` of a receiving row hold, in row order, the surplus pixels
+    ``[target, count)`` of the giving rows of its block (the pixels ``R`` moves there)."""
+    counts = dr.block_sum(mi.UInt32(sampling_map), width)
+    trace_px = dr.compress(sampling_map)          # row-major: each row's trace pixels in order
+    row_start = dr.prefix_sum(counts)
+    swaps = None
+    if mode == "rows":
+        final = counts
+        def build_map():
+            return reorder_rows(sampling_map, width, height)[0]
+    else:
+        final = _balanced_counts(counts, height, block_height)
+        surplus, _, s_cum, d_cum = _surplus_deficit(counts, final)
+        swaps = mi.UInt32(dr.sum(surplus))
+        def build_map():
+            return reorder_rows_blocks(sampling_map, width, height, block_height)[0]
+    # The launch is rows x slots: its width is the largest row count (a host read).
+    slots = int(dr.max(final)[0]) if height > 0 else 0
+    if slots == 0:
+        return Reordered(mi.UInt32(), mi.Bool(), final, mode, swaps, build_map)
+    lane = dr.arange(mi.UInt32, height * slots)
+    # An opaque width: a new largest row count compiles nothing new.
+    width_k = dr.opaque(mi.UInt32, slots)
+    v = lane // width_k
+    k = lane - v * width_k
+    active = k < dr.gather(mi.UInt32, final, v)
+    src_row, src_k = v, k
+    if mode == "rows_blocks":
+        moved = active & (k >= dr.gather(mi.UInt32, counts, v))
+        g = dr.gather(mi.UInt32, d_cum, v, moved) + k - dr.gather(mi.UInt32, counts, v, moved)
+        r = _search_sorted(s_cum, height, g, moved)
+        src_row = dr.select(moved, r, v)
+        src_k = dr.select(moved, dr.gather(mi.UInt32, final, r, moved)
+                          + g - dr.gather(mi.UInt32, s_cum, r, moved), k)
+    at = dr.gather(mi.UInt32, row_start, src_row, active) + src_k
+    wavefront = dr.gather(mi.UInt32, trace_px, at, active)
+    return Reordered(wavefront, active, final, mode, swaps, build_map)
 
 
 def reorder(sampling_map: mi.Bool, width: int, height: int, mode: str = "compact",
@@ -164,23 +235,7 @@ def reorder(sampling_map: mi.Bool, width: int, height: int, mode: str = "compact
     block_height = check_int("block_height", block_height, 1)
     n = width * height
     if mode == "none":
-        return Reordered(dr.arange(mi.UInt32, n), mi.Bool(sampling_map), None, None, mode)
+        return Reordered(dr.arange(mi.UInt32, n), mi.Bool(sampling_map), None, mode)
     if mode == "compact":
-        return Reordered(dr.compress(sampling_map), None, None, None, mode)
-    swaps = None
-    if mode == "rows":
-        rmap, counts = reorder_rows(sampling_map, width, height)
-    else:
-        rmap, counts, swaps = reorder_rows_blocks(sampling_map, width, height, block_height)
-    # The launch is rows x slots: its width is the largest row count (a host read).
-    slots = int(dr.max(counts)[0]) if height > 0 else 0
-    if slots == 0:
-        return Reordered(mi.UInt32(), mi.Bool(), rmap, counts, mode, swaps)
-    lane = dr.arange(mi.UInt32, height * slots)
-    # An opaque width: a new largest row count compiles nothing new.
-    width_k = dr.opaque(mi.UInt32, slots)
-    v = lane // width_k
-    k = lane - v * width_k
-    active = k < dr.gather(mi.UInt32, counts, v)
-    wavefront = dr.gather(mi.UInt32, rmap, v * width + k)
-    return Reordered(wavefront, active, rmap, counts, mode, swaps)
+        return Reordered(dr.compress(sampling_map), None, None, mode)
+    return _row_launch(sampling_map, width, height, mode, block_height)

@@ -467,7 +467,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             "position": gb.position, "normal": gb.normal, "depth": gb.depth, "hit": gb.hit,
             "probability": frame.probability, "edges": frame.edges,
             "sampling_map": frame.sampling_map, "reprojection_map": reproj,
-            "wavefront": ro.wavefront, "reordered_map": ro.reordered_map,
+            # R is built on request only (buffer("reordered_map")): the launch does not need it.
+            "wavefront": ro.wavefront, "reordered_map": ro,
             "row_counts": ro.row_counts, "traced": buffers["traced"],
             "shading": resolved.shading, "shading_mask": resolved.mask,
             "history_count": resolved.count, "nearest": buffers["nearest"],
@@ -522,6 +523,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         if name not in self.buffers:
             raise ParameterError("buffer", name, "one of " + ", ".join(sorted(self.buffers)))
         v = self.buffers[name]
+        if isinstance(v, _reorder.Reordered):
+            v = v.reordered_map
         w, h = self._stats_raw["width"], self._stats_raw["height"]
         if v is None:
             return None
