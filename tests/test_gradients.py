@@ -253,3 +253,35 @@ def test_frame_seed_derivation_and_map_seed():
 def test_map_seed_validation_one_line(bad):
     with pytest.raises(ParameterError, match=r"map_seed = .* is invalid: expected an integer"):
         FoveatedIntegrator(map_seed=bad)
+
+
+@pytest.mark.parametrize("preset", ["guided", "paper"])
+def test_recorded_formation_gives_the_recomputed_gradient(preset):
+    """A frame rendered for gradients keeps its image formation's graph: the first gradient
+    pass pushes through it, a second one (nothing recorded any more) forms the image again.
+    Both give the same parameter gradient, and the graph never reaches the history."""
+    sc = gradcheck.scene("prb", preset=preset, history=True)
+    integ = sc.integrator()
+    params = mi.traverse(sc)
+    key = "red.reflectance.value"
+    dr.enable_grad(params[key])
+    params.update()
+    mi.render(sc, params, seed=1, spp=4)
+    assert integ._primal.recorded is not None, "a differentiated frame records its formation"
+    assert not dr.grad_enabled(integ.history.mean) and not dr.grad_enabled(integ.history.count)
+    grad_in = mi.TensorXf(np.full((32, 32, 3), 0.5, np.float32))
+    grads = []
+    for _ in range(2):
+        dr.set_grad(params[key], 0.0)
+        integ.render_backward(sc, params, grad_in, seed=3, spp=4)
+        grads.append(np.array(dr.grad(params[key])))
+    assert integ._primal.recorded is None
+    assert np.all(np.isfinite(grads[0])) and grads[0][0] > 0
+    np.testing.assert_allclose(grads[0], grads[1], rtol=1e-4)
+
+
+def test_a_frame_without_gradients_records_nothing():
+    sc = gradcheck.scene("prb", preset="guided")
+    integ = sc.integrator()
+    mi.render(sc, seed=1, spp=4)
+    assert integ._primal.recorded is None

@@ -70,7 +70,9 @@ def test_the_gradient_pass_runs_it_and_learns_its_differentiability(identity):
         grads[name] = Probe(gradcheck.scene("prb", denoiser=name), "albedo").reverse(0, 4)
     assert grads["none"] != 0 and np.isfinite(grads["none"])
     assert grads[identity] == pytest.approx(grads["none"], rel=1e-5)
-    assert CALLS == [False, True]    # the primal frame, then the gradient pass
+    # Once: the primal frame, rendered for gradients, forms its image with the gradient
+    # pass's graph kept (grad_pass), and the gradient pass traverses that graph.
+    assert CALLS == [True]
     # The same denoiser registered as not differentiable: the gradient pass refuses it.
     register_denoiser(identity, lambda ctx: ctx.image, differentiable=False)
     with pytest.raises(ParameterError, match="identity is not differentiable"):

@@ -18,7 +18,10 @@ inverse, which are differentiated at the primal values. The derivative is theref
 
 with :math:`T` the traced pixels of the frame. :func:`image_backward` and :func:`image_forward`
 compute :math:`J_F^{\mathsf T}\delta I` and :math:`J_F\,\delta S` by running :math:`F` again on an
-AD-enabled copy of :math:`S_0` (identical values, hence identical detached weights).
+AD-enabled copy of :math:`S_0` (identical values, hence identical detached weights). A primal
+frame that ``mi.render(scene, params)`` will differentiate runs :math:`F` once on that copy
+and keeps its graph (:func:`record`); the gradient pass then only traverses it
+(:func:`recorded_backward`, :func:`recorded_forward`).
 
 - The history is a constant: frame :math:`t` blends :math:`(n h + s S)/(n + s)`, whose
   derivative is :math:`s/(n+s)\,\partial S/\partial\pi`. The gradient of frame :math:`t` flows
@@ -72,6 +75,7 @@ registration); :func:`check_differentiable` then refuses the configuration in on
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 from typing import Any, Callable
 
 import drjit as dr
@@ -148,6 +152,52 @@ def _through(form: Callable[[mi.Color3f], mi.Color3f], value: mi.Color3f, grad: 
         dr.enqueue(mode, start)
         dr.traverse(mode)
         return mi.Color3f(dr.grad(end))
+
+
+def record(form: Callable[[mi.Color3f], Any], value: mi.Color3f) -> tuple[mi.Color3f, Any]:
+    """``form`` evaluated at ``value`` with its derivative graph kept: ``(x, form(x))`` for an
+    AD-enabled copy ``x`` of ``value``. A primal frame that a gradient pass will follow
+    records its image formation once, and :func:`recorded_backward` /
+    :func:`recorded_forward` push through that graph instead of running the formation again
+    (every filter level's input is then computed once per gradient step)."""
+    with dr.resume_grad():
+        x = _ad_copy(value)
+        return x, form(x)
+
+
+def detached(tree):
+    """``tree`` (arrays in dicts, lists, tuples and named tuples) with every array detached
+    (``dr.detach`` leaves a named tuple's fields attached)."""
+    if dr.is_array_v(tree):
+        return dr.detach(tree)
+    if isinstance(tree, dict):
+        return {k: detached(v) for k, v in tree.items()}
+    if isinstance(tree, tuple) and hasattr(tree, "_fields"):
+        return type(tree)(*(detached(v) for v in tree))
+    if isinstance(tree, (list, tuple)):
+        return type(tree)(detached(v) for v in tree)
+    if dataclasses.is_dataclass(tree) and not isinstance(tree, type):
+        return dataclasses.replace(tree, **{f.name: detached(getattr(tree, f.name))
+                                            for f in dataclasses.fields(tree) if f.init})
+    return tree
+
+
+def recorded_backward(x: mi.Color3f, image: mi.Color3f, grad_image: mi.Color3f) -> mi.Color3f:
+    """:func:`image_backward` through a graph kept by :func:`record` (which it consumes)."""
+    with dr.resume_grad():
+        dr.set_grad(image, mi.Color3f(grad_image))
+        dr.enqueue(dr.ADMode.Backward, image)
+        dr.traverse(dr.ADMode.Backward)
+        return mi.Color3f(dr.grad(x))
+
+
+def recorded_forward(x: mi.Color3f, image: mi.Color3f, tangent: mi.Color3f) -> mi.Color3f:
+    """:func:`image_forward` through a graph kept by :func:`record` (which it consumes)."""
+    with dr.resume_grad():
+        dr.set_grad(x, mi.Color3f(tangent))
+        dr.enqueue(dr.ADMode.Forward, x)
+        dr.traverse(dr.ADMode.Forward)
+        return mi.Color3f(dr.grad(image))
 
 
 def image_backward(form: Callable[[mi.Color3f], mi.Color3f], value: mi.Color3f,

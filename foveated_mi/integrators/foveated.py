@@ -84,6 +84,13 @@ class _PrimalFrame:
     frame: Frame
     shading: _shading.ShadingBuffer   #: traced pixels' values (the primal's, detached)
     scene_id: int
+    #: ``(x, image)``: the image formation's derivative graph from the traced values ``x``,
+    #: kept by a primal frame rendered for gradients; the first gradient pass consumes it.
+    recorded: tuple[mi.Color3f, mi.Color3f] | None = None
+
+    def take_recorded(self):
+        rec, self.recorded = self.recorded, None
+        return rec
 
 
 def _tensor_to_color(tensor, frame: Frame, name: str) -> mi.Color3f:
@@ -225,7 +232,9 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         primal = self._primal_frame(scene, sensor, seed, spp)
         frame, shading = primal.frame, primal.shading
         grad = _tensor_to_color(grad_in, frame, "grad_in")
-        delta = _adjoint.image_backward(self._formation(primal), shading.value, grad)
+        rec = primal.take_recorded()
+        delta = _adjoint.recorded_backward(*rec, grad) if rec is not None else \
+            _adjoint.image_backward(self._formation(primal), shading.value, grad)
         self._adjoint.backward(self.nested, scene, params, frame, shading.mask, delta, seed,
                                spp, self._options)
 
@@ -237,7 +246,9 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         frame, shading = primal.frame, primal.shading
         tangent = self._adjoint.forward(self.nested, scene, params, frame, shading.mask, seed,
                                         spp, self._options)
-        image = _adjoint.image_forward(self._formation(primal), shading.value, tangent)
+        rec = primal.take_recorded()
+        image = _adjoint.recorded_forward(*rec, tangent) if rec is not None else \
+            _adjoint.image_forward(self._formation(primal), shading.value, tangent)
         return mi.TensorXf(dr.ravel(image), shape=(frame.height, frame.width, 3))
 
     def _check_differentiable(self) -> None:
@@ -315,11 +326,12 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         shade = self._shade(scene, frame)
         # The samples into the sparse shading buffer (the seam of the gradient pass).
         shading = self._develop(shade, frame)
-        # History resolve, reconstruction and post-processing.
-        image, buffers = self._form_image(frame, shading, timer)
+        # History resolve, reconstruction and post-processing; recorded for the gradient pass
+        # when mi.render will differentiate this frame.
+        image, buffers, recorded = self._form_primal(frame, shading, timer, state.differentiated)
         # The history, buffers and stats of this frame, and the frame a gradient pass reuses.
         self._finish_frame(frame, shade, buffers, timer)
-        self._primal = _PrimalFrame(frame, shading, id(scene))
+        self._primal = _PrimalFrame(frame, shading, id(scene), recorded)
         return mi.TensorXf(dr.ravel(image), shape=(frame.height, frame.width, 3))
 
     def _prepare(self, scene: mi.Scene, sensor: mi.Sensor, seed, spp: int,
@@ -420,6 +432,30 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         return _shading.develop(shade, frame.reordered.wavefront, frame.spp,
                                 frame.sensor.film(), o["pixel_filter"])
 
+    def _form_primal(self, frame: Frame, shading: _shading.ShadingBuffer, timer: StageTimer,
+                     differentiated: bool):
+        """:meth:`_form_image` of a primal frame: ``(image, buffers, recorded)``. A frame that a
+        gradient pass will follow (and whose denoiser is differentiable) is formed with its
+        derivative graph kept (:func:`foveated_mi.frame.adjoint.record`), so the gradient
+        pass does not form it again; image and buffers are detached either way (the history
+        never carries a gradient into the next frame)."""
+        try:
+            _adjoint.check_differentiable(self._options)
+        except ParameterError:
+            differentiated = False
+        if not differentiated:
+            image, buffers = self._form_image(frame, shading, timer)
+            return image, buffers, None
+        out = {}
+
+        def form(x):
+            out["image"], out["buffers"] = self._form_image(
+                frame, shading._replace(value=x), timer, grad_pass=True)
+            return out["image"]
+
+        x, image = _adjoint.record(form, shading.value)
+        return dr.detach(image), _adjoint.detached(out["buffers"]), (x, image)
+
     def _form_image(self, frame: Frame, shading: _shading.ShadingBuffer, timer: StageTimer,
                     grad_pass: bool = False) -> tuple[mi.Color3f, dict[str, Any]]:
         """Everything after the shading buffer: history resolve, reconstruction and
@@ -428,8 +464,9 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         ``shading.value`` holds the radiance estimate of each traced pixel. Every weight
         below (sites, interpolation windows, edge-stopping weights) is decided from the
         frame's G-buffer, its sampling map and detached values, so the image is a fixed
-        function of ``shading.value``: a gradient pass runs this again on the primal frame's
-        state, with the primal values carrying the gradient.
+        function of ``shading.value``: a primal frame rendered for gradients keeps its graph
+        (:meth:`_form_primal`); otherwise a gradient pass runs this again on the primal
+        frame's state, with the primal values carrying the gradient.
         """
         o, gb = self._options, frame.gbuffer
         width, height = frame.width, frame.height
