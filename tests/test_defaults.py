@@ -132,3 +132,25 @@ def test_one_seed_one_image(preset, pixel_filter):
         images.append(np.array(mi.render(sc, integrator=integ, seed=3, spp=4)))
     for img in images[1:]:
         assert np.array_equal(images[0], img), np.abs(images[0] - img).max()
+
+
+def test_a_small_move_of_a_sparse_frame_keeps_its_history():
+    """A frame tracing fewer pixels than the cut threshold (10 %) holds history at about that
+    share of its pixels: a small camera move must reuse it, not be taken for a cut (it was,
+    on every move, when the cut counted history hits instead of surfaces seen again)."""
+    sc = _cornell(96)
+    params = mi.traverse(sc)
+    integ = FoveatedIntegrator(nested=sc.integrator(), preset="paper", theta=0.02, sigma_p=0.8,
+                               edge_threshold=10.0)
+    for k in range(2):
+        mi.render(sc, integrator=integ, seed=k)
+    assert integ.stats["ray_fraction"] < 0.1, integ.stats["ray_fraction"]
+    params["sensor.to_world"] = _look([0.02, 0.0, 0.0])
+    params.update()
+    mi.render(sc, integrator=integ, seed=2)
+    assert integ.stats["history_hits"] > 0.05 * 96 * 96, integ.stats["history_hits"]
+    # Turned around, the same frame is a cut: nothing is reused.
+    params["sensor.to_world"] = _look([0, 0, 10])
+    params.update()
+    mi.render(sc, integrator=integ, seed=3)
+    assert integ.stats["history_hits"] == 0

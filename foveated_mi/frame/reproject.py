@@ -64,6 +64,9 @@ class ReprojectionMap(NamedTuple):
     coords: mi.Point2f   #: previous-frame pixel coordinates (continuous, in pixels)
     hit: mi.Bool         #: cache hit (Tr.z of the paper)
     index: mi.UInt32     #: previous pixel index (valid where ``hit``)
+    #: the pixel lands on the same surface (or sky) in the previous frame, whether or not
+    #: that pixel holds history: what a camera cut is judged by (None: judge by ``hit``)
+    agree: mi.Bool | None = None
 
 
 def camera_state(sensor: mi.Sensor) -> CameraState:
@@ -96,7 +99,8 @@ def reprojection_map(position: mi.Point3f, hit: mi.Bool, history: History | None
     it they always miss."""
     n = width * height
     if history is None:
-        return ReprojectionMap(dr.zeros(mi.Point2f, n), dr.zeros(mi.Bool, n), dr.zeros(mi.UInt32, n))
+        return ReprojectionMap(dr.zeros(mi.Point2f, n), dr.zeros(mi.Bool, n), dr.zeros(mi.UInt32, n),
+                               dr.zeros(mi.Bool, n))
     q = history.camera.matrix @ mi.Vector4f(position.x, position.y, position.z, 1.0)
     uv, dist = project(history.camera, position, width, height)
     # A point behind the previous camera (w <= 0) projects, mirrored, into its film: it was
@@ -122,18 +126,22 @@ def reprojection_map(position: mi.Point3f, hit: mi.Bool, history: History | None
     # Misses store depth = inf: the comparison is then False without forming inf - inf.
     same_surface = hit & dr.isfinite(prev_depth) & (dr.abs(prev_depth - dist) <= tol * dist)
     same_background = background & ~dr.isfinite(prev_depth)
-    ok = inside & (same_surface | same_background) & (prev_count > 0)
-    return ReprojectionMap(uv, ok, prev)
+    agree = inside & (same_surface | same_background)
+    return ReprojectionMap(uv, agree & (prev_count > 0), prev, agree)
 
 
 def unless_cut(reproj: ReprojectionMap, fraction: float) -> tuple[ReprojectionMap, mi.Bool]:
-    """``reproj`` with no hit at all when fewer than ``fraction`` of the pixels hit, and that
-    verdict (a one-entry ``mi.Bool``): after a camera cut the few pixels that still pass the
-    depth test are chance matches, and a frame that keeps them mixes two views. Decided on the
-    device (a one-entry count, broadcast), so the frame never waits for it."""
+    """``reproj`` with no hit at all when fewer than ``fraction`` of the pixels land on the
+    surface they saw in the previous frame, and that verdict (a one-entry ``mi.Bool``): after
+    a camera cut the few pixels that still pass the depth test are chance matches, and a
+    frame that keeps them mixes two views. Judged by ``agree``, not by ``hit``: a sparse
+    frame holds history at few pixels (about its ray fraction after one frame), so counting
+    hits would call every move of a frame tracing under ``fraction`` of its pixels a cut.
+    Decided on the device (a one-entry count, broadcast), so the frame never waits for it."""
     n = dr.width(reproj.hit)
+    agree = reproj.agree if reproj.agree is not None else reproj.hit
     hits = dr.zeros(mi.UInt32, 1)
-    dr.scatter_reduce(dr.ReduceOp.Add, hits, mi.UInt32(1), mi.UInt32(0), reproj.hit)
+    dr.scatter_reduce(dr.ReduceOp.Add, hits, mi.UInt32(1), mi.UInt32(0), agree)
     cut = mi.Float(dr.gather(mi.UInt32, hits, mi.UInt32(0))) < dr.opaque(mi.Float, fraction * n)
     return reproj._replace(hit=reproj.hit & ~cut), cut
 
