@@ -140,20 +140,6 @@ def _ad_copy(value: mi.Color3f) -> mi.Color3f:
     return x
 
 
-def _through(form: Callable[[mi.Color3f], mi.Color3f], value: mi.Color3f, grad: mi.Color3f,
-             mode: dr.ADMode) -> mi.Color3f:
-    """``grad`` pushed through ``form`` at ``value``: from the image back to the values
-    (``Backward``) or from the values to the image (``Forward``)."""
-    with dr.resume_grad():
-        x = _ad_copy(value)
-        image = form(x)
-        start, end = (image, x) if mode == dr.ADMode.Backward else (x, image)
-        dr.set_grad(start, mi.Color3f(grad))
-        dr.enqueue(mode, start)
-        dr.traverse(mode)
-        return mi.Color3f(dr.grad(end))
-
-
 def record(form: Callable[[mi.Color3f], Any], value: mi.Color3f) -> tuple[mi.Color3f, Any]:
     """``form`` evaluated at ``value`` with its derivative graph kept: ``(x, form(x))`` for an
     AD-enabled copy ``x`` of ``value``. A primal frame that a gradient pass will follow
@@ -182,35 +168,36 @@ def detached(tree):
     return tree
 
 
+def _push(start: mi.Color3f, end: mi.Color3f, grad: mi.Color3f, mode: dr.ADMode) -> mi.Color3f:
+    """``grad`` set on ``start`` and carried through the graph to ``end`` (which it consumes)."""
+    with dr.resume_grad():
+        dr.set_grad(start, mi.Color3f(grad))
+        dr.enqueue(mode, start)
+        dr.traverse(mode)
+        return mi.Color3f(dr.grad(end))
+
+
 def recorded_backward(x: mi.Color3f, image: mi.Color3f, grad_image: mi.Color3f) -> mi.Color3f:
     """:func:`image_backward` through a graph kept by :func:`record` (which it consumes)."""
-    with dr.resume_grad():
-        dr.set_grad(image, mi.Color3f(grad_image))
-        dr.enqueue(dr.ADMode.Backward, image)
-        dr.traverse(dr.ADMode.Backward)
-        return mi.Color3f(dr.grad(x))
+    return _push(image, x, grad_image, dr.ADMode.Backward)
 
 
 def recorded_forward(x: mi.Color3f, image: mi.Color3f, tangent: mi.Color3f) -> mi.Color3f:
     """:func:`image_forward` through a graph kept by :func:`record` (which it consumes)."""
-    with dr.resume_grad():
-        dr.set_grad(x, mi.Color3f(tangent))
-        dr.enqueue(dr.ADMode.Forward, x)
-        dr.traverse(dr.ADMode.Forward)
-        return mi.Color3f(dr.grad(image))
+    return _push(x, image, tangent, dr.ADMode.Forward)
 
 
 def image_backward(form: Callable[[mi.Color3f], mi.Color3f], value: mi.Color3f,
                    grad_image: mi.Color3f) -> mi.Color3f:
     r""":math:`J_F(S_0)^{\mathsf T}\,\delta I` for ``form`` = :math:`F`, ``value`` =
     :math:`S_0`, ``grad_image`` = :math:`\delta I` (one Color3f per pixel each)."""
-    return _through(form, value, grad_image, dr.ADMode.Backward)
+    return recorded_backward(*record(form, value), grad_image)
 
 
 def image_forward(form: Callable[[mi.Color3f], mi.Color3f], value: mi.Color3f,
                   tangent: mi.Color3f) -> mi.Color3f:
     r""":math:`J_F(S_0)\,\delta S` (see :func:`image_backward`)."""
-    return _through(form, value, tangent, dr.ADMode.Forward)
+    return recorded_forward(*record(form, value), tangent)
 
 
 # -- the nested integrator ------------------------------------------------------------------
