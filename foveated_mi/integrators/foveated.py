@@ -446,15 +446,10 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         if not differentiated:
             image, buffers = self._form_image(frame, shading, timer)
             return image, buffers, None
-        out = {}
-
-        def form(x):
-            out["image"], out["buffers"] = self._form_image(
-                frame, shading._replace(value=x), timer, grad_pass=True)
-            return out["image"]
-
-        x, image = _adjoint.record(form, shading.value)
-        return dr.detach(image), _adjoint.detached(out["buffers"]), (x, image)
+        x, (image, buffers) = _adjoint.record(
+            lambda v: self._form_image(frame, shading._replace(value=v), timer, grad_pass=True),
+            shading.value)
+        return dr.detach(image), _adjoint.detached(buffers), (x, image)
 
     def _form_image(self, frame: Frame, shading: _shading.ShadingBuffer, timer: StageTimer,
                     grad_pass: bool = False) -> tuple[mi.Color3f, dict[str, Any]]:
