@@ -150,11 +150,12 @@ def _balanced_counts(counts: mi.UInt32, height: int, block_height: int) -> mi.UI
 
 
 def _surplus_deficit(counts: mi.UInt32, target: mi.UInt32):
-    """Per row: pixels to give, pixels to receive, and their exclusive prefix sums (surplus
-    and deficit match inside every block, so global prefixes pair them up in row order)."""
+    """Per row: pixels to give, and the exclusive prefix sums of the pixels to give and to
+    receive (surplus and deficit match inside every block, so global prefixes pair them up
+    in row order)."""
     surplus = dr.select(counts > target, counts - target, 0)
     deficit = dr.select(target > counts, target - counts, 0)
-    return surplus, deficit, dr.prefix_sum(surplus), dr.prefix_sum(deficit)
+    return surplus, dr.prefix_sum(surplus), dr.prefix_sum(deficit)
 
 
 def reorder_rows_blocks(sampling_map: mi.Bool, width: int, height: int, block_height: int
@@ -164,7 +165,7 @@ def reorder_rows_blocks(sampling_map: mi.Bool, width: int, height: int, block_he
     compacted trace pixels, :func:`reorder`.)"""
     rmap, counts = reorder_rows(sampling_map, width, height)
     target = _balanced_counts(counts, height, block_height)
-    surplus, _, s_cum, d_cum = _surplus_deficit(counts, target)
+    surplus, s_cum, d_cum = _surplus_deficit(counts, target)
 
     # One lane per slot that may hold a surplus trace pixel: slots [target, count) of a row.
     idx = dr.arange(mi.UInt32, width * height)
@@ -191,8 +192,14 @@ def _row_launch(sampling_map: mi.Bool, width: int, height: int, mode: str, block
     lane ``(v, k)`` traces the ``k``-th trace pixel of row ``v``; under Strategy 2 the slots
     ``[count, target)`` of a receiving row hold, in row order, the surplus pixels
     ``[target, count)`` of the giving rows of its block (the pixels ``R`` moves there)."""
-    counts = dr.block_sum(mi.UInt32(sampling_map), width)
-    trace_px = dr.compress(sampling_map)          # row-major: each row's trace pixels in order
+    flags = mi.UInt32(sampling_map)
+    counts = dr.block_sum(flags, width)
+    # The trace pixels in row-major order (each row's in order), placed by an exclusive scan
+    # rather than dr.compress, whose size is a host read: the launch width stays the pass's
+    # only one.
+    n = width * height
+    trace_px = dr.zeros(mi.UInt32, n)
+    dr.scatter(trace_px, dr.arange(mi.UInt32, n), dr.prefix_sum(flags), sampling_map)
     row_start = dr.prefix_sum(counts)
     swaps = None
     if mode == "rows":
@@ -201,7 +208,7 @@ def _row_launch(sampling_map: mi.Bool, width: int, height: int, mode: str, block
             return reorder_rows(sampling_map, width, height)[0]
     else:
         final = _balanced_counts(counts, height, block_height)
-        surplus, _, s_cum, d_cum = _surplus_deficit(counts, final)
+        surplus, s_cum, d_cum = _surplus_deficit(counts, final)
         swaps = mi.UInt32(dr.sum(surplus))
         def build_map():
             return reorder_rows_blocks(sampling_map, width, height, block_height)[0]
