@@ -126,7 +126,9 @@ def summarise(out: str, variant: str) -> str:
                "|---|---|---|---|---|---|"]
         md += [f"| {r.get('method')} | {r.get('spp')} | {r.get('frame')} | {_num(r.get('time_ms'))} "
                f"| {_num(r.get('psnr_fovea'), '.2f')} | {_num(r.get('psnr'), '.2f')} |" for r in rows]
-    overhead = (_json(os.path.join(out, "overhead.json")) or {}).get("results") or []
+    overhead = []
+    for name in ("overhead.json", "overhead_2x.json"):
+        overhead += (_json(os.path.join(out, name)) or {}).get("results") or []
     if overhead:
         stages = list(overhead[0].get("stages_ms", {}))
         md += ["", "## Frame time per stage (bench_overhead; medians, ms)", "",
@@ -140,7 +142,7 @@ def summarise(out: str, variant: str) -> str:
                       f"{_f(r.get('full_ms'))} | {_f(r.get('frame_ms'))} | x{_f(r.get('speedup'), '.2f')} | "
                       + " | ".join(_f(r.get("stages_ms", {}).get(s)) for s in stages)
                       + f" | {_f(r.get('overhead_x_full'), '.2f')} |")
-    for name in ("overhead.json", os.path.join("table1", "results.csv")):
+    for name in ("overhead.json", "overhead_2x.json", os.path.join("table1", "results.csv")):
         if os.path.exists(os.path.join(out, name)):
             md += ["", f"Also written: `{name}`."]
     parity_log = _read(os.path.join(out, "logs", "tests_parity.log")).splitlines()

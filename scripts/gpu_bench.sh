@@ -7,7 +7,7 @@
 #
 # Installs the wheelhouse offline (`pip install --no-index`) over the host Python, prints the GPU and
 # driver, then runs each step under its own time limit (one failing step does not stop the
-# others): Ray reordering at 1024² and 2048², per-stage overhead, Table 1, one equal-time
+# others): Ray reordering at 1024² and 2048², per-stage overhead (at 1024² and 2048²), Table 1, one equal-time
 # study cell, the gradient step at 1024², and the test suite on the CUDA variant. Results go
 # to OUTDIR: each benchmark's JSON, steps.csv, reorder.csv, summary.json and summary.md (one
 # page: device, driver, each step's status and time, key figures). Each step has its own time
@@ -42,13 +42,13 @@ echo "step,status,seconds,limit_s,note" > "$STEPS"
 
 if [ $LOCAL = 1 ]; then
   VARIANT=${GPU_BENCH_VARIANT:-llvm_ad_rgb}
-  S1=64; S2=96; SB=32; ST1=64; SCELL=32; REPEATS=1; OSCALE=0.0625; RFRAC=0.35
+  S1=64; S2=96; SB=32; ST1=64; SCELL=32; REPEATS=1; OSCALE=0.0625; OSCALE2=0.125; RFRAC=0.35
   TESTS=${GPU_BENCH_TESTS:-tests/test_sampling.py}
   PARITY=${GPU_BENCH_PARITY_TESTS:-tests/test_backend_parity.py}
   [ -z "${DRJIT_LIBLLVM_PATH:-}" ] && [ -f .venv/llvm-path ] && export DRJIT_LIBLLVM_PATH=$(cat .venv/llvm-path)
 else
   VARIANT=${GPU_BENCH_VARIANT:-cuda_ad_rgb}
-  S1=1024; S2=2048; SB=1024; ST1=2048; SCELL=1024; REPEATS=2; OSCALE=1; RFRAC=0.10
+  S1=1024; S2=2048; SB=1024; ST1=2048; SCELL=1024; REPEATS=2; OSCALE=1; OSCALE2=2; RFRAC=0.10
   TESTS=${GPU_BENCH_TESTS:-tests}
   PARITY=${GPU_BENCH_PARITY_TESTS:-tests/test_backend_parity.py tests/test_kernel_budget.py}
 fi
@@ -164,6 +164,11 @@ if [ -f $B/bench_overhead.py ]; then
   [ $LOCAL = 1 ] && CASES=${GPU_BENCH_OVERHEAD_CASES:-voxel-static}
   step overhead 100 "bench_overhead (per-stage table: $CASES)" "$VPY" $B/bench_overhead.py \
     --cases $CASES --scale $OSCALE --out "$OUT/overhead.json"
+  # The paper's frame size (2048²): on a GPU a 1024² frame is launch-bound.
+  CASES2=${GPU_BENCH_OVERHEAD_CASES_2X:-voxel-static voxel-moving table1-rungholt table1-vokselia table1-eye-exam}
+  [ $LOCAL = 1 ] && CASES2=${GPU_BENCH_OVERHEAD_CASES_2X:-voxel-static}
+  step overhead_2x 60 "bench_overhead at twice the size ($CASES2)" "$VPY" $B/bench_overhead.py \
+    --cases $CASES2 --scale $OSCALE2 --frames 3 --warmup 2 --out "$OUT/overhead_2x.json"
 else
   skip overhead "benchmarks/bench_overhead.py not in this tree"
 fi
