@@ -5,7 +5,8 @@
 Every mode is a launch layout of the ``paper`` preset: ``none`` launches W x H lanes (the
 paper's "un-optimised" row), ``rows`` (Strategy 1) H x the largest row count,
 ``rows_blocks`` (Strategy 2, the paper's "our" row) H x the largest balanced row count, and
-``compact`` (an extension) exactly one lane per ray. θ is calibrated to ``--fraction`` of
+``compact`` (an extension) exactly one lane per ray, ``tiles`` (an extension) the same lanes
+in 16 x 16 pixel-tile order. θ is calibrated to ``--fraction`` of
 the pixels with the preset's edge rays counted.
 
 Per mode it renders warm-up frames, then ``--frames`` timed frames, interleaving the modes
@@ -25,7 +26,7 @@ import mitsuba as mi
 import foveated_mi
 from common import calibrate_theta, machine, md_table, median, preset_edges, timed, write_json
 
-MODES = ("none", "rows", "rows_blocks", "compact")
+MODES = ("none", "rows", "rows_blocks", "compact", "tiles")
 
 
 def main(argv=None):
@@ -81,7 +82,8 @@ def main(argv=None):
     rows.append(("full", "1.000", W * H * a.spp, W * H * a.spp, "-", f"{full:.1f}", "-",
                  f"{full:.1f}", "1.00"))
     label = {"none": "none (un-optimised)", "rows": "rows (Strategy 1)",
-             "rows_blocks": "rows_blocks (Strategy 2, our)", "compact": "compact (extension)"}
+             "rows_blocks": "rows_blocks (Strategy 2, our)", "compact": "compact (extension)",
+             "tiles": "tiles (extension)"}
     for m in MODES:
         tr = median([t["trace"] for t in stage[m]])
         tot = median([t["total"] for t in stage[m]])

@@ -311,9 +311,9 @@ PRESETS: dict[str, dict[str, Any]] = {
               "atrous_iterations": 1, "sigma_color": 1.0, "sigma_normal": 1.0,
               "sigma_position": 1.0, "tonemap": "uncharted2"},
     "oidn": {"theta": 0.25, "sigma_p": 0.8, "demodulate": True, "reconstruction": "stochastic",
-             "denoiser": "oidn", "emission_edges": True},
+             "denoiser": "oidn", "emission_edges": True, "reorder": "tiles"},
     "guided": {"demodulate": True, "reconstruction": "guided", "denoiser": "svgf",
-               "emission_edges": True},
+               "emission_edges": True, "reorder": "tiles"},
 }
 PRESET_NAMES = ("auto", *PRESETS)
 

@@ -138,14 +138,14 @@ def test_every_pixel_traced_equals_plain_render(spp, mode):
 def test_reorder_modes_same_image_with_deterministic_nested():
     scene = cornell()
     imgs = {}
-    for mode in ("none", "rows", "rows_blocks", "compact"):
+    for mode in ("none", "rows", "rows_blocks", "compact", "tiles"):
         integ = FoveatedIntegrator(preset="paper", nested=DirectionColor(mi.Properties()), theta=0.1,
                                    sigma_p=0.4, reorder=mode, atrous_iterations=0,
                                    reconstruction="voronoi")
         imgs[mode] = np.array(mi.render(scene, integrator=integ, seed=3))
         maps = integ.buffer("sampling_map")
         imgs[mode + "_map"] = maps
-    for mode in ("rows", "rows_blocks", "compact"):
+    for mode in ("rows", "rows_blocks", "compact", "tiles"):
         np.testing.assert_array_equal(imgs[mode + "_map"], imgs["none_map"])
         # Same pixels, jitter may differ by lane order: direction varies < 1 px apart.
         assert np.abs(imgs[mode] - imgs["none"]).max() < 0.05

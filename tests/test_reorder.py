@@ -26,7 +26,7 @@ def test_modes_are_permutations_of_the_same_pixels(w, h, frac, bh, seed):
         got = traced_set(r)
         assert len(got) == len(want), mode              # no loss, no duplicate
         np.testing.assert_array_equal(np.sort(got), want)
-        lanes = {"none": w * h, "compact": len(want)}
+        lanes = {"none": w * h, "compact": len(want), "tiles": len(want)}
         if mode in lanes:
             assert r.lanes == lanes[mode]
         if r.row_counts is not None:
@@ -141,3 +141,19 @@ def test_row_launch_reads_the_reordered_map(w, h, frac, bh, seed):
             c = counts[v]
             assert np.all(act[v, :c]) and not np.any(act[v, c:])
             np.testing.assert_array_equal(wf[v, :c], rmap[v, :c], err_msg=f"{mode} row {v}")
+
+
+@pytest.mark.parametrize("w,h", [(40, 24), (17, 33), (16, 16), (1, 5)])
+def test_tiles_visit_each_tile_in_turn(w, h):
+    """``tiles`` launches the traced pixels tile by tile (TILE x TILE, row-major inside and
+    between tiles), each exactly once; a film whose sides are not multiples of TILE too."""
+    from foveated_mi.frame.reorder import TILE, tile_order
+    order = tile_order(w, h).numpy()
+    np.testing.assert_array_equal(np.sort(order), np.arange(w * h))
+    m = np.random.default_rng(3).random(w * h) < 0.3
+    wf = reorder(mi.Bool(m), w, h, "tiles").wavefront.numpy()
+    x, y = wf % w, wf // w
+    tiles_x = -(-w // TILE)
+    key = ((y // TILE) * tiles_x + x // TILE) * TILE * TILE + (y % TILE) * TILE + x % TILE
+    assert np.all(np.diff(key) > 0)
+    np.testing.assert_array_equal(np.sort(wf), np.nonzero(m)[0])
