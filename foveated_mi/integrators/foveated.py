@@ -35,8 +35,8 @@ traced in frame ``t``. Differentiate a frame before rendering the next one.
 **History resets.** The history is forgotten (the next frame is a first frame, seeded as for
 a fresh integrator) on another scene or film size, and when ``params.update()`` changed a
 scene parameter other than the camera's. On a camera cut, a camera move after which fewer
-than ``CUT_HIT_FRACTION`` of the pixels reproject into the history, no pixel reads it (decided
-on the device, without waiting for it). Otherwise each pixel that fails reprojection
+than ``CUT_HIT_FRACTION`` of the pixels see the surface they saw in the previous frame, no
+pixel reads it (decided on the device, without waiting for it). Otherwise each pixel that fails reprojection
 (disoccluded, off-screen, or behind the previous camera) starts afresh.
 
 Stages a frame does not need cost nothing: no edge pass when ``edge_threshold = 0``, no
@@ -74,8 +74,8 @@ from ..validate import ParameterError, check_int
 
 __doc__ += parameter_table()
 
-#: A camera move after which fewer pixels than this fraction reproject into the history is a
-#: cut: no pixel of the frame reads the history.
+#: A camera move after which fewer pixels than this fraction see the surface they saw in the
+#: previous frame is a cut: no pixel of the frame reads the history.
 CUT_HIT_FRACTION = 0.1
 
 @dataclass
