@@ -262,6 +262,8 @@ def tile_order(width: int, height: int) -> mi.UInt32:
         on_film = (x < width) & (y < height)
         order = dr.gather(mi.UInt32, y * width + x, dr.compress(on_film))
         dr.eval(order)
+        if len(_TILE_ORDERS) >= 8:   # a study of many film sizes keeps the latest few
+            _TILE_ORDERS.pop(next(iter(_TILE_ORDERS)))
         _TILE_ORDERS[key] = order
     return order
 
