@@ -3,7 +3,8 @@
 Mitsuba's Cornell box at SIZE², 1 spp per traced pixel, the `paper` preset as published (no
 history cap), against the same path tracer (``max_depth`` 4) at 1024 spp on the same film.
 One row per film filter and seed: PSNR of the image in linear radiance and in the preset's
-display domain (Uncharted 2), at frame 1 and frame N, and the gain.
+display domain (Uncharted 2), and of the shading before the filter (the interpolated
+buffer), at frame 1 and frame N, and the gains.
 
     python benchmarks/bench_history_gain.py --filters box gaussian --seeds 5 6 7 \
         --out docs/results/history_gain.json
@@ -56,9 +57,11 @@ def history_gain(rfilter: str, seed: int, size: int, frames: int) -> dict:
             tag = "first" if f == 0 else "last"
             row[f"linear_{tag}"] = psnr(img, ref)
             row[f"display_{tag}"] = psnr(display(img), ref_d)
+            row[f"interpolated_{tag}"] = psnr(integ.buffer("interpolated"), ref)
+    assert integ.frame == frames and integ.buffer("history_count").max() == frames
     row["ray_fraction"] = integ.stats["ray_fraction"]
-    row["linear_gain"] = row["linear_last"] - row["linear_first"]
-    row["display_gain"] = row["display_last"] - row["display_first"]
+    for k in ("linear", "display", "interpolated"):
+        row[f"{k}_gain"] = row[f"{k}_last"] - row[f"{k}_first"]
     return row
 
 

@@ -1,6 +1,7 @@
 """The ``paper`` preset as published (Kwon et al. 2019) and, where the text is silent, as the
 authors' code does it."""
 import math
+import os
 
 import mitsuba as mi
 import numpy as np
@@ -13,11 +14,9 @@ from foveated_mi.frame.sampling import depth_edges
 from foveated_mi.validate import ParameterError
 
 
-def cornell(w, h, rfilter=None):
+def cornell(w, h):
     d = mi.cornell_box()
     d["sensor"]["film"].update(width=w, height=h)
-    if rfilter is not None:
-        d["sensor"]["film"]["rfilter"] = {"type": rfilter}
     d["integrator"] = {"type": "path", "max_depth": 4}
     return mi.load_dict(d)
 
@@ -47,56 +46,35 @@ def test_uncapped_history_keeps_counting():
     assert counts.min() == 40, "a cap of 32 would stop the count at 32"
 
 
-def _history_gains(rfilter, seed):
-    """PSNR gains frame 1 -> frame 32 of the `paper` preset (no history cap) on a still Cornell
-    box at 64x64, 1 spp per traced pixel, against the same path tracer (max_depth 4) at 1024
-    spp on the same film: (linear image, shading before the filter, display image)."""
-    from foveated_mi import postprocess as post
-
-    scene = cornell(64, 64, rfilter)
-    ref = np.array(mi.render(scene, spp=1024, seed=99))
-    integ = FoveatedIntegrator(preset="paper", nested=mi.load_dict({"type": "path",
-                                                                    "max_depth": 4}))
-    assert integ.options["max_history"] == 0
-
-    def psnr(img, r=ref):
-        mse = np.mean((np.clip(img, 0, 1) - np.clip(r, 0, 1)) ** 2)
-        return 10 * np.log10(1.0 / mse)
-
-    def display(x):
-        c = post.tonemap(mi.Color3f(x.reshape(-1, 3).T), "uncharted2").numpy()
-        return c.T.reshape(x.shape)
-
-    scores = []
-    for f in range(32):
-        img = np.array(mi.render(scene, integrator=integ, seed=seed, spp=1))
-        if f in (0, 31):
-            scores.append((psnr(img), psnr(integ.buffer("interpolated")),
-                           psnr(display(img), display(ref))))
-    assert integ.frame == 32 and integ.buffer("history_count").max() == 32
-    return tuple(b - a for a, b in zip(*scores))
+@pytest.fixture
+def history_gain(monkeypatch):
+    """``benchmarks/bench_history_gain.history_gain`` (the README's table comes from it)."""
+    monkeypatch.syspath_prepend(os.path.join(os.path.dirname(__file__), "..", "benchmarks"))
+    import bench_history_gain
+    return lambda rfilter, seed: bench_history_gain.history_gain(rfilter, seed, 64, 32)
 
 
 @pytest.mark.parametrize("seed", [5, 6, 7])
-def test_paper_history_gain_box_film(seed):
+def test_paper_history_gain_box_film(history_gain, seed):
     """The estimator of the authors' code: one jittered ray per traced pixel, no film filter
     (a box). Measured, linear / display: seed 5 +9.6 / +10.3 dB, seed 6 +8.7 / +8.3, seed 7
     +8.1 / +7.0 (``python benchmarks/bench_history_gain.py``). Fails below 6 dB."""
-    lin, _, disp = _history_gains("box", seed)
-    assert lin >= 6.0 and disp >= 6.0, (lin, disp)
+    r = history_gain("box", seed)
+    assert r["linear_gain"] >= 6.0 and r["display_gain"] >= 6.0, r
 
 
-def test_paper_history_gain_on_still_cornell_64():
+def test_paper_history_gain_on_still_cornell_64(history_gain):
     """The same on Mitsuba's default film (Gaussian filter), seed 5: the image gains +5.7 dB
     in linear radiance (21.2 -> 26.9), +6.6 dB in the preset's display domain (Uncharted 2:
-    23.5 -> 30.2), the shading before the filter +4.6 dB (20.3 -> 24.9); seeds 6 and 7 gain
+    23.5 -> 30.1), the shading before the filter +4.6 dB (20.3 -> 24.9); seeds 6 and 7 gain
     +5.1 / +4.2 dB in linear radiance. Below the box film's gain because a lone traced pixel
     splats only its own samples: its footprint is the Gaussian clipped to the pixel, a bias
     against the reference's full Gaussian that no amount of history removes (with 34 % of
     the pixels traced per frame, 17 % of them edge rays, those pixels carry 75 % of the
     squared error at frame 32)."""
-    lin, pre, disp = _history_gains(None, 5)
-    assert lin >= 5.0 and disp >= 5.5 and pre >= 3.8, (lin, pre, disp)
+    r = history_gain("gaussian", 5)
+    assert r["linear_gain"] >= 5.0 and r["display_gain"] >= 5.5, r
+    assert r["interpolated_gain"] >= 3.8, r
 
 
 def test_strict_sibson_drops_the_rim():
