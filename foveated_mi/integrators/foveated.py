@@ -232,9 +232,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         primal = self._primal_frame(scene, sensor, seed, spp)
         frame, shading = primal.frame, primal.shading
         grad = _tensor_to_color(grad_in, frame, "grad_in")
-        rec = primal.take_recorded()
-        delta = _adjoint.recorded_backward(*rec, grad) if rec is not None else \
-            _adjoint.image_backward(self._formation(primal), shading.value, grad)
+        delta = _adjoint.recorded_backward(*self._formation_graph(primal), grad)
         self._adjoint.backward(self.nested, scene, params, frame, shading.mask, delta, seed,
                                spp, self._options)
 
@@ -246,9 +244,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         frame, shading = primal.frame, primal.shading
         tangent = self._adjoint.forward(self.nested, scene, params, frame, shading.mask, seed,
                                         spp, self._options)
-        rec = primal.take_recorded()
-        image = _adjoint.recorded_forward(*rec, tangent) if rec is not None else \
-            _adjoint.image_forward(self._formation(primal), shading.value, tangent)
+        image = _adjoint.recorded_forward(*self._formation_graph(primal), tangent)
         return mi.TensorXf(dr.ravel(image), shape=(frame.height, frame.width, 3))
 
     def _check_differentiable(self) -> None:
@@ -283,6 +279,13 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         if self._primal is None:
             raise ParameterError("formation", None, "a primal frame rendered first")
         return self._formation(self._primal), self._primal.shading
+
+    def _formation_graph(self, primal: "_PrimalFrame") -> tuple[mi.Color3f, mi.Color3f]:
+        """``(x, image)``: the graph the primal frame kept (consumed), else the formation
+        formed again on an AD copy of its values."""
+        rec = primal.take_recorded()
+        return rec if rec is not None else \
+            _adjoint.record(self._formation(primal), primal.shading.value)
 
     def _formation(self, primal: "_PrimalFrame"):
         """The primal frame's image formation as a function of the shading values."""
