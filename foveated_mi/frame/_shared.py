@@ -134,15 +134,20 @@ def for_each_tap(width: int, height: int, step, visit: Callable[..., tuple], sta
     px, py = pixel_xy(width, height)
 
     def body(k, *s):
-        ty = k // 5
-        dx, dy = mi.Int32(k - ty * 5) - 2, mi.Int32(ty) - 2
-        qx, qy = px + dx * step, py + dy * step
-        inside = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
-        q = mi.UInt32(dr.select(inside, qy * width + qx, 0))
-        return (k + 1, *visit(Tap(q, inside, dx, dy), *s))
+        dy = mi.Int32(k) - 2
+        qy = py + dy * step
+        row_in = (qy >= 0) & (qy < height)
+        row = qy * width
+        for d in range(-2, 3):
+            dx = mi.Int32(d)
+            qx = px + d * step
+            inside = row_in & (qx >= 0) & (qx < width)
+            q = mi.UInt32(dr.select(inside, row + qx, 0))
+            s = visit(Tap(q, inside, dx, dy), *s)
+        return (k + 1, *s)
 
-    out = dr.while_loop(state=(mi.UInt32(0), *state), cond=lambda k, *_: k < 25, body=body,
-                        label=label, max_iterations=25)
+    out = dr.while_loop(state=(mi.UInt32(0), *state), cond=lambda k, *_: k < 5, body=body,
+                        label=label, max_iterations=5)
     return tuple(out[1:])
 
 
@@ -160,7 +165,9 @@ class HeldLevel(NamedTuple):
     ``W(p) = 0``; otherwise ``y(p) = sum_q w(p, q) x(q)``. ``residual`` evaluates a normalised
     level as ``x(p) + sum_q w(p, q) (x(q) - x(p)) / W(p)``, which keeps a constant image
     exactly constant. ``extra(P, Q, w)`` returns more sums to accumulate in the primal pass
-    (detached), such as a variance filtered alongside.
+    (detached), such as a variance filtered alongside. ``value(Q)``: where a level weighs with
+    the values it filters, their finite part read from the tap's data, so that the primal pass
+    gathers each tap once (the tangent and adjoint passes gather their own values).
     """
     width: int
     height: int
@@ -171,29 +178,40 @@ class HeldLevel(NamedTuple):
     residual: bool = False
     extra: Callable[[tuple, tuple, mi.Float], tuple] | None = None
     label: str = "held_taps"
+    value: Callable[[tuple], mi.Color3f] | None = None
 
 
 def _finite(c: mi.Color3f) -> mi.Color3f:
     return dr.select(dr.isfinite(c.x) & dr.isfinite(c.y) & dr.isfinite(c.z), c, 0.0)
 
 
-def _apply(level: HeldLevel, x: mi.Color3f, norm=None, extras: bool = True):
+def _apply(level: HeldLevel, x: mi.Color3f, norm=None, extras: bool = True,
+           primal: bool = False):
     """The level's map of ``x`` (gathers only, no atomics). ``norm = (has, scale)`` from an
     earlier call reuses the primal's normalisation (``has``: ``W > 0``, and ``W`` where it is);
-    returns ``(y, norm, extra sums)``."""
+    ``primal``: ``x`` is the level's own input, whose values ``level.value`` reads from the
+    taps' data. Returns ``(y, norm, extra sums)``."""
     n = level.width * level.height
-    xs = _finite(x)
-    xpk = packet(xs.x, xs.y, xs.z, dr.zeros(mi.Float, n))
-    dr.schedule(xpk)
+    own_values = primal and level.value is not None
+    if not own_values:
+        # Scheduled before the taps' data is read, so that it joins the pending launch.
+        xs = _finite(x)
+        xpk = packet(xs.x, xs.y, xs.z, dr.zeros(mi.Float, n))
+        dr.schedule(xpk)
     own = dr.arange(mi.UInt32, n)
     P = level.at(own, mi.Bool(True))
+    if own_values:
+        xs = level.value(P)
     with_extra = extras and level.extra is not None
 
     def visit(tap, acc, wsum, *more):
         Q = level.at(tap.q, tap.inside)
         w = level.weight(P, Q, tap)
-        v = gather4(xpk, tap.q, tap.inside)
-        cq = mi.Color3f(v.x, v.y, v.z)
+        if own_values:
+            cq = level.value(Q)
+        else:
+            v = gather4(xpk, tap.q, tap.inside)
+            cq = mi.Color3f(v.x, v.y, v.z)
         if level.residual:
             cq = cq - xs
         out = (dr.fma(cq, w, acc), wsum + w)
@@ -251,7 +269,7 @@ def _transpose(level: HeldLevel, g: mi.Color3f, norm) -> mi.Color3f:
 class _HeldOp(dr.CustomOp):
     def eval(self, x, level):
         self.level = level
-        y, self.norm, more = _apply(level, x)
+        y, self.norm, more = _apply(level, x, primal=True)
         self.n_more = len(more)
         return (y, *more)
 
@@ -270,6 +288,6 @@ def held_filter(x: mi.Color3f, level: HeldLevel) -> tuple:
     the primal's weights and normalisation: forward mode reruns the level on the tangent,
     reverse mode walks the transpose. A plain value runs the primal loop only."""
     if not dr.grad_enabled(x):
-        y, _, more = _apply(level, x)
+        y, _, more = _apply(level, x, primal=True)
         return (y, *more)
     return dr.custom(_HeldOp, x, level)

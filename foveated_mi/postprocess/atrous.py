@@ -189,7 +189,7 @@ def _atrous_level(c: mi.Color3f, surface: Surface, width: int, height: int, *, s
     """One à-trous level: a symbolic loop over the 25 taps (one small kernel, not 25
     unrolled copies, which LLVM needs seconds to compile), with its weights held
     (:func:`~foveated_mi.frame._shared.held_filter`). A tap reads three packets: colour + finiteness,
-    normal, position + hit."""
+    normal, position + hit; the colour it weighs with is the colour it filters."""
     dr.schedule(c)   # the previous level's result: its own kernel, read by every tap
     cd = dr.detach(c)
     finite = _all_finite(cd)
@@ -213,7 +213,8 @@ def _atrous_level(c: mi.Color3f, surface: Surface, width: int, height: int, *, s
         use = tap.inside & fq & ~(vp ^ vq)               # hit-miss pairs never mix
         return dr.select(use, tap.b3 * dr.exp(-(e_rt + e_geo)), 0.0)
 
-    y, = held_filter(c, HeldLevel(width, height, step, at, weight, label="atrous_taps"))
+    y, = held_filter(c, HeldLevel(width, height, step, at, weight, label="atrous_taps",
+                                  value=lambda Q: Q[0]))
     return y
 
 

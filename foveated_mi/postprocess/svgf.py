@@ -136,7 +136,7 @@ def _level(c: mi.Color3f, var: mi.Float, surface: Surface, width: int, height: i
 
     y, v_acc, w_acc = held_filter(c, HeldLevel(
         width, height, step, at, weight, residual=True,
-        extra=lambda P, Q, w: (w * w * Q[2], w), label="svgf_taps"))
+        extra=lambda P, Q, w: (w * w * Q[2], w), label="svgf_taps", value=lambda Q: Q[0]))
     has = w_acc > 0
     inv = dr.rcp(dr.select(has, w_acc, 1.0))
     return y, dr.select(has, v_acc * inv * inv, var)
