@@ -20,10 +20,14 @@ Cases (the film size is multiplied by ``--scale``):
     6.9 % (eye-exam) of the pixels, edge rays included.
 
 Each frame runs, back to back so they share the machine's noise: the full render of the
-nested integrator, the foveated frame (timing off: its wall time gives the speed-up), and the
+nested integrator, the foveated frame (timing off: its wall time gives the speed-up), the
 same frame on a twin integrator with ``timing=True`` (stage boundaries synchronised: its
-stage times give the table). Every image is forced to host memory inside the timed region.
-Medians over the frames after ``--warmup``. The overhead is everything but the trace stage,
+stage times give the table), and once more on a third twin with Dr.Jit's kernel history on
+(launches, compilations, and the time its kernels ran, which is not timed: recording a
+kernel's time can cost the GPU a synchronisation). Every image is forced inside the timed
+region: evaluated on the device (``dr.eval`` + ``dr.sync_thread``), where a display would read
+it; ``--to-host`` also copies it to a NumPy array (on a GPU, a 2048² RGB copy costs as much
+as several stages). Medians over the frames after ``--warmup``. The overhead is everything but the trace stage,
 as a multiple of the full frame (the paper's Table 1 puts it at 0.15-0.19x). Kernels: JIT
 launches per foveated frame, and compilations from frame 3 (the fourth) on (Dr.Jit's kernel
 history; target 0: frames 0-2 compile the first frame, the first with a history and the first
@@ -73,12 +77,27 @@ DEFAULT_CASES = ("voxel-static", "voxel-moving", "staircase-guided", "staircase-
 STAGES = ("gbuffer", "sampling", "reorder", "trace", "reconstruct", "post")
 
 
-def _forced(fn) -> float:
+def _forced(fn, to_host: bool = False) -> float:
+    """Wall time (ms) of ``fn()`` with its image evaluated (and copied to host memory when
+    ``to_host``): ``mi.render`` returns lazily."""
     dr.sync_thread()
     t0 = time.perf_counter()
-    np.array(fn())
+    img = fn()
+    if to_host:
+        np.array(img)
+    else:
+        dr.eval(img)
     dr.sync_thread()
     return (time.perf_counter() - t0) * 1e3
+
+
+def _kernel_profile(hist: list[dict], top: int = 5) -> dict:
+    """Launches of one frame: their total run time and the longest ones (ms)."""
+    ms = [float(h.get("execution_time", 0.0)) for h in hist]
+    order = sorted(range(len(hist)), key=lambda i: -ms[i])[:top]
+    return {"kernel_ms": sum(ms),
+            "longest": [{"ms": ms[i], "size": int(hist[i].get("size", 0)),
+                         "ops": int(hist[i].get("operation_count", 0))} for i in order]}
 
 
 def _orbit(camera: dict, degrees: float) -> dict:
@@ -90,7 +109,8 @@ def _orbit(camera: dict, degrees: float) -> dict:
     return {**camera, "origin": list(t + rot @ d)}
 
 
-def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int) -> dict | None:
+def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int,
+             to_host: bool = False) -> dict | None:
     from foveated_mi.integrators.foveated import FoveatedIntegrator
     from foveated_mi.options import validate_options
     from foveated_mi.scenes import apply_camera, camera_of, load_scene
@@ -122,19 +142,24 @@ def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int) -
             opts["theta"] = 1e-4
     fov = FoveatedIntegrator(**opts)
     timed = FoveatedIntegrator(**opts, timing=True)
+    counted = FoveatedIntegrator(**opts)
     camera = camera_of(scene)
 
     full, frame, stages, launches, compiled, fractions = [], [], [], [], 0, []
+    kernel_ms, profile = [], None
     for k in range(warmup + frames):
         if spec["orbit"]:
             camera = _orbit(camera, spec["orbit"])
             apply_camera(scene, camera)
-        t_full = _forced(lambda: mi.render(scene, integrator=nested, spp=spec["spp"], seed=k))
+        def render(integrator):
+            return lambda: mi.render(scene, integrator=integrator, spp=spec["spp"], seed=k)
+        t_full = _forced(render(nested), to_host)
+        t_fov = _forced(render(fov), to_host)
+        _forced(render(timed), to_host)
         with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
             dr.kernel_history_clear()
-            t_fov = _forced(lambda: mi.render(scene, integrator=fov, spp=spec["spp"], seed=k))
+            _forced(render(counted), to_host)
             hist = dr.kernel_history([dr.KernelType.JIT])
-        _forced(lambda: mi.render(scene, integrator=timed, spp=spec["spp"], seed=k))
         if k >= 3:   # frames 0-2 compile: the first, the first with a history, and the
             compiled += sum(1 for h in hist if not h.get("cache_hit", True))  # first reprojecting one
         if k >= warmup:
@@ -143,6 +168,8 @@ def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int) -
             stages.append(timed.stats["timings_ms"])
             launches.append(len(hist))
             fractions.append(fov.stats["ray_fraction"])
+            profile = _kernel_profile(hist)
+            kernel_ms.append(profile["kernel_ms"])
     full_ms = median(full)
     st = {s: median([t[s] for t in stages]) for s in STAGES}
     overhead = sum(v for s, v in st.items() if s != "trace")
@@ -152,7 +179,11 @@ def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int) -
             "speedup": full_ms / median(frame), "stages_ms": st,
             "stages_x_full": {s: v / full_ms for s, v in st.items()},
             "overhead_x_full": overhead / full_ms, "kernels_per_frame": median(launches),
-            "compiled_from_frame_3": compiled, "frames": frames}
+            "compiled_from_frame_3": compiled, "frames": frames,
+            # Time the frame's kernels ran (median), and the last frame's longest launches:
+            # on a GPU, wall time well above kernel time is host work (tracing, launches).
+            "kernel_ms": median(kernel_ms), "longest_kernels": profile["longest"],
+            "image_to_host": to_host}
 
 
 def main(argv=None):
@@ -162,6 +193,8 @@ def main(argv=None):
     p.add_argument("--scale", type=float, default=1.0, help="film size multiplier (default 1)")
     p.add_argument("--frames", type=int, default=5)
     p.add_argument("--warmup", type=int, default=3)
+    p.add_argument("--to-host", action="store_true",
+                   help="also copy every image to a NumPy array inside the timed region")
     p.add_argument("--variant")
     p.add_argument("--out", help="JSON results")
     a = p.parse_args(argv)
@@ -171,7 +204,8 @@ def main(argv=None):
     foveated_mi.set_variant(a.variant)
     rows, results = [], []
     for name in a.cases:
-        r = run_case(name, CASES[name], scale=a.scale, frames=a.frames, warmup=a.warmup)
+        r = run_case(name, CASES[name], scale=a.scale, frames=a.frames, warmup=a.warmup,
+                     to_host=a.to_host)
         if r is None:
             continue
         results.append(r)
@@ -181,10 +215,10 @@ def main(argv=None):
                      f"{r['frame_ms']:.0f}", f"x{r['speedup']:.2f}",
                      *(f"{r['stages_ms'][s]:.1f} ({x[s]:.2f})" for s in STAGES),
                      f"{r['overhead_x_full']:.2f}", f"{r['kernels_per_frame']:.0f}",
-                     r["compiled_from_frame_3"]])
+                     f"{r['kernel_ms']:.1f}", r["compiled_from_frame_3"]])
     print(md_table(["case", "size", "preset", "rays", "full ms", "foveated ms", "speed-up",
                     *(f"{s} ms (x full)" for s in STAGES), "overhead x full", "kernels/frame",
-                    "compiled (frame >= 3)"], rows))
+                    "kernel ms", "compiled (frame >= 3)"], rows))
     print(f"\n{machine()}; medians of {a.frames} frames after {a.warmup} warm-up frames")
     write_json(a.out, {"machine": machine(), "results": results})
     return 0

@@ -127,22 +127,26 @@ def summarise(out: str, variant: str) -> str:
         md += [f"| {r.get('method')} | {r.get('spp')} | {r.get('frame')} | {_num(r.get('time_ms'))} "
                f"| {_num(r.get('psnr_fovea'), '.2f')} | {_num(r.get('psnr'), '.2f')} |" for r in rows]
     overhead = []
-    for name in ("overhead.json", "overhead_2x.json"):
+    for name in ("overhead.json", "overhead_2x.json", "overhead_2x_host.json"):
         overhead += (_json(os.path.join(out, name)) or {}).get("results") or []
     if overhead:
         stages = list(overhead[0].get("stages_ms", {}))
         md += ["", "## Frame time per stage (bench_overhead; medians, ms)", "",
                "| case | size | preset | rays | full | foveated | speed-up | "
-               + " | ".join(stages) + " | overhead x full |",
-               "|---|---|---|---|---|---|---|" + "---|" * len(stages) + "---|"]
+               + " | ".join(stages) + " | overhead x full | kernels | kernel ms | image |",
+               "|---|---|---|---|---|---|---|" + "---|" * len(stages) + "---|---|---|---|"]
         for r in overhead:
             size = r.get("size") or ["?", "?"]
             md.append(f"| {r.get('case')} | {size[0]}x{size[1]} | {r.get('preset')} | "
                       f"{_f(100 * r['ray_fraction'] if r.get('ray_fraction') is not None else None)} % | "
                       f"{_f(r.get('full_ms'))} | {_f(r.get('frame_ms'))} | x{_f(r.get('speedup'), '.2f')} | "
                       + " | ".join(_f(r.get("stages_ms", {}).get(s)) for s in stages)
-                      + f" | {_f(r.get('overhead_x_full'), '.2f')} |")
-    for name in ("overhead.json", "overhead_2x.json", os.path.join("table1", "results.csv")):
+                      + f" | {_f(r.get('overhead_x_full'), '.2f')} | {_f(r.get('kernels_per_frame'), '.0f')}"
+                      f" | {_f(r.get('kernel_ms'))} | {'to host' if r.get('image_to_host') else 'device'} |")
+    if overhead:
+        md += ["", "Kernel ms: the time the foveated frame's kernels ran (from Dr.Jit's kernel history); "
+               "image: forced on the device (dr.eval + dr.sync_thread) or copied to a NumPy array."]
+    for name in ("overhead.json", "overhead_2x.json", "overhead_2x_host.json", os.path.join("table1", "results.csv")):
         if os.path.exists(os.path.join(out, name)):
             md += ["", f"Also written: `{name}`."]
     parity_log = _read(os.path.join(out, "logs", "tests_parity.log")).splitlines()

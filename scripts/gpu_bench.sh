@@ -7,7 +7,8 @@
 #
 # Installs the wheelhouse offline (`pip install --no-index`) over the host Python, prints the GPU and
 # driver, then runs each step under its own time limit (one failing step does not stop the
-# others): Ray reordering at 1024² and 2048², per-stage overhead (at 1024² and 2048²), Table 1, one equal-time
+# others): Ray reordering at 1024² and 2048², per-stage overhead (at 1024² and 2048², images on the
+# device, and once copied to host), Table 1, one equal-time
 # study cell, the gradient step at 1024², and the test suite on the CUDA variant. Results go
 # to OUTDIR: each benchmark's JSON, steps.csv, reorder.csv, summary.json and summary.md (one
 # page: device, driver, each step's status and time, key figures). Each step has its own time
@@ -169,6 +170,10 @@ if [ -f $B/bench_overhead.py ]; then
   [ $LOCAL = 1 ] && CASES2=${GPU_BENCH_OVERHEAD_CASES_2X:-voxel-static}
   step overhead_2x 60 "bench_overhead at twice the size ($CASES2)" "$VPY" $B/bench_overhead.py \
     --cases $CASES2 --scale $OSCALE2 --frames 3 --warmup 2 --out "$OUT/overhead_2x.json"
+  # The same still frame with every image copied to host memory, as a program that saves it does.
+  step overhead_2x_host 30 "bench_overhead voxel-static at twice the size, images copied to host" \
+    "$VPY" $B/bench_overhead.py --cases voxel-static --scale $OSCALE2 --frames 3 --warmup 2 \
+    --to-host --out "$OUT/overhead_2x_host.json"
 else
   skip overhead "benchmarks/bench_overhead.py not in this tree"
 fi

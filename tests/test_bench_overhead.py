@@ -25,7 +25,26 @@ def test_tiny_run_reports_stages_kernels_and_speedup(bench, tmp_path, capsys):
     rest = sum(v for k, v in r["stages_x_full"].items() if k != "trace")
     assert r["overhead_x_full"] == pytest.approx(rest)
     assert r["kernels_per_frame"] > 0 and r["compiled_from_frame_3"] == 0
+    # The kernels' own run time, and the longest launches, longest first.
+    longest = [k["ms"] for k in r["longest_kernels"]]
+    assert 0 < longest[0] <= r["kernel_ms"] and longest == sorted(longest, reverse=True)
+    assert r["image_to_host"] is False
     assert "voxel-static" in capsys.readouterr().out
+
+
+def test_forced_evaluates_the_image_inside_the_timed_region(bench):
+    import drjit as dr
+    import mitsuba as mi
+    seen = {}
+
+    def lazy():
+        x = dr.arange(mi.Float, 1 << 16) * 2.0
+        seen["x"] = x
+        return x
+
+    for to_host in (False, True):
+        assert bench._forced(lazy, to_host) > 0
+        assert seen["x"].state == dr.VarState.Evaluated
 
 
 def test_bad_arguments_name_the_value(bench):
