@@ -33,6 +33,29 @@ def test_packets_and_taps_visit_the_5x5_neighbourhood():
     assert np.array_equal(count.numpy().reshape(H, W), ref)
 
 
+@pytest.mark.parametrize("step", [1, 3])
+def test_rows_walk_visits_the_taps_in_the_loop_order(step):
+    # An order-sensitive fold of (q, inside, dx, dy, b3): both walks give the same value only
+    # if they visit the same taps in the same order.
+    def visit(t, h):
+        code = mi.Float(t.q) * 8.0 + dr.select(t.inside, 1.0, 0.0) * 4.0 \
+            + mi.Float(t.dx) * 2.0 + mi.Float(t.dy) + t.b3
+        return (h * 1.0009765625 + code,)
+    got = {u: for_each_tap(W, H, step, visit, (dr.zeros(mi.Float, N),), f"order_{u}",
+                           unroll=u)[0].numpy() for u in (True, False)}
+    assert np.array_equal(got[True], got[False])
+    ref = np.zeros((H, W), np.float32)
+    yy, xx = np.mgrid[0:H, 0:W]
+    for dy in range(-2, 3):
+        for dx in range(-2, 3):
+            qx, qy = xx + step * dx, yy + step * dy
+            inside = (qx >= 0) & (qx < W) & (qy >= 0) & (qy < H)
+            q = np.where(inside, qy * W + qx, 0)
+            b3 = np.array([1, 4, 6, 4, 1])[dx + 2] * np.array([1, 4, 6, 4, 1])[dy + 2] / 256
+            ref = ref * np.float32(1.0009765625) + (q * 8.0 + inside * 4.0 + dx * 2.0 + dy + b3)
+    np.testing.assert_allclose(got[True].reshape(H, W), ref, rtol=1e-5)
+
+
 def _level(mode, seed=1):
     n0, n1, n2 = _rand(seed)
     hit = mi.Bool(np.random.default_rng(seed).random(N) > 0.2)

@@ -125,13 +125,28 @@ class Tap(NamedTuple):
 
 
 def for_each_tap(width: int, height: int, step, visit: Callable[..., tuple], state: tuple,
-                 label: str) -> tuple:
+                 label: str, unroll: bool = True) -> tuple:
     """``state = visit(tap, *state)`` for the 25 taps of every pixel, spaced ``step`` pixels.
 
     ``visit`` receives a :class:`Tap` and returns the new state; taps outside the film are
     visited too (``tap.inside`` false) so that the caller decides how a border renormalises.
-    Returns the final state."""
+    ``unroll``: the loop runs over the 5 rows with each row's 5 taps unrolled (faster for the
+    à-trous and SVGF levels in ``benchmarks/bench_filters.py``; all 25 unrolled would take LLVM
+    seconds to compile), else over the 25 taps (faster for the heavier guided level and the
+    transposes). Both visit the taps in the same order. Returns the final state."""
     px, py = pixel_xy(width, height)
+
+    if not unroll:
+        def body1(k, *s):
+            ty = k // 5
+            dx, dy = mi.Int32(k - ty * 5) - 2, mi.Int32(ty) - 2
+            qx, qy = px + dx * step, py + dy * step
+            inside = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
+            q = mi.UInt32(dr.select(inside, qy * width + qx, 0))
+            return (k + 1, *visit(Tap(q, inside, dx, dy), *s))
+        out = dr.while_loop(state=(mi.UInt32(0), *state), cond=lambda k, *_: k < 25,
+                            body=body1, label=label, max_iterations=25)
+        return tuple(out[1:])
 
     def body(k, *s):
         dy = mi.Int32(k) - 2
@@ -178,6 +193,7 @@ class HeldLevel(NamedTuple):
     residual: bool = False
     extra: Callable[[tuple, tuple, mi.Float], tuple] | None = None
     label: str = "held_taps"
+    unroll: bool = True
     value: Callable[[tuple], mi.Color3f] | None = None
 
 
@@ -223,7 +239,7 @@ def _apply(level: HeldLevel, x: mi.Color3f, norm=None, extras: bool = True,
     n_extra = len(level.extra(P, P, zero)) if with_extra else 0
     acc, wsum, *more = for_each_tap(level.width, level.height, level.step, visit,
                                     (dr.zeros(mi.Color3f, n), zero, *([zero] * n_extra)),
-                                    level.label)
+                                    level.label, level.unroll)
     # Every output of the loop in one launch: a kernel reading only one of them would run
     # the 25-tap loop again.
     dr.schedule(acc, wsum, *more)
@@ -258,7 +274,7 @@ def _transpose(level: HeldLevel, g: mi.Color3f, norm) -> mi.Color3f:
         return (dr.fma(mi.Color3f(v.x, v.y, v.z), w, acc),)
 
     acc, = for_each_tap(level.width, level.height, level.step, visit,
-                        (dr.zeros(mi.Color3f, n),), level.label + "_transpose")
+                        (dr.zeros(mi.Color3f, n),), level.label + "_transpose", unroll=False)
     dr.schedule(acc)
     if norm is None:
         return acc

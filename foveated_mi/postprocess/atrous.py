@@ -55,9 +55,10 @@ Rules beyond the paper, so that no NaN can appear or spread:
   replaced by the weighted mean of its finite neighbours; when it has none it is returned
   unchanged.
 
-``iterations = 0`` returns the input. Each level is one kernel: a symbolic loop over the
-25 taps (``dr.while_loop`` with ``max_iterations=25``); the tap spacing and sigmas are
-opaque, so all levels and all sigma values share one compiled kernel.
+``iterations = 0`` returns the input. Each level is one kernel: a symbolic loop over the 5
+rows of taps, each row's 5 taps unrolled (:func:`~foveated_mi.frame._shared.for_each_tap`);
+the tap spacing and sigmas are opaque, so all levels and all sigma values share one compiled
+kernel.
 
 **Derivative.** The edge-stopping weights are computed from detached values (the colour term
 too), so the derivative with respect to the colour is that of the filter with its weights
@@ -186,8 +187,8 @@ def atrous(color: mi.Color3f, normal: mi.Array3f, position: mi.Array3f, width: i
 
 def _atrous_level(c: mi.Color3f, surface: Surface, width: int, height: int, *, step: mi.Int32,
                   inv_c: mi.Float, inv_n: mi.Float, inv_x: mi.Float) -> mi.Color3f:
-    """One à-trous level: a symbolic loop over the 25 taps (one small kernel, not 25
-    unrolled copies, which LLVM needs seconds to compile), with its weights held
+    """One à-trous level: one kernel walking the 25 taps (5 loop iterations of 5 unrolled
+    taps: 25 unrolled copies need seconds of LLVM compile), with its weights held
     (:func:`~foveated_mi.frame._shared.held_filter`). A tap reads three packets: colour + finiteness,
     normal, position + hit; the colour it weighs with is the colour it filters."""
     dr.schedule(c)   # the previous level's result: its own kernel, read by every tap

@@ -194,7 +194,7 @@ def _level(num: mi.Color3f, den: mi.Float, surface: Surface, width: int, height:
 
     n_acc, d_acc, g_acc = held_filter(num, HeldLevel(
         width, height, step, at, weight, normalized=False,
-        extra=lambda P, Q, g: (g * Q[3], g), label="guided_taps"))
+        extra=lambda P, Q, g: (g * Q[3], g), label="guided_taps", unroll=False))
     # All three outputs in one launch: a later kernel reading only one of them would run
     # the 25-tap loop again.
     dr.schedule(n_acc, d_acc, g_acc)
