@@ -22,7 +22,8 @@
 # left out (see WHEELHOUSE_HOST_HAS); 0: a fresh isolated venv), GPU_BENCH_VARIANT (cuda_ad_rgb),
 # GPU_BENCH_DEADLINE (seconds for the whole run, default 470), GPU_BENCH_TESTS (pytest
 # targets, default tests), GPU_BENCH_PARITY_TESTS (run first: the backend-parity and kernel-budget
-# tests), GPU_BENCH_MAXFAIL (25).
+# tests), GPU_BENCH_MAXFAIL (25), GPU_BENCH_ONLY (step names to run, e.g. "overhead tests_parity";
+# install, scenes and variant always run; default every step).
 set -u
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
@@ -66,6 +67,11 @@ log() { echo "gpu_bench: $*"; }
 # logs/NAME.log, record status and time in steps.csv.
 step() {
   local name=$1 limit=$2 note=$3; shift 3
+  if [ -n "${GPU_BENCH_ONLY:-}" ] && [ "$name" != install ] && [ "$name" != scenes ] \
+     && [ "$name" != variant ] && [[ " $GPU_BENCH_ONLY " != *" $name "* ]]; then
+    echo "$name,skipped,0,$limit,not in GPU_BENCH_ONLY" >> "$STEPS"
+    log "$name: skipped (not in GPU_BENCH_ONLY)"; return 0
+  fi
   local left=$((DEADLINE - $(date +%s)))
   if [ $left -lt 5 ]; then
     echo "$name,skipped,0,$limit,no time left before the deadline" >> "$STEPS"
