@@ -169,12 +169,12 @@ if [ -f $B/bench_overhead.py ]; then
   # Every case whose scene is here (a case without its scene is skipped with a line).
   CASES=${GPU_BENCH_OVERHEAD_CASES:-voxel-static voxel-moving staircase-guided staircase-oidn table1-rungholt table1-vokselia table1-eye-exam}
   [ $LOCAL = 1 ] && CASES=${GPU_BENCH_OVERHEAD_CASES:-voxel-static}
-  step overhead 100 "bench_overhead (per-stage table: $CASES)" "$VPY" $B/bench_overhead.py \
+  step overhead 120 "bench_overhead (per-stage table: $CASES)" "$VPY" $B/bench_overhead.py \
     --cases $CASES --scale $OSCALE --out "$OUT/overhead.json"
   # The paper's frame size (2048²): on a GPU a 1024² frame is launch-bound.
   CASES2=${GPU_BENCH_OVERHEAD_CASES_2X:-voxel-static voxel-moving table1-rungholt table1-vokselia table1-eye-exam}
   [ $LOCAL = 1 ] && CASES2=${GPU_BENCH_OVERHEAD_CASES_2X:-voxel-static}
-  step overhead_2x 60 "bench_overhead at twice the size ($CASES2)" "$VPY" $B/bench_overhead.py \
+  step overhead_2x 90 "bench_overhead at twice the size ($CASES2)" "$VPY" $B/bench_overhead.py \
     --cases $CASES2 --scale $OSCALE2 --frames 3 --warmup 2 --out "$OUT/overhead_2x.json"
   # The same still frame with every image copied to host memory, as a program that saves it does.
   step overhead_2x_host 30 "bench_overhead voxel-static at twice the size, images copied to host" \
