@@ -22,7 +22,8 @@ Cases (the film size is multiplied by ``--scale``):
 Each frame runs, back to back so they share the machine's noise: the full render of the
 nested integrator, the foveated frame (timing off: its wall time gives the speed-up), the
 same frame on a twin integrator with ``timing=True`` (stage boundaries synchronised: its
-stage times give the table), and once more on a third twin with Dr.Jit's kernel history on
+stage times give the table; a timed frame traces every pass, where the untimed one replays
+the recorded kernels of the passes after the trace unless ``--no-freeze``), and once more on a third twin with Dr.Jit's kernel history on
 (launches, compilations, and the time its kernels ran, which is not timed: recording a
 kernel's time can cost the GPU a synchronisation). Every image is forced inside the timed
 region: evaluated on the device (``dr.eval`` + ``dr.sync_thread``), where a display would read
@@ -110,7 +111,7 @@ def _orbit(camera: dict, degrees: float) -> dict:
 
 
 def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int,
-             to_host: bool = False) -> dict | None:
+             to_host: bool = False, freeze: bool = True) -> dict | None:
     from foveated_mi.integrators.foveated import FoveatedIntegrator
     from foveated_mi.options import validate_options
     from foveated_mi.scenes import apply_camera, camera_of, load_scene
@@ -128,7 +129,7 @@ def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int,
                        integrator={"type": "path", "max_depth": spec["max_depth"]},
                        **spec.get("params", {}))
     nested = scene.integrator()
-    opts = dict(preset=spec["preset"], nested=nested, **spec.get("options", {}))
+    opts = dict(preset=spec["preset"], nested=nested, freeze=freeze, **spec.get("options", {}))
     if spec["fraction"] is not None:
         # Calibrated with the preset's own edge rays, which count towards the fraction; a film
         # whose edge rays alone exceed it (tiny sizes) gets the smallest fovea instead.
@@ -183,7 +184,7 @@ def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int,
             # Time the frame's kernels ran (median), and the last frame's longest launches:
             # on a GPU, wall time well above kernel time is host work (tracing, launches).
             "kernel_ms": median(kernel_ms), "longest_kernels": profile["longest"],
-            "image_to_host": to_host}
+            "image_to_host": to_host, "freeze": freeze}
 
 
 def main(argv=None):
@@ -195,6 +196,8 @@ def main(argv=None):
     p.add_argument("--warmup", type=int, default=3)
     p.add_argument("--to-host", action="store_true",
                    help="also copy every image to a NumPy array inside the timed region")
+    p.add_argument("--no-freeze", action="store_true",
+                   help="trace the passes after the trace every frame (option freeze=false)")
     p.add_argument("--variant")
     p.add_argument("--out", help="JSON results")
     a = p.parse_args(argv)
@@ -205,7 +208,7 @@ def main(argv=None):
     rows, results = [], []
     for name in a.cases:
         r = run_case(name, CASES[name], scale=a.scale, frames=a.frames, warmup=a.warmup,
-                     to_host=a.to_host)
+                     to_host=a.to_host, freeze=not a.no_freeze)
         if r is None:
             continue
         results.append(r)

@@ -291,6 +291,13 @@ _SCHEMA: tuple[Option, ...] = (
            "scaled down", lo=0.0, hi=3e38, lo_open=True),
     Option("timing", False, "bool", "synchronise at stage boundaries and report wall time per "
            "stage", cli=False),
+    Option("freeze", True, "bool", "replay the recorded kernels of the passes after the trace "
+           "instead of tracing them each frame",
+           doc="Record history resolve, reconstruction and post-processing once per "
+           "configuration with ``dr.freeze`` and replay the recorded kernels on later frames "
+           "(:mod:`foveated_mi.frame.formation`): the same image without Python tracing them "
+           "again. Frames that are differentiated, timed or denoised by OIDN are traced as "
+           "usual; false traces every frame."),
     Option("map_seed", -1, "int", "pin the sampling map to this seed (-1 follows the frame "
            "seed)", lo=-1, hi=0xFFFFFFFF),
 )

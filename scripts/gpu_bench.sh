@@ -23,7 +23,9 @@
 # GPU_BENCH_DEADLINE (seconds for the whole run, default 470), GPU_BENCH_TESTS (pytest
 # targets, default tests), GPU_BENCH_PARITY_TESTS (run first: the backend-parity and kernel-budget
 # tests), GPU_BENCH_MAXFAIL (25), GPU_BENCH_ONLY (step names to run, e.g. "overhead tests_parity";
-# install, scenes and variant always run; default every step).
+# install, scenes and variant always run; default every step), GPU_BENCH_OVERHEAD_CASES and
+# GPU_BENCH_OVERHEAD_CASES_2X (bench_overhead's cases at 1024² and 2048²), GPU_BENCH_OVERHEAD_ARGS
+# (more bench_overhead arguments, e.g. --no-freeze).
 set -u
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
@@ -170,12 +172,13 @@ if [ -f $B/bench_overhead.py ]; then
   CASES=${GPU_BENCH_OVERHEAD_CASES:-voxel-static voxel-moving staircase-guided staircase-oidn table1-rungholt table1-vokselia table1-eye-exam}
   [ $LOCAL = 1 ] && CASES=${GPU_BENCH_OVERHEAD_CASES:-voxel-static}
   step overhead 120 "bench_overhead (per-stage table: $CASES)" "$VPY" $B/bench_overhead.py \
-    --cases $CASES --scale $OSCALE --out "$OUT/overhead.json"
+    --cases $CASES --scale $OSCALE ${GPU_BENCH_OVERHEAD_ARGS:-} --out "$OUT/overhead.json"
   # The paper's frame size (2048²): on a GPU a 1024² frame is launch-bound.
   CASES2=${GPU_BENCH_OVERHEAD_CASES_2X:-voxel-static voxel-moving table1-rungholt table1-vokselia table1-eye-exam}
   [ $LOCAL = 1 ] && CASES2=${GPU_BENCH_OVERHEAD_CASES_2X:-voxel-static}
   step overhead_2x 90 "bench_overhead at twice the size ($CASES2)" "$VPY" $B/bench_overhead.py \
-    --cases $CASES2 --scale $OSCALE2 --frames 3 --warmup 2 --out "$OUT/overhead_2x.json"
+    --cases $CASES2 --scale $OSCALE2 --frames 3 --warmup 2 ${GPU_BENCH_OVERHEAD_ARGS:-} \
+    --out "$OUT/overhead_2x.json"
   # The same still frame with every image copied to host memory, as a program that saves it does.
   step overhead_2x_host 30 "bench_overhead voxel-static at twice the size, images copied to host" \
     "$VPY" $B/bench_overhead.py --cases voxel-static --scale $OSCALE2 --frames 3 --warmup 2 \

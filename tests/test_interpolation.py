@@ -441,3 +441,9 @@ def test_kernels_reused_across_frames(method):
             if frame == 1:
                 hist = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
     assert hist and all(k["cache_hit"] for k in hist)
+
+
+@pytest.mark.parametrize("radius", [1, 2, 7, 32, 64])
+def test_square_half_sizes_on_the_device_equal_the_host_table(radius):
+    from foveated_mi.reconstruct.interpolate import _half_size_lanes, _half_size_table
+    assert _half_size_lanes(radius).numpy().tolist() == _half_size_table(radius)

@@ -33,13 +33,14 @@ class Reconstruction(NamedTuple):
 
 
 def reconstruction_pass(resolved: Resolved, gb: GBuffer, width: int, height: int,
-                        o: dict[str, Any], *, seed, emission_edges: mi.Bool | None = None
-                        ) -> Reconstruction:
+                        o: dict[str, Any], *, seed, emission_edges: mi.Bool | None = None,
+                        max_gap: float | None) -> Reconstruction:
     """``nearest``, ``filled`` and ``interpolated`` of a frame (module docstring); ``o``: the
     integrator's options; ``seed``: the stochastic fill's (the render's seed, not the
     frame's: over a still view the fill keeps its choices, so the frame changes only where
     new samples arrive); ``emission_edges``: pixels that lend values only to each other in
-    the guided methods."""
+    the guided methods; ``max_gap``: the Jump Flooding bound (None: none; see
+    :func:`foveated_mi.frame.formation.jfa_bound`)."""
     radiance = resolved.shading
     if o["demodulate"]:
         radiance = demodulate(radiance, gb.albedo, gb.emission)
@@ -48,7 +49,7 @@ def reconstruction_pass(resolved: Resolved, gb: GBuffer, width: int, height: int
     # whose samples were all rejected stays 0, or keeps its history); a guided
     # reconstruction still averages noisy samples.
     every_pixel = o["sigma_p"] >= 1.0 and not guided
-    nearest = _nearest_sites(resolved.mask, width, height, o, every_pixel)
+    nearest = _nearest_sites(resolved.mask, width, height, o, every_pixel, max_gap)
     if every_pixel:
         filled = interpolated = radiance
     else:
@@ -68,16 +69,13 @@ def reconstruction_pass(resolved: Resolved, gb: GBuffer, width: int, height: int
 
 
 def _nearest_sites(mask: mi.Bool, width: int, height: int, o: dict[str, Any],
-                   every_pixel: bool) -> mi.UInt32:
+                   every_pixel: bool, max_gap: float | None) -> mi.UInt32:
     """Each pixel's nearest site by Jump Flooding (each pixel its own site when every pixel
     is traced)."""
     with dr.suspend_grad():
         if every_pixel:
             return dr.arange(mi.UInt32, width * height)
-        # No jump longer than the sampling law's largest gap (host scalars, no sync).
-        gap = _sampling.largest_gap(width, height, gaze=o["gaze"], theta=o["theta"],
-                                    sigma_p=o["sigma_p"])
-        return rec.jump_flood(mask, width, height, variant=o["jfa"], max_gap=gap)
+        return rec.jump_flood(mask, width, height, variant=o["jfa"], max_gap=max_gap)
 
 
 def _interpolate(values: mi.Color3f, mask: mi.Bool, nearest: mi.UInt32, guide, seed,

@@ -63,9 +63,8 @@ from ..frame import reproject as _reproject
 from ..frame import sampling as _sampling
 from ..frame import shading as _shading
 from ..frame._shared import NO_SITE
+from ..frame.formation import FormationInput, FrozenFormation, form_image, replayable
 from ..frame.pixel_filter import FilterSampler
-from ..frame.post import post_pass
-from ..frame.reconstruction import reconstruction_pass
 from ..frame.scene_state import GeometryCache, SceneState, scene_state
 from ..options import SCHEMA, parameter_table, validate_options
 from ..postprocess import DENOISERS, tonemap
@@ -155,6 +154,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._filter_samplers: dict[tuple, FilterSampler] = {}
         self._geometry = GeometryCache()
         self._emission_cache: tuple | None = None
+        self._frozen = FrozenFormation()
 
     # -- options --------------------------------------------------------------------------
     @property
@@ -447,7 +447,10 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         except ParameterError:
             differentiated = False
         if not differentiated:
-            image, buffers = self._form_image(frame, shading, timer)
+            # Replayed without tracing where nothing needs the passes traced (timing,
+            # a host denoiser).
+            image, buffers = self._form_image(frame, shading, timer,
+                                              replay=replayable(self._options, timer, False))
             return image, buffers, None
         x, (image, buffers) = _adjoint.record(
             lambda v: self._form_image(frame, shading._replace(value=v), timer, grad_pass=True),
@@ -455,35 +458,16 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         return dr.detach(image), _adjoint.detached(buffers), (x, image)
 
     def _form_image(self, frame: Frame, shading: _shading.ShadingBuffer, timer: StageTimer,
-                    grad_pass: bool = False) -> tuple[mi.Color3f, dict[str, Any]]:
-        """Everything after the shading buffer: history resolve, reconstruction and
-        post-processing.
-
-        ``shading.value`` holds the radiance estimate of each traced pixel. Every weight
-        below (sites, interpolation windows, edge-stopping weights) is decided from the
-        frame's G-buffer, its sampling map and detached values, so the image is a fixed
-        function of ``shading.value``: a primal frame rendered for gradients keeps its graph
-        (:meth:`_form_primal`); otherwise a gradient pass runs this again on the primal
-        frame's state, with the primal values carrying the gradient.
-        """
-        o, gb = self._options, frame.gbuffer
-        width, height = frame.width, frame.height
-        # History resolve (Fig. 4): this frame's samples blended with the reprojected history.
-        resolved = _reproject.resolve(shading.value, shading.mask, frame.spp, frame.reprojection,
-                                      frame.history, o["max_history"], shading.moment2)
-        timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
-        # Reconstruction (§3.4): nearest sites, Voronoi fill and interpolation.
-        recon = reconstruction_pass(resolved, gb, width, height, o, seed=frame.fill_seed,
-                                    emission_edges=frame.emission_edges)
-        timer.mark("reconstruct", recon.nearest, recon.filled, recon.interpolated)
-        # Post-processing (§3.5): the registered denoiser, the albedo multiplied back.
-        post = post_pass(recon, resolved, gb, width, height, o, grad_pass)
-        timer.mark("post", post.image)
-        buffers = {"traced": shading.mask, "resolved": resolved, "nearest": recon.nearest,
-                   "filled": post.filled, "interpolated": post.interpolated,
-                   "tonemapped": post.tonemapped, "filtered": post.filtered,
-                   "variance": post.variance, "image": post.image}
-        return post.image, buffers
+                    grad_pass: bool = False, replay: bool = False
+                    ) -> tuple[mi.Color3f, dict[str, Any]]:
+        """Everything after the shading buffer (:func:`foveated_mi.frame.formation.form_image`):
+        history resolve, reconstruction and post-processing; ``replay``: by the recorded
+        kernels of :class:`~foveated_mi.frame.formation.FrozenFormation`."""
+        inp = FormationInput(frame.gbuffer, frame.reprojection, frame.history, frame.width,
+                             frame.height, frame.spp, frame.fill_seed, frame.emission_edges)
+        if replay:
+            return self._frozen(shading, inp, self._options)
+        return form_image(shading, inp, self._options, timer, grad_pass)
 
     def _finish_frame(self, frame: Frame, shade: _shading.ShadingResult,
                       buffers: dict[str, Any], timer: StageTimer) -> None:

@@ -235,4 +235,4 @@ def atrous_stage(ctx: DenoiseInput) -> Denoised:
     return Denoised(image, filtered=filtered, tonemapped=tonemapped)
 
 
-register_denoiser("atrous", atrous_stage, differentiable=True)
+register_denoiser("atrous", atrous_stage, differentiable=True, replayable=True)

@@ -48,6 +48,7 @@ class Denoiser(NamedTuple):
     display_values: bool
     available: Callable[[], bool] | None
     requirement: str
+    replayable: bool = False
 
 
 #: Denoiser name -> :class:`Denoiser`, in registration order.
@@ -57,7 +58,7 @@ DENOISERS: dict[str, Denoiser] = {}
 def register_denoiser(name: str, fn: Callable[[DenoiseInput], Any], *, differentiable: bool,
                       demodulated: bool = False, materials: bool = False,
                       display_values: bool = True, available: Callable[[], bool] | None = None,
-                      requirement: str = "") -> None:
+                      requirement: str = "", replayable: bool = False) -> None:
     """Make ``fn`` the denoiser ``name`` (the option value ``denoiser = name``).
 
     ``differentiable``: a gradient pass may differentiate it (else a gradient pass of a
@@ -66,9 +67,11 @@ def register_denoiser(name: str, fn: Callable[[DenoiseInput], Any], *, different
     ``demodulate``) before the albedo is multiplied back; else it filters radiance.
     ``materials``: it reads the G-buffer's albedo and emission. ``display_values``: it also
     works on tone-mapped samples (``tonemap_samples``). ``available``: whether its
-    dependency is installed; ``requirement`` says what to install."""
+    dependency is installed; ``requirement`` says what to install. ``replayable``: it is
+    Dr.Jit arithmetic only (no host call, no read of a value), so its kernels may be recorded
+    once and replayed (:mod:`foveated_mi.frame.formation`)."""
     DENOISERS[name] = Denoiser(fn, bool(differentiable), bool(demodulated), bool(materials),
-                               bool(display_values), available, requirement)
+                               bool(display_values), available, requirement, bool(replayable))
 
 
 def unregister_denoiser(name: str) -> None:
@@ -81,4 +84,4 @@ def as_denoised(result: Any) -> Denoised:
     return result if isinstance(result, Denoised) else Denoised(result, filtered=result)
 
 
-register_denoiser("none", lambda ctx: Denoised(ctx.image), differentiable=True)
+register_denoiser("none", lambda ctx: Denoised(ctx.image), differentiable=True, replayable=True)

@@ -164,4 +164,4 @@ def svgf_stage(ctx: DenoiseInput) -> Denoised:
 
 # Models the noise of radiance, so not on display values (tonemap_samples).
 register_denoiser("svgf", svgf_stage, differentiable=True, demodulated=True,
-                  display_values=False)
+                  display_values=False, replayable=True)

@@ -271,10 +271,30 @@ def _half_size_table(radius: int) -> list[int]:
     return table
 
 
+def _half_size_lanes(radius: int) -> mi.Int32:
+    """:func:`_half_size_table` computed on the device, one lane per ``r^2``: the same
+    integers (exact integer counts, then the same Float64 rounding). Built by arithmetic, not
+    copied from a host list, so that a frozen frame (:mod:`foveated_mi.frame.formation`) can
+    record it."""
+    r2max = radius * radius
+    r2 = dr.arange(mi.Int32, r2max + 1)
+
+    def body(i, total):
+        # Row i of the disk holds 2 floor(sqrt(r2 - i^2)) + 1 lattice points.
+        rest = r2 - i * i
+        row = 2 * _isqrt(dr.maximum(rest, 0), r2max) + 1
+        return i + 1, total + dr.select(rest >= 0, row, 0)
+
+    _, total = dr.while_loop(state=(mi.Int32(-radius), dr.zeros(mi.Int32, r2max + 1)),
+                             cond=lambda i, total: i <= radius, body=body,
+                             label="gauss_circle_counts")
+    return mi.Int32(dr.floor((dr.sqrt(mi.Float64(total)) - 1.0) * 0.5 + 0.5))
+
+
 def _square_half_size(r2: mi.Int32, radius: int) -> mi.Int32:
     """Half-size ``k`` of the ``(2k+1)^2`` square with about as many pixels as the disk ``r2``."""
     small = min(radius, _TABLE_RADIUS)
-    table = mi.Int32(_half_size_table(small))
+    table = _half_size_lanes(small)
     exact = dr.gather(mi.Int32, table, mi.UInt32(dr.minimum(r2, small * small)))
     if radius <= small:
         return exact

@@ -1,0 +1,116 @@
+"""The frozen image formation: a replayed frame equals the traced one bit for bit, through
+camera moves, gaze moves, parameter updates, option changes, size changes and resets, and a
+sequence records only the configurations it meets."""
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from foveated_mi.integrators.foveated import FoveatedIntegrator
+from foveated_mi.scenes import apply_camera, camera_of, load_scene
+
+
+def _pair(preset, **options):
+    scene = load_scene("cornell-box", width=40, height=32, spp=1,
+                       integrator={"type": "path", "max_depth": 3})
+    frozen = FoveatedIntegrator(preset=preset, nested=scene.integrator(), **options)
+    traced = FoveatedIntegrator(preset=preset, nested=scene.integrator(), freeze=False, **options)
+    return scene, frozen, traced
+
+
+def _same_frame(scene, a, b, seed):
+    ia = np.array(mi.render(scene, integrator=a, seed=seed))
+    ib = np.array(mi.render(scene, integrator=b, seed=seed))
+    assert np.array_equal(ia, ib), np.abs(ia - ib).max()
+    for name in ("nearest", "interpolated", "history_count"):
+        assert np.array_equal(a.buffer(name), b.buffer(name)), name
+
+
+@pytest.mark.parametrize("preset, options", [
+    ("paper", {}),
+    ("paper", {"reconstruction": "fast_sibson", "atrous_iterations": 2}),
+    ("paper", {"reconstruction": "discrete_sibson", "denoiser": "none"}),
+    ("guided", {}),
+    ("guided", {"reconstruction": "stochastic"}),
+])
+def test_replayed_frames_equal_traced_frames(preset, options):
+    scene, a, b = _pair(preset, **options)
+    cam = camera_of(scene)
+    params = mi.traverse(scene)
+    key = next(k for k in params.keys() if k.endswith("reflectance.value"))
+    for k in range(9):
+        if k in (2, 3):      # camera moves
+            cam = {**cam, "origin": [cam["origin"][0] + 0.05, *cam["origin"][1:]]}
+            apply_camera(scene, cam)
+        if k == 4:           # the gaze moves
+            a.set_options(gaze=(0.3, 0.6))
+            b.set_options(gaze=(0.3, 0.6))
+        if k == 6:           # a scene parameter changes: the history resets
+            params[key] = mi.Color3f(0.3, 0.5, 0.7)
+            params.update()
+        _same_frame(scene, a, b, seed=k)
+    # First frame, first with a history; the stochastic fill's seed and the gaze are inputs.
+    assert 1 <= a._frozen.recordings <= 3
+    assert b._frozen.recordings == 0
+
+
+def test_an_option_change_records_again_and_is_not_stale():
+    scene, a, b = _pair("paper")
+    for k in range(3):
+        _same_frame(scene, a, b, seed=k)
+    before = a._frozen.recordings
+    for integ in (a, b):
+        integ.set_options(atrous_iterations=3, sigma_color=0.25)
+    _same_frame(scene, a, b, seed=3)
+    assert a._frozen.recordings == before + 1
+    for integ in (a, b):
+        integ.set_options(atrous_iterations=1, sigma_color=1.0)
+    _same_frame(scene, a, b, seed=4)
+    assert a._frozen.recordings <= before + 2
+
+
+@pytest.mark.parametrize("moving", ["still", "camera", "gaze"])
+def test_steady_frames_record_nothing(moving):
+    scene, a, _ = _pair("paper")
+    cam = camera_of(scene)
+    counts = []
+    for k in range(8):
+        if moving == "camera":
+            cam = {**cam, "origin": [cam["origin"][0] + 0.01, *cam["origin"][1:]]}
+            apply_camera(scene, cam)
+        elif moving == "gaze":
+            a.set_options(gaze=(0.5 + 0.01 * k, 0.5))
+        np.array(mi.render(scene, integrator=a, seed=k))
+        counts.append(a._frozen.recordings)
+    assert counts[2] >= 1 and counts[2:] == [counts[2]] * 6, counts
+
+
+def test_size_change_and_reset_replay_correctly():
+    scene, a, b = _pair("paper")
+    for k in range(3):
+        _same_frame(scene, a, b, seed=k)
+    small = load_scene("cornell-box", width=24, height=20, spp=1,
+                       integrator={"type": "path", "max_depth": 3})
+    _same_frame(small, a, b, seed=3)
+    a.reset()
+    b.reset()
+    for k in range(4, 6):
+        _same_frame(scene, a, b, seed=k)
+
+
+def test_frames_that_need_tracing_are_traced():
+    # Stage timing synchronises between the passes: not replayed.
+    scene, a, _ = _pair("paper", timing=True)
+    for k in range(2):
+        mi.render(scene, integrator=a, seed=k)
+    assert a._frozen.recordings == 0 and a.stats["timings_ms"]["post"] > 0
+    # A frame rendered for gradients keeps its derivative graph: not replayed either.
+    scene, a, _ = _pair("guided")
+    params = mi.traverse(scene)
+    key = next(k for k in params.keys() if k.endswith("reflectance.value"))
+    dr.enable_grad(params[key])
+    params.update()
+    img = mi.render(scene, params, integrator=a, seed=0)
+    dr.backward(dr.mean(img))
+    assert a._frozen.recordings == 0
+    assert dr.all(dr.isfinite(dr.grad(params[key])), axis=None)
