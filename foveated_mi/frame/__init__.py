@@ -11,6 +11,9 @@
 9. variance: :mod:`.variance` (SVGF)
 10. post-processing: :mod:`.post` (§3.5, tone mapping and à-trous)
 
+:mod:`.formation` runs 6-10 as one function of the shading buffer (the image formation), and
+replays them from a ``dr.freeze`` recording where nothing needs them traced.
+
 The gradient pass, :mod:`.adjoint` with :mod:`.traced_sensor`, sits at the shading seam.
 Reconstruction and post-processing call the methods registered in
 :mod:`foveated_mi.reconstruct` and :mod:`foveated_mi.postprocess`. :mod:`._shared` holds the
