@@ -114,3 +114,9 @@ def test_frames_that_need_tracing_are_traced():
     dr.backward(dr.mean(img))
     assert a._frozen.recordings == 0
     assert dr.all(dr.isfinite(dr.grad(params[key])), axis=None)
+
+
+def test_options_left_out_of_the_key_are_options():
+    from foveated_mi.frame.formation import _NOT_KEYED
+    from foveated_mi.options import SCHEMA
+    assert set(_NOT_KEYED) <= set(SCHEMA), set(_NOT_KEYED) - set(SCHEMA)

@@ -41,9 +41,10 @@ from .shading import ShadingBuffer
 RECORDINGS = 8
 
 #: Options these passes never read, or read only through the Jump Flooding bound: not part of
-#: a recording's key (a new gaze must not record again).
+#: a recording's key (a new gaze must not record again). They are left out of the options the
+#: recording sees, so a pass that read one would fail to record, not replay a stale value.
 _NOT_KEYED = ("gaze", "theta", "timing", "map_seed", "reorder", "block_height", "edge_threshold",
-              "edge_test", "reprojection_tolerance", "freeze")
+              "edge_detector", "reprojection_tolerance", "freeze")
 
 
 class FormationInput(NamedTuple):
