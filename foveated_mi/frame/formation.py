@@ -132,8 +132,9 @@ class FrozenFormation:
     """:func:`form_image` recorded once per configuration and replayed (module docstring)."""
 
     def __init__(self):
-        # Every input opaque: an input that is a literal in one frame (a buffer of zeros)
-        # and stored in the next would otherwise record the passes again.
+        # Every input opaque, so that no recording depends on an input's value: with
+        # auto_opaque, Dr.Jit folds a literal input (a buffer of zeros) into the recording
+        # and records again when that literal changes.
         self._frozen = dr.freeze(_record, limit=RECORDINGS, warn_after=4 * RECORDINGS,
                                  auto_opaque=False)
 
