@@ -7,7 +7,8 @@ gradient pass (:mod:`foveated_mi.frame.adjoint`) differentiates this same functi
 
 **Frozen replay.** Python traces every kernel of these passes again each frame. On a GPU that
 tracing costs more than the kernels run (``benchmarks/bench_overhead.py`` reports both: at
-1024² on an H200 a ``paper`` frame's kernels ran 1.1 ms of its 6.6 ms). :class:`FrozenFormation`
+1024² on an H200 a ``paper`` frame's kernels ran 1.1 ms of its 6.6 ms,
+``docs/results/cuda/run_c0cc6d7/overhead.json``). :class:`FrozenFormation`
 records the passes once per configuration with ``dr.freeze`` and afterwards launches the
 recorded kernels on the frame's buffers without tracing them. A recording is keyed on what
 decides the kernels: the film size, ``spp``, the options these passes read, the Jump Flooding
@@ -102,10 +103,10 @@ def form_image(shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any],
     return post.image, buffers
 
 
-def replayable(o: dict[str, Any], timer: StageTimer, differentiated: bool) -> bool:
-    """Whether :class:`FrozenFormation` may form this frame (module docstring)."""
-    return bool(o["freeze"]) and not timer.enabled and not differentiated \
-        and DENOISERS[o["denoiser"]].replayable
+def replayable(o: dict[str, Any], timer: StageTimer) -> bool:
+    """Whether :class:`FrozenFormation` may form a frame that is not differentiated (module
+    docstring)."""
+    return bool(o["freeze"]) and not timer.enabled and DENOISERS[o["denoiser"]].replayable
 
 
 def _fields(t) -> dict | None:

@@ -450,7 +450,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             # Replayed without tracing where nothing needs the passes traced (timing,
             # a host denoiser).
             image, buffers = self._form_image(frame, shading, timer,
-                                              replay=replayable(self._options, timer, False))
+                                              replay=replayable(self._options, timer))
             return image, buffers, None
         x, (image, buffers) = _adjoint.record(
             lambda v: self._form_image(frame, shading._replace(value=v), timer, grad_pass=True),
