@@ -120,3 +120,19 @@ def test_options_left_out_of_the_key_are_options():
     from foveated_mi.frame.formation import _NOT_KEYED
     from foveated_mi.options import SCHEMA
     assert set(_NOT_KEYED) <= set(SCHEMA), set(_NOT_KEYED) - set(SCHEMA)
+
+
+def test_a_collection_cannot_abort_a_recording(tmp_path):
+    """Cold (an empty kernel cache) and again warm (the kernels cached by the first run):
+    garbage that maps NumPy memory never reaches the collector inside a recording, and the
+    process lives."""
+    import os
+    import subprocess
+    import sys
+    script = os.path.join(os.path.dirname(__file__), "scripts", "collect_during_recording.py")
+    env = dict(os.environ, DRJIT_CACHE_DIR=str(tmp_path / "kernels"))
+    for run in ("cold", "warm"):
+        p = subprocess.run([sys.executable, script], capture_output=True, text=True,
+                           timeout=300, env=env)
+        assert p.returncode == 0, (run, p.returncode, p.stderr[-2000:])
+        assert p.stdout.strip().splitlines()[-1] == "collections inside a recording: 0", run

@@ -24,6 +24,8 @@ host between kernels). Option ``freeze = false`` traces every frame.
 """
 from __future__ import annotations
 
+import gc
+from contextlib import contextmanager
 from typing import Any, NamedTuple
 
 import drjit as dr
@@ -129,6 +131,26 @@ def _record(arrays: dict, key: dict) -> dict:
     return {"image": image, "buffers": buffers}
 
 
+@contextmanager
+def _no_collection():
+    """Python's cyclic garbage collector held off while Dr.Jit may be recording.
+
+    Dr.Jit 1.5 imports a NumPy array on the LLVM backend without a copy and frees it through
+    ``jit_enqueue_host_func``, which a ``dr.freeze`` recording refuses by raising inside a
+    callback that must not throw: ``RecordThreadState::enqueue_host_func(): this function
+    cannot be recorded!``, then ``std::terminate``. Any such array in an unreachable cycle
+    (a user's, a test's, an earlier frame's) is freed by whichever allocation triggers the
+    collector, so a collection during a recording aborts the process. What becomes garbage
+    meanwhile is collected after the call."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
 class FrozenFormation:
     """:func:`form_image` recorded once per configuration and replayed (module docstring)."""
 
@@ -158,7 +180,8 @@ class FrozenFormation:
         key = {"width": inp.width, "height": inp.height, "spp": inp.spp,
                "jfa_bound": jfa_bound(inp.width, inp.height, o),
                "options": {k: v for k, v in o.items() if k not in _NOT_KEYED}}
-        out = self._frozen(arrays, key)
+        with _no_collection():          # a collection inside a recording aborts (above)
+            out = self._frozen(arrays, key)
         buffers = dict(out["buffers"])
         buffers["resolved"] = _reproject.Resolved(**buffers["resolved"])
         return out["image"], buffers
