@@ -41,7 +41,7 @@ from .cornell_box import _cornell_box
 from .eye_exam import CHART_ROWS, _chart_fine_target, _eye_exam, eye_chart
 from .voxel_city import (BLOCK_PITCH, CITY_EXTENT, _voxel_city, voxel_city_heights,
                          voxel_city_triangle_count)
-from .xml import _children, _load_xml, _xml_state
+from .xml import _children, _load_xml, _xml_state, _override_error
 
 __all__ = [
     "SCENES", "SCENE_CAMERAS", "BLOCK_PITCH", "CITY_EXTENT", "CHART_ROWS", "scene_dict",
@@ -143,7 +143,9 @@ def load_scene(name_or_path: str, *, width: int | None = None, height: int | Non
     ``sample_count`` (``spp``), the ``integrator`` (a plugin dict, may nest another) and the
     sensor pose (``camera``); ``params`` are the file's ``<default>`` parameters
     (``$name`` substitutions). Unknown names, missing files and unknown parameters raise
-    :class:`ParameterError`.
+    :class:`ParameterError`, as does a bad option of a ``foveated`` integrator, in one line:
+    the file's (``scene.xml, line 2: foveated integrator: theta = ...``, checked also when
+    ``integrator`` replaces it) or the given dict's (``integrator.theta = ...``).
     """
     for key, value, lo in (("width", width, 1), ("height", height, 1), ("spp", spp, 1)):
         if value is not None:
@@ -151,9 +153,17 @@ def load_scene(name_or_path: str, *, width: int | None = None, height: int | Non
     if camera is not None:
         camera = check_camera(camera)
     if _is_builtin(name_or_path):
-        return mi.load_dict(scene_dict(name_or_path, width=width or 256, height=height or 256,
-                                       spp=spp or 1, integrator=integrator, camera=camera,
-                                       **params))
+        d = scene_dict(name_or_path, width=width or 256, height=height or 256, spp=spp or 1,
+                       integrator=integrator, camera=camera, **params)
+        try:
+            return mi.load_dict(d)
+        except RuntimeError as e:
+            # A foveated integrator dict's bad option, without Mitsuba's quoted traceback.
+            from ..integrators import take_plugin_error
+            cause = take_plugin_error(str(e))
+            if cause is None:
+                raise
+            raise _override_error(cause) from None
     path = _check_xml_path(name_or_path)
     if integrator is not None:
         _check_integrator(integrator)

@@ -13,10 +13,17 @@ fail with "Found unused parameters"); a loaded scene's integrator cannot be repl
 instantiated integrator object stored in the parsed root was dropped by
 ``transform_merge_meshes`` (checked with Mitsuba 3.9.1). Version 0.x files (``staircase``) are
 upgraded first (``maxDepth`` -> ``max_depth``), as ``mi.load_file`` does.
+
+A bad option of the file's ``foveated`` integrator is reported as one line naming the file,
+the XML line and the option (``scene.xml, line 2: foveated integrator: theta = -1.0 is
+invalid: expected a finite number > 0``), also when an ``integrator`` given here replaces it;
+other errors name the file and Mitsuba's reason, without its Python traceback.
 """
 from __future__ import annotations
 
 import os
+import re
+import warnings
 
 import mitsuba as mi
 
@@ -51,9 +58,91 @@ def _splice_dict(state: "mi.parser.ParserState", config: "mi.parser.ParserConfig
     return new_index[0]
 
 
+# "[parser.cpp:1718] ": where in Mitsuba's sources the error was raised, noise to a user.
+_SOURCE_TAG = re.compile(r"\[[\w.]+\.(?:cpp|h|inl):\d+\]\s*")
+# Where Mitsuba's parser says the foveated plugin failed: "At FILE (line 2, col 6): failed
+# to instantiate integrator plugin of type "foveated": ..."
+_AT_FOVEATED = re.compile(r'At (?P<file>.+?) \(line (?P<line>\d+), col \d+\): failed to '
+                          r'instantiate \w+ plugin of type "foveated"')
+
+
 def _one_line(e: Exception) -> str:
-    """Mitsuba's (possibly multi-line) error message on one line."""
-    return " ".join(part.strip() for part in str(e).splitlines()) or type(e).__name__
+    """Mitsuba's (possibly multi-line) error message on one line, without the source tags
+    and without the frames of a Python traceback it quotes (its last line, the exception,
+    is kept)."""
+    parts, in_traceback = [], False
+    for line in _SOURCE_TAG.sub("", str(e)).splitlines():
+        head, tb, _ = line.partition("Traceback (most recent call last):")
+        if tb:
+            parts.append(head)
+            in_traceback = True
+        elif not (in_traceback and line.startswith("  ")):   # a frame and its code line
+            in_traceback = False
+            parts.append(line)
+    return " ".join(p.strip() for p in parts if p.strip()) or type(e).__name__
+
+
+def _located(e: ParameterError, source: str, line: int | None) -> ParameterError:
+    """``e`` of the foveated integrator of ``source`` re-issued as ``SOURCE, line N: foveated
+    integrator: NAME = VALUE is invalid: expected ...``."""
+    where = source if line is None else f"{source}, line {line}"
+    err = ParameterError(f"{where}: foveated integrator: {e.name}", e.value, e.allowed)
+    err.key, err.source, err.line = e.name, source, line
+    return err
+
+
+def _override_error(e: ParameterError) -> ParameterError:
+    """``e`` of a foveated integrator given as the ``integrator`` dict, re-issued as
+    ``integrator.NAME = VALUE is invalid: expected ...``."""
+    err = ParameterError(f"integrator.{e.name}", e.value, e.allowed)
+    err.key = e.name
+    return err
+
+
+def _instantiate_error(e: RuntimeError, path: str, override: bool) -> ParameterError:
+    """Mitsuba's instantiation error as one line: a foveated option's ParameterError with
+    its file and line when that is the cause, else the file and Mitsuba's reason. With an
+    ``override`` integrator the cause is the override's: the file's own integrator was
+    replaced (and checked by :func:`_check_replaced`), though Mitsuba reports its line."""
+    from ..integrators import take_plugin_error
+    text = str(e)
+    cause = take_plugin_error(text)
+    if cause is None:
+        return ParameterError("scene", path, f"a loadable Mitsuba XML file ({_one_line(e)})")
+    if override:
+        return _override_error(cause)
+    at = _AT_FOVEATED.search(text)
+    return _located(cause, at["file"] if at else path, int(at["line"]) if at else None)
+
+
+def _line_of(path: str, offset: int) -> int | None:
+    """1-based line of byte ``offset`` in ``path`` (None when unreadable)."""
+    try:
+        with open(path, "rb") as f:
+            return f.read(offset).count(b"\n") + 1
+    except OSError:
+        return None
+
+
+def _check_replaced(state: "mi.parser.ParserState", index: int, path: str) -> None:
+    """Check the options of a foveated integrator node that an override replaces: dropped
+    silently, its mistakes would go unseen (a study always replaces the file's integrator)."""
+    node = state.nodes[index]
+    if node.props.plugin_name() != "foveated":
+        return
+    from ..integrators.foveated import FoveatedIntegrator
+    props = mi.Properties(node.props)
+    for key in list(props.keys()):
+        if props.type(key) == mi.Properties.Type.ResolvedReference:
+            del props[key]      # its nested integrator: replaced as well, not checked here
+    try:
+        with warnings.catch_warnings():     # advice on options of an integrator not used
+            warnings.simplefilter("ignore")
+            FoveatedIntegrator(props)
+    except ParameterError as e:
+        files = state.files      # the scene and its <include>s; the node names its own
+        source = str(files[node.file_index]) if node.file_index < len(files) else path
+        raise _located(e, source, _line_of(source, node.offset)) from None
 
 
 def _xml_state(path: str, params: dict) -> tuple:
@@ -118,6 +207,7 @@ def _load_xml(path: str, width, height, spp, integrator, camera, params) -> "mi.
     if integrator is not None:
         old = _children(state, 0, mi.ObjectType.Integrator)
         if old:
+            _check_replaced(state, old[0], path)
             _splice_dict(state, config, integrator, old[0])
         else:
             _add_child(state, config, 0, integrator)
@@ -129,8 +219,7 @@ def _load_xml(path: str, width, height, spp, integrator, camera, params) -> "mi.
     try:
         scene = mi.parser.instantiate(config, state)
     except RuntimeError as e:
-        raise ParameterError("scene", path,
-                             f"a loadable Mitsuba XML file ({_one_line(e)})") from None
+        raise _instantiate_error(e, path, integrator is not None) from None
     finally:
         del resolver[0]
     return scene
