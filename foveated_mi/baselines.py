@@ -10,6 +10,16 @@ time::
 
     time_ms = render_ms + aov_ms + denoise_ms
 
+**The film's filter** (``pixel_filter``). OIDN is trained on independent per-pixel noise.
+``mi.render`` splats every sample through the film's filter (Mitsuba's default
+``gaussian``), which spreads its noise over the neighbouring pixels, and OIDN leaves such
+correlated noise in place. So with ``denoise=True`` the colour is rendered by filter
+importance sampling by default (``pixel_filter="auto"`` -> ``importance``,
+:class:`foveated_mi.frame.pixel_filter.FilterSampler`): each pixel averages its own
+``spp`` samples, drawn from the filter around its centre, with the same expectation as
+``mi.render``. On a box film both are the plain per-pixel mean, and ``mi.render`` runs.
+Without ``denoise`` the frame is ``mi.render``'s own (``auto`` -> ``splat``).
+
 ``spp`` is always passed to ``mi.render`` explicitly. ``mi.render(spp=N)`` leaves N as the
 sensor sampler's sample count, so both functions here restore the sampler's count afterwards:
 a caller relying on the sensor's own count is not silently changed.
@@ -17,15 +27,19 @@ a caller relying on the sensor's own count is not silently changed.
 from __future__ import annotations
 
 import time
+import warnings
 from typing import Any
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .validate import ParameterError, check_int
+from .validate import ParameterError, check_choice, check_int
 
 __all__ = ["render_uniform", "render_reference", "AOV_INTEGRATOR"]
+
+#: How a uniform frame honours the film's filter (see the module docstring).
+PIXEL_FILTERS = ("auto", "splat", "importance")
 
 #: The auxiliary buffers OIDN uses, as a Mitsuba ``aov`` integrator.
 AOV_INTEGRATOR = {"type": "aov", "aovs": "albedo:albedo,normal:sh_normal"}
@@ -74,29 +88,104 @@ def _check_integrator(scene, integrator):
 
 
 def render_uniform(scene: "mi.Scene", *, spp: int, seed: int = 0, denoise: bool = False,
-                   integrator: "mi.Integrator | None" = None) -> tuple[np.ndarray, dict[str, Any]]:
+                   integrator: "mi.Integrator | None" = None, pixel_filter: str = "auto"
+                   ) -> tuple[np.ndarray, dict[str, Any]]:
     """One uniform frame: linear (H, W, 3) float32 image and stats
-    ``{"time_ms", "spp", "denoised"}`` (+ ``render_ms``, ``aov_ms``, ``denoise_ms`` when
-    denoised). ``integrator`` defaults to the scene's own. Raises :class:`ParameterError`
-    for bad arguments, and when ``denoise`` is asked for without ``pyoidn``.
+    ``{"time_ms", "spp", "denoised", "pixel_filter"}`` (+ ``render_ms``, ``aov_ms``,
+    ``denoise_ms`` when denoised). ``integrator`` defaults to the scene's own.
+    ``pixel_filter``: ``auto`` (``importance`` when denoised, else ``splat``), ``splat``
+    (``mi.render``) or ``importance`` (filter importance sampling, a sampling integrator
+    only); ``stats["pixel_filter"]`` is the estimator that ran (``splat`` on a box film or
+    for an integrator that is not a sampling integrator under ``auto``). Raises
+    :class:`ParameterError` for bad arguments, and when ``denoise`` is asked for without
+    ``pyoidn``.
     """
     spp = check_int("spp", spp, 1)
     seed = check_int("seed", seed, 0, 2**32 - 1)
     if not isinstance(denoise, bool):
         raise ParameterError("denoise", denoise, "true or false")
+    pixel_filter = check_choice("pixel_filter", pixel_filter, PIXEL_FILTERS)
     integ = _check_integrator(scene, integrator)
     if denoise:
         from .denoise import INSTALL_HINT, oidn_available
         if not oidn_available():
             raise ParameterError("denoise", True, f"pyoidn installed ({INSTALL_HINT})")
+    mode = _uniform_pixel_filter(scene, integ, pixel_filter, denoise)
     with _KeepSampleCount(scene):
-        return _render_uniform(scene, integ, spp, seed, denoise)
+        return _render_uniform(scene, integ, spp, seed, denoise, mode)
 
 
-def _render_uniform(scene, integ, spp, seed, denoise):
-    color, render_ms = _timed_render(scene, integ, spp, seed)
+def _uniform_pixel_filter(scene, integ, pixel_filter: str, denoise: bool) -> str:
+    """The estimator a uniform frame runs: ``splat`` (``mi.render``) or ``importance``."""
+    sampling = _samples_rays(integ)
+    if pixel_filter == "importance" and not sampling:
+        raise ParameterError("integrator", type(integ).__name__, "a sampling integrator "
+                             "(such as 'path') for pixel_filter = 'importance', or "
+                             "pixel_filter = 'splat'")
+    box = scene.sensors()[0].film().rfilter().is_box_filter()
+    if pixel_filter == "splat" and denoise and not box:
+        warnings.warn("pixel_filter = 'splat' with denoise = True: splatting through the "
+                      "film's filter spreads each sample's noise over neighbouring pixels "
+                      "and OIDN, which expects independent per-pixel noise, leaves it in "
+                      "place; leave pixel_filter = 'auto' or set it to 'importance'",
+                      UserWarning, stacklevel=3)
+    if pixel_filter == "auto":
+        pixel_filter = "importance" if denoise and sampling else "splat"
+    # On a box film both estimators are the per-pixel mean: mi.render's is the same frame.
+    return "splat" if box else pixel_filter
+
+
+def _samples_rays(integ) -> bool:
+    """Whether ``integ`` shades any ray through ``sample()``: one of Mitsuba's sampling
+    integrators, or a Python one that defines ``sample`` (not one that only overrides
+    ``render``, such as the foveated integrator)."""
+    if not isinstance(integ, mi.SamplingIntegrator):
+        return False
+    mro = type(integ).__mro__
+    own = mro[:mro.index(mi.SamplingIntegrator)]
+    return type(integ).__module__.startswith("mitsuba") or any("sample" in c.__dict__
+                                                                for c in own)
+
+
+def _timed_importance(scene, integ, spp: int, seed: int) -> tuple[np.ndarray, float]:
+    """A uniform frame by filter importance sampling: every pixel's ``spp`` samples drawn
+    from the film's filter around its centre and averaged (the foveated integrator's
+    ``pixel_filter = "importance"`` estimator with every pixel traced), timed like
+    :func:`_timed_render`."""
+    from .frame.pixel_filter import FilterSampler
+    from .frame.shading import develop_mean, trace_wavefront
+    sensor = scene.sensors()[0]
+    film = sensor.film()
+    width, height = (int(v) for v in film.crop_size())
+    # Tabulating the filter reads it back to the host: set-up, like mi.render's film.
+    sampler = FilterSampler(film, importance=True)
+    dr.sync_thread()
+    t0 = time.perf_counter()
+    pixels = dr.arange(mi.UInt32, width * height)
+    # No clamp, as mi.render (a non-finite sample is dropped here).
+    samples = trace_wavefront(scene, sensor, integ, pixels, width, height, spp=spp,
+                              seed=dr.opaque(mi.UInt32, seed), clamp=_NO_CLAMP,
+                              filter_sampler=sampler)
+    value = develop_mean(samples, pixels, spp, width * height).value
+    dr.eval(value)
+    dr.sync_thread()
+    ms = (time.perf_counter() - t0) * 1e3
+    img = np.array(mi.TensorXf(dr.ravel(value), shape=(height, width, 3)), dtype=np.float32)
+    return img, ms
+
+
+#: Larger than any finite float32 sample: :func:`trace_wavefront` then clamps nothing.
+_NO_CLAMP = float(np.finfo(np.float32).max)
+
+
+def _render_uniform(scene, integ, spp, seed, denoise, mode):
+    if mode == "importance":
+        color, render_ms = _timed_importance(scene, integ, spp, seed)
+    else:
+        color, render_ms = _timed_render(scene, integ, spp, seed)
     color = color[..., :3]
-    stats: dict[str, Any] = {"spp": spp, "denoised": denoise, "render_ms": render_ms}
+    stats: dict[str, Any] = {"spp": spp, "denoised": denoise, "render_ms": render_ms,
+                             "pixel_filter": mode}
     if not denoise:
         stats["time_ms"] = render_ms
         return color, stats

@@ -35,6 +35,11 @@ defaults by a configuration tuned together; any option given explicitly wins ove
     Denoise installed (``pip install -e '.[denoise]'`` from a clone): wider sampling (θ = 0.25),
     albedo demodulation, the stochastic surface-aware fill and OIDN. Not differentiable
     (a gradient pass raises). Emission edges are traced every frame (``emission_edges``).
+    Samples are drawn by filter importance sampling (``pixel_filter = "auto"`` resolves to
+    ``importance`` for OIDN): OIDN is trained on independent per-pixel noise and leaves
+    the correlated noise of splatting through a film's filter (Mitsuba's default
+    ``gaussian``) in place, so on such a film the frame got worse as σp rose; see
+    ``benchmarks/bench_pixel_filter_noise.py``.
 ``guided``
     The differentiable noise-aware pipeline, no extra dependency: albedo demodulation, the
     G-buffer-guided sparse reconstruction and the variance-guided à-trous filter (SVGF), which
@@ -156,7 +161,29 @@ def _reorder_modes():
 
 def _pixel_filters():
     from .frame.shading import PIXEL_FILTERS
-    return PIXEL_FILTERS
+    return ("auto", *PIXEL_FILTERS)
+
+
+def resolve_pixel_filter(value: str, denoiser: str) -> str:
+    """``pixel_filter`` as the frame runs it: ``auto`` -> ``importance`` when ``denoiser`` is
+    registered with ``independent_noise`` (it leaves splatted, correlated noise in place),
+    else ``splat``; an explicit ``splat`` or ``importance`` is kept."""
+    if value != "auto":
+        return value
+    return "importance" if denoisers()[denoiser].independent_noise else "splat"
+
+
+def pixel_filter_warning(given: dict[str, Any], options: dict[str, Any]) -> str | None:
+    """The one-line warning for an explicit ``pixel_filter = "splat"`` with a denoiser that
+    needs independent per-pixel noise (``given``: the options the user set; ``options``:
+    validated), else ``None``."""
+    denoiser = options["denoiser"]
+    if given.get("pixel_filter") != "splat" or not denoisers()[denoiser].independent_noise:
+        return None
+    return (f"pixel_filter = 'splat' with denoiser = '{denoiser}': on a film whose filter is "
+            f"not box, splatting spreads each sample's noise over neighbouring pixels and "
+            f"{denoiser}, which expects independent per-pixel noise, leaves it in place; leave "
+            f"pixel_filter unset (auto) or set it to 'importance'")
 
 
 def _jfa_variants():
@@ -208,12 +235,17 @@ _SCHEMA: tuple[Option, ...] = (
            "attribute, which is ignored"),
     Option("reorder", "compact", "string", "ray reordering (§3.2): the trace wavefront's "
            "layout", choices=_reorder_modes),
-    Option("pixel_filter", "splat", "string", "how samples honour the film's filter",
-           choices=_pixel_filters,
+    Option("pixel_filter", "auto", "string", "how samples honour the film's filter (auto: "
+           "importance for a denoiser that needs independent per-pixel noise, such as oidn, "
+           "else splat)", choices=_pixel_filters,
            doc="How samples honour the film's reconstruction filter: ``splat`` (Mitsuba's "
-           "own estimator, identical to the nested integrator at sigma_p = 1) or "
-           "``importance`` (filter importance sampling: independent, unbiased pixels); see "
-           ":mod:`foveated_mi.frame.shading`"),
+           "own estimator, identical to the nested integrator at sigma_p = 1; neighbouring "
+           "pixels share samples, so their noise is correlated) or ``importance`` (filter "
+           "importance sampling: independent, unbiased pixels). ``auto`` is ``importance`` "
+           "when the denoiser expects independent per-pixel noise (``oidn``: splatted noise "
+           "survives it, and the frame got worse as more pixels were traced), else ``splat``; "
+           "``splat`` with such a denoiser warns once. Both are the plain per-pixel mean on a "
+           "box film. See :mod:`foveated_mi.frame.shading`"),
     Option("block_height", 8, "int", "rows per block of Strategy 2", lo=1),
     Option("edge_threshold", 0.1, "float", "depth edges that force a ray (0 disables them)",
            lo=0.0, doc="Depth edges that force a ray; 0 disables them (see "
@@ -343,7 +375,8 @@ def resolve_preset(preset: str, gradients: bool = False) -> str:
 
 def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[str, Any]:
     """Check every option and return them all, normalised, with the preset resolved
-    (``gradients``: see :func:`resolve_preset`).
+    (``gradients``: see :func:`resolve_preset`) and ``pixel_filter = "auto"`` resolved by
+    the denoiser (:func:`resolve_pixel_filter`).
 
     Raises :class:`~foveated_mi.validate.ParameterError` (one line) for an unknown option or
     a bad value."""
@@ -356,6 +389,7 @@ def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[s
     merged = {**defaults, **PRESETS[preset], "preset": preset, **options}
     out = {name: opt.validate(merged[name]) for name, opt in SCHEMA.items()}
     out["preset"] = preset
+    out["pixel_filter"] = resolve_pixel_filter(out["pixel_filter"], out["denoiser"])
     _check_combination(out)
     return out
 

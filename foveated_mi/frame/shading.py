@@ -10,7 +10,7 @@ numbers are those of a plain ``mi.render`` of the nested integrator.
 shading buffer in one of two ways, both converging to the image the nested integrator renders
 on the same film (Mitsuba's default filter is ``gaussian``), never to a box-filtered one:
 
-``splat`` (:func:`develop_splat`, default)
+``splat`` (:func:`develop_splat`; what ``auto`` picks unless the denoiser needs independent noise)
     Mitsuba's own estimator: uniformly jittered samples are splatted with the film's filter
     into an ``mi.ImageBlock`` and a traced pixel holds :math:`\sum f L / \sum f` over the
     samples that reach it. Neighbouring traced pixels share samples, as in ``mi.render``, so
@@ -22,7 +22,9 @@ on the same film (Mitsuba's default filter is ``gaussian``), never to a box-filt
     drawn from the filter and a traced pixel holds the (signed-)weighted mean of its own
     samples. Every pixel is an unbiased estimate of the filtered image and independent of
     its neighbours, at a higher variance than splatting when neighbours are traced (their
-    samples are not shared).
+    samples are not shared). ``auto`` picks it for a denoiser registered with
+    ``independent_noise`` (OIDN, trained on independent per-pixel noise, leaves the
+    correlated noise of splatting in place).
 
 For the ``box`` filter both are the plain per-pixel mean.
 

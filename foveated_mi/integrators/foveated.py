@@ -49,6 +49,7 @@ The parameters (generated from :data:`foveated_mi.options.SCHEMA`):
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -66,7 +67,7 @@ from ..frame._shared import NO_SITE
 from ..frame.formation import FormationInput, FrozenFormation, form_image, replayable
 from ..frame.pixel_filter import FilterSampler
 from ..frame.scene_state import GeometryCache, SceneState, scene_state
-from ..options import SCHEMA, parameter_table, validate_options
+from ..options import SCHEMA, parameter_table, pixel_filter_warning, validate_options
 from ..postprocess import DENOISERS, tonemap
 from ..timing import StageTimer
 from ..validate import ParameterError, check_int
@@ -138,6 +139,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         # 'auto' preset then resolves to one whose gradient is exact.
         self._gradients = _shading.is_ad_integrator(nested)
         self._options = validate_options(self._given, self._gradients)
+        self._pixel_filter_warned: str | None = None
+        self._warn_pixel_filter()
         self._history: _reproject.History | None = None
         self._scene_ref = None
         self._scene_state = self._camera_state = None
@@ -172,6 +175,15 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         if new["history"] != old["history"] or any(new[k] != old[k] for k in domain):
             self.reset()   # a stale history, or one held in another domain
         self._given, self._options = given, new
+        self._warn_pixel_filter()
+
+    def _warn_pixel_filter(self) -> None:
+        """Warn once for an explicit splat with a denoiser that needs independent noise;
+        again only when an option change makes that choice anew (not on every frame)."""
+        msg = pixel_filter_warning(self._given, self._options)
+        if msg is not None and msg != self._pixel_filter_warned:
+            warnings.warn(msg, UserWarning, stacklevel=3)
+        self._pixel_filter_warned = msg
 
     def __getattr__(self, name):
         opts = self.__dict__.get("_options")

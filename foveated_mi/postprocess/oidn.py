@@ -136,6 +136,7 @@ def oidn_stage(ctx: DenoiseInput) -> Denoised:
     return Denoised(image, filtered=image)
 
 
+# Trained on independent per-pixel noise: splatted (correlated) noise is left in place.
 register_denoiser("oidn", oidn_stage, differentiable=False, materials=True,
-                  available=lambda: _dn.oidn_available(),
+                  independent_noise=True, available=lambda: _dn.oidn_available(),
                   requirement=f"pyoidn installed ({_dn.INSTALL_HINT})")

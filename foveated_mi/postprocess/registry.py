@@ -49,6 +49,7 @@ class Denoiser(NamedTuple):
     available: Callable[[], bool] | None
     requirement: str
     replayable: bool = False
+    independent_noise: bool = False
 
 
 #: Denoiser name -> :class:`Denoiser`, in registration order.
@@ -58,7 +59,8 @@ DENOISERS: dict[str, Denoiser] = {}
 def register_denoiser(name: str, fn: Callable[[DenoiseInput], Any], *, differentiable: bool,
                       demodulated: bool = False, materials: bool = False,
                       display_values: bool = True, available: Callable[[], bool] | None = None,
-                      requirement: str = "", replayable: bool = False) -> None:
+                      requirement: str = "", replayable: bool = False,
+                      independent_noise: bool = False) -> None:
     """Make ``fn`` the denoiser ``name`` (the option value ``denoiser = name``).
 
     ``differentiable``: a gradient pass may differentiate it (else a gradient pass of a
@@ -69,9 +71,12 @@ def register_denoiser(name: str, fn: Callable[[DenoiseInput], Any], *, different
     works on tone-mapped samples (``tonemap_samples``). ``available``: whether its
     dependency is installed; ``requirement`` says what to install. ``replayable``: it is
     Dr.Jit arithmetic only (no host call, no read of a value), so its kernels may be recorded
-    once and replayed (:mod:`foveated_mi.frame.formation`)."""
+    once and replayed (:mod:`foveated_mi.frame.formation`). ``independent_noise``: it expects
+    each pixel's noise independent of its neighbours' (a network trained on such noise), so
+    ``pixel_filter = "auto"`` gives it filter importance sampling instead of splatting."""
     DENOISERS[name] = Denoiser(fn, bool(differentiable), bool(demodulated), bool(materials),
-                               bool(display_values), available, requirement, bool(replayable))
+                               bool(display_values), available, requirement, bool(replayable),
+                               bool(independent_noise))
 
 
 def unregister_denoiser(name: str) -> None:

@@ -457,7 +457,7 @@ def _bools(ctx: TableContext, key: str, value: Any) -> list[bool]:
 
 
 def _uniform(ctx: TableContext, table: Any, foveated: list[dict]) -> list[dict]:
-    from ..options import DEFAULTS, PRESET_NAMES, PRESETS
+    from ..options import DEFAULTS, PRESET_NAMES, PRESETS, resolve_pixel_filter
     table = dict(ctx.table("uniform", table))
     if not table:
         return []
@@ -505,6 +505,10 @@ def _uniform(ctx: TableContext, table: Any, foveated: list[dict]) -> list[dict]:
                 if d:
                     denoiser = PRESETS[full["preset"]].get("denoiser", DEFAULTS["denoiser"])
                     full["denoiser"] = denoiser
+                    # resolved above for denoiser none: the preset's denoiser decides it
+                    full["pixel_filter"] = resolve_pixel_filter(
+                        PRESETS[full["preset"]].get("pixel_filter", DEFAULTS["pixel_filter"]),
+                        denoiser)
                     del given["denoiser"]
                 if denoiser == "none" and d:
                     continue            # the preset has no denoiser: the same as denoise false
