@@ -19,7 +19,7 @@ defaults by a configuration tuned together; any option given explicitly wins ove
     level (``main.cpp`` 355) with σ = 1 for colour, normal and position (``ATrous.cpp``
     53-55; the shader's ``exp(-d²/φ)`` with φ = 1), the Uncharted 2 tone curve
     (``shared_helper_funcs.h`` 354-373) applied to the frame before the filter.
-    ``compact``, ``jfa+1``, ``max_history`` caps, the inclusive test and
+    ``compact``, ``jfa+1``, ``max_history`` caps, exclusive history reads, the inclusive test and
     ``tonemap_samples`` (the authors' per-sample tone mapping, an option) are extensions.
 
     Edge rays: the text asks for "edge detection by the depth buffer" and names no test.
@@ -186,6 +186,11 @@ def pixel_filter_warning(given: dict[str, Any], options: dict[str, Any]) -> str 
             f"pixel_filter unset (auto) or set it to 'importance'")
 
 
+def _reprojection_modes():
+    from .frame.reproject import REPROJECTION_MODES
+    return REPROJECTION_MODES
+
+
 def _jfa_variants():
     from .reconstruct import JFA_VARIANTS
     return JFA_VARIANTS
@@ -319,6 +324,15 @@ _SCHEMA: tuple[Option, ...] = (
            "authors use 0.99, in scene units)"),
     Option("reprojection_tolerance", 0.02, "float", "relative depth tolerance of the "
            "reprojection test", lo=0.0, hi=1.0),
+    Option("reprojection", "exclusive", "string", "how a pixel reads the history: each "
+           "previous pixel serves one pixel (exclusive) or every pixel reads its nearest "
+           "previous pixel (nearest, the paper)", choices=_reprojection_modes,
+           doc="How a pixel reads the history after a camera move: ``exclusive`` (each "
+           "previous pixel serves only the pixel landing nearest its centre; the others start "
+           "afresh, so no history value is copied into several pixels, whose noise the "
+           "denoisers would then leave in place) or ``nearest`` (every pixel reads its "
+           "nearest previous pixel: Nehab et al. 2007, the paper). A still camera reads all "
+           "of its history either way. See :mod:`foveated_mi.frame.reproject`"),
     Option("clamp", 1e4, "float", "largest accepted sample component; larger samples are "
            "scaled down", lo=0.0, hi=3e38, lo_open=True),
     Option("timing", False, "bool", "synchronise at stage boundaries and report wall time per "
@@ -346,6 +360,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     # Strategy 2 launch layout, an uncapped history, plain JFA, the strict in-circle test,
     # one à-trous level with unit sigmas (see the module docstring).
     "paper": {"reorder": "rows_blocks", "max_history": 0.0, "jfa": "jfa",
+              "reprojection": "nearest",
               "sibson_inclusive": False,
               "atrous_iterations": 1, "sigma_color": 1.0, "sigma_normal": 1.0,
               "sigma_position": 1.0, "tonemap": "uncharted2"},

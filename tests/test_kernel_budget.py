@@ -1,7 +1,9 @@
 """Kernels per frame: from frame 3 on a still or moving frame compiles nothing, launches the
 same number of kernels every frame, and no more than the frame-time benchmark reports
 (``benchmarks/bench_overhead.py``, README "Frame time": 27 / 30 for `paper` still / moving at
-1024², 47 for `guided`; here `guided` also traces the light's edges: 43 / 48)."""
+1024², 47 for `guided`; here `guided` also traces the light's edges: 43 / 48, and on a
+moving camera its exclusive history reads add the one scatter that claims each previous
+pixel: 49)."""
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -11,7 +13,7 @@ from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.scenes import apply_camera, camera_of, load_scene
 
 #: The most JIT kernels one frame may launch, per preset (measured as in the docstring).
-BUDGET = {"paper": 30, "guided": 48}
+BUDGET = {"paper": 30, "guided": 49}
 
 
 @pytest.mark.parametrize("preset", ["paper", "guided"])

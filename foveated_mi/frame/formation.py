@@ -47,7 +47,7 @@ RECORDINGS = 8
 #: a recording's key (a new gaze must not record again). They are left out of the options the
 #: recording sees, so a pass that read one would fail to record, not replay a stale value.
 _NOT_KEYED = ("gaze", "theta", "timing", "map_seed", "reorder", "block_height", "edge_threshold",
-              "edge_detector", "reprojection_tolerance", "freeze")
+              "edge_detector", "reprojection_tolerance", "reprojection", "freeze")
 
 
 class FormationInput(NamedTuple):

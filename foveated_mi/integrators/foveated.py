@@ -373,7 +373,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             history = self._history if o["history"] else None
             reproj = _reproject.reprojection_map(gb.position, gb.hit, history, width, height,
                                                  tolerance=o["reprojection_tolerance"],
-                                                 direction=gb.direction)
+                                                 direction=gb.direction,
+                                                 mode=o["reprojection"])
             cut = None
             if history is not None and self._camera_moved:
                 reproj, cut = _reproject.unless_cut(reproj, CUT_HIT_FRACTION)
