@@ -15,11 +15,15 @@ setup: $(STAMP)
 demo: $(STAMP)
 	$(RUN) $(VENV)/bin/foveated-mi demo
 
+# Tests run on every core (at most 4 workers); a file's tests stay on one worker, so they share
+# its module fixtures and the kernels they compile.
+XDIST  = -n auto --maxprocesses 4 --dist loadfile
+
 test: $(STAMP)            # the fast tier (< 4 minutes on 2 cores with a cold kernel cache)
-	$(RUN) $(PY) -m pytest -q --durations=15
+	$(RUN) $(PY) -m pytest -q $(XDIST) --durations=15
 
 test-all: $(STAMP)        # everything, the slow checks included (before each release)
-	$(RUN) $(PY) -m pytest -q --durations=15 -m "slow or not slow"
+	$(RUN) $(PY) -m pytest -q $(XDIST) --durations=15 -m "slow or not slow"
 
 test-slow: $(STAMP)       # only the checks marked slow
 	$(RUN) $(PY) -m pytest -q -m slow
