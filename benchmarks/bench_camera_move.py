@@ -1,8 +1,8 @@
 """History after a camera move: PSNR of the frames after the move against a fresh first frame.
 
 Mitsuba's Cornell box at SIZE², 1 spp per traced pixel, θ 0.1, σp 0.8, nested ``path``
-(``max_depth`` 4). N frames of a still view, then the camera moves to
-``look_at(origin=[0.9, 0.6, 2.2], target=[0, 0, 0])`` (``params.update()``) and four more
+(``max_depth`` 4). N frames of a still view, then the camera moves (:data:`MOVES`; by default
+to ``look_at(origin=[0.9, 0.6, 2.2], target=[0, 0, 0])``, ``params.update()``) and four more
 frames render. Each figure is PSNR against a converged render of the new view (REF_SPP), on
 display values (:func:`foveated_mi.render.to_display`) and on linear values clipped to
 [0, 1]. ``fresh`` is a new integrator's first frame of the new view with the same seed.
@@ -30,7 +30,13 @@ import mitsuba as mi  # noqa: E402
 
 from common import machine, md_table, write_json  # noqa: E402
 
-MOVED = dict(origin=[0.9, 0.6, 2.2], target=[0, 0, 0], up=[0, 1, 0])
+#: The camera moves after the still frames: ``closer`` (the default: several pixels land in
+#: one previous pixel), ``away`` (the box shrinks and the sky around it appears) and ``turn``.
+MOVES = {
+    "closer": dict(origin=[0.9, 0.6, 2.2], target=[0, 0, 0], up=[0, 1, 0]),
+    "away": dict(origin=[0.3, 0.2, 5.5], target=[0, 0, 0], up=[0, 1, 0]),
+    "turn": dict(origin=[0, 0, 3.9], target=[0.6, 0.3, 0], up=[0, 1, 0]),
+}
 AFTER = 4          # frames rendered after the move
 
 
@@ -43,12 +49,12 @@ def cornell(size: int):
 
 
 @functools.lru_cache(maxsize=None)
-def reference(size: int, spp: int, variant: str) -> np.ndarray:
-    """The converged render of the moved view (cached per size, spp and variant)."""
+def reference(size: int, spp: int, variant: str, move: str = "closer") -> np.ndarray:
+    """The converged render of the moved view (cached per size, spp, variant and move)."""
     from foveated_mi.baselines import render_reference
     scene = cornell(size)
     params = mi.traverse(scene)
-    params["sensor.to_world"] = mi.ScalarTransform4f().look_at(**MOVED)
+    params["sensor.to_world"] = mi.ScalarTransform4f().look_at(**MOVES[move])
     params.update()
     return render_reference(scene, spp=spp, seed=1234)
 
@@ -65,10 +71,10 @@ def measures(img: np.ndarray, ref: np.ndarray) -> dict[str, float]:
 
 
 def camera_move(preset: str, still: int, seed: int, size: int = 64, ref_spp: int = 512,
-                **options) -> dict:
+                move: str = "closer", **options) -> dict:
     """One row: N = ``still`` still frames, the move, AFTER frames; fresh first frame."""
     from foveated_mi.integrators.foveated import FoveatedIntegrator
-    ref = reference(size, ref_spp, mi.variant())
+    ref = reference(size, ref_spp, mi.variant(), move)
     opts = dict(preset=preset, theta=0.1, sigma_p=0.8, **options)
 
     def integrator():
@@ -79,13 +85,13 @@ def camera_move(preset: str, still: int, seed: int, size: int = 64, ref_spp: int
     integ = integrator()
     for _ in range(still):
         np.array(mi.render(scene, integrator=integ, seed=seed))
-    params["sensor.to_world"] = mi.ScalarTransform4f().look_at(**MOVED)
+    params["sensor.to_world"] = mi.ScalarTransform4f().look_at(**MOVES[move])
     params.update()
     after = [measures(np.array(mi.render(scene, integrator=integ, seed=seed)), ref)
              for _ in range(AFTER)]
     hit_rate = integ.stats["history_hit_rate"]
     fresh = measures(np.array(mi.render(scene, integrator=integrator(), seed=seed)), ref)
-    row = {"preset": preset, "still": still, "seed": seed, "size": size,
+    row = {"preset": preset, "move": move, "still": still, "seed": seed, "size": size,
            "resolved_preset": integ.stats["preset"], "hit_rate_last": hit_rate}
     for m in ("display", "linear"):
         row[f"{m}_fresh"] = fresh[m]
@@ -102,19 +108,20 @@ def main(argv=None) -> int:
     p.add_argument("--size", type=int, default=64)
     p.add_argument("--ref-spp", type=int, default=512)
     p.add_argument("--reprojection", choices=["exclusive", "nearest"])
+    p.add_argument("--moves", nargs="+", default=["closer"], choices=list(MOVES))
     p.add_argument("--variant")
     p.add_argument("--out", help="JSON results")
     a = p.parse_args(argv)
     foveated_mi.set_variant(a.variant)
     extra = {"reprojection": a.reprojection} if a.reprojection else {}
-    rows = [camera_move(pr, n, s, a.size, a.ref_spp, **extra)
-            for pr in a.presets for n in a.history for s in a.seeds]
-    table = [[r["preset"], r["still"], r["seed"], m, f"{r[f'{m}_1']:.2f}",
+    rows = [camera_move(pr, n, s, a.size, a.ref_spp, move=mv, **extra)
+            for mv in a.moves for pr in a.presets for n in a.history for s in a.seeds]
+    table = [[r["move"], r["preset"], r["still"], r["seed"], m, f"{r[f'{m}_1']:.2f}",
               " ".join(f"{r[f'{m}_{k}']:.2f}" for k in range(2, AFTER + 1)),
               f"{r[f'{m}_fresh']:.2f}", f"{r[f'{m}_1'] - r[f'{m}_fresh']:+.2f}",
               f"{r[f'{m}_3'] - r[f'{m}_fresh']:+.2f}"]
              for r in rows for m in ("display", "linear")]
-    print(md_table(["preset", "N", "seed", "measure", "first after the move",
+    print(md_table(["move", "preset", "N", "seed", "measure", "first after the move",
                     "next frames", "fresh first frame", "first - fresh", "third - fresh"],
                    table))
     if a.out:

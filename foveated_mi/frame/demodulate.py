@@ -12,7 +12,11 @@ radiance :math:`L` is split as
 per channel (Zimmer et al. 2015; Schied et al. 2017, SVGF). The sparse reconstruction and the
 noise filter then work on :math:`E`, which varies slowly across texture edges, and the
 texture comes back at full resolution when :math:`\hat a` multiplies the result. Emitters are
-handled by subtracting :math:`L_e` first, so a visible light or sky stays sharp.
+handled by subtracting :math:`L_e` first, so a visible light or sky stays sharp. At a
+light's edge (the integrator's emission edges) the emission seen at the pixel's centre does
+not describe its footprint, which covers the light only in part: there :math:`L_e` is taken as
+0 (:func:`foveated_mi.frame.formation.form_image`), since :math:`L < L_e` would give negative
+irradiance for the reconstruction to spread.
 
 **The floor** :math:`a_{\min}` (``ALBEDO_FLOOR`` = 0.4). Dividing by a small albedo amplifies
 a dark site's Monte Carlo noise, and a reconstruction that spreads that site into a bright

@@ -87,6 +87,11 @@ def form_image(shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any],
     if max_gap == "law":
         # No jump longer than the sampling law's largest gap (host scalars, no sync).
         max_gap = jfa_bound(width, height, o)
+    if o["demodulate"] and inp.emission_edges is not None:
+        # At an emitter's edge the emission seen at the pixel's centre is not its footprint's
+        # (a partial cover of the light): subtracting it could leave negative irradiance,
+        # which the reconstruction would spread. Such pixels are divided by the albedo only.
+        gb = gb._replace(emission=dr.select(inp.emission_edges, 0.0, gb.emission))
     # History resolve (Fig. 4): this frame's samples blended with the reprojected history.
     resolved = _reproject.resolve(shading.value, shading.mask, inp.spp, inp.reprojection,
                                   inp.history, o["max_history"], shading.moment2)

@@ -17,8 +17,8 @@ copied into a block of pixels, which the denoisers (trained on, or modelling, in
 per-pixel noise) leave in place, and one history estimate weighted as if it were several.
 In exclusive mode a previous pixel serves only the pixel that lands nearest its centre (ties:
 the lowest index); the others miss and start afresh. A still camera maps every pixel onto
-itself, so it keeps all of its history. Measured on the Cornell box at 64² after a camera
-move, against a fresh first frame of the new view (``benchmarks/bench_camera_move.py``,
+itself, so it keeps all of its history. Measured on the Cornell box at 64² after the camera
+moves closer (``closer``), against a fresh first frame of the new view (``benchmarks/bench_camera_move.py``,
 seeds 5-7, ``docs/results/camera_move_nearest.json`` and ``camera_move.json``): with nearest
 reads the first frame after the move was up to 4.0 dB below it (``guided``, 32 frames of
 history, linear values) and the third still 2.8 dB below; with exclusive reads the first was
@@ -28,7 +28,12 @@ after 1, 4 and 32 frames of history.
 A background pixel (the primary ray escapes) reprojects by its direction, the point at
 infinity :math:`q = M_{t-1} (d, 0)`, as in temporal anti-aliasing; it is a hit when the
 previous pixel was background too. Without this, a background pixel next to a silhouette,
-whose filter footprint still covers the object, would never accumulate samples.
+whose filter footprint still covers the object, would never accumulate samples. Such a
+pixel's value holds part of the object, which moves with parallax, not with the direction:
+a background pixel with a surface within the film filter's reach (``reach``), in this frame
+or around its previous pixel, reads the history only while the camera is still (it lands
+within 1/100 pixel of its own centre). Otherwise, after a move away, the glow of the old
+silhouettes stays in the sky.
 
 **Shading with history** (Fig. 4). Per pixel, with history mean :math:`h`, count :math:`n`
 (capped at ``max_history``; 0 = no cap, as in the paper) and this frame's mean :math:`L` over ``spp`` samples:
@@ -113,11 +118,12 @@ REPROJECTION_MODES = ("exclusive", "nearest")
 def reprojection_map(position: mi.Point3f, hit: mi.Bool, history: History | None,
                      width: int, height: int, *, tolerance: float = 0.02,
                      direction: mi.Vector3f | None = None,
-                     mode: str = "exclusive") -> ReprojectionMap:
+                     mode: str = "exclusive", reach: int = 1) -> ReprojectionMap:
     """Reverse-reproject the current G-buffer into the history (see the module docstring).
 
     ``direction`` (the primary rays' directions) lets background pixels reproject; without
-    it they always miss. ``mode``: one of :data:`REPROJECTION_MODES`."""
+    it they always miss. ``mode``: one of :data:`REPROJECTION_MODES`. ``reach``: the film
+    filter's reach in pixels (:func:`~foveated_mi.frame.gbuffer.filter_reach`)."""
     if mode not in REPROJECTION_MODES:
         from ..validate import check_choice
         check_choice("reprojection", mode, REPROJECTION_MODES)
@@ -150,11 +156,38 @@ def reprojection_map(position: mi.Point3f, hit: mi.Bool, history: History | None
     # Misses store depth = inf: the comparison is then False without forming inf - inf.
     same_surface = hit & dr.isfinite(prev_depth) & (dr.abs(prev_depth - dist) <= tol * dist)
     same_background = background & ~dr.isfinite(prev_depth)
+    # The pixel lands within 1/100 pixel of its own centre: the camera is still here.
+    _, cx, cy = pixel_coords(width, height)
+    still = dr.square(uv.x - (mi.Float(cx) + 0.5)) + dr.square(uv.y - (mi.Float(cy) + 0.5)) \
+        <= 1e-4
+    if direction is not None:
+        # Sky next to a surface holds part of it (module docstring): only a still view keeps it.
+        ask = same_background & ~still
+        clear = ~_any_within(hit, mi.Int32(cx), mi.Int32(cy), width, height, reach, ask)
+        clear &= ~_any_within(history.depth, mi.Int32(px), mi.Int32(py), width, height, reach,
+                              ask & clear, dr.isfinite)
+        same_background &= still | clear
     agree = inside & (same_surface | same_background)
     hits = agree & (prev_count > 0)
     if mode == "exclusive":
         hits &= _nearest_claim(uv, px, py, prev, hits, n)
     return ReprojectionMap(uv, hits, prev, agree)
+
+
+def _any_within(values, x: mi.Int32, y: mi.Int32, width: int, height: int, reach: int,
+                active: mi.Bool, test=None) -> mi.Bool:
+    """Whether ``test(values)`` (``values`` itself: a mi.Bool) holds at any pixel of the square
+    window of half-width ``reach`` around pixel ``(x, y)`` (pixels outside the film do not
+    count); False where not ``active``. The test runs on the gathered values, so ``values``
+    needs no kernel of its own."""
+    found = mi.Bool(False)
+    for dy in range(-reach, reach + 1):
+        for dx in range(-reach, reach + 1):
+            qx, qy = x + dx, y + dy
+            ok = active & (qx >= 0) & (qy >= 0) & (qx < width) & (qy < height)
+            v = dr.gather(type(values), values, mi.UInt32(qy) * width + mi.UInt32(qx), ok)
+            found |= ok & (v if test is None else test(v))
+    return found
 
 
 def _nearest_claim(uv: mi.Point2f, px: mi.Float, py: mi.Float, prev: mi.UInt32,

@@ -374,7 +374,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             reproj = _reproject.reprojection_map(gb.position, gb.hit, history, width, height,
                                                  tolerance=o["reprojection_tolerance"],
                                                  direction=gb.direction,
-                                                 mode=o["reprojection"])
+                                                 mode=o["reprojection"],
+                                                 reach=_gbuffer.filter_reach(sensor.film()))
             cut = None
             if history is not None and self._camera_moved:
                 reproj, cut = _reproject.unless_cut(reproj, CUT_HIT_FRACTION)
