@@ -5,6 +5,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
+import tolerances
 from foveated_mi.frame import reproject
 from foveated_mi.frame.adjoint import (NON_DIFFERENTIABLE, check_differentiable, integrator_kind,
                                  register_non_differentiable)
@@ -23,7 +24,16 @@ def _color(a):
 
 
 def _dot(a, b) -> float:
-    return float(dr.sum(dr.sum(a * b))[0])
+    """``<a, b>`` in float64: no float32 reduction order (tests/tolerances.py)."""
+    return tolerances.dot(a.numpy(), b.numpy())
+
+
+def _nearest_xy(nearest: mi.UInt32) -> np.ndarray:
+    """Each pixel's site as (x, y), -1 without one (``FoveatedIntegrator.buffer`` layout)."""
+    idx = nearest.numpy().astype(np.int64)
+    xy = np.stack([idx % W, idx // W], -1)
+    xy[idx == 0xFFFFFFFF] = -1
+    return xy
 
 
 def _vjp(f, x0, y):
@@ -80,9 +90,13 @@ def test_reconstruction_adjoint_is_the_transpose(method, density):
     ax = A(x)
     aty = _vjp(A, dr.zeros(mi.Color3f, N), y)
     lhs, rhs = _dot(ax, y), _dot(x, aty)
-    assert abs(lhs - rhs) <= 1e-5 * max(abs(lhs), 1.0), (lhs, rhs)
-    np.testing.assert_allclose(_jvp(A, dr.zeros(mi.Color3f, N), x).numpy(), ax.numpy(),
-                               rtol=1e-5, atol=1e-6)
+    fwd, rev = tolerances.reconstruction_depth(method, _nearest_xy(nearest), mask.numpy(), W)
+    bound = tolerances.transpose_bound(ax.numpy(), y.numpy(), x.numpy(), aty.numpy(), fwd, rev)
+    assert abs(lhs - rhs) <= bound, (lhs, rhs, bound)
+    # Forward mode and the primal evaluate the same sums: x >= 0 and every weight >= 0, so
+    # A x is its own sum of absolute terms, and both sides carry fwd roundings.
+    tolerances.assert_within(_jvp(A, dr.zeros(mi.Color3f, N), x).numpy(), ax.numpy(),
+                             tolerances.chain_bound(ax.numpy(), 2 * fwd), "J x vs A x")
 
 
 def _gbuffer():
@@ -107,8 +121,10 @@ def test_atrous_adjoint_without_colour_weights_is_the_transpose():
 
     # (Linear, so A^T y is the same at any point; a literal zero buffer would not do here:
     # see foveated_mi.frame.adjoint._ad_copy.)
-    lhs, rhs = _dot(A(x), y), _dot(x, _vjp(A, x, y))
-    assert abs(lhs - rhs) <= 1e-5 * abs(lhs)
+    ax, aty = A(x), _vjp(A, x, y)
+    lhs, rhs = _dot(ax, y), _dot(x, aty)
+    assert abs(lhs - rhs) <= tolerances.transpose_bound(
+        ax.numpy(), y.numpy(), x.numpy(), aty.numpy(), 3 * tolerances.FILTER_LEVEL), (lhs, rhs)
 
 
 def test_atrous_colour_weights_are_held_at_the_primal():
@@ -129,11 +145,16 @@ def test_atrous_colour_weights_are_held_at_the_primal():
     jx = _jvp(A, c0, x)
     jty = _vjp(A, c0, y)
     lhs, rhs = _dot(jx, y), _dot(x, jty)
-    assert abs(lhs - rhs) <= 1e-5 * abs(lhs)
+    depth = 3 * tolerances.FILTER_LEVEL
+    assert abs(lhs - rhs) <= tolerances.transpose_bound(
+        jx.numpy(), y.numpy(), x.numpy(), jty.numpy(), depth), (lhs, rhs)
     # Held weights: the derivative is linear in the direction *and* independent of the
     # colour perturbation's effect on the weights: J(2x) = 2 J(x) exactly, and the
-    # derivative along c0 itself reproduces the filtered image (Euler: W(c0) c0 = A(c0)).
-    np.testing.assert_allclose(_jvp(A, c0, c0).numpy(), A(c0).numpy(), rtol=1e-5, atol=1e-6)
+    # derivative along c0 itself reproduces the filtered image (Euler: W(c0) c0 = A(c0)),
+    # to the roundings of both evaluations (c0 >= 0, weights >= 0: nothing cancels).
+    a_c0 = A(c0).numpy()
+    tolerances.assert_within(_jvp(A, c0, c0).numpy(), a_c0,
+                             tolerances.chain_bound(a_c0, 2 * depth), "J c0 vs A(c0)")
 
 
 def test_resolve_adjoint_is_the_transpose():
@@ -151,9 +172,16 @@ def test_resolve_adjoint_is_the_transpose():
         return reproject.resolve(v, traced, 4, reproj, hist, 32.0, mi.Float(rng2)).shading
 
     b = A(dr.zeros(mi.Color3f, N))          # the constant (history) part
-    lhs = _dot(A(x) - b, y)
-    rhs = _dot(x, _vjp(A, dr.zeros(mi.Color3f, N), y))
-    assert abs(lhs - rhs) <= 1e-5 * abs(lhs)
+    ax, aty = A(x), _vjp(A, dr.zeros(mi.Color3f, N), y)
+    lhs = _dot(ax - b, y)
+    rhs = _dot(x, aty)
+    # A x = (h n + x s) * rcp(n + s): 4 roundings (the rcp is the same value in both
+    # passes); b = h n rcp(n + s): 2; their difference: 1; at most 5 on |A x| + |b| (all
+    # terms >= 0). A^T y = y s rcp(n + s): 2.
+    scale = np.abs(ax.numpy()) + np.abs(b.numpy())
+    bound = tolerances.dot_bound(scale, y.numpy(), 5) + \
+        tolerances.dot_bound(x.numpy(), aty.numpy(), 2)
+    assert abs(lhs - rhs) <= bound, (lhs, rhs, bound)
 
 
 # --------------------------------------------------------------------- splat footprint

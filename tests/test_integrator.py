@@ -5,6 +5,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
+import tolerances
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.validate import ParameterError
 
@@ -131,8 +132,11 @@ def test_every_pixel_traced_equals_plain_render(spp, mode):
     assert integ.stats["rays"] == 48 * 40
     if spp == 1:
         np.testing.assert_array_equal(fov, plain)
-    else:  # same random numbers; only the order of the per-pixel sum differs
-        np.testing.assert_allclose(fov, plain, rtol=1e-5, atol=1e-6)
+    else:  # same random numbers; only the order of the per-pixel sum differs: per side
+        # spp - 1 additions of radiance >= 0 (box film: weights 1) and the division (or a
+        # product with 1 / spp: 3 roundings with CUDA's approximate reciprocal)
+        tolerances.assert_within(fov, plain, tolerances.chain_bound(plain, 2 * (spp + 2)),
+                                 mode)
 
 
 def test_reorder_modes_same_image_with_deterministic_nested():

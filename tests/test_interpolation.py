@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
+import tolerances
 from foveated_mi.reconstruct import (NO_SITE, RECONSTRUCTIONS, Guide, box_mean, interleave_rgb0,
                                      jump_flood, reconstruct, summed_area_table, uses_guide)
 from foveated_mi.validate import ParameterError
@@ -131,6 +132,22 @@ def ref_fast_sibson(shading, nearest, w, h, max_radius):
     return np.where((r2 == 0)[:, None], F, out).T
 
 
+def reference_bound(ref, shading, nearest, w, h):
+    """What separates a method of REFERENCES from its Float64 reference: the methods sum in
+    Float64 and round once to Float32 (U |ref|); the Float64 sums err by at most
+    gamma64(k) times their absolute terms, k the additions along a path (a disk: at most
+    w h terms; the summed-area table: w + h for an entry, 3 for a box, 1 for the division,
+    on entries at most the film's total), bounded by the film's total of |F| (shading
+    rounded to Float32 is F itself)."""
+    total = np.abs(fill(np.nan_to_num(shading), nearest)).sum(axis=0)[:, None]    # per channel
+    f64 = tolerances.gamma(2 * (w * h + w + h + 4), tolerances.U64) * 4 * total
+    return tolerances.chain_bound(ref, 1) + f64
+
+
+#: Roundings of the guided reconstruction (default 5 levels) on a constant or convex
+#: combination of site values (tests/tolerances.py).
+GUIDED_DEPTH = tolerances.guided_constant_depth()
+
 REFERENCES = {
     "voronoi": lambda s, nr, w, h, r: fill(s, nr).T,
     "sibson": ref_sibson,
@@ -187,7 +204,7 @@ def test_matches_reference(method, size, density, max_radius):
         mask, shading, nearest = random_case(seed, w, h, density)
         out = run(method, shading, mask, nearest, w, h, max_radius)
         ref = REFERENCES[method](shading, nearest, w, h, max_radius)
-        np.testing.assert_allclose(out, ref, rtol=2e-6, atol=1e-7)
+        tolerances.assert_within(out, ref, reference_bound(ref, shading, nearest, w, h), method)
 
 
 def test_radius_beyond_table():
@@ -201,7 +218,8 @@ def test_radius_beyond_table():
     shading[:, 0], shading[:, -1] = [1.0, 0.0, 5.0], [0.0, 2.0, 1.0]
     nearest = exact_nearest(mask, w, h)
     out = run(method, shading, mask, nearest, w, h, 100)
-    np.testing.assert_allclose(out, REFERENCES[method](shading, nearest, w, h, 100), rtol=2e-6, atol=1e-6)
+    ref = REFERENCES[method](shading, nearest, w, h, 100)
+    tolerances.assert_within(out, ref, reference_bound(ref, shading, nearest, w, h), method)
 
 
 @pytest.mark.parametrize("size", SIZES)
@@ -212,7 +230,7 @@ def test_film_sizes(size):
     for method in REFERENCES:
         out = run(method, shading, mask, jfa, w, h, 8)
         ref = REFERENCES[method](shading, jfa, w, h, 8)
-        np.testing.assert_allclose(out, ref, rtol=2e-6, atol=1e-7)
+        tolerances.assert_within(out, ref, reference_bound(ref, shading, jfa, w, h), method)
 
 
 # ----------------------------------------------------------------------------- properties
@@ -232,8 +250,9 @@ def test_constant_stays_constant(case, colour, method):
     expected = np.broadcast_to(np.array(colour, np.float32)[:, None], out.shape)
     if method in EXACT:
         np.testing.assert_array_equal(out, expected)
-    else:  # Float32 normalised sums: within rounding
-        np.testing.assert_allclose(out, expected, rtol=1e-5, atol=1e-30)
+    else:  # guided: Float32 normalised sums, within their rounding
+        tolerances.assert_within(out, expected, tolerances.chain_bound(expected, GUIDED_DEPTH),
+                                 method)
 
 
 @settings(max_examples=40, deadline=None)
@@ -246,7 +265,8 @@ def test_inside_site_range(case, scale, offset, method):
     out = run(method, shading, mask, nearest, w, h)
     lo = shading[:, mask].min(axis=1, keepdims=True)
     hi = shading[:, mask].max(axis=1, keepdims=True)
-    slack = 0 if method in EXACT else 1e-5 * np.maximum(np.abs(lo), np.abs(hi))
+    slack = 0 if method in EXACT else \
+        tolerances.chain_bound(np.maximum(np.abs(lo), np.abs(hi)), GUIDED_DEPTH)
     assert np.all(out >= lo - slack) and np.all(out <= hi + slack)
 
 
@@ -282,15 +302,19 @@ def test_non_finite_sites(method):
     assert np.all(np.isfinite(out))
     clean = np.where(np.isfinite(shading) | ~mask, shading, 0).astype(np.float32)
     if method in REFERENCES:
-        np.testing.assert_allclose(out, REFERENCES[method](clean, nearest, w, h, 8), rtol=2e-6,
-                                   atol=1e-7)
+        ref = REFERENCES[method](clean, nearest, w, h, 8)
+        tolerances.assert_within(out, ref, reference_bound(ref, clean, nearest, w, h), method)
     elif method == "guided":   # as if the bad sites held no samples
         kept = mask.copy()
         kept[bad] = False
         guide = plane_guide(kept, w, h)
         ref = reconstruct(method, mi.Color3f(clean), mi.Bool(mask),
                           mi.UInt32(nearest.astype(np.uint32)), w, h, max_radius=8, guide=guide)
-        np.testing.assert_allclose(out, ref.numpy(), rtol=1e-6, atol=1e-7)
+        # The same convex combinations of the same site values: both within their rounding
+        # of the exact one, on terms of size at most max |site value| (per channel).
+        top = np.abs(clean[:, mask]).max(axis=1, keepdims=True)
+        tolerances.assert_within(out, ref.numpy(), tolerances.chain_bound(top, 2 * GUIDED_DEPTH),
+                                 method)
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -311,8 +335,9 @@ def test_one_site(method):
     expected = np.broadcast_to(shading[:, mask], (3, w * h))
     if method in EXACT:
         np.testing.assert_array_equal(out.numpy(), expected)
-    else:
-        np.testing.assert_allclose(out.numpy(), expected, rtol=1e-5)
+    else:   # guided: Float32 normalised sums, within their rounding
+        tolerances.assert_within(out.numpy(), expected,
+                                 tolerances.chain_bound(expected, GUIDED_DEPTH), method)
     assert elapsed < 30
 
 
@@ -400,9 +425,18 @@ def test_gradients(method):
     fwd = dr.forward_to(out).numpy()
     # Linearity: f(s + v) - f(s) = J v (the range clamp of fast_sibson moves with the extremes).
     jv = run(method, shading + v, mask, nearest, w, h, 6) - run(method, shading, mask, nearest, w, h, 6)
-    np.testing.assert_allclose(fwd, jv, atol=1e-5)
-    # <g, J v> = <J^T g, v>
-    np.testing.assert_allclose(np.sum(rev * v), np.sum(g * jv), rtol=1e-4)
+    # Rounding bound (tests/tolerances.py): the tangent, f(s + v) and f(s) each carry the
+    # method's forward roundings on terms of size at most f(|s| + |v|) (weights >= 0); the
+    # sum s + v and the difference of the two images one rounding each.
+    xy = np.stack([nearest % w, nearest // w], -1)
+    depth, rev_depth = tolerances.reconstruction_depth(method, xy, mask, w)
+    scale = run(method, np.abs(shading) + np.abs(v), mask, nearest, w, h, 6)
+    tolerances.assert_within(fwd, jv, tolerances.chain_bound(scale, 3 * depth + 2), "J v")
+    # <g, J v> = <J^T g, v>, both in Float64: J^T g carries the adjoint's roundings, J v the
+    # ones above.
+    lhs, rhs = tolerances.dot(rev, v), tolerances.dot(g, jv)
+    bound = tolerances.dot_bound(rev, v, rev_depth) + tolerances.dot_bound(g, scale, 3 * depth + 2)
+    assert abs(lhs - rhs) <= bound, (lhs, rhs, bound)
     assert np.all(rev[:, ~mask] == 0)  # gradients only reach the sites
 
 

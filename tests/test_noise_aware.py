@@ -6,6 +6,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
+import tolerances
 import foveated_mi.denoise as denoise_mod
 from foveated_mi import options as opts_mod
 from foveated_mi.frame.demodulate import ALBEDO_FLOOR, demodulate, remodulate, safe_albedo
@@ -64,8 +65,10 @@ def test_demodulation_divides_by_the_albedo_above_the_floor_only():
                                   np.maximum(a, ALBEDO_FLOOR).astype(np.float32))
     L = np.full((2, 3), 2.0)
     e = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
-    np.testing.assert_allclose(np3(demodulate(c3(L), c3(a), c3(e))),
-                               (L - e) / np.maximum(a, ALBEDO_FLOOR), rtol=1e-6)
+    # The albedo's rounding to float32 and the division (L - e is exact here).
+    want = (L - e) / np.maximum(a, ALBEDO_FLOOR)
+    tolerances.assert_within(np3(demodulate(c3(L), c3(a), c3(e))), want,
+                             tolerances.chain_bound(want, 2), "demodulate")
 
 
 def _cornell(w=32, h=28, integrator=None, black_wall=False):
@@ -86,7 +89,12 @@ def test_demodulated_frame_with_every_pixel_traced_is_the_plain_render():
     integ = FoveatedIntegrator(preset="paper", nested=scene.integrator(), sigma_p=1.0,
                                demodulate=True, atrous_iterations=0, history=False)
     img = np.array(mi.render(scene, integrator=integ, spp=2, seed=3))
-    np.testing.assert_allclose(img, plain, rtol=5e-7, atol=1e-6)
+    # Per side the pixel mean (spp - 1 additions and the division or a product with 1 / spp,
+    # up to 3 roundings; box film, radiance >= 0); then L - L_e, the division by the albedo
+    # and the FMA back, 3 roundings on terms of size |L| + |L_e| <= 2 |L| (the emission is
+    # part of the radiance).
+    bound = tolerances.chain_bound(plain, 2 * (2 + 2)) + tolerances.chain_bound(2 * plain, 3)
+    tolerances.assert_within(img, plain, bound, "round trip")
     emission = integ.buffer("image")  # sanity: the light is in view and bright
     assert emission.max() > 5.0
 
@@ -110,7 +118,14 @@ def test_sample_variance_from_moments_and_spatial_fallback():
                           mi.Bool(np.ones(n, bool)), guide.normal, guide.hit, w, h).numpy()
     own = (m2 - mu ** 2) * count / (count - 1)
     top = np.arange(n) < n // 2
-    np.testing.assert_allclose(est[top], own[top], rtol=1e-3, atol=1e-5)
+    # m2 - mu^2 cancels: its roundings count on |m2| + mu^2. mu: its rounding to float32 and
+    # the luminance (three rounded coefficients summing to 1, a product and two FMAs), 5;
+    # mu^2 twice that and the product; m2's rounding; then the subtraction, n / (n - 1) and
+    # the product on the result.
+    bessel = count / (count - 1)
+    bound = tolerances.chain_bound((mu ** 2 + m2) * bessel, 2 * 5 + 1 + 1) + \
+        tolerances.chain_bound(own, 3)
+    tolerances.assert_within(est[top], own[top], bound[top], "own moments")
     assert abs(est[top].mean() - sigma2) < 0.1 * sigma2
     assert abs(est[~top].mean() - sigma2) < 0.1 * sigma2   # spatial: pooled samples
     assert est[~top].std() < own[~top].std() / 2           # and far steadier than 2 samples
@@ -133,8 +148,10 @@ def test_estimate_variance_divides_by_samples_and_albedo():
     samples = mi.Float(np.full(n, 36.0, np.float32))
     var2 = estimate_variance(mi.Float(s2), mi.Float(count), mi.Bool(mask), nearest, samples,
                              albedo=c3(np.full((n, 3), 0.5))).numpy()
-    np.testing.assert_allclose(var2[~mask], np.where(near[~mask] == 0, 4.0, 9.0) / 36 / 0.25,
-                               rtol=1e-5)
+    # s2 / n, the albedo's luminance (4, as above) squared, the division.
+    want = np.where(near[~mask] == 0, 4.0, 9.0) / 36 / 0.25
+    tolerances.assert_within(var2[~mask], want, tolerances.chain_bound(want, 1 + 2 * 4 + 1 + 1),
+                             "variance")
 
 
 # ----------------------------------------------------------------------------- SVGF
@@ -214,7 +231,9 @@ def test_guided_does_not_bleed_across_geometry():
     guide = guide._replace(weight=mi.Float(mask.astype(np.float32)))
     out = np3(reconstruct("guided", c3(np.where(mask[:, None], values, 0)), mi.Bool(mask),
                           jump_flood(mi.Bool(mask), w, h), w, h, guide=guide))
-    np.testing.assert_allclose(out, values, rtol=1e-5)
+    # Each plane's value is a convex combination of equal site values, to its rounding.
+    tolerances.assert_within(out, values, tolerances.chain_bound(
+        values, tolerances.guided_constant_depth()), "planes")
 
 
 def test_stochastic_takes_one_same_surface_site_reproducibly():

@@ -7,6 +7,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
+import tolerances
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.options import validate_options
 from foveated_mi.reconstruct.interpolate import sibson
@@ -179,10 +180,16 @@ def test_atrous_level_matches_the_authors_shader():
     x = rng.random((H * W, 3)).astype(np.float32) * 2
     k1 = np.array([1, 4, 6, 4, 1]) / 16.0
     expect = np.zeros_like(c)
+    # Rounding bound (tests/tolerances.py): both sides compute the exponents in float32 (6
+    # roundings each: 3 subtractions' worth, squares, sums) and an exponential (and here the
+    # float32 weight products): the weights' relative errors dw, acting on |c_q| + |out|;
+    # the float32 filter's 25 FMA taps, 25 weight sums and division, the store of expect.
+    bound = np.zeros_like(c, dtype=np.float64)
     for p in range(H * W):
         py, px = divmod(p, W)
         s = np.zeros(3)
         cum = 0.0
+        err_c, err_w = np.zeros(3), 0.0
         for dy in range(-2, 3):
             for dx in range(-2, 3):
                 qx, qy = px + dx, py + dy
@@ -194,9 +201,16 @@ def test_atrous_level_matches_the_authors_shader():
                     * min(np.exp(-np.sum((x[p] - x[q]) ** 2) / 1.0), 1.0)
                 s += c[q] * w * k1[dx + 2] * k1[dy + 2]
                 cum += w * k1[dx + 2] * k1[dy + 2]
+                e = sum(float(np.sum((a[p].astype(np.float64) - a[q]) ** 2)) for a in (c, n, x))
+                dw = 2 * tolerances.gamma(6) * e + \
+                    2 * (tolerances.TRANSCENDENTAL + 1 + e) * tolerances.U + tolerances.gamma(2)
+                err_c += w * k1[dx + 2] * k1[dy + 2] * dw * np.abs(c[q])
+                err_w += w * k1[dx + 2] * k1[dy + 2] * dw
         expect[p] = s / cum
+        bound[p] = (err_c + np.abs(expect[p]) * err_w) / cum + \
+            tolerances.chain_bound(expect[p], 2 * 25 + 2)
     o = validate_options({"preset": "paper"})
     got = atrous(mi.Color3f(c.T), mi.Array3f(n.T), mi.Array3f(x.T), W, H,
                  iterations=o["atrous_iterations"], sigma_color=o["sigma_color"],
                  sigma_normal=o["sigma_normal"], sigma_position=o["sigma_position"])
-    np.testing.assert_allclose(got.numpy().T, expect, rtol=1e-4, atol=1e-6)
+    tolerances.assert_within(got.numpy().T, expect, bound, "shader")

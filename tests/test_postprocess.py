@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
+import tolerances
 from foveated_mi.postprocess import TONEMAPPERS, atrous, tonemap
 from foveated_mi.validate import ParameterError
 
@@ -57,40 +58,80 @@ def ref_aces(x):
 REFERENCE_TONEMAPS = {"reinhard": ref_reinhard, "aces": ref_aces}
 
 
-def atrous_ref(col, nor, pos, valid, iterations, sc, sn, sp):
-    """Brute-force NumPy version of the documented filter (float64)."""
+def atrous_ref(col, nor, pos, valid, iterations, sc, sn, sp, bound=False):
+    """Brute-force NumPy version of the documented filter (float64).
+
+    ``bound``: also return an elementwise bound of the float32 filter's error against this
+    reference, propagated level by level to first order (tests/tolerances.py): the inputs
+    rounded to float32 (U each); per tap, the exponents' errors from the colours' errors so
+    far (the colour weights depend on them) and from their own roundings (7 each: the
+    subtraction, the square, two additions, the rounded 1 / sigma^2 and its product; 2 for
+    adding the terms), the exponential's (TRANSCENDENTAL + 1 + its argument: CUDA's ex2
+    scales it) and the B3 product's; per output, 25 FMA taps and 25 weight sums, the
+    division, and the weights' errors acting on |c_q| + |y_p|."""
     h, w, _ = col.shape
     c = col.astype(np.float64)
     nor = np.where(valid[..., None], nor, 0.0).astype(np.float64)
     pos = np.where(valid[..., None], pos, 0.0).astype(np.float64)
+    U = tolerances.U
+    err = U * np.abs(np.nan_to_num(c, nan=0.0, posinf=0.0, neginf=0.0))   # float32 inputs
     ys, xs = np.mgrid[0:h, 0:w]
     for it in range(iterations):
         s = 2 ** it
         fin = np.isfinite(c).all(-1)
         cs = np.where(fin[..., None], c, 0.0)
+        es = np.where(fin[..., None], err, 0.0)
         num = np.zeros_like(c)
         den = np.zeros((h, w))
+        taps = []
         for dy in range(-2, 3):
             for dx in range(-2, 3):
                 qy, qx = ys + dy * s, xs + dx * s
                 inside = (qy >= 0) & (qy < h) & (qx >= 0) & (qx < w)
                 qy, qx = np.clip(qy, 0, h - 1), np.clip(qx, 0, w - 1)
                 wgt = np.full((h, w), H1[dy + 2] * H1[dx + 2])
+                expo = np.zeros((h, w))          # the exponent and a bound of its error
+                d_expo = np.zeros((h, w))
                 if math.isfinite(sc):
-                    d2 = ((cs - cs[qy, qx]) ** 2).sum(-1)
-                    wgt *= np.where(fin, np.exp(-d2 / (sc * 2.0 ** -it) ** 2), 1.0)
+                    diff = cs - cs[qy, qx]
+                    d2 = (diff ** 2).sum(-1)
+                    inv = 1.0 / (sc * 2.0 ** -it) ** 2
+                    wgt *= np.where(fin, np.exp(-d2 * inv), 1.0)
+                    e_c = es + es[qy, qx]
+                    expo += np.where(fin, d2 * inv, 0.0)
+                    d_expo += np.where(fin, inv * (2 * np.abs(diff) * e_c + e_c ** 2).sum(-1)
+                                       + tolerances.gamma(7) * d2 * inv, 0.0)
                 both = valid & valid[qy, qx]
                 geo = np.ones((h, w))
-                if math.isfinite(sn):
-                    geo *= np.exp(-((nor - nor[qy, qx]) ** 2).sum(-1) / (s * s * sn * sn))
-                if math.isfinite(sp):
-                    geo *= np.exp(-((pos - pos[qy, qx]) ** 2).sum(-1) / (sp * sp))
+                for sigma, g, scale2 in ((sn, nor, s * s), (sp, pos, 1.0)):
+                    if math.isfinite(sigma):
+                        diff = g - g[qy, qx]
+                        inv = 1.0 / (scale2 * sigma * sigma)
+                        e_g = (diff ** 2).sum(-1) * inv
+                        geo *= np.exp(-e_g)
+                        d_g = inv * (2 * np.abs(diff) * U * (np.abs(g) + np.abs(g[qy, qx]))).sum(-1) \
+                            + tolerances.gamma(7) * e_g
+                        expo += np.where(both, e_g, 0.0)
+                        d_expo += np.where(both, d_g, 0.0)
                 wgt *= np.where(both, geo, 1.0)
                 wgt *= inside & fin[qy, qx] & (valid == valid[qy, qx])
                 num += wgt[..., None] * cs[qy, qx]
                 den += wgt
-        c = np.where(den[..., None] > 0, num / np.where(den > 0, den, 1.0)[..., None], c)
-    return c
+                rel_w = d_expo + tolerances.gamma(2) * expo + \
+                    (tolerances.TRANSCENDENTAL + 1 + expo) * U
+                taps.append((wgt, qy, qx, rel_w))
+        has = den > 0
+        y = np.where(has[..., None], num / np.where(has, den, 1.0)[..., None], c)
+        if bound:
+            ya = np.abs(np.where(has[..., None], y, 0.0))
+            acc = np.zeros_like(c)
+            for wgt, qy, qx, rel_w in taps:
+                cq = np.abs(cs[qy, qx])
+                acc += wgt[..., None] * ((cq + ya) * rel_w[..., None] + es[qy, qx]
+                                         + tolerances.gamma(25) * (cq + ya))
+            err = np.where(has[..., None], acc / np.where(has, den, 1.0)[..., None] + U * ya, err)
+        c = y
+    return (c, err) if bound else c
 
 
 def b3_smooth_ref(img, iterations):
@@ -145,7 +186,10 @@ def test_tonemap_matches_formula_and_special_values(op):
     got = np.asarray(tonemap(c, op), np.float64)
     expected = np.stack([REFERENCE_TONEMAPS[op](v) for v in (x, np.roll(x, 1), np.roll(x, 2))])
     assert np.all(np.isfinite(got)) and got.min() >= 0.0 and got.max() <= 1.0
-    np.testing.assert_allclose(got, expected, rtol=2e-6, atol=1e-7)
+    # float32 roundings of the curve on terms of one sign (x >= 0): reinhard 1 + x and the
+    # division; aces its five constants, three products, three sums and the division.
+    tolerances.assert_within(got, expected, tolerances.chain_bound(
+        expected, {"reinhard": 2, "aces": 13}[op]), op)
     # the documented rule, spelled out
     y = np.asarray(tonemap(mi.Color3f(mi.Float([np.nan, -np.inf, -5.0, np.inf])), op))
     np.testing.assert_array_equal(y[0], [0.0, 0.0, 0.0, 1.0])
@@ -168,8 +212,21 @@ def test_exposure_is_a_power_of_two_scale(op):
     c = mi.Color3f(x, 2 * x, 0.5 * x)
     for e in (-2.0, 0.0, 1.5):
         scaled = mi.Color3f(x * 2.0 ** e, 2 * x * 2.0 ** e, 0.5 * x * 2.0 ** e)
-        np.testing.assert_allclose(np.asarray(tonemap(c, op, e)), np.asarray(tonemap(scaled, op)),
-                                   rtol=1e-6)
+        got, want = np.asarray(tonemap(c, op, e)), np.asarray(tonemap(scaled, op))
+        if e.is_integer():      # a power-of-two scale is exact: the same curve inputs
+            np.testing.assert_array_equal(got, want)
+            continue
+        # 2^e rounds to float32 on the host and the product rounds again (NumPy rounds
+        # x 2^e once): the curve's inputs differ by at most 2 ulps, so the outputs by at most
+        # the float32 curve's largest change over the 4 inputs within 2 ulps of NumPy's.
+        s = np.asarray(scaled, np.float32)
+        near, lo, hi = [], s, s
+        for _ in range(2):
+            lo, hi = np.nextafter(lo, np.float32(-1)), np.nextafter(hi, np.float32(np.inf))
+            near += [lo, hi]
+        spread = np.max([np.abs(np.asarray(tonemap(mi.Color3f(np.maximum(v, 0)), op)) - want)
+                         for v in near], axis=0)
+        tolerances.assert_within(got, want, spread, op)
 
 
 def test_none_is_linear_times_exposure():
@@ -199,7 +256,11 @@ def test_tonemap_gradient_matches_derivative():
     dr.backward(dr.sum(y.x))
     g = np.asarray(dr.grad(x))
     xs = np.array([0.0, 0.5, 2.0]) * 2.0
-    np.testing.assert_allclose(g[:3], 2.0 / (1.0 + xs) ** 2, rtol=1e-5)
+    # The derivative of a / b as 1 / b - a / b^2 (a = 2x, b = 1 + a), times 2: its terms are
+    # 2 / b and 2 a / b^2, about 8 roundings (rcp, products, the subtraction).
+    terms = 2.0 / (1.0 + xs) + 2.0 * xs / (1.0 + xs) ** 2
+    tolerances.assert_within(g[:3], 2.0 / (1.0 + xs) ** 2, tolerances.chain_bound(terms, 8),
+                             "reinhard'")
     assert g[3] == 0.0
 
 
@@ -225,7 +286,11 @@ def test_infinite_sigmas_equal_b3_spline_smoothing():
     col, nor, pos = random_gbuffer(rng, 11, 13)
     got = run_atrous(col, nor, pos, iterations=3, sigma_color=math.inf,
                      sigma_normal=math.inf, sigma_position=math.inf)
-    np.testing.assert_allclose(got, b3_smooth_ref(col, 3), atol=2e-6)
+    # The B3 weights and their sums are exact (multiples of 1/256): the input's rounding to
+    # float32 and each level's 25 FMA taps and division, on non-negative terms.
+    ref = b3_smooth_ref(col, 3)
+    tolerances.assert_within(got, ref, tolerances.chain_bound(ref, 1 + 3 * tolerances.FILTER_LEVEL),
+                             "b3")
 
 
 @pytest.mark.parametrize("sigmas", [(0.5, 0.5, 0.5), (0.2, math.inf, 1.0), (math.inf, 0.3, 0.4)])
@@ -236,8 +301,8 @@ def test_matches_bruteforce_reference(sigmas):
     got = run_atrous(col, nor, pos, iterations=4, sigma_color=sigmas[0],
                      sigma_normal=sigmas[1], sigma_position=sigmas[2])
     valid = np.ones((h, w), bool)
-    expected = atrous_ref(col, nor, pos, valid, 4, *sigmas)
-    np.testing.assert_allclose(got, expected, atol=2e-5)
+    expected, bound = atrous_ref(col, nor, pos, valid, 4, *sigmas, bound=True)
+    tolerances.assert_within(got, expected, bound, "atrous")
     assert np.abs(got - col).max() > 1e-2          # it did filter
 
 
@@ -273,7 +338,10 @@ def test_noiseless_edge_is_kept_exactly():
     rng = np.random.default_rng(5)
     base, _, nor, pos, _ = two_plane_gbuffer(rng, noise=0.0)
     out = run_atrous(base, nor, pos, iterations=5)
-    np.testing.assert_allclose(out, base, atol=1e-6)
+    # Across the edge the weights are below exp(-36) (z differs by 3, sigma_position 0.5);
+    # within a plane a constant: per level the 25 FMA taps and the 25-term weight sum err
+    # separately, then the division; base rounds to float32 once.
+    tolerances.assert_within(out, base, tolerances.chain_bound(base, 1 + 5 * 51), "edge")
 
 
 def test_non_finite_colour_does_not_spread():
@@ -287,15 +355,18 @@ def test_non_finite_colour_does_not_spread():
         got = run_atrous(col, nor, pos, iterations=3, sigma_color=sig, sigma_normal=sig,
                          sigma_position=sig)
         assert np.all(np.isfinite(got))
-        expected = atrous_ref(col, nor, pos, np.ones((h, w), bool), 3, sig, sig, sig)
-        np.testing.assert_allclose(got, expected, atol=2e-5)
+        expected, bound = atrous_ref(col, nor, pos, np.ones((h, w), bool), 3, sig, sig, sig,
+                                     bound=True)
+        tolerances.assert_within(got, expected, bound, "atrous")
     # neighbours of the NaN pixel equal the filter of an image where it never existed but
     # carries weight 0 ... checked directly: a constant image stays constant everywhere
     const = np.full((h, w, 3), 0.3)
     const[5, 7] = np.nan
     out = run_atrous(const, nor, pos, iterations=3, sigma_color=math.inf,
                      sigma_normal=math.inf, sigma_position=math.inf)
-    np.testing.assert_allclose(out, 0.3, atol=1e-6)
+    # 0.3 rounded to float32, then per level 25 FMA taps and the division (exact weights).
+    tolerances.assert_within(out, 0.3, tolerances.chain_bound(0.3, 1 + 3 * tolerances.FILTER_LEVEL),
+                             "constant")
 
 
 def test_isolated_non_finite_pixel_is_returned_unchanged():
@@ -309,7 +380,9 @@ def test_isolated_non_finite_pixel_is_returned_unchanged():
     pos[2, 2] = 0.0
     out = run_atrous(col, nor, pos, iterations=1)
     assert np.all(np.isnan(out[2, 2]))
-    np.testing.assert_allclose(np.delete(out.reshape(-1, 3), 12, 0), 0.4, atol=1e-6)
+    # A constant through one level: 0.4's rounding, 25 FMA taps, 25 weight sums, the division.
+    tolerances.assert_within(np.delete(out.reshape(-1, 3), 12, 0), 0.4,
+                             tolerances.chain_bound(0.4, 1 + 51), "constant")
 
 
 @pytest.mark.parametrize("explicit_mask", [False, True])
@@ -329,9 +402,12 @@ def test_background_only_mixes_with_background(explicit_mask):
         got = run_atrous(col, nor, pos, valid=valid, iterations=4, sigma_color=sig,
                          sigma_normal=sig, sigma_position=sig)
         assert np.all(np.isfinite(got))
-        assert got[miss].min() >= 1.0 - 1e-6 and got[~miss].max() <= 0.5 + 1e-6
-        expected = atrous_ref(col, nor, pos, ~miss, 4, sig, sig, sig)
-        np.testing.assert_allclose(got, expected, atol=2e-5)
+        # Convex combinations within each class, to their float32 rounding (per level 25 FMA
+        # taps, 25 weight sums, the division) on the class's largest colour.
+        slack = tolerances.chain_bound(col[miss].max(), 1 + 4 * 51)
+        assert got[miss].min() >= 1.0 - slack and got[~miss].max() <= 0.5 + slack
+        expected, bound = atrous_ref(col, nor, pos, ~miss, 4, sig, sig, sig, bound=True)
+        tolerances.assert_within(got, expected, bound, "atrous")
 
 
 def test_iterations_zero_is_identity():
@@ -357,7 +433,10 @@ def test_gradient_is_transposed_filter_when_linear():
     a = np.stack([b3_smooth_ref(e.reshape(h, w, 1).repeat(3, -1), 2)[..., 0].ravel()
                   for e in np.eye(h * w)], axis=1)               # column j = A e_j
     expected = (a.T @ r.reshape(-1, 3)).reshape(h, w, 3)
-    np.testing.assert_allclose(grad, expected, atol=1e-5)
+    # r >= 0 and A >= 0: nothing cancels; r's rounding to float32 and two transposed levels.
+    tolerances.assert_within(grad, expected,
+                             tolerances.chain_bound(expected, 1 + 2 * tolerances.FILTER_LEVEL),
+                             "A^T r")
 
 
 def test_sigma_change_compiles_no_new_kernel():

@@ -10,6 +10,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
+import tolerances
 import foveated_mi.denoise as denoise_mod
 from foveated_mi.frame.gbuffer import emission_edges, filter_reach
 from foveated_mi.integrators.foveated import FoveatedIntegrator
@@ -166,7 +167,10 @@ def test_emission_edge_values_stay_on_the_edge(method):
     # The guided cascade never crosses; the stochastic fill falls back to the nearest site
     # (here on the edge) when none of its tries lands on its side: 3 pixels of 864.
     assert frac == 0.0 if method == "guided" else frac < 0.01
-    filled_band = band & (np.abs(a - 100.0).max(1) < 1e-3)
+    # Edge values kept: 100 to the rounding of a guided convex combination (the stochastic
+    # fill copies exactly).
+    edge_slack = tolerances.chain_bound(100.0, tolerances.guided_constant_depth())
+    filled_band = band & (np.abs(a - 100.0).max(1) <= edge_slack)
     assert filled_band.sum() > band.sum() * 0.9           # the edge keeps the edge's values
     # Without the flag the edge's light leaks onto the plane around it.
     assert leaked(guide._replace(emission_edge=None))[0] > 0.05

@@ -6,6 +6,7 @@ import pytest
 import drjit as dr
 import mitsuba as mi
 
+import tolerances
 from foveated_mi.frame._shared import (HeldLevel, Surface, for_each_tap, gather4, held_filter, packet,
                               surface_energy)
 
@@ -45,6 +46,7 @@ def test_rows_walk_visits_the_taps_in_the_loop_order(step):
                            unroll=u)[0].numpy() for u in (True, False)}
     assert np.array_equal(got[True], got[False])
     ref = np.zeros((H, W), np.float32)
+    ref_abs = np.zeros((H, W))
     yy, xx = np.mgrid[0:H, 0:W]
     for dy in range(-2, 3):
         for dx in range(-2, 3):
@@ -52,8 +54,13 @@ def test_rows_walk_visits_the_taps_in_the_loop_order(step):
             inside = (qx >= 0) & (qx < W) & (qy >= 0) & (qy < H)
             q = np.where(inside, qy * W + qx, 0)
             b3 = np.array([1, 4, 6, 4, 1])[dx + 2] * np.array([1, 4, 6, 4, 1])[dy + 2] / 256
-            ref = ref * np.float32(1.0009765625) + (q * 8.0 + inside * 4.0 + dx * 2.0 + dy + b3)
-    np.testing.assert_allclose(got[True].reshape(H, W), ref, rtol=1e-5)
+            code = q * 8.0 + inside * 4.0 + dx * 2.0 + dy + b3
+            ref = ref * np.float32(1.0009765625) + code          # float64 from here on
+            ref_abs = ref_abs * 1.0009765625 + np.abs(code)
+    # Each code is exact in float32 (an integer below 2^13 plus k / 256); the fold rounds a
+    # product and a sum per tap: 2 x 25 roundings on terms of total size ref_abs.
+    tolerances.assert_within(got[True].reshape(H, W), ref, tolerances.chain_bound(ref_abs, 50),
+                             "tap fold vs NumPy")
 
 
 def _level(mode, seed=1):
@@ -94,10 +101,20 @@ def test_held_level_reverse_is_the_transpose_of_forward(mode):
     y, = held_filter(x, level)
     dr.backward_from(y * dr.detach(g))
     jtg = dr.grad(x)
-    lhs = float(np.sum(np.array(jdx) * np.array(g)))
-    rhs = float(np.sum(np.array(dx) * np.array(jtg)))
-    assert lhs == pytest.approx(rhs, rel=1e-4, abs=1e-5)
-    # The map is linear: its tangent is the primal applied to dx (non-residual levels).
+    lhs = tolerances.dot(np.array(jdx), np.array(g))
+    rhs = tolerances.dot(np.array(dx), np.array(jtg))
+    # 25 FMA taps, the division by the weight sum (normalised), the residual's subtraction
+    # and addition (residual).
+    depth = {"plain": 25, "normalized": tolerances.FILTER_LEVEL,
+             "residual": tolerances.SVGF_LEVEL}[mode]
+    assert abs(lhs - rhs) <= tolerances.transpose_bound(
+        np.array(jdx), np.array(g), np.array(dx), np.array(jtg), depth), (lhs, rhs)
+    # The map is linear: its tangent is the primal applied to dx (non-residual levels), to
+    # the roundings of both on the sums of absolute terms (the level applied to |dx|: its
+    # weights are >= 0).
     if mode != "residual":
         ydx, = held_filter(dx, level)
-        np.testing.assert_allclose(np.array(jdx), np.array(ydx), rtol=1e-5, atol=1e-6)
+        scale, = held_filter(dr.abs(dx), level)
+        tolerances.assert_within(np.array(jdx), np.array(ydx),
+                                 tolerances.chain_bound(np.array(scale), 2 * depth),
+                                 "J dx vs A dx")
