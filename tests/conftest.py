@@ -13,6 +13,29 @@ import mitsuba as mi  # noqa: E402
 
 import foveated_mi  # noqa: E402,F401
 
+
+def _llvm_vector_width(width: int) -> None:
+    """Compile LLVM kernels ``width`` lanes wide on this CPU, as a CPU with narrower vector
+    registers would (AVX2: 8, SSE4.2: 4; AVX-512: 16). Reductions then run in another order,
+    which is what differs between machines. Dr.Jit exports the setter from its core library
+    only (a C++ symbol), so it is called through ctypes."""
+    import ctypes
+    core = ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), "libdrjit-core.so"))
+    cpu = core._Z19jit_llvm_target_cpuv
+    features = core._Z24jit_llvm_target_featuresv
+    cpu.restype = features.restype = ctypes.c_char_p
+    set_target = core._Z19jit_llvm_set_targetPKcS0_j
+    set_target.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_uint32]
+    set_target(cpu(), features(), width)
+    current = core._Z21jit_llvm_vector_widthv
+    current.restype = ctypes.c_uint32
+    assert current() == width, (current(), width)
+
+
+#: ``FOVEATED_MI_TEST_VECTOR_WIDTH=8`` runs the tests as on a CPU with 8-wide vectors.
+if VARIANT.startswith("llvm_") and os.environ.get("FOVEATED_MI_TEST_VECTOR_WIDTH"):
+    _llvm_vector_width(int(os.environ["FOVEATED_MI_TEST_VECTOR_WIDTH"]))
+
 SHARED_SCENES = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "scenes")
 
 
