@@ -186,6 +186,11 @@ def pixel_filter_warning(given: dict[str, Any], options: dict[str, Any]) -> str 
             f"pixel_filter unset (auto) or set it to 'importance'")
 
 
+def _sampling_laws():
+    from .viewer import SAMPLING_LAWS
+    return SAMPLING_LAWS
+
+
 def _reprojection_modes():
     from .frame.reproject import REPROJECTION_MODES
     return REPROJECTION_MODES
@@ -234,6 +239,23 @@ _SCHEMA: tuple[Option, ...] = (
            lo=0.0, lo_open=True),
     Option("sigma_p", 0.8, "float", "probability P(θ); 1 traces every pixel",
            lo=0.0, hi=1.0, lo_open=True),
+    Option("theta_deg", 0.0, "float", "foveal radius in degrees of eccentricity: P = σp "
+           "there, whatever the field of view (0: θ in film units)", lo=0.0, hi=180.0,
+           doc="Foveal radius in degrees of eccentricity (the angle between a pixel's ray "
+           "and the gaze ray, from the sensor's projection): P = σp there, whatever the "
+           "camera's field of view; 0 (the default, and ``paper``) uses ``theta`` in film "
+           "units. See :mod:`foveated_mi.viewer`"),
+    Option("sampling_law", "kwon", "string", "the sampling probability: kwon (Eq. 1) or "
+           "acuity (density following the eye's minimum angle of resolution, ray_budget)",
+           choices=lambda: _sampling_laws(),
+           doc="``kwon``: Eq. 1 of the paper (in degrees with ``theta_deg``); ``acuity``: "
+           "the density follows the minimum angle of resolution, "
+           "ω(e) = 1/48° + 0.022 e (Guenter et al. 2012), scaled to ``ray_budget`` with "
+           "the floor ``acuity_floor``. See :mod:`foveated_mi.viewer`"),
+    Option("ray_budget", 0.1, "float", "rays per frame as a fraction of the film's pixels "
+           "(sampling_law = acuity)", lo=0.0, hi=1.0, lo_open=True),
+    Option("acuity_floor", 0.01, "float", "smallest probability of the acuity law "
+           "(at most ray_budget)", lo=0.0, hi=1.0),
     Option("gaze", (0.5, 0.5), "point", "gaze in normalised film coordinates, origin top-left",
            doc="Gaze in normalised film coordinates, origin top-left; outside [0, 1]^2 is "
            "legal (the viewer looks off-screen). Mitsuba's XML ``<point>`` needs a ``z`` "
@@ -411,6 +433,9 @@ def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[s
 
 def _check_combination(out: dict[str, Any]) -> None:
     """Checks of one option against another, and of the denoiser's requirements."""
+    if out["sampling_law"] == "acuity" and out["acuity_floor"] > out["ray_budget"]:
+        raise ParameterError("acuity_floor", out["acuity_floor"],
+                             f"a number <= ray_budget ({out['ray_budget']:g})")
     entry = denoisers()[out["denoiser"]]
     if out["tonemap_samples"]:
         # The history and the reconstruction then hold display values: demodulation and

@@ -47,7 +47,8 @@ RECORDINGS = 8
 #: a recording's key (a new gaze must not record again). They are left out of the options the
 #: recording sees, so a pass that read one would fail to record, not replay a stale value.
 _NOT_KEYED = ("gaze", "theta", "timing", "map_seed", "reorder", "block_height", "edge_threshold",
-              "edge_detector", "reprojection_tolerance", "reprojection", "freeze")
+              "edge_detector", "reprojection_tolerance", "reprojection", "freeze",
+              "theta_deg", "sampling_law", "ray_budget", "acuity_floor")
 
 
 class FormationInput(NamedTuple):
@@ -66,8 +67,13 @@ def jfa_bound(width: int, height: int, o: dict[str, Any]) -> int | None:
     """The longest Jump Flooding step a frame needs: the sampling law's largest gap between
     sites, rounded up to a power of two (what :func:`~foveated_mi.reconstruct.jump_flood`
     does with it anyway); None where the law bounds nothing."""
-    gap = _sampling.largest_gap(width, height, gaze=o["gaze"], theta=o["theta"],
-                                sigma_p=o["sigma_p"])
+    if o["sampling_law"] == "acuity":
+        gap = _sampling.gap_bound(width, height, o["acuity_floor"])
+    elif o["theta_deg"] > 0:
+        gap = None        # the law's smallest P needs the sensor's projection: no bound
+    else:
+        gap = _sampling.largest_gap(width, height, gaze=o["gaze"], theta=o["theta"],
+                                    sigma_p=o["sigma_p"])
     if gap is None:
         return None
     b = 1

@@ -141,18 +141,22 @@ def gaze_pixel(gaze: mi.Point2f, width: int, height: int) -> mi.UInt32:
 
 
 def sampling_map(width: int, height: int, *, gaze: tuple[float, float], theta: float,
-                 sigma_p: float, seed: int, edges: mi.Bool | None = None
-                 ) -> tuple[mi.Bool, mi.Float]:
+                 sigma_p: float, seed: int, edges: mi.Bool | None = None,
+                 probability: mi.Float | None = None) -> tuple[mi.Bool, mi.Float]:
     """The sampling map of §3.1 (True where a ray is traced) and the probability P per pixel.
 
     ``gaze``, ``θ``, ``σp`` and ``seed`` enter the kernel as opaque values: changing them
-    from frame to frame compiles nothing new.
+    from frame to frame compiles nothing new. ``probability``: P per pixel from another law
+    (:mod:`foveated_mi.viewer`) instead of Eq. 1 in film units.
     """
-    w = sampling_weight(theta, sigma_p)
     idx, x, y = pixel_coords(width, height)
     g = mi.Point2f(dr.opaque(mi.Float, gaze[0]), dr.opaque(mi.Float, gaze[1]))
-    d = normalized_distance(mi.Float(x) + 0.5, mi.Float(y) + 0.5, g, width, height)
-    prob = sampling_probability(d, dr.opaque(mi.Float, w))
+    if probability is None:
+        w = sampling_weight(theta, sigma_p)
+        d = normalized_distance(mi.Float(x) + 0.5, mi.Float(y) + 0.5, g, width, height)
+        prob = sampling_probability(d, dr.opaque(mi.Float, w))
+    else:
+        prob = probability
     u = mi.sample_tea_float32(idx, opaque_seed(seed))
     smap = u < prob
     if edges is not None:
@@ -179,6 +183,12 @@ def largest_gap(width: int, height: int, *, gaze: tuple[float, float], theta: fl
     d_max = max(math.hypot(cx - gx, cy - gy) for cx in (0.5, width - 0.5)
                 for cy in (0.5, height - 0.5)) / half_diag
     p_min = 1.0 if d_max == 0 else 1.0 / (w * d_max * d_max + 1.0) if math.isfinite(w) else 0.0
+    return gap_bound(width, height, p_min, epsilon)
+
+
+def gap_bound(width: int, height: int, p_min: float, epsilon: float = 1e-12) -> float | None:
+    """:func:`largest_gap` of any law that traces every pixel with probability at least
+    ``p_min`` (None: no useful bound)."""
     if p_min >= 1.0:
         return 1.0
     rate = -math.log1p(-p_min)
@@ -202,10 +212,20 @@ def expected_fraction(width: int, height: int, *, gaze: tuple[float, float], the
     return float(np.mean(p))
 
 
-def sampling_pass(gb, width: int, height: int, o: dict, seed, emitting: mi.Bool | None = None):
+def sampling_pass(gb, width: int, height: int, o: dict, seed, emitting: mi.Bool | None = None,
+                  sensor: mi.Sensor | None = None):
     """The sampling pass of a frame: depth edges (none when ``edge_threshold = 0``), plus the
     emission edges ``emitting`` when given, and the sampling map of the options ``o`` drawn
-    with ``seed``. Returns ``(edges, sampling_map, probability)``."""
+    with ``seed`` (a law in degrees needs the ``sensor``: :mod:`foveated_mi.viewer`).
+    Returns ``(edges, sampling_map, probability)``."""
+    from .. import viewer
+    prob = None
+    if viewer.in_degrees(o):
+        if sensor is None:
+            from ..validate import ParameterError
+            raise ParameterError("sensor", None, "the frame's sensor for a sampling law in "
+                                 "degrees (theta_deg or sampling_law = 'acuity')")
+        prob = viewer.sampling_probability(gb.direction, sensor, o)
     edges = None
     if o["edge_threshold"] > 0:
         edges = depth_edges(gb.depth, gb.hit, width, height, o["edge_threshold"],
@@ -213,5 +233,5 @@ def sampling_pass(gb, width: int, height: int, o: dict, seed, emitting: mi.Bool 
     if emitting is not None:
         edges = emitting if edges is None else edges | emitting
     smap, prob = sampling_map(width, height, gaze=o["gaze"], theta=o["theta"],
-                              sigma_p=o["sigma_p"], seed=seed, edges=edges)
+                              sigma_p=o["sigma_p"], seed=seed, edges=edges, probability=prob)
     return edges, smap, prob

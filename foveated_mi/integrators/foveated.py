@@ -385,7 +385,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             # where every pixel within the filter's reach is traced too.
             emitting = self._emission_edges(gb, sensor, width, height) \
                 if o["emission_edges"] else None
-            edges, smap, prob = _sampling.sampling_pass(gb, width, height, o, map_seed, emitting)
+            edges, smap, prob = _sampling.sampling_pass(gb, width, height, o, map_seed, emitting,
+                                                        sensor=sensor)
             timer.mark("sampling", smap, prob, reproj.hit, reproj.index, edges)
             ro = _reorder.reorder(smap, width, height, o["reorder"], o["block_height"])
             timer.mark("reorder", ro.wavefront)

@@ -1,0 +1,120 @@
+"""The viewer in degrees: eccentricity from the sensor's own projection, Eq. 1 in degrees
+(``theta_deg``) and the acuity law with its ray budget (:mod:`foveated_mi.viewer`)."""
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from foveated_mi import viewer
+from foveated_mi.integrators.foveated import FoveatedIntegrator
+from foveated_mi.validate import ParameterError
+
+
+def _sensor(fov, axis, w, h, target=(0, 0, 1)):
+    return mi.load_dict({
+        "type": "perspective", "fov": fov, "fov_axis": axis,
+        "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 0], target=list(target),
+                                                   up=[0, 1, 0]),
+        "film": {"type": "hdrfilm", "width": w, "height": h}})
+
+
+def _analytic(fov, axis, w, h, gaze):
+    """Angles between pixel-centre rays and the gaze ray of a pinhole camera (camera space:
+    film x runs against camera x in Mitsuba's convention, which the angle does not see)."""
+    t = math.tan(math.radians(fov) / 2)
+    tx, ty = (t, t * h / w) if axis == "x" else (t * w / h, t)
+    ys, xs = np.mgrid[0:h, 0:w] + 0.5
+
+    def ray(u, v):
+        return np.stack(np.broadcast_arrays((1 - 2 * u) * tx, (1 - 2 * v) * ty, 1.0), -1)
+
+    p, g = ray(xs / w, ys / h), ray(np.float64(gaze[0]), np.float64(gaze[1]))
+    return np.degrees(np.arctan2(np.linalg.norm(np.cross(p, g), axis=-1), (p * g).sum(-1)))
+
+
+@pytest.mark.parametrize("axis", ["x", "y"])
+def test_eccentricity_is_the_angle_to_the_gaze_ray(axis):
+    w, h, gaze = 40, 24, (0.3, 0.7)
+    ecc = viewer.pixel_eccentricity(_sensor(100.0, axis, w, h), gaze).numpy().reshape(h, w)
+    assert np.abs(ecc - _analytic(100.0, axis, w, h, gaze)).max() < 0.01
+
+
+def _scene(fov=90.0, target=(0, 0, 1)):
+    return mi.load_dict({
+        "type": "scene", "sensor": _sensor_dict(fov, target),
+        "integrator": {"type": "path", "max_depth": 2},
+        "sky": {"type": "constant", "radiance": {"type": "rgb", "value": 0.5}},
+        "floor": {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate(
+            [0, -1, 0]).rotate([1, 0, 0], -90).scale(20)}})
+
+
+def _sensor_dict(fov, target):
+    return {"type": "perspective", "fov": fov, "fov_axis": "x",
+            "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 0], target=list(target),
+                                                       up=[0, 1, 0]),
+            "sampler": {"type": "independent", "sample_count": 1},
+            "film": {"type": "hdrfilm", "width": 48, "height": 32}}
+
+
+def _rays(scene, **options):
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="paper", history=False,
+                               edge_threshold=0.0, **options)
+    np.array(mi.render(scene, integrator=integ, seed=3))
+    return integ.stats["rays"], integ.buffer("probability")
+
+
+def test_theta_deg_follows_the_viewer_not_the_camera():
+    opts = dict(theta_deg=10.0, sigma_p=0.5, gaze=(0.4, 0.6))
+    rays, prob = _rays(_scene(90.0), **opts)
+    turned, prob_t = _rays(_scene(90.0, target=(0.7, 0.3, 1)), **opts)
+    # The same eccentricities, up to the rounding of the rotated rays: a pixel flips only
+    # where its uniform draw lies within that rounding of P.
+    assert abs(turned - rays) <= 2, (rays, turned)
+    assert np.abs(prob_t - prob).max() < 1e-4
+    narrow, _ = _rays(_scene(45.0), **opts)
+    assert narrow > 1.5 * rays, (rays, narrow)
+    # P = sigma_p at theta_deg: the pixels nearest 10 degrees hold about 0.5.
+    sensor = _scene(90.0).sensors()[0]
+    ecc = viewer.pixel_eccentricity(sensor, opts["gaze"]).numpy().reshape(32, 48)
+    ring = np.abs(ecc - 10.0) < 0.5
+    assert ring.any() and np.allclose(prob[ring], 0.5, atol=0.03)
+
+
+@pytest.mark.parametrize("budget", [0.05, 0.2, 0.5])
+def test_acuity_law_meets_its_budget_and_falls_with_eccentricity(budget):
+    scene = _scene(100.0)
+    _, prob = _rays(scene, sampling_law="acuity", ray_budget=budget, acuity_floor=0.01,
+                    gaze=(0.35, 0.55))
+    assert abs(prob.mean() - budget) <= 0.02 * budget, prob.mean()
+    ecc = viewer.pixel_eccentricity(scene.sensors()[0], (0.35, 0.55)).numpy().ravel()
+    p = prob.ravel()[np.argsort(ecc)]
+    assert np.all(np.diff(p) <= 0) and p.min() >= 0.01 - 1e-7 and p.max() <= 1.0
+
+
+def test_a_moving_gaze_in_degrees_compiles_nothing():
+    scene = _scene(90.0)
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="guided",
+                               sampling_law="acuity", ray_budget=0.2)
+    compiled = []
+    for k in range(5):
+        integ.gaze = (0.3 + 0.05 * k, 0.5)
+        with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+            dr.kernel_history_clear()
+            np.array(mi.render(scene, integrator=integ, seed=k))
+            hist = dr.kernel_history([dr.KernelType.JIT])
+        compiled.append(sum(1 for h in hist if not h.get("cache_hit", True)))
+    assert compiled[3:] == [0, 0], compiled
+
+
+@pytest.mark.parametrize("options, key", [
+    ({"sampling_law": "acuity", "ray_budget": 0.05, "acuity_floor": 0.1}, "acuity_floor"),
+    ({"theta_deg": -1.0}, "theta_deg"),
+    ({"sampling_law": "foveal"}, "sampling_law"),
+    ({"ray_budget": 0.0}, "ray_budget"),
+])
+def test_bad_viewer_options_are_one_line(options, key):
+    with pytest.raises(ParameterError) as e:
+        FoveatedIntegrator(**options)
+    assert e.value.name == key and "\n" not in str(e.value)
