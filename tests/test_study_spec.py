@@ -377,3 +377,36 @@ def test_example_studies_parse(name):
         assert spec.scenes[1].optional
         assert spec.scenes[1].source.endswith(os.path.join("shared", "scenes", "staircase",
                                                            "scene.xml"))
+
+
+def test_pareto_legend_names_every_family_of_every_panel():
+    """Each baseline family has a marker and a legend entry of its own, also one that appears
+    only on a later panel; a plot without labels draws no legend (and no warning)."""
+    import json
+    import warnings
+    from foveated_mi.study.pareto import pareto_figure
+
+    def row(scene, method, t, q, preset=None):
+        config = json.dumps({"full_options": {"preset": preset}}) if preset else ""
+        return {"scene": scene, "method": method, "time_ms": t, "psnr": q, "frame": 1,
+                "reconstruction": "stochastic" if preset else "", "config": config,
+                "theta": 0.1, "sigma_p": 0.8, "spp": 1}
+
+    rows = [row("a", "foveated", 10.0, 30.0, "oidn"), row("a", "uniform", 12.0, 25.0),
+            row("a", "uniform+oidn", 15.0, 29.0),
+            row("b", "uniform+history", 12.0, 27.0), row("b", "uniform+history+oidn", 16.0, 33.0),
+            row("b", "uniform+history+svgf", 14.0, 31.0)]
+    fig = pareto_figure(rows, "psnr")
+    legend = fig.axes[0].get_legend()
+    labels = [t.get_text() for t in legend.get_texts()]
+    for label in ("foveated oidn, stochastic", "uniform", "uniform + OIDN", "uniform + history",
+                  "uniform + history + OIDN", "uniform + history + SVGF", "Pareto front"):
+        assert labels.count(label) == 1, (label, labels)
+    # Five baseline families, five marker shapes.
+    shapes = {h.get_paths()[0].vertices.round(3).tobytes()
+              for h, label in zip(legend.legend_handles, labels) if label.startswith("uniform")}
+    assert len(shapes) == 5
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        empty = pareto_figure([row("a", "foveated", float("nan"), float("nan"), "oidn")], "psnr")
+    assert empty.axes[0].get_legend() is None

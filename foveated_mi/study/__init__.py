@@ -11,10 +11,10 @@ measure time and quality against a reference, and plot Pareto fronts.
 * :mod:`~foveated_mi.study.pareto`: Pareto fronts, plots and the front table;
 * :mod:`~foveated_mi.study.runner`: :func:`run_study`, tying them together.
 """
-from .pareto import front_table, pareto_front, plot_pareto, scene_fronts
+from .pareto import front_table, pareto_figure, pareto_front, plot_pareto, scene_fronts
 from .results import columns, read_rows
 from .runner import StudyResult, run_study
 from .spec import SceneSpec, StudySpec, load_study, parse_study
 
 __all__ = ["run_study", "StudyResult", "load_study", "parse_study", "StudySpec", "SceneSpec",
-           "pareto_front", "scene_fronts", "plot_pareto", "front_table", "read_rows", "columns"]
+           "pareto_front", "scene_fronts", "plot_pareto", "pareto_figure", "front_table", "read_rows", "columns"]

@@ -14,7 +14,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-__all__ = ["pareto_front", "scene_fronts", "plot_pareto", "front_table", "LOWER_IS_BETTER"]
+__all__ = ["pareto_front", "scene_fronts", "plot_pareto", "pareto_figure", "front_table",
+           "LOWER_IS_BETTER"]
 
 #: Quality columns where lower is better (their front maximises ``-quality``).
 LOWER_IS_BETTER = frozenset({"flip", "flip_fovea", "flip_periphery"})
@@ -56,7 +57,24 @@ def scene_fronts(rows: list[dict[str, Any]], metric: str) -> dict[str, list[dict
 
 
 _STYLE = {"uniform": dict(marker="s", color="0.25", label="uniform"),
-          "uniform+oidn": dict(marker="^", color="tab:red", label="uniform + OIDN")}
+          "uniform+oidn": dict(marker="^", color="tab:red", label="uniform + OIDN"),
+          "uniform+history": dict(marker="D", color="tab:green", label="uniform + history"),
+          "uniform+history+oidn": dict(marker="P", color="tab:purple",
+                                       label="uniform + history + OIDN")}
+#: Markers of baseline families without a style of their own (another history denoiser).
+_MORE_MARKERS = ("X", "v", "<", ">", "h", "*")
+
+
+def _baseline_style(method: str, k: int) -> dict:
+    """Marker, colour and legend label of a baseline family (``k``: its rank among the
+    families without a style of their own)."""
+    if method in _STYLE:
+        return _STYLE[method]
+    parts = method.split("+")
+    label = " + ".join("OIDN" if p == "oidn" else p.upper() if p in ("svgf", "atrous") else p
+                       for p in parts)
+    return dict(marker=_MORE_MARKERS[k % len(_MORE_MARKERS)], color=f"C{(k + 4) % 10}",
+                label=label)
 
 
 def _foveated_name(r: dict[str, Any]) -> str:
@@ -72,35 +90,10 @@ def _foveated_name(r: dict[str, Any]) -> str:
 
 def plot_pareto(rows: list[dict[str, Any]], metric: str, out_dir: str, *,
                 title: str | None = None) -> tuple[str, str]:
-    """Write ``pareto.png`` and ``pareto.svg`` in ``out_dir`` (matplotlib, Agg canvas): one
-    panel per scene, foveated
-    points as circles coloured by preset and reconstruction, baselines as squares (uniform) and triangles
-    (uniform + OIDN), the front as a step line with ringed points. Returns the two paths."""
-    # A bare Figure (Agg canvas) rather than pyplot: no global backend switch and no figure
-    # left in pyplot's state, so a notebook's inline plots keep working.
-    from matplotlib.figure import Figure
+    """Write ``pareto.png`` and ``pareto.svg`` in ``out_dir`` (:func:`pareto_figure`).
+    Returns the two paths."""
     from ..io import atomic_write
-
-    scenes = list(dict.fromkeys(r["scene"] for r in rows)) or ["(no rows)"]
-    fronts = scene_fronts(rows, metric)
-    n = len(scenes)
-    cols = min(n, 3)
-    nrows = math.ceil(n / cols)
-    fig = Figure(figsize=(5.2 * cols, 4.2 * nrows))
-    axes = fig.subplots(nrows, cols, squeeze=False)
-    recs = list(dict.fromkeys((_foveated_name(r), r["reconstruction"]) for r in rows
-                              if r["method"] == "foveated"))
-    for k, scene in enumerate(scenes):
-        ax = axes[k // cols][k % cols]
-        sub = [r for r in rows if r["scene"] == scene]
-        _scatter_points(ax, sub, metric, recs)
-        _draw_front(ax, fronts.get(scene, []), metric)
-        _label_panel(ax, sub, metric, scene, legend=k == 0)
-    for k in range(n, nrows * cols):
-        axes[k // cols][k % cols].axis("off")
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
+    fig = pareto_figure(rows, metric, title=title)
     os.makedirs(out_dir, exist_ok=True)
     paths = []
     for ext in ("png", "svg"):
@@ -111,13 +104,62 @@ def plot_pareto(rows: list[dict[str, Any]], metric: str, out_dir: str, *,
     return paths[0], paths[1]
 
 
+def pareto_figure(rows: list[dict[str, Any]], metric: str, *, title: str | None = None):
+    """The Pareto plot as a matplotlib ``Figure`` (Agg canvas): one panel per scene, foveated
+    points as circles coloured by preset and reconstruction, each baseline family with a
+    marker of its own (uniform, uniform + OIDN, uniform + history, uniform + history + its
+    denoiser, ...), the front as a step line with ringed points. The first panel's legend
+    names every family of every panel."""
+    # A bare Figure (Agg canvas) rather than pyplot: no global backend switch and no figure
+    # left in pyplot's state, so a notebook's inline plots keep working.
+    from matplotlib.figure import Figure
+
+    scenes = list(dict.fromkeys(r["scene"] for r in rows)) or ["(no rows)"]
+    fronts = scene_fronts(rows, metric)
+    n = len(scenes)
+    cols = min(n, 3)
+    nrows = math.ceil(n / cols)
+    fig = Figure(figsize=(5.2 * cols, 4.2 * nrows))
+    axes = fig.subplots(nrows, cols, squeeze=False)
+    recs = list(dict.fromkeys((_foveated_name(r), r["reconstruction"]) for r in rows
+                              if r["method"] == "foveated"))
+    others = [m for m in dict.fromkeys(r["method"] for r in rows)
+              if m != "foveated" and m not in _STYLE]
+    styles = {**_STYLE, **{m: _baseline_style(m, k) for k, m in enumerate(others)}}
+    for k, scene in enumerate(scenes):
+        ax = axes[k // cols][k % cols]
+        sub = [r for r in rows if r["scene"] == scene]
+        _scatter_points(ax, sub, metric, recs, styles)
+        _draw_front(ax, fronts.get(scene, []), metric)
+        _label_panel(ax, sub, metric, scene)
+    _legend(axes[0][0], [a for row in axes for a in row])
+    for k in range(n, nrows * cols):
+        axes[k // cols][k % cols].axis("off")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def _legend(ax, axes) -> None:
+    """One legend on ``ax`` with every labelled artist of ``axes`` (each label once); none
+    when nothing is labelled."""
+    handles: dict[str, Any] = {}
+    for a in axes:
+        for h, label in zip(*a.get_legend_handles_labels()):
+            handles.setdefault(label, h)
+    if handles:
+        ax.legend(list(handles.values()), list(handles), fontsize=7, loc="best")
+
+
 def _finite(r: dict[str, Any], metric: str) -> bool:
     return math.isfinite(r["time_ms"]) and math.isfinite(r[metric])
 
 
-def _scatter_points(ax, sub: list[dict[str, Any]], metric: str, recs: list) -> None:
+def _scatter_points(ax, sub: list[dict[str, Any]], metric: str, recs: list,
+                    styles: dict[str, dict]) -> None:
     """One scene's foveated points (circles by preset and reconstruction, later frames
-    numbered) and baselines (:data:`_STYLE`)."""
+    numbered) and baselines (``styles``: method -> marker, colour, label)."""
     import matplotlib
     cmap = matplotlib.colormaps["tab10"]
     for rec_i, (name, rec) in enumerate(recs):
@@ -132,7 +174,7 @@ def _scatter_points(ax, sub: list[dict[str, Any]], metric: str, recs: list) -> N
         if r["method"] == "foveated" and r["frame"] > 1 and _finite(r, metric):
             ax.annotate(f"f{int(r['frame'])}", (r["time_ms"], r[metric]), fontsize=6,
                         xytext=(3, 3), textcoords="offset points", alpha=0.7)
-    for method, style in _STYLE.items():
+    for method, style in styles.items():
         pts = [(r["time_ms"], r[metric]) for r in sub if r["method"] == method
                and _finite(r, metric)]
         if pts:
@@ -150,8 +192,8 @@ def _draw_front(ax, front: list[dict[str, Any]], metric: str) -> None:
         ax.scatter(fx, fy, s=90, facecolor="none", edgecolor="black", linewidth=1.2)
 
 
-def _label_panel(ax, sub: list[dict[str, Any]], metric: str, scene: str, legend: bool) -> None:
-    """Log time axis, labels, title, grid (and the legend on the first panel)."""
+def _label_panel(ax, sub: list[dict[str, Any]], metric: str, scene: str) -> None:
+    """Log time axis, labels, title, grid."""
     import matplotlib.ticker
     ax.set_xscale("log")
     fmt = matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}")
@@ -163,8 +205,6 @@ def _label_panel(ax, sub: list[dict[str, Any]], metric: str, scene: str, legend:
     ax.set_ylabel(metric + (" (lower is better)" if metric in LOWER_IS_BETTER else ""))
     ax.set_title(scene)
     ax.grid(True, which="both", alpha=0.3)
-    if legend:
-        ax.legend(fontsize=7, loc="best")
 
 
 def _varying_options(rows: list[dict[str, Any]]) -> list[str]:
