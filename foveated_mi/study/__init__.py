@@ -17,4 +17,5 @@ from .runner import StudyResult, run_study
 from .spec import SceneSpec, StudySpec, load_study, parse_study
 
 __all__ = ["run_study", "StudyResult", "load_study", "parse_study", "StudySpec", "SceneSpec",
-           "pareto_front", "scene_fronts", "plot_pareto", "pareto_figure", "front_table", "read_rows", "columns"]
+           "pareto_front", "scene_fronts", "plot_pareto", "pareto_figure", "front_table",
+           "read_rows", "columns"]
