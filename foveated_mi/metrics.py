@@ -332,13 +332,15 @@ def flip(reference, test, *, ppd: float = 67.0, mask=None) -> float:
 
 def compare(reference, test, *, gaze=None, theta=None, sigma_p=None,
             data_range: float | None = None, flip: bool = True,
-            ppd: float = 67.0) -> dict[str, float]:
+            ppd: float = 67.0, eccentricity=None, fovea_deg: float = 5.0) -> dict[str, float]:
     """All metrics of ``test`` against ``reference`` as ``{key: float}`` with every key of
     :data:`COMPARE_KEYS` present (``nan`` where not computable), so CSV columns are stable:
 
     * ``psnr``, ``ssim``, ``flip``: full frame;
     * with ``gaze`` and ``theta``: ``*_fovea`` and ``*_periphery`` over :func:`fovea_mask`
-      and its complement;
+      and its complement; with ``eccentricity`` instead (an (H, W) map in degrees, e.g.
+      :func:`foveated_mi.viewer.eccentricity_map`), the fovea is the pixels within
+      ``fovea_deg`` of the gaze;
     * with ``sigma_p`` too: ``psnr_eccentricity`` (:func:`eccentricity_weighted_psnr` with
       :func:`eccentricity_weights`, same data range).
 
@@ -352,6 +354,15 @@ def compare(reference, test, *, gaze=None, theta=None, sigma_p=None,
                              + ("gaze" if gaze is None else "theta") + " (both or neither)")
     if sigma_p is not None and gaze is None:
         raise ParameterError("sigma_p", sigma_p, "None unless gaze and theta are given")
+    fovea = None
+    if eccentricity is not None:
+        ecc = np.asarray(eccentricity, dtype=np.float64)
+        if ecc.shape != ref.shape[:2] or not np.all(np.isfinite(ecc)):
+            raise ParameterError("eccentricity", f"<array of shape {ecc.shape}>",
+                                 f"finite degrees of shape {ref.shape[:2]}")
+        fovea = ecc < check_range("fovea_deg", fovea_deg, 0.0, 180.0, lo_open=True)
+    elif gaze is not None:
+        fovea = fovea_mask(ref.shape, gaze, theta)
     rng = _data_range(ref, data_range)
     out = dict.fromkeys(COMPARE_KEYS, math.nan)
     out["psnr"] = psnr(ref, tst, rng)
@@ -361,8 +372,7 @@ def compare(reference, test, *, gaze=None, theta=None, sigma_p=None,
     fmap = flip_map(ref, tst, ppd=ppd) if do_flip else None
     if fmap is not None:
         out["flip"] = float(fmap.mean())
-    if gaze is not None:
-        fovea = fovea_mask(ref.shape, gaze, theta)
+    if fovea is not None:
         win = ssim_win_size(ref.shape[0], ref.shape[1])
         smap = ssim_map(ref, tst, rng, win) if win is not None else None
         for tag, m in (("fovea", fovea), ("periphery", ~fovea)):
@@ -372,7 +382,7 @@ def compare(reference, test, *, gaze=None, theta=None, sigma_p=None,
                     out[f"ssim_{tag}"] = float(smap[m].mean())
                 if fmap is not None:
                     out[f"flip_{tag}"] = float(fmap[m].mean())
-        if sigma_p is not None:
+        if sigma_p is not None and gaze is not None:
             out["psnr_eccentricity"] = eccentricity_weighted_psnr(
                 ref, tst, eccentricity_weights(ref.shape, gaze, theta, sigma_p), rng)
     return out

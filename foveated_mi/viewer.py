@@ -79,6 +79,25 @@ def pixel_eccentricity(sensor: mi.Sensor, gaze) -> mi.Float:
     return eccentricity(mi.Vector3f(ray.d), sensor, gaze)
 
 
+def eccentricity_map(sensor: mi.Sensor, gaze):
+    """:func:`pixel_eccentricity` as an (H, W) NumPy array, for metrics and plots (it reads
+    the device: not for the per-frame path)."""
+    from .frame.gbuffer import film_size
+    width, height = film_size(sensor)
+    return pixel_eccentricity(sensor, gaze).numpy().reshape(height, width)
+
+
+def pixels_per_degree(sensor: mi.Sensor, gaze=(0.5, 0.5)) -> float:
+    """Pixels per degree of visual angle at film point ``gaze``, along the film's x axis: the
+    inverse of the angle between the rays half a pixel either side of it (a viewer whose
+    display spans the sensor's field of view, as in a headset)."""
+    from .frame.gbuffer import film_size
+    width, _ = film_size(sensor)
+    h = 0.5 / width
+    a, b = (gaze_direction(sensor, (gaze[0] + d, gaze[1])) for d in (-h, h))
+    return 1.0 / float(angle_deg(a, b)[0])
+
+
 def kwon_in_degrees(ecc: mi.Float, theta_deg: float, sigma_p: float) -> mi.Float:
     """Eq. 1 of the paper with the eccentricity in degrees: P = σp at ``theta_deg``."""
     from .frame.sampling import sampling_probability, sampling_weight

@@ -118,3 +118,23 @@ def test_bad_viewer_options_are_one_line(options, key):
     with pytest.raises(ParameterError) as e:
         FoveatedIntegrator(**options)
     assert e.value.name == key and "\n" not in str(e.value)
+
+
+def test_pixels_per_degree_at_the_centre_of_a_headset_film():
+    """1150 px across 90°: the centre pixel spans atan(2 tan(45°) / 1150) (about 10 ppd)."""
+    ppd = viewer.pixels_per_degree(_sensor(90.0, "x", 1150, 16))
+    assert abs(ppd - 1.0 / math.degrees(math.atan(2.0 / 1150))) < 1e-3 * ppd
+
+
+def test_regions_in_degrees():
+    from foveated_mi.metrics import compare
+    sensor = _sensor(90.0, "x", 48, 32)
+    ecc = viewer.eccentricity_map(sensor, (0.25, 0.5))
+    ref = np.full((32, 48, 3), 0.5)
+    test = ref.copy()
+    test[ecc >= 5.0] += 0.1        # only the periphery (beyond 5 degrees) is wrong
+    out = compare(ref, test, eccentricity=ecc, fovea_deg=5.0, flip=False)
+    assert out["psnr_fovea"] == math.inf and math.isfinite(out["psnr_periphery"])
+    assert 0 < (ecc < 5.0).sum() < ecc.size
+    with pytest.raises(ParameterError, match="eccentricity"):
+        compare(ref, test, eccentricity=ecc[:4], flip=False)
