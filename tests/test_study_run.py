@@ -330,3 +330,59 @@ def test_dask_task_that_cannot_finish_fails_after_the_timeout():
     [(key, result, err)] = out
     assert key == "stuck" and result is None and isinstance(err, TimeoutError)
     assert "--task-timeout" in str(err) and "\n" not in str(err)
+
+
+VIEWER = """
+seed = 2
+repeats = 1
+warmup = 0
+size = [32, 24]
+gaze = [0.4, 0.6]
+[reference]
+spp = 16
+[[scenes]]
+scene = "cornell-box"
+[viewer]
+fov = "sensor"
+[metrics]
+fovea_deg = {deg}
+flip = false
+[foveated.defaults]
+atrous_iterations = 1
+frames = [1]
+[foveated.grid]
+reconstruction = ["voronoi"]
+"""
+
+
+def test_a_viewer_judges_the_fovea_in_degrees(tmp_path):
+    """[viewer] fov = "sensor": the fovea is the pixels within metrics.fovea_deg of the gaze
+    ray. 179 degrees holds the whole film (the fovea is the frame, no periphery); a hundredth
+    of a degree holds none of it."""
+    rows = {}
+    for deg in (179.0, 0.01):
+        res = run_study(study_file(tmp_path, VIEWER.format(deg=deg), f"v{deg}.toml"),
+                        out=str(tmp_path / f"o{deg}"), progress=False, echo=None)
+        assert res.failed == []
+        [rows[deg]] = read_rows(res.results_path)
+    wide, narrow = rows[179.0], rows[0.01]
+    assert wide["psnr_fovea"] == pytest.approx(wide["psnr"], rel=1e-12)
+    assert math.isnan(wide["psnr_periphery"])
+    assert math.isnan(narrow["psnr_fovea"])
+    assert narrow["psnr_periphery"] == pytest.approx(narrow["psnr"], rel=1e-12)
+
+
+@pytest.mark.parametrize("text, key", [
+    ('[viewer]\nfov = 0\n', "viewer.fov"),
+    ('[viewer]\nfov = "sensor"\nfps = 90\n', "viewer"),
+    ('[viewer]\n', "viewer.fov"),
+    ('[metrics]\nfovea_deg = 5.0\n', "metrics.fovea_deg"),
+    ('[viewer]\nfov = "sensor"\n[metrics]\nfovea_deg = 0\n', "metrics.fovea_deg"),
+])
+def test_bad_viewer_tables_are_one_line(tmp_path, text, key):
+    from foveated_mi.study import load_study
+    from foveated_mi.validate import ParameterError
+    base = '[[scenes]]\nscene = "cornell-box"\n[foveated.grid]\nreconstruction = ["voronoi"]\n'
+    with pytest.raises(ParameterError) as e:
+        load_study(study_file(tmp_path, base + text))
+    assert key in str(e.value) and "\n" not in str(e.value), str(e.value)

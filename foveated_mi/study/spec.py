@@ -33,6 +33,12 @@ Layout (every key optional except ``scenes``)::
     jod = true                  #   FovVideoVDP JOD at the scene's gaze (a `jod` column) when
                                 #   the perceptual extra is installed; absent without it
     display = "standard_fhd"    #   FovVideoVDP display model (photometry); see perceptual.py
+    fovea_deg = 5.0             #   with [viewer]: fovea radius in degrees of eccentricity
+
+    [viewer]                    # the viewing condition (default: a monitor at metrics.ppd)
+    fov = "sensor"              #   the film spans the sensor's field of view (a headset): FLIP
+                                #   and JOD at the pixels per degree of the gaze, the fovea
+                                #   within metrics.fovea_deg of the gaze ray
 
     [foveated.defaults]         # options shared by the grid and the list
     atrous_iterations = 0
@@ -94,7 +100,7 @@ DEFAULT_METRICS = {"theta": 0.1, "sigma_p": 0.8, "ppd": 67.0, "flip": True, "exp
 DEFAULT_PERCEPTUAL = {"jod": True, "display": "standard_fhd"}
 
 _TOP_KEYS = ("description", "seed", "seeds", "repeats", "warmup", "metric", "size", "gaze",
-             "integrator", "reference", "scenes", "metrics", "foveated", "uniform")
+             "integrator", "reference", "scenes", "metrics", "viewer", "foveated", "uniform")
 _SCENE_KEYS = ("scene", "label", "size", "gaze", "params", "integrator", "reference",
                "optional")
 _REFERENCE_KEYS = ("spp", "seed", "file", "layer")
@@ -200,6 +206,7 @@ def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
         if lab in labels[:i]:
             raise ctx.error(f"scenes[{i}].label", lab, "a label no other scene uses")
     metrics, perceptual = _metrics(ctx, data.get("metrics", {}))
+    metrics.update(_viewer(ctx, data.get("viewer"), metrics.pop("fovea_deg", None)))
     foveated = _foveated(ctx, data.get("foveated", {}))
     uniform = _uniform(ctx, data.get("uniform", {}), foveated)
     if not foveated and not uniform:
@@ -328,9 +335,34 @@ def _scene(ctx: TableContext, key: str, table: Any, defaults: dict, base_dir: st
                      params=params, integrator=integ, reference=ref, optional=optional)
 
 
+def _viewer(ctx: TableContext, table: Any, fovea_deg) -> dict:
+    """The ``[viewer]`` table as metric settings (none without it, so the task ids of studies
+    written before it stay the same)."""
+    if table is None:
+        if fovea_deg is not None:
+            raise ctx.error("metrics.fovea_deg", fovea_deg, "a [viewer] table with fov = "
+                            "\"sensor\" (degrees need the sensor's field of view)")
+        return {}
+    table = dict(ctx.table("viewer", table))
+    ctx.known("viewer", table, ("fov",))
+    if "fov" not in table:
+        raise ctx.error("viewer.fov", None, "\"sensor\" (the film spans the sensor's field "
+                        "of view)")
+    fov = ctx.string("viewer.fov", table["fov"], ("sensor",))
+    from ..validate import check_range
+    try:
+        deg = check_range("metrics.fovea_deg", 5.0 if fovea_deg is None else fovea_deg,
+                          0.0, 180.0, lo_open=True)
+    except ParameterError as e:
+        raise ctx.rename(e) from None
+    return {"viewer": fov, "fovea_deg": deg}
+
+
 def _metrics(ctx: TableContext, table: Any) -> tuple[dict, dict]:
     table = dict(ctx.table("metrics", table))
-    ctx.known("metrics", table, tuple(DEFAULT_METRICS) + tuple(DEFAULT_PERCEPTUAL))
+    ctx.known("metrics", table, tuple(DEFAULT_METRICS) + tuple(DEFAULT_PERCEPTUAL) +
+              ("fovea_deg",))
+    fovea_deg = table.pop("fovea_deg", None)
     perceptual = {"jod": ctx.boolean("metrics.jod", table.pop("jod", True))}
     from ..perceptual import check_display
     try:
@@ -348,6 +380,8 @@ def _metrics(ctx: TableContext, table: Any) -> tuple[dict, dict]:
     except ParameterError as e:
         raise ctx.rename(e) from None
     out["flip"] = ctx.boolean("metrics.flip", m["flip"])
+    if fovea_deg is not None:
+        out["fovea_deg"] = fovea_deg
     return out, perceptual
 
 

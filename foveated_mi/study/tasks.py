@@ -207,17 +207,32 @@ def _median(xs: list[float | None]) -> float | None:
     return statistics.median(xs) if xs else None
 
 
-def _quality(reference_display: np.ndarray, image: np.ndarray, task: dict) -> dict:
+def _viewing(scene, task: dict) -> dict:
+    """How quality is judged for this task's scene: ``{"ppd", "eccentricity"}`` (the
+    eccentricity map in degrees under ``[viewer] fov = "sensor"``, else None)."""
+    m = task["metrics"]
+    if m.get("viewer") != "sensor":
+        return {"ppd": m["ppd"], "eccentricity": None}
+    from .. import viewer
+    sensor, gaze = scene.sensors()[0], tuple(task["gaze"])
+    return {"ppd": viewer.pixels_per_degree(sensor, gaze),
+            "eccentricity": viewer.eccentricity_map(sensor, gaze)}
+
+
+def _quality(reference_display: np.ndarray, image: np.ndarray, task: dict,
+             viewing: dict | None = None) -> dict:
     from ..metrics import compare
     from ..render import to_display
     m = task["metrics"]
+    viewing = viewing or {"ppd": m["ppd"], "eccentricity": None}
     test = to_display(image, m["exposure"])
     out = compare(reference_display, test, gaze=tuple(task["gaze"]), theta=m["theta"],
-                  sigma_p=m["sigma_p"], data_range=1.0, flip=m["flip"], ppd=m["ppd"])
+                  sigma_p=m["sigma_p"], data_range=1.0, flip=m["flip"], ppd=viewing["ppd"],
+                  eccentricity=viewing["eccentricity"], fovea_deg=m.get("fovea_deg", 5.0))
     if task.get("jod"):                   # the client checked the extra is installed
         from ..perceptual import jod
-        out["jod"] = jod(reference_display, test, gaze=tuple(task["gaze"]), ppd=m["ppd"],
-                         display=task["perceptual"]["display"])
+        out["jod"] = jod(reference_display, test, gaze=tuple(task["gaze"]),
+                         ppd=viewing["ppd"], display=task["perceptual"]["display"])
     return out
 
 
@@ -257,6 +272,7 @@ def run_task(task: dict, reference: np.ndarray) -> list[dict]:
     ref_d = to_display(reference, task["metrics"]["exposure"])
     w, h = task["scene"]["width"], task["scene"]["height"]
     record = sorted(task.get("frames_todo") or task["frames"])
+    viewing = _viewing(scene, task)
     common = {"task_id": task["task_id"], "scene": task["label"], "method": task["method"],
               "seed": task["seed"], "spp": task["spp"], "width": w, "height": h, "repeats": task["repeats"],
               "variant": task["variant"], "config": task["config"]}
@@ -273,7 +289,7 @@ def run_task(task: dict, reference: np.ndarray) -> list[dict]:
                        time_ms=_median([t.get("total") for t in timings[k]]))
             for col in stage_columns():
                 row[col] = _median([t.get(col[:-3]) for t in timings[k]])
-            row.update(_quality(ref_d, image, task))
+            row.update(_quality(ref_d, image, task, viewing))
             rows.append(row)
         return rows
     from ..baselines import render_uniform
@@ -291,6 +307,6 @@ def run_task(task: dict, reference: np.ndarray) -> list[dict]:
     if den:
         row["aov_ms"] = _median([s["aov_ms"] for _, s in runs])
         row["denoise_ms"] = _median([s["denoise_ms"] for _, s in runs])
-    row.update(_quality(ref_d, image, task))
+    row.update(_quality(ref_d, image, task, viewing))
     return [row]
 
