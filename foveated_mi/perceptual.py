@@ -6,7 +6,10 @@ imports torch. ``pyfvvdp`` is licensed CC BY-NC 4.0 (non-commercial use).
 
 JOD (just-objectionable differences) is 10 for an image identical to the reference and falls
 as differences grow more visible; one JOD unit means 75 % of observers prefer the better of
-two images. The score is of one frame (image mode), foveated at the gaze.
+two images. :func:`jod` scores one frame (image mode), foveated at the gaze;
+:func:`jod_video` scores a sequence as a video (FovVideoVDP's temporal channels, about 250 ms
+of frames, see flicker and judder), with a fixation point per frame. A video's JOD is not the
+mean of its frames' JODs.
 
 Viewing condition (the same for every row of a study):
 
@@ -14,7 +17,8 @@ Viewing condition (the same for every row of a study):
   contrast, ambient light); default ``standard_fhd``: 200 cd/m², 1000:1, 250 lux.
 * **geometry** -- the film fills a display whose centre has ``ppd`` pixels per degree (the
   study's ``[metrics] ppd``, shared with FLIP; default 67), so the frame spans
-  ``width / ppd`` degrees horizontally.
+  ``width / ppd`` degrees horizontally; or, with ``fov_horizontal``, the film spans that
+  many degrees (a headset whose display spans the sensor's field of view).
 * **gaze** -- the fixation point, the scene's gaze (normalised film coordinates, origin
   top-left).
 
@@ -34,7 +38,8 @@ import numpy as np
 
 from .validate import ParameterError, check_point2, check_range
 
-__all__ = ["available", "display_names", "jod", "INSTALL_HINT", "DEFAULT_DISPLAY", "COLUMNS"]
+__all__ = ["available", "display_names", "jod", "jod_video", "INSTALL_HINT", "DEFAULT_DISPLAY",
+           "COLUMNS"]
 
 INSTALL_HINT = "pip install -e '.[perceptual]'"
 DEFAULT_DISPLAY = "standard_fhd"
@@ -78,20 +83,28 @@ def check_display(name: str, display: str) -> str:
     return display
 
 
+def _fov(width: int, ppd: float | None, fov_horizontal: float | None) -> float:
+    """The horizontal field of view of the display: given, or the one that puts exactly
+    ``ppd`` pixels per degree at the centre of a flat display."""
+    if fov_horizontal is not None:
+        return check_range("fov_horizontal", fov_horizontal, 0.0, 180.0, lo_open=True)
+    ppd = check_range("ppd", ppd, 0.0, None, lo_open=True)
+    return 2.0 * math.degrees(math.atan(width * math.tan(math.radians(0.5 / ppd))))
+
+
 @lru_cache(maxsize=8)
-def _metric(width: int, height: int, ppd: float, display: str):
+def _metric(width: int, height: int, fov: float, display: str):
     import torch
     import pyfvvdp
     from pyfvvdp.fvvdp_display_model import fvvdp_display_geometry
-    # a horizontal field of view that puts exactly `ppd` pixels per degree at the centre
-    fov = 2.0 * math.degrees(math.atan(width * math.tan(math.radians(0.5 / ppd))))
     geometry = fvvdp_display_geometry((width, height), fov_horizontal=fov)
     return pyfvvdp.fvvdp(display_name=display, display_geometry=geometry, foveated=True,
                          quiet=True, device=torch.device("cpu")), torch
 
 
 def jod(reference: np.ndarray, test: np.ndarray, *, gaze: tuple[float, float] = (0.5, 0.5),
-        ppd: float = 67.0, display: str = DEFAULT_DISPLAY) -> float:
+        ppd: float = 67.0, display: str = DEFAULT_DISPLAY,
+        fov_horizontal: float | None = None) -> float:
     """FovVideoVDP's JOD of ``test`` against ``reference``: both (H, W, 3) display-referred
     sRGB in [0, 1], fixated at ``gaze``. Raises :class:`ParameterError` for bad input or
     without the extra."""
@@ -103,16 +116,58 @@ def jod(reference: np.ndarray, test: np.ndarray, *, gaze: tuple[float, float] = 
         raise ParameterError("test", tst.shape, f"an (H, W, 3) image of the reference's shape "
                              f"{ref.shape}")
     gx, gy = check_point2("gaze", gaze)
-    ppd = check_range("ppd", ppd, 0.0, None, lo_open=True)
     display = check_display("display", display)
     h, w = ref.shape[:2]
+    fov = _fov(w, ppd, fov_horizontal)
     with warnings.catch_warnings():       # pyfvvdp's own SciPy deprecations
         warnings.simplefilter("ignore", DeprecationWarning)
-        metric, torch = _metric(w, h, float(ppd), display)
+        metric, torch = _metric(w, h, float(fov), display)
     fix = np.array([min(max(gx * w, 0.0), w - 1.0), min(max(gy * h, 0.0), h - 1.0)])
     with torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
         q, _ = metric.predict(torch.from_numpy(np.clip(tst, 0.0, 1.0)),
                               torch.from_numpy(np.clip(ref, 0.0, 1.0)),
                               dim_order="HWC", fixation_point=fix)
+    return float(q)
+
+
+def jod_video(reference: np.ndarray, test: np.ndarray, *, fixations, fps: float,
+              ppd: float | None = 67.0, fov_horizontal: float | None = None,
+              display: str = DEFAULT_DISPLAY) -> float:
+    """FovVideoVDP's JOD of the video ``test`` against ``reference``: both (F, H, W, 3)
+    display-referred sRGB in [0, 1], shown at ``fps`` frames per second, frame ``f`` fixated
+    at ``fixations[f]`` (normalised film coordinates; one pair for all frames also works).
+    The geometry is ``fov_horizontal`` degrees across the film when given, else ``ppd`` at its
+    centre. Raises :class:`ParameterError` for bad input or without the extra."""
+    if not available():
+        raise ParameterError("jod_video", "pyfvvdp", f"pyfvvdp and torch installed "
+                             f"({INSTALL_HINT})")
+    ref = np.asarray(reference, dtype=np.float32)
+    tst = np.asarray(test, dtype=np.float32)
+    if ref.ndim != 4 or ref.shape[3] != 3 or ref.shape[0] < 2:
+        raise ParameterError("reference", ref.shape, "an (F, H, W, 3) video of at least 2 "
+                             "frames")
+    if tst.shape != ref.shape:
+        raise ParameterError("test", tst.shape, f"a video of the reference's shape {ref.shape}")
+    fps = check_range("fps", fps, 0.0, 1000.0, lo_open=True)
+    n, h, w = ref.shape[:3]
+    fix = np.asarray(fixations, dtype=np.float64)
+    if fix.shape == (2,):
+        fix = np.tile(fix, (n, 1))
+    if fix.shape != (n, 2) or not np.all(np.isfinite(fix)):
+        raise ParameterError("fixations", f"<array of shape {fix.shape}>",
+                             f"finite (x, y) per frame, shape ({n}, 2)")
+    display = check_display("display", display)
+    fov = _fov(w, ppd, fov_horizontal)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        metric, torch = _metric(w, h, float(fov), display)
+    px = np.stack([np.clip(fix[:, 0] * w, 0.0, w - 1.0), np.clip(fix[:, 1] * h, 0.0, h - 1.0)],
+                  -1)
+    with torch.no_grad(), warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        q, _ = metric.predict(torch.from_numpy(np.clip(tst, 0.0, 1.0)),
+                              torch.from_numpy(np.clip(ref, 0.0, 1.0)),
+                              dim_order="FHWC", frames_per_second=float(fps),
+                              fixation_point=torch.from_numpy(px))
     return float(q)

@@ -98,6 +98,13 @@ def pixels_per_degree(sensor: mi.Sensor, gaze=(0.5, 0.5)) -> float:
     return 1.0 / float(angle_deg(a, b)[0])
 
 
+def horizontal_fov(sensor: mi.Sensor) -> float:
+    """Degrees between the rays through the left and right film edges at mid-height: the
+    horizontal field of view a display spanning the sensor's film shows."""
+    a, b = (gaze_direction(sensor, (x, 0.5)) for x in (0.0, 1.0))
+    return float(angle_deg(a, b)[0])
+
+
 def kwon_in_degrees(ecc: mi.Float, theta_deg: float, sigma_p: float) -> mi.Float:
     """Eq. 1 of the paper with the eccentricity in degrees: P = σp at ``theta_deg``."""
     from .frame.sampling import sampling_probability, sampling_weight

@@ -5,6 +5,9 @@ import pytest
 from foveated_mi import perceptual
 from foveated_mi.validate import ParameterError
 
+needs_extra = pytest.mark.skipif(not perceptual.available(),
+                                 reason="the perceptual extra (pyfvvdp, torch) is not installed")
+
 
 def _pair(noise, seed=0):
     rng = np.random.default_rng(seed)
@@ -34,3 +37,56 @@ def test_without_the_extra_jod_names_the_install_command(monkeypatch):
     ref, test = _pair(0.1)
     with pytest.raises(ParameterError, match=r"pip install -e '\.\[perceptual\]'"):
         perceptual.jod(ref, test)
+
+
+def _panning_video(frames=12, h=48, w=64, seed=0):
+    """A smooth random texture panning 2 px per frame (display values in [0, 1])."""
+    from scipy.ndimage import gaussian_filter
+    rng = np.random.default_rng(seed)
+    base = rng.random((h, w + 2 * frames, 3))
+    base = np.stack([gaussian_filter(base[..., c], 1.5) for c in range(3)], -1)
+    base = (base - base.min()) / (base.max() - base.min())
+    return np.stack([base[:, 2 * f: 2 * f + w] for f in range(frames)]).astype(np.float32)
+
+
+@needs_extra
+def test_video_jod_sees_stutter_and_peripheral_flicker():
+    from foveated_mi.perceptual import jod_video
+    ref = _panning_video()
+    n, h, w = ref.shape[:3]
+    fix = np.tile([0.5, 0.5], (n, 1))
+    score = lambda test: jod_video(ref, test, fixations=fix, fps=30, fov_horizontal=90.0)  # noqa: E731
+    assert abs(score(ref) - 10.0) <= 0.01
+    stutter = ref.copy()
+    stutter[6] = stutter[5]                       # one frame shown twice
+    yy, xx = np.mgrid[0:h, 0:w]
+    periphery = (np.hypot(xx - w / 2, yy - h / 2) > 0.4 * w)[..., None]
+    flicker = ref.copy()
+    flicker[1::2] = np.clip(flicker[1::2] + 0.08 * periphery, 0, 1)
+    assert score(stutter) < 9.9 and score(flicker) < 9.9
+
+
+def test_video_jod_bad_input_is_one_line():
+    from foveated_mi.perceptual import available, jod_video
+    ref = np.zeros((4, 8, 8, 3), np.float32)
+    cases = [(dict(fixations=[0.5, 0.5], fps=0.0), "fps"),
+             (dict(fixations=np.zeros((3, 2)), fps=30.0), "fixations")]
+    if not available():
+        cases = [(dict(fixations=[0.5, 0.5], fps=30.0), "jod_video")]
+    for kw, name in cases:
+        with pytest.raises(ParameterError) as e:
+            jod_video(ref, ref, **kw)
+        assert e.value.name == name and "\n" not in str(e.value)
+
+
+def test_jod_as_the_pareto_axis_needs_the_column(tmp_path):
+    from foveated_mi import perceptual
+    from foveated_mi.study import load_study, run_study
+    p = tmp_path / "s.toml"
+    p.write_text('metric = "jod"\nsize = [16, 16]\n[metrics]\njod = false\n[[scenes]]\n'
+                 'scene = "cornell-box"\n[foveated.grid]\nreconstruction = ["voronoi"]\n')
+    assert load_study(str(p)).metric == "jod"          # accepted as an axis ...
+    with pytest.raises(ParameterError) as e:           # ... refused where nothing computes it
+        run_study(str(p), out=str(tmp_path / "o"), progress=False, echo=None)
+    assert e.value.name == "metric" and "\n" not in str(e.value)
+    assert ("jod = true" in str(e.value)) == perceptual.available()

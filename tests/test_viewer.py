@@ -138,3 +138,11 @@ def test_regions_in_degrees():
     assert 0 < (ecc < 5.0).sum() < ecc.size
     with pytest.raises(ParameterError, match="eccentricity"):
         compare(ref, test, eccentricity=ecc[:4], flip=False)
+
+
+@pytest.mark.parametrize("axis", ["x", "y"])
+def test_horizontal_fov_is_the_sensors(axis):
+    w, h, fov = 48, 32, 100.0
+    expect = fov if axis == "x" else 2 * math.degrees(math.atan(math.tan(math.radians(fov / 2))
+                                                                 * w / h))
+    assert abs(viewer.horizontal_fov(_sensor(fov, axis, w, h)) - expect) < 1e-3

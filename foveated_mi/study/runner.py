@@ -166,6 +166,13 @@ def _prepare_study(study, out, executor, scheduler, size, metric, variant):
     if metric is not None and metric not in QUALITY_COLUMNS:
         raise ParameterError("--metric", metric, "one of " + ", ".join(QUALITY_COLUMNS))
     metric = metric or spec.metric
+    if metric == "jod":
+        from .. import perceptual
+        if not (spec.perceptual.get("jod") and perceptual.available()):
+            why = "[metrics] jod = true" if perceptual.available() else \
+                f"FovVideoVDP installed ({perceptual.INSTALL_HINT})"
+            raise ParameterError("metric", metric, f"a column this study computes: jod "
+                                 f"needs {why}")
     out_dir = out if out is not None else os.path.join("out", "studies", spec.name)
     if executor == "local" or scheduler is None:
         v = foveated_mi.set_variant(variant)   # the client renders (or starts the workers)

@@ -91,7 +91,9 @@ from ..validate import ParameterError
 __all__ = ["StudySpec", "SceneSpec", "load_study", "parse_study", "QUALITY_COLUMNS",
            "DEFAULT_INTEGRATOR", "DEFAULT_REFERENCE_SPP"]
 
-QUALITY_COLUMNS = COMPARE_KEYS
+#: Columns a study can put on the Pareto plot's quality axis (``jod``: with the perceptual
+#: extra and ``[metrics] jod = true``).
+QUALITY_COLUMNS = (*COMPARE_KEYS, "jod")
 DEFAULT_INTEGRATOR = {"type": "path", "max_depth": 8}
 DEFAULT_REFERENCE_SPP = 256
 DEFAULT_METRICS = {"theta": 0.1, "sigma_p": 0.8, "ppd": 67.0, "flip": True, "exposure": 0.0}

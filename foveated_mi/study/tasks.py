@@ -208,15 +208,17 @@ def _median(xs: list[float | None]) -> float | None:
 
 
 def _viewing(scene, task: dict) -> dict:
-    """How quality is judged for this task's scene: ``{"ppd", "eccentricity"}`` (the
-    eccentricity map in degrees under ``[viewer] fov = "sensor"``, else None)."""
+    """How quality is judged for this task's scene: ``{"ppd", "eccentricity", "fov"}`` (under
+    ``[viewer] fov = "sensor"``: the pixels per degree at the gaze, the eccentricity map in
+    degrees and the sensor's horizontal field of view; else the monitor's ppd)."""
     m = task["metrics"]
     if m.get("viewer") != "sensor":
-        return {"ppd": m["ppd"], "eccentricity": None}
+        return {"ppd": m["ppd"], "eccentricity": None, "fov": None}
     from .. import viewer
     sensor, gaze = scene.sensors()[0], tuple(task["gaze"])
     return {"ppd": viewer.pixels_per_degree(sensor, gaze),
-            "eccentricity": viewer.eccentricity_map(sensor, gaze)}
+            "eccentricity": viewer.eccentricity_map(sensor, gaze),
+            "fov": viewer.horizontal_fov(sensor)}
 
 
 def _quality(reference_display: np.ndarray, image: np.ndarray, task: dict,
@@ -224,7 +226,7 @@ def _quality(reference_display: np.ndarray, image: np.ndarray, task: dict,
     from ..metrics import compare
     from ..render import to_display
     m = task["metrics"]
-    viewing = viewing or {"ppd": m["ppd"], "eccentricity": None}
+    viewing = viewing or {"ppd": m["ppd"], "eccentricity": None, "fov": None}
     test = to_display(image, m["exposure"])
     out = compare(reference_display, test, gaze=tuple(task["gaze"]), theta=m["theta"],
                   sigma_p=m["sigma_p"], data_range=1.0, flip=m["flip"], ppd=viewing["ppd"],
@@ -232,7 +234,8 @@ def _quality(reference_display: np.ndarray, image: np.ndarray, task: dict,
     if task.get("jod"):                   # the client checked the extra is installed
         from ..perceptual import jod
         out["jod"] = jod(reference_display, test, gaze=tuple(task["gaze"]),
-                         ppd=viewing["ppd"], display=task["perceptual"]["display"])
+                         ppd=viewing["ppd"], fov_horizontal=viewing["fov"],
+                         display=task["perceptual"]["display"])
     return out
 
 
