@@ -11,8 +11,9 @@ Per frame (Fig. 1 of the paper), each stage a pass of its own module:
    ``rays * spp`` lanes only; other pixels resample the history.
 5. **Reconstruction** (:mod:`foveated_mi.reconstruct`, §3.4): Jump Flooding Voronoi fill and
    (approximate) Sibson interpolation.
-6. **Post-processing** (:mod:`foveated_mi.postprocess`, §3.5): tone mapping, edge-avoiding
-   à-trous filter in the tone-mapped domain, mapped back to linear radiance.
+6. **Post-processing** (:mod:`foveated_mi.postprocess`, §3.5): the registered denoiser
+   (``denoiser``: the paper's edge-avoiding à-trous filter in the tone-mapped domain, mapped
+   back to linear radiance; SVGF; OIDN; none), the albedo multiplied back.
 
 ``mi.render(scene)`` returns linear radiance (H, W, 3) like any Mitsuba integrator. After a
 render, :attr:`buffers` holds the intermediate buffers and :attr:`stats` the frame's stats.

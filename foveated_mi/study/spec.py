@@ -70,7 +70,7 @@ accumulate the same reprojection history; ``denoise = true`` keeps the preset's 
 (``uniform+history``).
 
 Foveated keys are the options of the ``foveated`` integrator (checked by
-:func:`foveated_mi.integrators.foveated.validate_options`, so new options work without
+:func:`foveated_mi.options.validate_options`, so new options work without
 changes here) except ``gaze`` (per scene) and ``timing`` (always on), plus ``spp`` and
 ``frames``. Every error is a :class:`~foveated_mi.validate.ParameterError` of one line naming
 the file and the dotted key.
