@@ -60,6 +60,10 @@ def run_demo(out: str = os.path.join("out", "demo"), *, size: tuple[int, int] | 
     print()
     print(f"Equal time on voxel-city {w}x{h}, {mi.variant()}, path max_depth 8, against a "
           f"256-spp reference (fovea: within θ = 0.1 of the gaze):")
+    ppd = spec.metrics["ppd"]
+    print(f"Judged as seen on a monitor at {ppd:g} pixels per degree: the film spans "
+          f"{w / ppd:.1f}° x {h / ppd:.1f}°, all of it within the parafovea (a headset's "
+          f"condition is a study's [viewer] fov = \"sensor\").")
     cells = aggregate(res.rows)
     jod = any("jod" in r for r in cells)
     print(f"{'configuration':40s} {'frame':>5s} {'time ms':>10s} {'rays':>5s} {'PSNR':>12s} "

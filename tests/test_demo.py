@@ -62,6 +62,8 @@ def test_demo_runs_end_to_end_and_resumes(tmp_path, capsys):
     assert main(["demo", "--size", "32", "18", "--out", str(out), "--no-progress"]) == 0
     text = capsys.readouterr().out
     assert "256-spp reference" in text and "foveated (" in text
+    # the viewing condition the verdict is judged under: 32 px at 67 ppd span 0.5 degrees
+    assert "monitor at 67 pixels per degree: the film spans 0.5° x 0.3°" in text
     sentence = [line for line in text.splitlines() if line.startswith("On voxel-city")]
     assert len(sentence) == 1 and " ms" in sentence[0]
     assert "stronger baseline, uniform 1 spp + history + " in sentence[0]
