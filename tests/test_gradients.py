@@ -325,9 +325,10 @@ def test_a_frame_without_gradients_records_nothing():
 
 
 def test_transposes_hold_with_the_vector_width_of_another_cpu(tmp_path):
-    """The transpose tests in a process whose kernels are 8 lanes wide (an AVX2 CPU; this one
-    may have AVX-512): their reductions run in another order, which broke a tolerance fitted
-    to one machine (``demodulate``: 1.35e-5 against 1e-5 of the value)."""
+    """The transpose test in a process whose kernels are 8 lanes wide (an AVX2 CPU; this one
+    may have AVX-512): its reductions run in another order, which broke a tolerance fitted
+    to one machine (``demodulate``: 1.35e-5 against 1e-5 of the value). The whole suite
+    passes that way too (``FOVEATED_MI_TEST_VECTOR_WIDTH=8 make test``)."""
     import os
     import subprocess
     import sys
@@ -335,8 +336,8 @@ def test_transposes_hold_with_the_vector_width_of_another_cpu(tmp_path):
                DRJIT_CACHE_DIR=str(tmp_path / "kernels"))
     p = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
                         "-p", "no:xdist", os.path.abspath(__file__), "-k",
-                        "adjoint_is_its_transpose and (demodulate or guided_preset or paper)"],
+                        "adjoint_is_its_transpose and demodulate"],
                        capture_output=True, text=True, timeout=600, env=env,
                        cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-2000:]
-    assert re.search(r"^3 passed", p.stdout, re.M), p.stdout[-2000:]
+    assert re.search(r"^1 passed", p.stdout, re.M), p.stdout[-2000:]
