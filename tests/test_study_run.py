@@ -386,3 +386,93 @@ def test_bad_viewer_tables_are_one_line(tmp_path, text, key):
     with pytest.raises(ParameterError) as e:
         load_study(study_file(tmp_path, base + text))
     assert key in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
+MOTION = """
+seed = 2
+repeats = 1
+warmup = 0
+size = [24, 16]
+[reference]
+spp = 8
+[[scenes]]
+scene = "cornell-box"
+[viewer]
+fov = "sensor"
+[motion]
+frames = 6
+fps = 30
+[motion.camera]
+[[motion.camera.keyframes]]
+t = 0.0
+[[motion.camera.keyframes]]
+t = 0.2
+origin = [0.3, 0.0, 3.9]
+[motion.gaze]
+type = "saccades"
+targets = [[0.3, 0.5], [0.7, 0.4]]
+dwell = 0.1
+[foveated.defaults]
+atrous_iterations = 1
+[foveated.grid]
+reconstruction = ["voronoi"]
+[uniform]
+spp = [1]
+"""
+
+
+def _motion_rows(tmp_path, **kw):
+    from foveated_mi import perceptual
+    res = run_study(study_file(tmp_path, MOTION, "motion.toml"),
+                    out=str(tmp_path / kw.get("executor", "local")), progress=False,
+                    echo=None, **kw)
+    assert res.failed == []
+    rows, raw = keyed(res.results_path)
+    refs = [np.load(p) for p in (tmp_path / kw.get("executor", "local") / "references"
+                                 ).glob("*.npy")]
+    return rows, raw, refs, perceptual.available()
+
+
+def test_a_study_in_motion_scores_sequences(tmp_path):
+    """[motion]: one row per sequence (frame = its length), scored against one reference per
+    frame of the camera path; the camera goes back where it was for later tasks."""
+    from foveated_mi.scenes import camera_of
+    from foveated_mi.study.tasks import get_scene
+    _, raw, refs, jod = _motion_rows(tmp_path)
+    assert sorted(r["method"] for r in raw) == ["foveated", "uniform"]
+    assert all(r["frame"] == "6" for r in raw)
+    [ref] = refs
+    assert ref.shape == (6, 16, 24, 3) and not np.allclose(ref[0], ref[-1])
+    assert all(0 < float(r["psnr"]) < math.inf for r in raw)
+    assert all(("jod_video" in r and float(r["jod_video"]) <= 10.0) == jod for r in raw)
+    from foveated_mi.study import load_study
+    scene = get_scene(load_study(str(tmp_path / "motion.toml")).scenes[0].load_spec(),
+                      __import__("mitsuba").variant())
+    assert camera_of(scene)["origin"] == pytest.approx([0.0, 0.0, 3.9], abs=1e-5)
+
+
+@needs_dask
+def test_a_study_in_motion_gives_the_same_quality_on_dask(tmp_path):
+    a, _, _, _ = _motion_rows(tmp_path)
+    b, _, _, _ = _motion_rows(tmp_path, executor="dask", workers=1)
+    assert a.keys() == b.keys()
+    for k in a:
+        for col in COMPARE_KEYS + ("ray_fraction",):
+            x, y = float(a[k][col]), float(b[k][col])
+            assert (math.isnan(x) and math.isnan(y)) or math.isclose(x, y, rel_tol=1e-5), \
+                (k, col, x, y)
+
+
+@pytest.mark.parametrize("text, key", [
+    ("[motion]\nframes = 1\n", "motion.frames"),
+    ("[motion]\nfps = 0\n", "motion.fps"),
+    ('[motion]\n[motion.gaze]\ntype = "saccades"\n', "motion.gaze.targets"),
+    ("[motion]\nspeed = 3\n", "motion.speed"),
+])
+def test_bad_motion_tables_are_one_line(tmp_path, text, key):
+    from foveated_mi.study import load_study
+    from foveated_mi.validate import ParameterError
+    base = '[[scenes]]\nscene = "cornell-box"\n[foveated.grid]\nreconstruction = ["voronoi"]\n'
+    with pytest.raises(ParameterError) as e:
+        load_study(study_file(tmp_path, base + text))
+    assert key in str(e.value) and "\n" not in str(e.value), str(e.value)

@@ -208,8 +208,9 @@ def _execute(tasks, scenes, file_refs, ex, with_jod, v, executor, progress,
     """The references, then the tasks' frames not yet in ``results.csv``, appended to it."""
     from .. import perceptual
     from .results import ResultsFile, columns
-    extra = perceptual.COLUMNS if with_jod else ()
     spec, results_path = result.spec, result.results_path
+    motion = any(s.motion is not None for s in spec.scenes)
+    extra = (perceptual.COLUMNS + (("jod_video",) if motion else ())) if with_jod else ()
     with ResultsFile(results_path, columns(extra)) as results:
         if results.repaired_bytes:
             say(f"note: {results_path}: removed a partly written last line "

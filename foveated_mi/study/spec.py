@@ -40,6 +40,23 @@ Layout (every key optional except ``scenes``)::
                                 #   and JOD at the pixels per degree of the gaze, the fovea
                                 #   within metrics.fovea_deg of the gaze ray
 
+    [motion]                    # rows are sequences instead of frames of a still view
+    frames = 45                 #   frames per sequence (>= 2), shown at fps
+    fps = 90
+    [motion.camera]             #   the camera path (the sequence format of configs/*.toml;
+    interpolation = "linear"    #   absent: each scene's own camera, still); each scene's own
+    [[motion.camera.keyframes]] #   camera fills the keys a keyframe leaves out
+    t = 0.0
+    [motion.gaze]               #   the gaze path (fixed, keyframes, saccades, csv; absent:
+    type = "saccades"           #   each scene's gaze, still)
+    targets = [[0.3, 0.5], [0.7, 0.4]]
+
+With ``[motion]`` a row is one sequence (``frame`` = its frame count): ``time_ms`` is the
+median frame time after the first frame, the quality columns the mean over its frames, each
+scored against a reference of that frame's camera (rendered once per scene, cached) with the
+fovea at that frame's gaze, and ``jod_video`` (with the perceptual extra) FovVideoVDP's score
+of the whole sequence as a video at ``fps``, fixating the gaze path.
+
     [foveated.defaults]         # options shared by the grid and the list
     atrous_iterations = 0
     [foveated.grid]             # cartesian product of the lists (a scalar is one value)
@@ -102,7 +119,8 @@ DEFAULT_METRICS = {"theta": 0.1, "sigma_p": 0.8, "ppd": 67.0, "flip": True, "exp
 DEFAULT_PERCEPTUAL = {"jod": True, "display": "standard_fhd"}
 
 _TOP_KEYS = ("description", "seed", "seeds", "repeats", "warmup", "metric", "size", "gaze",
-             "integrator", "reference", "scenes", "metrics", "viewer", "foveated", "uniform")
+             "integrator", "reference", "scenes", "metrics", "viewer", "motion", "foveated",
+             "uniform")
 _SCENE_KEYS = ("scene", "label", "size", "gaze", "params", "integrator", "reference",
                "optional")
 _REFERENCE_KEYS = ("spp", "seed", "file", "layer")
@@ -123,6 +141,9 @@ class SceneSpec:
     integrator: dict = field(default_factory=lambda: dict(DEFAULT_INTEGRATOR))
     reference: dict = field(default_factory=lambda: {"spp": DEFAULT_REFERENCE_SPP, "seed": 1})
     optional: bool = False
+    #: ``{"fps", "cameras": [camera dict per frame] or None, "gazes": [[x, y] per frame]}``
+    #: under ``[motion]``, else None
+    motion: dict | None = None
 
     @property
     def builtin(self) -> bool:
@@ -142,9 +163,12 @@ class SceneSpec:
     def identity(self) -> dict:
         """What identifies the scene's results (machine-independent: the TOML spelling)."""
         ref = {k: v for k, v in self.reference.items() if k != "path"}
-        return {"scene": self.name, "label": self.label, "size": list(self.size),
-                "gaze": list(self.gaze),
-                "params": self.params, "integrator": self.integrator, "reference": ref}
+        out = {"scene": self.name, "label": self.label, "size": list(self.size),
+               "gaze": list(self.gaze),
+               "params": self.params, "integrator": self.integrator, "reference": ref}
+        if self.motion is not None:
+            out["motion"] = self.motion
+        return out
 
 
 @dataclass(frozen=True)
@@ -203,6 +227,8 @@ def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
         raise ctx.error("scenes", scenes_in, "a non-empty list of [[scenes]] tables")
     scenes = [_scene(ctx, f"scenes[{i}]", s, defaults, base_dir)
               for i, s in enumerate(scenes_in)]
+    if "motion" in data:
+        scenes = _motion(ctx, data["motion"], scenes, base_dir)
     labels = [s.label for s in scenes]
     for i, lab in enumerate(labels):
         if lab in labels[:i]:
@@ -335,6 +361,46 @@ def _scene(ctx: TableContext, key: str, table: Any, defaults: dict, base_dir: st
                      defaults["reference"]) if "reference" in table else defaults["reference"]
     return SceneSpec(name=name, source=source, label=label, size=size, gaze=gaze,
                      params=params, integrator=integ, reference=ref, optional=optional)
+
+
+def _motion(ctx: TableContext, table: Any, scenes: list, base_dir: str) -> list:
+    """The scenes with their ``motion``: the ``[motion]`` paths sampled at each frame (plain
+    values a worker can take; the camera path is completed by each scene's own camera)."""
+    from ..config import _camera, _gaze
+    table = dict(ctx.table("motion", table))
+    ctx.known("motion", table, ("frames", "fps", "camera", "gaze"))
+    frames = ctx.integer("motion.frames", table.get("frames", 16), 2, 100000)
+    fps = table.get("fps", 90.0)
+    from ..validate import check_range
+    try:
+        fps = check_range("motion.fps", fps, 0.0, 1000.0, lo_open=True)
+    except ParameterError as e:
+        raise ctx.rename(e) from None
+    out = []
+    for scene in scenes:
+        camera = None
+        if "camera" in table and not scene.missing:
+            path = _with_prefix(ctx, "motion", lambda c: _camera(c, table["camera"], scene.source))
+            camera = [path.at(k / fps) for k in range(frames)]
+        if "gaze" in table:
+            gaze = _with_prefix(ctx, "motion", lambda c: _gaze(c, table["gaze"], base_dir))
+            gazes = [list(map(float, gaze.at(k / fps))) for k in range(frames)]
+        else:
+            gazes = [list(scene.gaze)] * frames
+        out.append(replace(scene, motion={"fps": fps, "cameras": camera, "gazes": gazes}))
+    return out
+
+
+def _with_prefix(ctx: TableContext, prefix: str, parse):
+    """``parse(ctx)`` with its errors' keys under ``prefix`` (``gaze.targets`` ->
+    ``motion.gaze.targets``); an error that names its own file and line passes as it is."""
+    try:
+        return parse(ctx)
+    except ParameterError as e:
+        key = getattr(e, "key", None)
+        if key is None:
+            raise
+        raise ctx.error(f"{prefix}.{key}", e.value, e.allowed) from None
 
 
 def _viewer(ctx: TableContext, table: Any, fovea_deg) -> dict:

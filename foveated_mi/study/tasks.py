@@ -24,6 +24,7 @@ Quality columns: :func:`foveated_mi.metrics.compare` against the reference, plus
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -66,16 +67,20 @@ def reference_key(scene, variant: str) -> str:
     from ..scenes import scene_camera
     camera = scene_camera(scene.source)
     mtime = None if scene.builtin else os.stat(scene.source).st_mtime_ns
-    return _hash({"scene": scene.name, "size": list(scene.size), "params": scene.params,
-                  "integrator": scene.integrator, "spp": scene.reference["spp"],
-                  "seed": scene.reference["seed"], "camera": camera, "variant": variant,
-                  "mtime": mtime})
+    key = {"scene": scene.name, "size": list(scene.size), "params": scene.params,
+           "integrator": scene.integrator, "spp": scene.reference["spp"],
+           "seed": scene.reference["seed"], "camera": camera, "variant": variant,
+           "mtime": mtime}
+    if scene.motion is not None and scene.motion["cameras"] is not None:
+        key["cameras"] = scene.motion["cameras"]      # one reference per frame of the path
+    return _hash(key)
 
 
 def reference_task(scene, variant: str) -> dict:
     return {"kind": "reference", "scene": scene.load_spec(), "variant": variant,
             "spp": scene.reference["spp"], "seed": scene.reference["seed"],
-            "label": scene.label}
+            "label": scene.label,
+            "cameras": None if scene.motion is None else scene.motion["cameras"]}
 
 
 def expand_tasks(spec, variant: str, *, denoise_available: bool = True) -> list[dict]:
@@ -89,6 +94,7 @@ def expand_tasks(spec, variant: str, *, denoise_available: bool = True) -> list[
         if scene.missing:
             continue
         base = {"scene": scene.load_spec(), "label": scene.label, "gaze": list(scene.gaze),
+                "motion": scene.motion,
                 "variant": variant, "repeats": spec.repeats, "warmup": spec.warmup,
                 "metrics": dict(spec.metrics), "perceptual": _perceptual(spec)}
         ident = scene.identity()
@@ -129,6 +135,9 @@ def expand_tasks(spec, variant: str, *, denoise_available: bool = True) -> list[
                               "method": method, "options": {"denoise": u["denoise"]},
                               "spp": u["spp"], "frames": [1],
                               "config": json.dumps(config, sort_keys=True)})
+    for t in tasks:               # under [motion] a row is the whole sequence
+        if t["motion"] is not None:
+            t["frames"] = [len(t["motion"]["gazes"])]
     return tasks
 
 
@@ -198,8 +207,31 @@ def run_reference_task(task: dict) -> dict:
     _prepare_worker(task)
     from ..baselines import render_reference
     scene = get_scene(task["scene"], task["variant"])
-    image = render_reference(scene, spp=task["spp"], seed=task["seed"])
+    cameras = task.get("cameras")
+    if cameras:           # a moving camera: (F, H, W, 3), one reference per frame
+        with _camera_path(scene) as move:
+            image = np.stack([render_reference(scene, spp=task["spp"], seed=task["seed"])
+                              for _ in move(cameras)])
+    else:
+        image = render_reference(scene, spp=task["spp"], seed=task["seed"])
     return {"image": image, "rfilter": str(scene.sensors()[0].film().rfilter())}
+
+
+@contextlib.contextmanager
+def _camera_path(scene):
+    """``move(cameras)``: yields each frame's index after moving the scene's camera there;
+    the camera goes back where it was afterwards (the scene is cached for later tasks)."""
+    from ..scenes import apply_camera, camera_of
+    home = camera_of(scene)
+
+    def move(cameras):
+        for k, cam in enumerate(cameras):
+            apply_camera(scene, cam)
+            yield k
+    try:
+        yield move
+    finally:
+        apply_camera(scene, home)
 
 
 def _median(xs: list[float | None]) -> float | None:
@@ -239,6 +271,68 @@ def _quality(reference_display: np.ndarray, image: np.ndarray, task: dict,
     return out
 
 
+def _sequence_row(scene, task: dict, reference: np.ndarray) -> dict:
+    """One sequence of ``[motion]`` (spec module docstring): each frame moved, fixated,
+    rendered and scored against its own reference; the row's time is the median frame time
+    after the first, its quality the mean over frames (+ ``jod_video``)."""
+    import mitsuba as mi
+    from ..render import to_display
+    motion, m = task["motion"], task["metrics"]
+    gazes, cameras = motion["gazes"], motion["cameras"]
+    n = len(gazes)
+    refs = reference if reference.ndim == 4 else np.broadcast_to(reference, (n,) + reference.shape)
+    spp, seed = task["spp"], task["seed"]
+    foveated = task["kind"] == "foveated"
+    if foveated:
+        from ..integrators.foveated import FoveatedIntegrator
+        integ = FoveatedIntegrator(nested=scene.integrator(), **task["options"],
+                                   gaze=tuple(gazes[0]), timing=True)
+    else:
+        from ..baselines import render_uniform
+        den = bool(task["options"]["denoise"])
+    times, shown, quality, rays = [], [], [], []
+    with _camera_path(scene) as move:
+        for k in move(cameras) if cameras else range(n):
+            frame_task = dict(task, gaze=gazes[k])
+            viewing = _viewing(scene, frame_task)
+            if foveated:
+                integ.gaze = tuple(gazes[k])
+                image = np.array(mi.render(scene, integrator=integ, spp=spp, seed=seed),
+                                 dtype=np.float32)
+                stats = integ.stats
+                times.append(stats["timings_ms"]["total"])
+                rays.append(stats["ray_fraction"])
+            else:
+                image, stats = render_uniform(scene, spp=spp, seed=seed, denoise=den)
+                times.append(stats["time_ms"])
+                rays.append(1.0)
+            ref_d = to_display(refs[k], m["exposure"])
+            shown.append((ref_d, to_display(image, m["exposure"])))
+            quality.append(_quality(ref_d, image, dict(frame_task, jod=False), viewing))
+    w, h = task["scene"]["width"], task["scene"]["height"]
+    row = {"task_id": task["task_id"], "scene": task["label"], "method": task["method"],
+           "seed": seed, "spp": spp, "width": w, "height": h, "repeats": 1,
+           "variant": task["variant"], "config": task["config"], "frame": n,
+           "rays": float(np.mean(rays)) * w * h, "ray_fraction": float(np.mean(rays)),
+           "samples": float(np.mean(rays)) * w * h * spp,
+           "time_ms": _median(times[1:])}
+    if foveated:
+        row.update(theta=task["options"]["theta"], sigma_p=task["options"]["sigma_p"],
+                   reconstruction=task["options"]["reconstruction"],
+                   history_hit_rate=integ.stats.get("history_hit_rate"))
+    for key in quality[0]:                      # nan (an empty region) stays nan
+        row[key] = float(np.mean([q[key] for q in quality]))
+    if task.get("jod"):
+        from ..perceptual import jod_video
+        viewing = _viewing(scene, task)
+        row["jod_video"] = jod_video(np.stack([r for r, _ in shown]),
+                                     np.stack([t for _, t in shown]), fixations=gazes,
+                                     fps=motion["fps"], ppd=viewing["ppd"],
+                                     fov_horizontal=viewing["fov"],
+                                     display=task["perceptual"]["display"])
+    return row
+
+
 def _foveated_frames(scene, task: dict, record: list[int]):
     import drjit as dr
     import mitsuba as mi
@@ -267,11 +361,14 @@ def _foveated_frames(scene, task: dict, record: list[int]):
 
 def run_task(task: dict, reference: np.ndarray) -> list[dict]:
     """Run one configuration; returns its rows (one per recorded frame not yet done: the
-    task's ``frames_todo``, default all of ``frames``) as plain dicts."""
+    task's ``frames_todo``, default all of ``frames``; one per sequence under ``[motion]``)
+    as plain dicts."""
     _prepare_worker(task)
     from ..render import to_display
     from .results import stage_columns
     scene = get_scene(task["scene"], task["variant"])
+    if task.get("motion") is not None:
+        return [_sequence_row(scene, task, reference)]
     ref_d = to_display(reference, task["metrics"]["exposure"])
     w, h = task["scene"]["width"], task["scene"]["height"]
     record = sorted(task.get("frames_todo") or task["frames"])
