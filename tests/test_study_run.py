@@ -378,6 +378,7 @@ def test_a_viewer_judges_the_fovea_in_degrees(tmp_path):
     ('[viewer]\n', "viewer.fov"),
     ('[metrics]\nfovea_deg = 5.0\n', "metrics.fovea_deg"),
     ('[viewer]\nfov = "sensor"\n[metrics]\nfovea_deg = 0\n', "metrics.fovea_deg"),
+    ('[viewer]\nfov = "sensor"\ndisplay = ""\n', "viewer.display"),
 ])
 def test_bad_viewer_tables_are_one_line(tmp_path, text, key):
     from foveated_mi.study import load_study
@@ -476,3 +477,11 @@ def test_bad_motion_tables_are_one_line(tmp_path, text, key):
     with pytest.raises(ParameterError) as e:
         load_study(study_file(tmp_path, base + text))
     assert key in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
+def test_a_viewer_sets_the_display():
+    from foveated_mi.study import parse_study
+    spec = parse_study({"scenes": [{"scene": "cornell-box"}],
+                        "viewer": {"fov": "sensor", "display": "standard_hmd"},
+                        "foveated": {"grid": {"reconstruction": ["voronoi"]}}})
+    assert spec.perceptual["display"] == "standard_hmd" and spec.metrics["viewer"] == "sensor"

@@ -39,6 +39,7 @@ Layout (every key optional except ``scenes``)::
     fov = "sensor"              #   the film spans the sensor's field of view (a headset): FLIP
                                 #   and JOD at the pixels per degree of the gaze, the fovea
                                 #   within metrics.fovea_deg of the gaze ray
+    display = "standard_hmd"    #   the display's photometry (as metrics.display)
 
     [motion]                    # rows are sequences instead of frames of a still view
     frames = 45                 #   frames per sequence (>= 2), shown at fps
@@ -234,7 +235,8 @@ def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
         if lab in labels[:i]:
             raise ctx.error(f"scenes[{i}].label", lab, "a label no other scene uses")
     metrics, perceptual = _metrics(ctx, data.get("metrics", {}))
-    metrics.update(_viewer(ctx, data.get("viewer"), metrics.pop("fovea_deg", None)))
+    metrics.update(_viewer(ctx, data.get("viewer"), metrics.pop("fovea_deg", None),
+                           perceptual))
     foveated = _foveated(ctx, data.get("foveated", {}))
     uniform = _uniform(ctx, data.get("uniform", {}), foveated)
     if not foveated and not uniform:
@@ -403,16 +405,23 @@ def _with_prefix(ctx: TableContext, prefix: str, parse):
         raise ctx.error(f"{prefix}.{key}", e.value, e.allowed) from None
 
 
-def _viewer(ctx: TableContext, table: Any, fovea_deg) -> dict:
+def _viewer(ctx: TableContext, table: Any, fovea_deg, perceptual: dict) -> dict:
     """The ``[viewer]`` table as metric settings (none without it, so the task ids of studies
-    written before it stay the same)."""
+    written before it stay the same); its ``display`` (the photometry of a FovVideoVDP
+    display model, e.g. ``standard_hmd``) goes into ``perceptual``."""
     if table is None:
         if fovea_deg is not None:
             raise ctx.error("metrics.fovea_deg", fovea_deg, "a [viewer] table with fov = "
                             "\"sensor\" (degrees need the sensor's field of view)")
         return {}
     table = dict(ctx.table("viewer", table))
-    ctx.known("viewer", table, ("fov",))
+    ctx.known("viewer", table, ("fov", "display"))
+    if "display" in table:
+        from ..perceptual import check_display
+        try:
+            perceptual["display"] = check_display("viewer.display", table["display"])
+        except ParameterError as e:
+            raise ctx.rename(e) from None
     if "fov" not in table:
         raise ctx.error("viewer.fov", None, "\"sensor\" (the film spans the sensor's field "
                         "of view)")
