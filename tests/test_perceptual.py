@@ -90,3 +90,15 @@ def test_jod_as_the_pareto_axis_needs_the_column(tmp_path):
         run_study(str(p), out=str(tmp_path / "o"), progress=False, echo=None)
     assert e.value.name == "metric" and "\n" not in str(e.value)
     assert ("jod = true" in str(e.value)) == perceptual.available()
+
+
+def test_jod_video_as_the_pareto_axis_needs_motion(tmp_path):
+    from foveated_mi.study import load_study, run_study
+    p = tmp_path / "s.toml"
+    p.write_text('metric = "jod_video"\nsize = [16, 16]\n[[scenes]]\nscene = "cornell-box"\n'
+                 '[foveated.grid]\nreconstruction = ["voronoi"]\n')
+    assert load_study(str(p)).metric == "jod_video"
+    with pytest.raises(ParameterError) as e:
+        run_study(str(p), out=str(tmp_path / "o"), progress=False, echo=None)
+    assert e.value.name == "metric" and "\n" not in str(e.value)
+    assert ("[motion]" in str(e.value)) == perceptual.available()

@@ -50,7 +50,7 @@ def columns(extra: Iterable[str] = ()) -> list[str]:
 
 #: Columns read back as numbers by :func:`read_rows` (besides any ``*_ms`` column).
 NUMERIC_COLUMNS = frozenset(("seed", "theta", "sigma_p", "spp", "frame", "rays",
-                             "ray_fraction", "samples", "time_ms", *COMPARE_KEYS, "jod",
+                             "ray_fraction", "samples", "time_ms", *COMPARE_KEYS, "jod", "jod_video",
                              "history_hit_rate", "width", "height", "repeats"))
 
 

@@ -166,12 +166,18 @@ def _prepare_study(study, out, executor, scheduler, size, metric, variant):
     if metric is not None and metric not in QUALITY_COLUMNS:
         raise ParameterError("--metric", metric, "one of " + ", ".join(QUALITY_COLUMNS))
     metric = metric or spec.metric
-    if metric == "jod":
+    if metric in ("jod", "jod_video"):
         from .. import perceptual
-        if not (spec.perceptual.get("jod") and perceptual.available()):
-            why = "[metrics] jod = true" if perceptual.available() else \
-                f"FovVideoVDP installed ({perceptual.INSTALL_HINT})"
-            raise ParameterError("metric", metric, f"a column this study computes: jod "
+        motion = any(s.motion is not None for s in spec.scenes)
+        if not (spec.perceptual.get("jod") and perceptual.available()) or \
+                (metric == "jod_video") != motion:
+            if not perceptual.available():
+                why = f"FovVideoVDP installed ({perceptual.INSTALL_HINT})"
+            elif not spec.perceptual.get("jod"):
+                why = "[metrics] jod = true"
+            else:
+                why = "a study without [motion]" if metric == "jod" else "a [motion] table"
+            raise ParameterError("metric", metric, f"a column this study computes: {metric} "
                                  f"needs {why}")
     out_dir = out if out is not None else os.path.join("out", "studies", spec.name)
     if executor == "local" or scheduler is None:

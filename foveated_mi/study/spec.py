@@ -110,8 +110,8 @@ __all__ = ["StudySpec", "SceneSpec", "load_study", "parse_study", "QUALITY_COLUM
            "DEFAULT_INTEGRATOR", "DEFAULT_REFERENCE_SPP"]
 
 #: Columns a study can put on the Pareto plot's quality axis (``jod``: with the perceptual
-#: extra and ``[metrics] jod = true``).
-QUALITY_COLUMNS = (*COMPARE_KEYS, "jod")
+#: extra and ``[metrics] jod = true``; ``jod_video``: also under ``[motion]``).
+QUALITY_COLUMNS = (*COMPARE_KEYS, "jod", "jod_video")
 DEFAULT_INTEGRATOR = {"type": "path", "max_depth": 8}
 DEFAULT_REFERENCE_SPP = 256
 DEFAULT_METRICS = {"theta": 0.1, "sigma_p": 0.8, "ppd": 67.0, "flip": True, "exposure": 0.0}
