@@ -458,6 +458,7 @@ def test_a_study_in_motion_scores_sequences(tmp_path):
     assert camera_of(scene)["origin"] == pytest.approx([0.0, 0.0, 3.9], abs=1e-5)
 
 
+@pytest.mark.slow   # the EXR study above keeps a Dask run in `make test`
 @needs_dask
 def test_a_study_in_motion_gives_the_same_quality_on_dask(tmp_path):
     a, _, _, _ = _motion_rows(tmp_path)
