@@ -187,7 +187,7 @@ def pixel_filter_warning(given: dict[str, Any], options: dict[str, Any]) -> str 
 
 
 def _sampling_laws():
-    from .viewer import SAMPLING_LAWS
+    from .frame.sampling import SAMPLING_LAWS
     return SAMPLING_LAWS
 
 
@@ -244,14 +244,14 @@ _SCHEMA: tuple[Option, ...] = (
            doc="Foveal radius in degrees of eccentricity (the angle between a pixel's ray "
            "and the gaze ray, from the sensor's projection): P = σp there, whatever the "
            "camera's field of view; 0 (the default, and ``paper``) uses ``theta`` in film "
-           "units. See :mod:`foveated_mi.viewer`"),
+           "units. See :mod:`foveated_mi.frame.sampling`"),
     Option("sampling_law", "kwon", "string", "the sampling probability: kwon (Eq. 1) or "
            "acuity (density following the eye's minimum angle of resolution, ray_budget)",
            choices=lambda: _sampling_laws(),
            doc="``kwon``: Eq. 1 of the paper (in degrees with ``theta_deg``); ``acuity``: "
            "the density follows the minimum angle of resolution, "
            "ω(e) = 1/48° + 0.022 e (Guenter et al. 2012), scaled to ``ray_budget`` with "
-           "the floor ``acuity_floor``. See :mod:`foveated_mi.viewer`"),
+           "the floor ``acuity_floor``. See :mod:`foveated_mi.frame.sampling`"),
     Option("ray_budget", 0.1, "float", "rays per frame as a fraction of the film's pixels "
            "(sampling_law = acuity)", lo=0.0, hi=1.0, lo_open=True),
     Option("acuity_floor", 0.01, "float", "smallest probability of the acuity law "

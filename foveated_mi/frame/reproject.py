@@ -20,11 +20,10 @@ the lowest index); the others miss and start afresh. A still camera maps every p
 itself, so it keeps all of its history. Measured on the Cornell box at 64² after the camera
 moves closer (``closer``), against a fresh first frame of the new view
 (``benchmarks/bench_camera_move.py``, seeds 5-7, ``docs/results/camera_move_nearest.json``
-and ``camera_move.json``): with nearest
-reads the first frame after the move was up to 4.0 dB below it (``guided``, 32 frames of
-history, linear values) and the third still 2.8 dB below; with exclusive reads the first was
-at most 0.15 dB below it and the third at least 0.2 dB above it, for ``guided`` and ``oidn``
-after 1, 4 and 32 frames of history.
+and ``camera_move.json``): with nearest reads the first frame after the move was up to
+4.0 dB below it (``guided``, 32 frames of history, linear values) and the third still 2.8 dB
+below; with exclusive reads the first was at most 0.15 dB below it and the third at least
+0.2 dB above it, for ``guided`` and ``oidn`` after 1, 4 and 32 frames of history.
 
 A background pixel (the primary ray escapes) reprojects by its direction, the point at
 infinity :math:`q = M_{t-1} (d, 0)`, as in temporal anti-aliasing; it is a hit when the
@@ -125,9 +124,8 @@ def reprojection_map(position: mi.Point3f, hit: mi.Bool, history: History | None
     ``direction`` (the primary rays' directions) lets background pixels reproject; without
     it they always miss. ``mode``: one of :data:`REPROJECTION_MODES`. ``reach``: the film
     filter's reach in pixels (:func:`~foveated_mi.frame.gbuffer.filter_reach`)."""
-    if mode not in REPROJECTION_MODES:
-        from ..validate import check_choice
-        check_choice("reprojection", mode, REPROJECTION_MODES)
+    from ..validate import check_choice
+    check_choice("reprojection", mode, REPROJECTION_MODES)
     n = width * height
     if history is None:
         return ReprojectionMap(dr.zeros(mi.Point2f, n), dr.zeros(mi.Bool, n), dr.zeros(mi.UInt32, n),

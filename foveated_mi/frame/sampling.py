@@ -22,6 +22,29 @@ implements the text's Eq. (1) with the corrected :math:`w`.
 The sampling map is one uniform draw per pixel per frame (:math:`u_i < P(d_i)`), plus rays
 forced on depth discontinuities (the Voronoi fill would otherwise smear silhouettes), plus
 the pixel under the gaze (clamped to the film), so a frame never has an empty wavefront.
+
+**Sampling laws** (option ``sampling_law``; the eccentricity in degrees comes from
+:mod:`foveated_mi.viewer`):
+
+``kwon`` (Kwon et al. 2019, Eq. 1)
+    :math:`P = 1 / (w x^2 + 1)` with :math:`w = (1/\sigma_p - 1) / \theta^2`. With
+    ``theta_deg = 0`` (the default, and ``paper``), :math:`x` is the film distance to the gaze
+    over half the film diagonal and :math:`\theta` the option ``theta``, as in the paper. With
+    ``theta_deg > 0``, :math:`x` is the eccentricity in degrees and :math:`\theta` =
+    ``theta_deg``: P = σp at that eccentricity whatever the camera's field of view.
+``acuity``
+    The density follows the minimum angle of resolution, which grows linearly with
+    eccentricity: :math:`\omega(e) = \omega_0 + m e` (Guenter et al. 2012, "Foveated 3D
+    Graphics", §3: :math:`\omega_0 = 1/48°`, :math:`m` between 0.022 and 0.034 °/°; here
+    :data:`ACUITY_SLOPE` = 0.022, the low end, which keeps the most periphery). Rays per
+    unit solid angle fall as :math:`\omega^{-2}`:
+
+    .. math::  P(e) = \operatorname{clip}\big(k\,(\omega_0 / \omega(e))^2,\; P_{\min},\; 1\big),
+
+    with :math:`k` set so that the expected rays are ``ray_budget`` times the film's pixels and
+    :math:`P_{\min}` = ``acuity_floor``. :math:`k` is solved on the device (a few sums over
+    the film, no read back to the host), so a moving gaze or camera compiles and waits for
+    nothing.
 """
 from __future__ import annotations
 
@@ -32,6 +55,15 @@ import mitsuba as mi
 
 from ._shared import pixel_coords
 from ..validate import check_range
+
+#: Minimum angle of resolution at the fovea, degrees (Guenter et al. 2012, §3).
+ACUITY_OMEGA0 = 1.0 / 48.0
+#: Its growth per degree of eccentricity (Guenter et al. 2012 fit 0.022-0.034; the low end).
+ACUITY_SLOPE = 0.022
+#: Fixed-point steps that solve for the acuity law's scale (each one sum over the film).
+ACUITY_STEPS = 8
+
+SAMPLING_LAWS = ("kwon", "acuity")
 
 #: Parameter ranges; the README's table of extremes is generated from the same numbers.
 THETA_RANGE = (0.0, math.inf)      # open at 0
@@ -147,7 +179,7 @@ def sampling_map(width: int, height: int, *, gaze: tuple[float, float], theta: f
 
     ``gaze``, ``θ``, ``σp`` and ``seed`` enter the kernel as opaque values: changing them
     from frame to frame compiles nothing new. ``probability``: P per pixel from another law
-    (:mod:`foveated_mi.viewer`) instead of Eq. 1 in film units.
+    (:func:`probability_in_degrees`) instead of Eq. 1 in film units.
     """
     idx, x, y = pixel_coords(width, height)
     g = mi.Point2f(dr.opaque(mi.Float, gaze[0]), dr.opaque(mi.Float, gaze[1]))
@@ -212,20 +244,67 @@ def expected_fraction(width: int, height: int, *, gaze: tuple[float, float], the
     return float(np.mean(p))
 
 
+def kwon_in_degrees(ecc: mi.Float, theta_deg: float, sigma_p: float) -> mi.Float:
+    """Eq. 1 of the paper with the eccentricity in degrees: P = σp at ``theta_deg``."""
+    return sampling_probability(ecc, dr.opaque(mi.Float, sampling_weight(theta_deg, sigma_p)))
+
+
+def acuity_shape(ecc: mi.Float) -> mi.Float:
+    """:math:`(\\omega_0 / \\omega(e))^2`, 1 at the gaze (module docstring)."""
+    return dr.square(ACUITY_OMEGA0 / (ACUITY_OMEGA0 + ACUITY_SLOPE * ecc))
+
+
+def acuity_probability(ecc: mi.Float, ray_budget: float, floor: float) -> mi.Float:
+    """The acuity law's P per pixel, its scale solved on the device so that the mean of P is
+    ``ray_budget`` (or as near as the floor and the cap of 1 allow).
+
+    Fixed point on :math:`k`: with :math:`S(k)` the pixels whose :math:`k g` lies inside
+    :math:`(P_{\\min}, 1)`, :math:`k \\leftarrow (B - N_1 - P_{\\min} N_{\\min}) / \\sum_S g`, the
+    scale that spends what the clipped pixels leave on the others; it converges in a few
+    steps from the unclipped solution."""
+    n = dr.width(ecc)
+    g = acuity_shape(ecc)
+    dr.schedule(g)
+    budget = dr.opaque(mi.Float, ray_budget * n)
+    lo = dr.opaque(mi.Float, floor)
+    k = budget / dr.sum(g)
+    for _ in range(ACUITY_STEPS):
+        kg = k * g                       # k: one lane on the device, broadcast
+        full, low = kg >= 1.0, kg <= lo
+        rest = budget - dr.sum(dr.select(full, 1.0, 0.0)) - lo * dr.sum(dr.select(low, 1.0, 0.0))
+        mid = dr.sum(dr.select(full | low, 0.0, g))
+        k = dr.select(mid > 0, dr.maximum(rest, 0.0) / dr.maximum(mid, 1e-30), k)
+        dr.schedule(k)
+    return dr.clip(k * g, lo, 1.0)
+
+
+def probability_in_degrees(directions: mi.Vector3f, sensor: mi.Sensor, o: dict) -> mi.Float:
+    """P per pixel of the options' law in degrees (``theta_deg`` or ``acuity``)."""
+    from ..viewer import eccentricity
+    ecc = eccentricity(directions, sensor, o["gaze"])
+    if o["sampling_law"] == "acuity":
+        return acuity_probability(ecc, o["ray_budget"], o["acuity_floor"])
+    return kwon_in_degrees(ecc, o["theta_deg"], o["sigma_p"])
+
+
+def in_degrees(o: dict) -> bool:
+    """Whether the options' sampling law works in degrees (needs the sensor's projection)."""
+    return o["sampling_law"] == "acuity" or o["theta_deg"] > 0
+
+
 def sampling_pass(gb, width: int, height: int, o: dict, seed, emitting: mi.Bool | None = None,
                   sensor: mi.Sensor | None = None):
     """The sampling pass of a frame: depth edges (none when ``edge_threshold = 0``), plus the
     emission edges ``emitting`` when given, and the sampling map of the options ``o`` drawn
-    with ``seed`` (a law in degrees needs the ``sensor``: :mod:`foveated_mi.viewer`).
+    with ``seed`` (a law in degrees needs the ``sensor``).
     Returns ``(edges, sampling_map, probability)``."""
-    from .. import viewer
     prob = None
-    if viewer.in_degrees(o):
+    if in_degrees(o):
         if sensor is None:
             from ..validate import ParameterError
             raise ParameterError("sensor", None, "the frame's sensor for a sampling law in "
                                  "degrees (theta_deg or sampling_law = 'acuity')")
-        prob = viewer.sampling_probability(gb.direction, sensor, o)
+        prob = probability_in_degrees(gb.direction, sensor, o)
     edges = None
     if o["edge_threshold"] > 0:
         edges = depth_edges(gb.depth, gb.hit, width, height, o["edge_threshold"],
