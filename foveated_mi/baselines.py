@@ -124,11 +124,9 @@ def _uniform_pixel_filter(scene, integ, pixel_filter: str, denoise: bool) -> str
                              "pixel_filter = 'splat'")
     box = scene.sensors()[0].film().rfilter().is_box_filter()
     if pixel_filter == "splat" and denoise and not box:
-        warnings.warn("pixel_filter = 'splat' with denoise = True: splatting through the "
-                      "film's filter spreads each sample's noise over neighbouring pixels "
-                      "and OIDN, which expects independent per-pixel noise, leaves it in "
-                      "place; leave pixel_filter = 'auto' or set it to 'importance'",
-                      UserWarning, stacklevel=3)
+        from .options import splat_warning
+        warnings.warn(splat_warning("denoise = True", "OIDN", "= 'auto'"), UserWarning,
+                      stacklevel=3)
     if pixel_filter == "auto":
         pixel_filter = "importance" if denoise and sampling else "splat"
     # On a box film both estimators are the per-pixel mean: mi.render's is the same frame.

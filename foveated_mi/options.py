@@ -180,10 +180,16 @@ def pixel_filter_warning(given: dict[str, Any], options: dict[str, Any]) -> str 
     denoiser = options["denoiser"]
     if given.get("pixel_filter") != "splat" or not denoisers()[denoiser].independent_noise:
         return None
-    return (f"pixel_filter = 'splat' with denoiser = '{denoiser}': on a film whose filter is "
-            f"not box, splatting spreads each sample's noise over neighbouring pixels and "
-            f"{denoiser}, which expects independent per-pixel noise, leaves it in place; leave "
-            f"pixel_filter unset (auto) or set it to 'importance'")
+    return splat_warning(f"denoiser = '{denoiser}'", denoiser, "unset (auto)")
+
+
+def splat_warning(setting: str, denoiser: str, instead: str) -> str:
+    """The one-line warning for splatted samples fed to ``denoiser`` (``setting``: what the
+    user set beside ``pixel_filter = 'splat'``; ``instead``: the value to leave it at)."""
+    return (f"pixel_filter = 'splat' with {setting}: on a film whose filter is not box, "
+            f"splatting spreads each sample's noise over neighbouring pixels and {denoiser}, "
+            f"which expects independent per-pixel noise, leaves it in place; leave "
+            f"pixel_filter {instead} or set it to 'importance'")
 
 
 def _sampling_laws():
