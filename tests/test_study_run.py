@@ -477,3 +477,17 @@ def test_a_viewer_sets_the_display():
                         "viewer": {"fov": "sensor", "display": "standard_hmd"},
                         "foveated": {"grid": {"reconstruction": ["voronoi"]}}})
     assert spec.perceptual["display"] == "standard_hmd" and spec.metrics["viewer"] == "sensor"
+
+
+def test_a_gaze_path_alone_keeps_one_reference_and_the_camera(tmp_path):
+    """[motion] with a gaze path and no camera path: one reference for every frame, and the
+    camera is never touched (any sensor will do)."""
+    camera = MOTION[MOTION.index("[motion.camera]"):MOTION.index("[motion.gaze]")]
+    text = MOTION.replace(camera, "")
+    assert "[motion.camera]" not in text and "[motion.gaze]" in text
+    res = run_study(study_file(tmp_path, text, "gaze.toml"), out=str(tmp_path / "o"),
+                    progress=False, echo=None)
+    assert res.failed == []
+    [ref] = [np.load(p) for p in (tmp_path / "o" / "references").glob("*.npy")]
+    assert ref.shape == (16, 24, 3)
+    assert all(r["frame"] == 6 for r in read_rows(res.results_path))

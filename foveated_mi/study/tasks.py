@@ -291,7 +291,8 @@ def _sequence_row(scene, task: dict, reference: np.ndarray) -> dict:
         from ..baselines import render_uniform
         den = bool(task["options"]["denoise"])
     times, shown, quality, rays = [], [], [], []
-    with _camera_path(scene) as move:
+    # A still camera (a gaze path only) is never moved, whatever the sensor.
+    with _camera_path(scene) if cameras else contextlib.nullcontext() as move:
         for k in move(cameras) if cameras else range(n):
             frame_task = dict(task, gaze=gazes[k])
             viewing = _viewing(scene, frame_task)
