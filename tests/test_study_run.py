@@ -479,9 +479,15 @@ def test_a_viewer_sets_the_display():
     assert spec.perceptual["display"] == "standard_hmd" and spec.metrics["viewer"] == "sensor"
 
 
-def test_a_gaze_path_alone_keeps_one_reference_and_the_camera(tmp_path):
+def test_a_gaze_path_alone_keeps_one_reference_and_the_camera(tmp_path, monkeypatch):
     """[motion] with a gaze path and no camera path: one reference for every frame, and the
-    camera is never touched (any sensor will do)."""
+    camera is never read or moved (a sensor that is not perspective will do)."""
+    import foveated_mi.scenes as scenes
+
+    def untouchable(*_):
+        raise AssertionError("the camera was read or moved")
+    monkeypatch.setattr(scenes, "camera_of", untouchable)
+    monkeypatch.setattr(scenes, "apply_camera", untouchable)
     camera = MOTION[MOTION.index("[motion.camera]"):MOTION.index("[motion.gaze]")]
     text = MOTION.replace(camera, "")
     assert "[motion.camera]" not in text and "[motion.gaze]" in text
