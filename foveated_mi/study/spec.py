@@ -378,17 +378,17 @@ def _motion(ctx: TableContext, table: Any, scenes: list, base_dir: str) -> list:
         fps = check_range("motion.fps", fps, 0.0, 1000.0, lo_open=True)
     except ParameterError as e:
         raise ctx.rename(e) from None
+    gaze = _with_prefix(ctx, "motion", lambda c: _gaze(c, table["gaze"], base_dir)) \
+        if "gaze" in table else None
     out = []
     for scene in scenes:
         camera = None
         if "camera" in table and not scene.missing:
+            # each scene's own camera fills the keys a keyframe leaves out
             path = _with_prefix(ctx, "motion", lambda c: _camera(c, table["camera"], scene.source))
             camera = [path.at(k / fps) for k in range(frames)]
-        if "gaze" in table:
-            gaze = _with_prefix(ctx, "motion", lambda c: _gaze(c, table["gaze"], base_dir))
-            gazes = [list(map(float, gaze.at(k / fps))) for k in range(frames)]
-        else:
-            gazes = [list(scene.gaze)] * frames
+        gazes = [list(map(float, gaze.at(k / fps))) for k in range(frames)] if gaze else \
+            [list(scene.gaze)] * frames
         out.append(replace(scene, motion={"fps": fps, "cameras": camera, "gazes": gazes}))
     return out
 
