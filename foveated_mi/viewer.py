@@ -42,7 +42,7 @@ def eccentricity(directions: mi.Vector3f, sensor: mi.Sensor, gaze) -> mi.Float:
 def pixel_eccentricity(sensor: mi.Sensor, gaze) -> mi.Float:
     """Eccentricity in degrees of every pixel centre of ``sensor``'s film (row-major)."""
     from .frame.gbuffer import film_size, primary_rays
-    from .frame._shared import pixel_coords
+    from .kernels import pixel_coords
     width, height = film_size(sensor)
     _, x, y = pixel_coords(width, height)
     ray = primary_rays(sensor, x, y, width, height)

@@ -7,8 +7,8 @@ import drjit as dr
 import mitsuba as mi
 
 import tolerances
-from foveated_mi.frame._shared import (HeldLevel, Surface, for_each_tap, gather4, held_filter, packet,
-                              surface_energy)
+from foveated_mi.kernels import (HeldLevel, Surface, for_each_tap, gather4, held_filter, packet,
+                                 surface_energy)
 
 W, H = 24, 16
 N = W * H

@@ -18,7 +18,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..validate import check_int
-from ._shared import pixel_coords
+from ..kernels import pixel_coords
 
 
 class GBuffer(NamedTuple):

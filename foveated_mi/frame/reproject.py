@@ -58,7 +58,7 @@ from typing import NamedTuple
 import drjit as dr
 import mitsuba as mi
 
-from ._shared import pixel_coords
+from ..kernels import pixel_coords
 
 
 @dataclass

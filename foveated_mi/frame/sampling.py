@@ -53,7 +53,7 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-from ._shared import pixel_coords
+from ..kernels import pixel_coords
 from ..validate import check_range
 
 #: Minimum angle of resolution at the fovea, degrees (Guenter et al. 2012, §3).

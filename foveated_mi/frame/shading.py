@@ -47,7 +47,7 @@ from typing import NamedTuple
 import drjit as dr
 import mitsuba as mi
 
-from ._shared import luminance
+from ..kernels import luminance
 from .pixel_filter import FilterSample, FilterSampler
 
 

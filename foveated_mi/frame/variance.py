@@ -26,7 +26,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from ._shared import NO_SITE, Surface, for_each_tap, gather4, luminance, packet
+from ..kernels import NO_SITE, Surface, for_each_tap, gather4, luminance, packet
 
 #: Below this many samples a pixel's own moments are replaced by the spatial estimate.
 MIN_TEMPORAL_SAMPLES = 4.0

@@ -64,7 +64,7 @@ from ..frame import reorder as _reorder
 from ..frame import reproject as _reproject
 from ..frame import sampling as _sampling
 from ..frame import shading as _shading
-from ..frame._shared import NO_SITE
+from ..kernels import NO_SITE
 from ..frame.formation import FormationInput, FrozenFormation, form_image, replayable
 from ..frame.pixel_filter import FilterSampler
 from ..frame.scene_state import GeometryCache, SceneState, scene_state

@@ -15,7 +15,7 @@ registers in one line beside its code (:func:`register_denoiser`,
 """
 from __future__ import annotations
 
-from ..frame._shared import B3_SPLINE
+from ..kernels import B3_SPLINE
 from .registry import (DENOISERS, DenoiseInput, Denoised, register_denoiser,
                        unregister_denoiser)
 from .tonemap import MAX_EXPOSURE, TONEMAPPERS, check_exposure, register_tonemapper, tonemap

@@ -78,7 +78,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..validate import ParameterError, check_int, check_sigma  # noqa: F401 (re-exported)
-from ..frame._shared import HeldLevel, Surface, gather4, held_filter, packet
+from ..kernels import HeldLevel, Surface, gather4, held_filter, packet
 from .inverse import inverse_tonemap
 from .registry import DenoiseInput, Denoised, register_denoiser
 from .tonemap import as_color3f, tonemap

@@ -43,7 +43,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..frame import variance as _variance
-from ..frame._shared import HeldLevel, Surface, gather4, held_filter, packet, pixel_xy, surface_energy
+from ..kernels import HeldLevel, Surface, gather4, held_filter, packet, pixel_xy, surface_energy
 from ..validate import ParameterError, check_int, check_range
 from .registry import DenoiseInput, Denoised, register_denoiser
 

@@ -14,12 +14,13 @@ Example::
     nearest = jump_flood(shading_mask, W, H)
     interpolated = reconstruct("sibson", shading, shading_mask, nearest, W, H, max_radius=32)
 """
+from ..kernels import NO_SITE
 from .registry import RECONSTRUCTIONS, reconstruct, register_reconstruction, uses_guide
 # Registration order is the order of the choices.
 from .interpolate import discrete_sibson, fast_sibson, sibson, voronoi
 from .guided import Guide, guided
 from .stochastic import stochastic
-from .jfa import JFA_VARIANTS, NO_SITE, jfa_steps, jump_flood, voronoi_fill
+from .jfa import JFA_VARIANTS, jfa_steps, jump_flood, voronoi_fill
 from .sat import box_mean, box_sum, interleave_rgb0, summed_area_table
 
 __all__ = [

@@ -62,7 +62,7 @@ from typing import NamedTuple
 import drjit as dr
 import mitsuba as mi
 
-from ..frame._shared import HeldLevel, Surface, gather4, held_filter, packet, surface_energy
+from ..kernels import HeldLevel, Surface, gather4, held_filter, packet, surface_energy
 from ..validate import ParameterError, check_int, check_range
 from .jfa import check_buffer, check_film, voronoi_fill
 from .registry import register_reconstruction

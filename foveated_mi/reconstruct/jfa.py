@@ -39,7 +39,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from ..frame._shared import NO_SITE, pixel_xy
+from ..kernels import NO_SITE, pixel_xy
 from ..validate import ParameterError, check_choice, check_int
 
 

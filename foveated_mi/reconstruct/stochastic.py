@@ -38,7 +38,7 @@ import mitsuba as mi
 
 from ..validate import check_int, check_range
 from .guided import Guide, check_guided_inputs
-from .jfa import NO_SITE
+from ..kernels import NO_SITE
 from .registry import register_reconstruction
 
 #: Candidate on the same surface: cosine between normals and relative tangent-plane distance.
