@@ -56,7 +56,7 @@ Rules beyond the paper, so that no NaN can appear or spread:
   unchanged.
 
 ``iterations = 0`` returns the input. Each level is one kernel: a symbolic loop over the 5
-rows of taps, each row's 5 taps unrolled (:func:`~foveated_mi.frame._shared.for_each_tap`);
+rows of taps, each row's 5 taps unrolled (:func:`~foveated_mi.kernels.taps.for_each_tap`);
 the tap spacing and sigmas are opaque, so all levels and all sigma values share one compiled
 kernel.
 
@@ -189,7 +189,7 @@ def _atrous_level(c: mi.Color3f, surface: Surface, width: int, height: int, *, s
                   inv_c: mi.Float, inv_n: mi.Float, inv_x: mi.Float) -> mi.Color3f:
     """One à-trous level: one kernel walking the 25 taps (5 loop iterations of 5 unrolled
     taps: 25 unrolled copies need seconds of LLVM compile), with its weights held
-    (:func:`~foveated_mi.frame._shared.held_filter`). A tap reads three packets: colour + finiteness,
+    (:func:`~foveated_mi.kernels.held.held_filter`). A tap reads three packets: colour + finiteness,
     normal, position + hit; the colour it weighs with is the colour it filters."""
     dr.schedule(c)   # the previous level's result: its own kernel, read by every tap
     cd = dr.detach(c)

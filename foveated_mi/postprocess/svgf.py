@@ -103,7 +103,7 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
 
 def _level(c: mi.Color3f, var: mi.Float, surface: Surface, width: int, height: int, *, step,
            sl, inv_n, inv_x) -> tuple[mi.Color3f, mi.Float]:
-    """One level, its weights held (:func:`~foveated_mi.frame._shared.held_filter`), the variance
+    """One level, its weights held (:func:`~foveated_mi.kernels.held.held_filter`), the variance
     filtered alongside with the squared weights."""
     n = width * height
     dr.schedule(c, var)

@@ -172,7 +172,7 @@ def _level(num: mi.Color3f, den: mi.Float, surface: Surface, width: int, height:
            ) -> tuple[mi.Color3f, mi.Float, mi.Float]:
     """One level of the cascade: a symbolic loop over the 25 taps (one kernel per level
     size, shared by all levels: the spacing is opaque), with its weights held
-    (:func:`~foveated_mi.frame._shared.held_filter`): ``num`` carries the gradient, the sample weights
+    (:func:`~foveated_mi.kernels.held.held_filter`): ``num`` carries the gradient, the sample weights
     ``den`` and the kernel mass are accumulated alongside."""
     n = width * height
     dr.schedule(num, den)
