@@ -1,4 +1,4 @@
-"""The demodulation floor a_min (``foveated_mi.frame.demodulate.ALBEDO_FLOOR``), by measurement.
+"""The demodulation floor a_min (``foveated_mi.kernels.demodulation.ALBEDO_FLOOR``), measured.
 
 Quality only (no timing): display-referred PSNR of one foveated frame (history off, 2 spp) on
 the shared staircase scene against a 1024-spp reference, and the mean over four seeds on a
@@ -24,7 +24,7 @@ import foveated_mi  # noqa: E402,F401
 import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
 
-from foveated_mi.frame import demodulate as dm  # noqa: E402
+from foveated_mi.kernels import demodulation as dm  # noqa: E402
 from foveated_mi.baselines import render_reference  # noqa: E402
 from foveated_mi.integrators.foveated import FoveatedIntegrator  # noqa: E402
 from foveated_mi.metrics import compare, psnr  # noqa: E402

@@ -293,7 +293,7 @@ _SCHEMA: tuple[Option, ...] = (
            "were traced with it. See :func:`foveated_mi.frame.gbuffer.emission_edges`"),
     Option("demodulate", False, "bool", "reconstruct and filter irradiance (radiance / "
            "G-buffer albedo)", doc="Reconstruct and filter irradiance, albedo multiplied "
-           "back (:mod:`foveated_mi.frame.demodulate`)"),
+           "back (:mod:`foveated_mi.kernels.demodulation`)"),
     Option("reconstruction", "sibson", "string", "interpolation of the sparse shading buffer "
            "(§3.4)", choices=lambda: reconstructions(),
            doc="Interpolation of the sparse shading buffer (§3.4); ``guided`` and "

@@ -9,11 +9,11 @@ import pytest
 import tolerances
 import foveated_mi.denoise as denoise_mod
 from foveated_mi import options as opts_mod
-from foveated_mi.frame.demodulate import ALBEDO_FLOOR, demodulate, remodulate, safe_albedo
+from foveated_mi.kernels.demodulation import ALBEDO_FLOOR, demodulate, remodulate, safe_albedo
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.postprocess import svgf
 from foveated_mi.reconstruct import Guide, jump_flood, reconstruct
-from foveated_mi.frame.variance import estimate_variance, sample_variance
+from foveated_mi.kernels.variance import estimate_variance, sample_variance
 from foveated_mi.validate import ParameterError
 
 

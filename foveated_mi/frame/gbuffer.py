@@ -6,7 +6,7 @@ buffers are deterministic and the reprojection of a static camera is the identit
 With ``materials=True`` the pass also evaluates, at the primary hit, the diffuse albedo of the
 BSDF (``bsdf.eval_diffuse_reflectance``, as Mitsuba's ``aov`` integrator does) and the
 radiance emitted towards the camera (an area emitter at the hit, or the environment on a
-miss). Demodulation (:mod:`foveated_mi.frame.demodulate`) divides the traced radiance by the
+miss). Demodulation (:mod:`foveated_mi.kernels.demodulation`) divides the traced radiance by the
 albedo so that textures come from this full-resolution buffer, not from sparse samples.
 """
 from __future__ import annotations
@@ -51,7 +51,7 @@ def render_gbuffer(scene: mi.Scene, sensor: mi.Sensor, *, materials: bool = Fals
     ``emission`` only with ``materials=True``).
 
     Runs without gradient tracking: visibility is discrete, and the albedo and emission are
-    used as fixed weights of the image formation (see :mod:`foveated_mi.frame.demodulate`).
+    used as fixed weights of the image formation (see :mod:`foveated_mi.kernels.demodulation`).
     """
     width, height = film_size(sensor)
     with dr.suspend_grad():

@@ -16,7 +16,7 @@ import mitsuba as mi
 
 from ..postprocess import DENOISERS, DenoiseInput, Denoised
 from ..postprocess.registry import as_denoised
-from .demodulate import remodulate
+from ..kernels import remodulate
 from .gbuffer import GBuffer
 from .reconstruction import Reconstruction
 from .reproject import Resolved

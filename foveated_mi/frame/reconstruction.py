@@ -21,7 +21,7 @@ import mitsuba as mi
 from .. import reconstruct as rec
 from ..postprocess.inverse import inverse_tonemap
 from . import sampling as _sampling
-from .demodulate import demodulate
+from ..kernels import demodulate
 from .gbuffer import GBuffer
 from .reproject import Resolved
 

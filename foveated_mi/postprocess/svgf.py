@@ -4,7 +4,7 @@ The à-trous wavelet filter of Dammertz et al. 2010 with the edge-stopping funct
 *Spatiotemporal Variance-Guided Filtering* (Schied et al., HPG 2017): the colour weight is
 scaled by the local standard deviation of the noise, so the filter smooths where the estimate
 is noisy and keeps differences that exceed the noise. It runs on demodulated irradiance
-(:mod:`foveated_mi.frame.demodulate`), in linear units, before the albedo is multiplied back.
+(:mod:`foveated_mi.kernels.demodulation`), in linear units, before the albedo is multiplied back.
 
 Level :math:`i` (tap spacing :math:`2^i`, B3-spline taps :math:`h`):
 
@@ -42,7 +42,7 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-from ..frame import variance as _variance
+from ..kernels import variance as _variance
 from ..kernels import HeldLevel, Surface, gather4, held_filter, packet, pixel_xy, surface_energy
 from ..validate import ParameterError, check_int, check_range
 from .registry import DenoiseInput, Denoised, register_denoiser
@@ -75,7 +75,7 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
     """Variance-guided à-trous filter of ``color`` (see the module docstring).
 
     ``variance`` is the noise variance of each pixel's value (e.g. from
-    :func:`foveated_mi.frame.variance.estimate_variance`); 0 leaves a pixel's differences intact.
+    :func:`foveated_mi.kernels.variance.estimate_variance`); 0 leaves a pixel's differences intact.
     """
     n = width * height
     iterations = check_int("iterations", iterations, 0, 16)

@@ -24,8 +24,8 @@ new site appears near it, so the frame changes only where new samples arrive (a 
 afresh every frame made a learned denoiser's output, and the PSNR of a still view, jump by
 up to 2.4 dB from frame to frame).
 
-With demodulation (:mod:`foveated_mi.frame.demodulate`) the chosen site's irradiance is multiplied by
-the pixel's own albedo, so textures stay sharp. The output is a gather of site values with
+With demodulation (:mod:`foveated_mi.kernels.demodulation`) the chosen site's irradiance is
+multiplied by the pixel's own albedo, so textures stay sharp. The output is a gather of site values with
 indices fixed by the G-buffer and the seed: linear in the values, with the scatter-add of the
 gather as adjoint (Dr.Jit's reverse mode).
 """

@@ -26,7 +26,9 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from ..kernels import NO_SITE, Surface, for_each_tap, gather4, luminance, packet
+from .demodulation import safe_albedo
+from .pixels import NO_SITE, gather4, luminance, packet
+from .taps import Surface, for_each_tap
 
 #: Below this many samples a pixel's own moments are replaced by the spatial estimate.
 MIN_TEMPORAL_SAMPLES = 4.0
@@ -77,7 +79,6 @@ def estimate_variance(per_sample: mi.Float, count: mi.Float, mask: mi.Bool, near
                   dr.maximum(dr.detach(samples), n_site))
     var = dr.select(has & (n > 0), s2 / dr.select(n > 0, n, 1.0), 0.0)
     if albedo is not None:
-        from .demodulate import safe_albedo
         a = luminance(safe_albedo(albedo))
         var = var / dr.square(dr.maximum(a, 1e-3))
     return var
