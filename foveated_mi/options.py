@@ -469,6 +469,19 @@ def non_differentiable() -> dict[str, tuple[Callable[[dict], bool], str]]:
         options.get(o.name, o.default)), o.gradient) for o in opts}
 
 
+def _declare_non_differentiable() -> None:
+    """Declare the schema's rules (:func:`non_differentiable`) to the gradient pass, which
+    refuses a configuration by them (:func:`foveated_mi.frame.adjoint.check_differentiable`).
+    The options sit above the frame's passes: they hand the rules down, as a denoiser
+    registers itself, and the frame never imports the options."""
+    from .frame import adjoint
+    for name, (predicate, allowed) in non_differentiable().items():
+        adjoint.register_non_differentiable(name, predicate, allowed)
+
+
+_declare_non_differentiable()
+
+
 # -- docs -----------------------------------------------------------------------------------
 
 def parameter_table() -> str:

@@ -302,3 +302,15 @@ def test_non_differentiable_option_is_refused_in_one_line():
         assert "\n" not in str(e.value) and "clamp = 0.5" in str(e.value)
     finally:
         NON_DIFFERENTIABLE.pop("clamp")
+
+
+def test_the_option_schema_declares_its_rules_to_the_gradient_pass():
+    """``foveated_mi.options`` hands the schema's rules down at import, in the schema's order
+    (the frame does not import the options)."""
+    from foveated_mi.options import non_differentiable
+    rules = non_differentiable()
+    assert list(NON_DIFFERENTIABLE)[:len(rules)] == list(rules)
+    assert "tonemap_samples" in rules
+    with pytest.raises(ParameterError) as e:
+        check_differentiable({"tonemap_samples": True})
+    assert "\n" not in str(e.value) and "tonemap_samples" in str(e.value)

@@ -69,8 +69,9 @@ sample count, and a projective integrator's ``sppc``/``sppp``/``sppi`` apply as 
 are not differentiated: the adjoint is that of the unclamped estimator (Mitsuba's
 integrators have no clamp). What cannot be differentiated is declared in the option schema
 (:data:`foveated_mi.options.SCHEMA`: an option's ``differentiable`` predicate, a denoiser's
-registration); :func:`check_differentiable` then refuses the configuration in one line.
-:func:`register_non_differentiable` adds a predicate of its own (tests).
+registration), which hands its rules down at import with :func:`register_non_differentiable`
+(this module never imports the options); :func:`check_differentiable` then refuses the
+configuration in one line. A test may register a predicate of its own.
 """
 from __future__ import annotations
 
@@ -85,15 +86,15 @@ from . import Frame
 from . import shading as _shading
 from .pixel_filter import FilterSampler, SplatFootprint
 from .traced_sensor import TracedSensors
-from ..options import non_differentiable
 from ..validate import ParameterError
 
 # -- configurations that cannot be differentiated -------------------------------------------
 
-#: option -> (predicate on the validated options, what a differentiable run needs), from the
-#: option schema (:func:`foveated_mi.options.non_differentiable`: ``tonemap_samples``, and a
+#: option -> (predicate on the validated options, what a differentiable run needs), in
+#: registration order. :mod:`foveated_mi.options` registers the schema's rules when it is
+#: imported (:func:`foveated_mi.options.non_differentiable`: ``tonemap_samples``, and a
 #: denoiser registered with ``differentiable=False``).
-NON_DIFFERENTIABLE: dict[str, tuple[Callable[[dict], bool], str]] = non_differentiable()
+NON_DIFFERENTIABLE: dict[str, tuple[Callable[[dict], bool], str]] = {}
 
 
 def register_non_differentiable(option: str, predicate: Callable[[dict], bool],
