@@ -14,16 +14,20 @@ learn of it from :data:`DENOISERS`. The post-processing pass
 """
 from __future__ import annotations
 
-from typing import Any, Callable, NamedTuple
+from typing import TYPE_CHECKING, Any, Callable, NamedTuple
 
 import mitsuba as mi
+
+if TYPE_CHECKING:  # the frame's types, for readers and checkers: no import at run time
+    from ..frame.gbuffer import GBuffer
+    from ..frame.reproject import Resolved
 
 
 class DenoiseInput(NamedTuple):
     """What a denoiser may read of the frame (all flat per-pixel Dr.Jit buffers)."""
     image: mi.Color3f            #: the reconstructed image, in the denoiser's domain
-    gbuffer: Any                 #: :class:`foveated_mi.frame.gbuffer.GBuffer`
-    resolved: Any                #: the resolved shading buffer (mean, moments, counts, mask)
+    gbuffer: GBuffer             #: the frame's G-buffer
+    resolved: Resolved           #: the resolved shading buffer (mean, moments, counts, mask)
     nearest: mi.UInt32           #: each pixel's nearest site
     width: int
     height: int
