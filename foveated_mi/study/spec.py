@@ -568,7 +568,6 @@ def _bools(ctx: TableContext, key: str, value: Any) -> list[bool]:
 
 
 def _uniform(ctx: TableContext, table: Any, foveated: list[dict]) -> list[dict]:
-    from ..options import DEFAULTS, PRESET_NAMES, PRESETS, resolve_pixel_filter
     table = dict(ctx.table("uniform", table))
     if not table:
         return []
@@ -585,7 +584,22 @@ def _uniform(ctx: TableContext, table: Any, foveated: list[dict]) -> list[dict]:
             if k in table:
                 raise ctx.error(f"uniform.{k}", table[k], "no history rows to apply to "
                                 "(uniform.history = [false, true] adds them)")
-    # history rows: the foveated configurations' presets and frames unless given
+    presets, frames = _uniform_history_of(ctx, table, foveated)
+    out = []
+    for s in dict.fromkeys(spps):
+        for d in dens:
+            if False in hists:
+                out.append({"spp": s, "denoise": d, "history": False})
+            if True in hists:
+                out += _uniform_history_rows(ctx, s, d, presets, frames)
+    return out
+
+
+def _uniform_history_of(ctx: TableContext, table: dict, foveated: list[dict]
+                        ) -> tuple[list[str], list[int]]:
+    """The presets and frames of the uniform history rows: the foveated configurations'
+    unless ``uniform.presets`` / ``uniform.frames`` are given."""
+    from ..options import PRESET_NAMES
     default_presets = list(dict.fromkeys(c["options"]["preset"] for c in foveated)) or ["auto"]
     presets = table.get("presets", default_presets)
     presets = presets if isinstance(presets, list) else [presets]
@@ -597,37 +611,38 @@ def _uniform(ctx: TableContext, table: Any, foveated: list[dict]) -> list[dict]:
         frames = _frames(ctx, "uniform.frames", table["frames"])
     else:
         frames = sorted({f for c in foveated for f in c["frames"]}) or [1]
-    out = []
-    for s in dict.fromkeys(spps):
-        for d in dens:
-            if False in hists:
-                out.append({"spp": s, "denoise": d, "history": False})
-            if True not in hists:
-                continue
-            seen = set()
-            for i, p in enumerate(presets):
-                given = {"preset": p, "sigma_p": 1.0, "history": True, "denoiser": "none"}
-                where = {k: f"uniform.presets[{i}]" for k in given}
-                # validated without the denoiser (OIDN may be missing here: the row is then
-                # skipped with a note, like uniform+oidn), which is then the preset's own
-                full = _check_options(ctx, "uniform", given, where)["options"]
-                given["preset"] = full["preset"]
-                denoiser = "none"
-                if d:
-                    denoiser = PRESETS[full["preset"]].get("denoiser", DEFAULTS["denoiser"])
-                    full["denoiser"] = denoiser
-                    # resolved above for denoiser none: the preset's denoiser decides it
-                    full["pixel_filter"] = resolve_pixel_filter(
-                        PRESETS[full["preset"]].get("pixel_filter", DEFAULTS["pixel_filter"]),
-                        denoiser)
-                    del given["denoiser"]
-                if denoiser == "none" and d:
-                    continue            # the preset has no denoiser: the same as denoise false
-                key = json.dumps(full, sort_keys=True)
-                if key in seen:
-                    continue
-                seen.add(key)
-                out.append({"spp": s, "denoise": d, "history": True, "preset": full["preset"],
-                            "denoiser": denoiser, "frames": frames, "options": full,
-                            "given": given})
+    return presets, frames
+
+
+def _uniform_history_rows(ctx: TableContext, s: int, d: bool, presets: list[str],
+                          frames: list[int]) -> list[dict]:
+    """The uniform history rows of ``spp = s`` and ``denoise = d``, one per preset (a preset
+    that resolves to the same options as an earlier one runs once)."""
+    from ..options import DEFAULTS, PRESETS, resolve_pixel_filter
+    out, seen = [], set()
+    for i, p in enumerate(presets):
+        given = {"preset": p, "sigma_p": 1.0, "history": True, "denoiser": "none"}
+        where = {k: f"uniform.presets[{i}]" for k in given}
+        # validated without the denoiser (OIDN may be missing here: the row is then
+        # skipped with a note, like uniform+oidn), which is then the preset's own
+        full = _check_options(ctx, "uniform", given, where)["options"]
+        given["preset"] = full["preset"]
+        denoiser = "none"
+        if d:
+            denoiser = PRESETS[full["preset"]].get("denoiser", DEFAULTS["denoiser"])
+            full["denoiser"] = denoiser
+            # resolved above for denoiser none: the preset's denoiser decides it
+            full["pixel_filter"] = resolve_pixel_filter(
+                PRESETS[full["preset"]].get("pixel_filter", DEFAULTS["pixel_filter"]),
+                denoiser)
+            del given["denoiser"]
+        if denoiser == "none" and d:
+            continue            # the preset has no denoiser: the same as denoise false
+        key = json.dumps(full, sort_keys=True)
+        if key in seen:
+            continue
+        seen.add(key)
+        out.append({"spp": s, "denoise": d, "history": True, "preset": full["preset"],
+                    "denoiser": denoiser, "frames": frames, "options": full,
+                    "given": given})
     return out

@@ -275,49 +275,14 @@ def _sequence_row(scene, task: dict, reference: np.ndarray) -> dict:
     """One sequence of ``[motion]`` (spec module docstring): each frame moved, fixated,
     rendered and scored against its own reference; the row's time is the median frame time
     after the first, its quality the mean over frames (+ ``jod_video``)."""
-    import mitsuba as mi
-    from ..render import to_display
-    motion, m = task["motion"], task["metrics"]
-    gazes, cameras = motion["gazes"], motion["cameras"]
+    motion = task["motion"]
+    gazes = motion["gazes"]
     n = len(gazes)
     refs = reference if reference.ndim == 4 else np.broadcast_to(reference, (n,) + reference.shape)
-    spp, seed = task["spp"], task["seed"]
-    foveated = task["kind"] == "foveated"
-    if foveated:
-        from ..integrators.foveated import FoveatedIntegrator
-        integ = FoveatedIntegrator(nested=scene.integrator(), **task["options"],
-                                   gaze=tuple(gazes[0]), timing=True)
-    else:
-        from ..baselines import render_uniform
-        den = bool(task["options"]["denoise"])
-    times, shown, quality, rays = [], [], [], []
-    # A still camera (a gaze path only) is never moved, whatever the sensor.
-    with _camera_path(scene) if cameras else contextlib.nullcontext() as move:
-        for k in move(cameras) if cameras else range(n):
-            frame_task = dict(task, gaze=gazes[k])
-            viewing = _viewing(scene, frame_task)
-            if foveated:
-                integ.gaze = tuple(gazes[k])
-                image = np.array(mi.render(scene, integrator=integ, spp=spp, seed=seed),
-                                 dtype=np.float32)
-                stats = integ.stats
-                times.append(stats["timings_ms"]["total"])
-                rays.append(stats["ray_fraction"])
-            else:
-                image, stats = render_uniform(scene, spp=spp, seed=seed, denoise=den)
-                times.append(stats["time_ms"])
-                rays.append(1.0)
-            ref_d = to_display(refs[k], m["exposure"])
-            shown.append((ref_d, to_display(image, m["exposure"])))
-            quality.append(_quality(ref_d, image, dict(frame_task, jod=False), viewing))
-    w, h = task["scene"]["width"], task["scene"]["height"]
-    row = {"task_id": task["task_id"], "scene": task["label"], "method": task["method"],
-           "seed": seed, "spp": spp, "width": w, "height": h, "repeats": 1,
-           "variant": task["variant"], "config": task["config"], "frame": n,
-           "rays": float(np.mean(rays)) * w * h, "ray_fraction": float(np.mean(rays)),
-           "samples": float(np.mean(rays)) * w * h * spp,
-           "time_ms": _median(times[1:])}
-    if foveated:
+    render, integ = _sequence_renderer(scene, task, gazes[0])
+    times, rays, shown, quality = _sequence_frames(scene, task, refs, render)
+    row = _sequence_summary(task, n, times, rays)
+    if integ is not None:
         row.update(theta=task["options"]["theta"], sigma_p=task["options"]["sigma_p"],
                    reconstruction=task["options"]["reconstruction"],
                    history_hit_rate=integ.stats.get("history_hit_rate"))
@@ -332,6 +297,68 @@ def _sequence_row(scene, task: dict, reference: np.ndarray) -> dict:
                                      fov_horizontal=viewing["fov"],
                                      display=task["perceptual"]["display"])
     return row
+
+
+def _sequence_renderer(scene, task: dict, gaze):
+    """``(render, integrator)`` for the frames of a sequence: ``render(gaze)`` renders one
+    frame and returns ``(image, time_ms, ray_fraction)``; ``integrator`` is the foveated
+    integrator the frames share (its history runs through the sequence), None for a uniform
+    row."""
+    import mitsuba as mi
+    spp, seed = task["spp"], task["seed"]
+    if task["kind"] == "foveated":
+        from ..integrators.foveated import FoveatedIntegrator
+        integ = FoveatedIntegrator(nested=scene.integrator(), **task["options"],
+                                   gaze=tuple(gaze), timing=True)
+
+        def render_foveated(g):
+            integ.gaze = tuple(g)
+            image = np.array(mi.render(scene, integrator=integ, spp=spp, seed=seed),
+                             dtype=np.float32)
+            stats = integ.stats
+            return image, stats["timings_ms"]["total"], stats["ray_fraction"]
+        return render_foveated, integ
+    from ..baselines import render_uniform
+    den = bool(task["options"]["denoise"])
+
+    def render_baseline(g):
+        image, stats = render_uniform(scene, spp=spp, seed=seed, denoise=den)
+        return image, stats["time_ms"], 1.0
+    return render_baseline, None
+
+
+def _sequence_frames(scene, task: dict, refs: np.ndarray, render) -> tuple:
+    """Each frame of the sequence moved, fixated, rendered (``render``, see
+    :func:`_sequence_renderer`) and scored against ``refs[k]``: ``(times, rays, shown,
+    quality)`` per frame, ``shown`` the (reference, image) pair in display values."""
+    from ..render import to_display
+    motion, m = task["motion"], task["metrics"]
+    gazes, cameras = motion["gazes"], motion["cameras"]
+    times, shown, quality, rays = [], [], [], []
+    # A still camera (a gaze path only) is never moved, whatever the sensor.
+    with _camera_path(scene) if cameras else contextlib.nullcontext() as move:
+        for k in move(cameras) if cameras else range(len(gazes)):
+            frame_task = dict(task, gaze=gazes[k])
+            viewing = _viewing(scene, frame_task)
+            image, time_ms, ray_fraction = render(gazes[k])
+            times.append(time_ms)
+            rays.append(ray_fraction)
+            ref_d = to_display(refs[k], m["exposure"])
+            shown.append((ref_d, to_display(image, m["exposure"])))
+            quality.append(_quality(ref_d, image, dict(frame_task, jod=False), viewing))
+    return times, rays, shown, quality
+
+
+def _sequence_summary(task: dict, n: int, times: list, rays: list) -> dict:
+    """The row's identity, rays and time (the median frame time after the first)."""
+    spp, seed = task["spp"], task["seed"]
+    w, h = task["scene"]["width"], task["scene"]["height"]
+    return {"task_id": task["task_id"], "scene": task["label"], "method": task["method"],
+            "seed": seed, "spp": spp, "width": w, "height": h, "repeats": 1,
+            "variant": task["variant"], "config": task["config"], "frame": n,
+            "rays": float(np.mean(rays)) * w * h, "ray_fraction": float(np.mean(rays)),
+            "samples": float(np.mean(rays)) * w * h * spp,
+            "time_ms": _median(times[1:])}
 
 
 def _foveated_frames(scene, task: dict, record: list[int]):
