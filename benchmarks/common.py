@@ -57,7 +57,8 @@ def preset_edges(scene, preset="paper", **options):
     """The edge rays the ``foveated`` integrator would force on ``scene``'s first sensor
     under ``preset`` (its edge detector and threshold; ``options`` override), or None when
     the threshold is 0."""
-    from foveated_mi.frame.gbuffer import film_size, render_gbuffer
+    from foveated_mi.frame.gbuffer import render_gbuffer
+    from foveated_mi.kernels import film_size
     from foveated_mi.options import validate_options
     from foveated_mi.frame.sampling import depth_edges
     o = validate_options({"preset": preset, **options})

@@ -41,8 +41,7 @@ def eccentricity(directions: mi.Vector3f, sensor: mi.Sensor, gaze) -> mi.Float:
 
 def pixel_eccentricity(sensor: mi.Sensor, gaze) -> mi.Float:
     """Eccentricity in degrees of every pixel centre of ``sensor``'s film (row-major)."""
-    from .frame.gbuffer import film_size, primary_rays
-    from .kernels import pixel_coords
+    from .kernels import film_size, pixel_coords, primary_rays
     width, height = film_size(sensor)
     _, x, y = pixel_coords(width, height)
     ray = primary_rays(sensor, x, y, width, height)
@@ -52,7 +51,7 @@ def pixel_eccentricity(sensor: mi.Sensor, gaze) -> mi.Float:
 def eccentricity_map(sensor: mi.Sensor, gaze):
     """:func:`pixel_eccentricity` as an (H, W) NumPy array, for metrics and plots (it reads
     the device: not for the per-frame path)."""
-    from .frame.gbuffer import film_size
+    from .kernels import film_size
     width, height = film_size(sensor)
     return pixel_eccentricity(sensor, gaze).numpy().reshape(height, width)
 
@@ -61,7 +60,7 @@ def pixels_per_degree(sensor: mi.Sensor, gaze=(0.5, 0.5)) -> float:
     """Pixels per degree of visual angle at film point ``gaze``, along the film's x axis: the
     inverse of the angle between the rays half a pixel either side of it (a viewer whose
     display spans the sensor's field of view, as in a headset)."""
-    from .frame.gbuffer import film_size
+    from .kernels import film_size
     width, _ = film_size(sensor)
     h = 0.5 / width
     a, b = (gaze_direction(sensor, (gaze[0] + d, gaze[1])) for d in (-h, h))

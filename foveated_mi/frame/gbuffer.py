@@ -18,7 +18,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..validate import check_int
-from ..kernels import pixel_coords
+from ..kernels import film_size, pixel_coords, primary_rays
 
 
 class GBuffer(NamedTuple):
@@ -30,20 +30,6 @@ class GBuffer(NamedTuple):
     direction: mi.Vector3f  #: unit direction of the primary ray (reprojects the background)
     albedo: mi.Color3f | None = None    #: diffuse albedo at the hit (0 on a miss)
     emission: mi.Color3f | None = None  #: emitted radiance towards the camera
-
-
-def film_size(sensor: mi.Sensor) -> tuple[int, int]:
-    size = sensor.film().crop_size()
-    return int(size[0]), int(size[1])
-
-
-def primary_rays(sensor: mi.Sensor, x: mi.UInt32, y: mi.UInt32,
-                 width: int, height: int) -> mi.RayDifferential3f:
-    """Rays through the pixel centres of ``(x, y)``."""
-    pos = mi.Point2f((mi.Float(x) + 0.5) / width, (mi.Float(y) + 0.5) / height)
-    ray, _ = sensor.sample_ray_differential(
-        time=sensor.shutter_open(), sample1=0.0, sample2=pos, sample3=mi.Point2f(0.5))
-    return ray
 
 
 def render_gbuffer(scene: mi.Scene, sensor: mi.Sensor, *, materials: bool = False) -> GBuffer:

@@ -1,5 +1,6 @@
-"""Pixels as Dr.Jit sees them: the index ``i = y * W + x`` and its coordinates, luminance, the
-"no site" mark of a Jump Flooding map, and packets.
+"""Pixels as Dr.Jit sees them: the index ``i = y * W + x`` and its coordinates, the film's size
+and the rays through the pixel centres, luminance, the "no site" mark of a Jump Flooding map,
+and packets.
 
 **Packets.** A tap reads several buffers at ``q``. Four values of a pixel stored side by side
 (:func:`packet`) are gathered as one packet: one vector load per lane on the LLVM backend
@@ -35,6 +36,20 @@ def pixel_xy(width: int, height: int) -> tuple[mi.Int32, mi.Int32]:
     idx = dr.arange(mi.UInt32, width * height)
     y = idx // width
     return mi.Int32(idx - y * width), mi.Int32(y)
+
+
+def film_size(sensor: mi.Sensor) -> tuple[int, int]:
+    size = sensor.film().crop_size()
+    return int(size[0]), int(size[1])
+
+
+def primary_rays(sensor: mi.Sensor, x: mi.UInt32, y: mi.UInt32,
+                 width: int, height: int) -> mi.RayDifferential3f:
+    """Rays through the pixel centres of ``(x, y)``."""
+    pos = mi.Point2f((mi.Float(x) + 0.5) / width, (mi.Float(y) + 0.5) / height)
+    ray, _ = sensor.sample_ray_differential(
+        time=sensor.shutter_open(), sample1=0.0, sample2=pos, sample3=mi.Point2f(0.5))
+    return ray
 
 
 def packet(x: mi.Float, y: mi.Float, z: mi.Float, w: mi.Float) -> mi.Float:
