@@ -144,7 +144,7 @@ def _level(c: mi.Color3f, var: mi.Float, surface: Surface, width: int, height: i
 
 def svgf_stage(ctx: DenoiseInput) -> Denoised:
     """The ``svgf`` denoiser of a frame: the noise variance of each pixel's value
-    (:mod:`foveated_mi.frame.variance`), then :func:`svgf` on the reconstruction's values."""
+    (:mod:`foveated_mi.kernels.variance`), then :func:`svgf` on the reconstruction's values."""
     o, gb, res = ctx.options, ctx.gbuffer, ctx.resolved
     levels = o["atrous_iterations"]
     if levels == 0:
