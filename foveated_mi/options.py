@@ -207,6 +207,12 @@ def _jfa_variants():
     return JFA_VARIANTS
 
 
+def formations():
+    """The formation registry (:data:`foveated_mi.frame.formation.FORMATIONS`)."""
+    from .frame.formation import FORMATIONS
+    return FORMATIONS
+
+
 def reconstructions():
     """The reconstruction registry (:data:`foveated_mi.reconstruct.RECONSTRUCTIONS`)."""
     from .reconstruct import RECONSTRUCTIONS
@@ -294,6 +300,11 @@ _SCHEMA: tuple[Option, ...] = (
     Option("demodulate", False, "bool", "reconstruct and filter irradiance (radiance / "
            "G-buffer albedo)", doc="Reconstruct and filter irradiance, albedo multiplied "
            "back (:mod:`foveated_mi.kernels.demodulation`)"),
+    Option("formation", "film", "string", "the image formation after the trace",
+           choices=lambda: formations(),
+           doc="The image formation after the trace (:mod:`foveated_mi.frame.formation`): "
+           "``film`` resolves the history, reconstructs and post-processes on the film's "
+           "pixels (§3.4-3.5)"),
     Option("reconstruction", "sibson", "string", "interpolation of the sparse shading buffer "
            "(§3.4)", choices=lambda: reconstructions(),
            doc="Interpolation of the sparse shading buffer (§3.4); ``guided`` and "
@@ -497,3 +508,50 @@ def parameter_table() -> str:
     lines += [" * - (nested)", "   - |integrator|",
               "   - Any sampling integrator (default ``path``); XML allows it unnamed", ""]
     return "\n".join(lines)
+
+
+def from_properties(props) -> tuple[dict[str, Any], Any]:
+    """The options and the nested integrator of an XML ``<integrator type="foveated">``
+    (``mi.Properties``): each parameter must be an option of :data:`SCHEMA` (a ``<point>``
+    becomes ``(x, y)``), and at most one child a sampling integrator. Returns ``(options,
+    nested)``, ``nested`` None when the XML names none."""
+    import mitsuba as mi
+    options: dict[str, Any] = {}
+    nested = None
+    for name in props.keys():
+        if props.type(name) == mi.Properties.Type.Object:
+            obj = props.get(name)
+            if not isinstance(obj, mi.SamplingIntegrator):
+                raise ParameterError(f"nested integrator {name!r}", type(obj).__name__,
+                                     "a sampling integrator such as 'path'")
+            if nested is not None:
+                raise ParameterError(f"nested integrator {name!r}", type(obj).__name__,
+                                     "a single nested integrator")
+            nested = obj
+        elif name in SCHEMA:
+            v = props.get(name)
+            if SCHEMA[name].kind == "point":      # an XML <point>: x and y
+                v = (float(v[0]), float(v[1]))
+            options[name] = v
+        else:
+            raise ParameterError(name, props.get(name), "a parameter of the foveated "
+                                 "integrator: " + ", ".join(sorted(SCHEMA)))
+    return options, nested
+
+
+def gradient_refusal(given: dict[str, Any], options: dict[str, Any]) -> ParameterError | None:
+    """Why a gradient pass of a frame with these options would not be the gradient of the
+    image shown, as the one-line error to raise (None: it would be). ``given``: the options
+    the user set (the advice differs when the ``auto`` preset chose the denoiser)."""
+    from .frame.adjoint import refusal
+    error = refusal(options)
+    if error is None or error.name != "denoiser":
+        return error
+    # A gradient of another image than the one shown would mislead an optimisation.
+    denoiser = error.value
+    how = ("preset = 'auto' chose it for a frame rendered without gradients; render "
+           "the frame with mi.render(scene, params, ...) or set preset='guided'"
+           if given.get("preset", "auto") == "auto" and "denoiser" not in given else
+           "preset='guided' (or denoiser='svgf', 'atrous' or 'none') for gradients")
+    return ParameterError("denoiser", denoiser, f"a differentiable denoiser ({denoiser} "
+                          f"is not differentiable): {how}")

@@ -116,10 +116,42 @@ def test_frames_that_need_tracing_are_traced():
     assert dr.all(dr.isfinite(dr.grad(params[key])), axis=None)
 
 
-def test_options_left_out_of_the_key_are_options():
-    from foveated_mi.frame.formation import _NOT_KEYED
-    from foveated_mi.options import SCHEMA
-    assert set(_NOT_KEYED) <= set(SCHEMA), set(_NOT_KEYED) - set(SCHEMA)
+def test_the_replay_key_is_what_the_passes_declare():
+    from foveated_mi.frame.film import film_view
+    from foveated_mi.options import SCHEMA, validate_options
+    from foveated_mi.postprocess import DENOISERS
+    from foveated_mi.reconstruct import RECONSTRUCTIONS
+    for preset in ("paper", "guided"):
+        o = validate_options({"preset": preset})
+        view = film_view(64, 48, o)
+        assert set(view) - {"jfa_bound"} <= set(SCHEMA)
+        # What only the sampling and the launch read is not in it: a moving gaze under the
+        # same Jump Flooding bound replays the same recording.
+        assert not {"gaze", "theta", "timing", "reorder", "freeze", "map_seed"} & set(view)
+        moved = film_view(64, 48, {**o, "gaze": (0.3, 0.6), "map_seed": 4})
+        assert moved == view
+        # Each method's declared options are in it, and so is the denoiser's.
+        method = RECONSTRUCTIONS[o["reconstruction"]]
+        assert set(method.options.values()) <= set(view)
+        assert set(DENOISERS[o["denoiser"]].reads) <= set(view)
+
+
+def test_a_denoiser_sees_only_the_options_it_declares():
+    from foveated_mi.postprocess import Denoised, register_denoiser, unregister_denoiser
+    seen = {}
+
+    def peek(ctx):
+        seen.update(ctx.options)
+        return Denoised(ctx.image)
+    register_denoiser("peek", peek, differentiable=True, reads=("sigma_color",))
+    try:
+        scene = load_scene("cornell-box", width=24, height=20, spp=1,
+                           integrator={"type": "path", "max_depth": 2})
+        integ = FoveatedIntegrator(nested=scene.integrator(), preset="paper", denoiser="peek")
+        mi.render(scene, integrator=integ, seed=0)
+        assert seen == {"sigma_color": integ.options["sigma_color"]}
+    finally:
+        unregister_denoiser("peek")
 
 
 def test_a_collection_cannot_abort_a_recording(tmp_path):

@@ -110,7 +110,7 @@ def _frame_state(options, frames=1, spp=8):
     for k in range(frames):
         mi.render(sc, seed=k, spp=spp)
     primal = integ._primal
-    return integ, primal, integ._formation(primal)
+    return integ, primal, integ.formation()[0]
 
 
 def _formation_depth(integ) -> tuple[int, int]:

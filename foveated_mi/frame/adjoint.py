@@ -82,7 +82,7 @@ from typing import Any, Callable
 import drjit as dr
 import mitsuba as mi
 
-from . import Frame
+from .plan import FramePlan
 from . import shading as _shading
 from .pixel_filter import FilterSampler, SplatFootprint
 from .traced_sensor import TracedSensors
@@ -106,12 +106,20 @@ def register_non_differentiable(option: str, predicate: Callable[[dict], bool],
     NON_DIFFERENTIABLE[option] = (predicate, allowed)
 
 
-def check_differentiable(options: dict[str, Any]) -> None:
-    """Raise :class:`ParameterError` (one line) for the first option that makes the frame
-    non-differentiable."""
+def refusal(options: dict[str, Any]) -> ParameterError | None:
+    """The one-line error for the first option that makes the frame non-differentiable, or
+    None when nothing does."""
     for name, (predicate, allowed) in NON_DIFFERENTIABLE.items():
         if predicate(options):
-            raise ParameterError(name, options.get(name), allowed)
+            return ParameterError(name, options.get(name), allowed)
+    return None
+
+
+def check_differentiable(options: dict[str, Any]) -> None:
+    """Raise :func:`refusal`'s error, if any."""
+    error = refusal(options)
+    if error is not None:
+        raise error
 
 
 # -- integrator kinds -----------------------------------------------------------------------
@@ -255,7 +263,7 @@ class NestedAdjoint:
             self._footprints[key] = fp
         return fp
 
-    def _flat(self, frame: Frame, mask: mi.Bool, mode: str):
+    def _flat(self, frame: FramePlan, mask: mi.Bool, mode: str):
         """Traced pixels (host sync: the flat film's size is a Python int) and their sensor."""
         pixels = dr.compress(mask)
         if dr.width(pixels) == 0:
@@ -266,7 +274,7 @@ class NestedAdjoint:
         return pixels, sensor, layout
 
     # -- reverse mode
-    def backward(self, integrator, scene: mi.Scene, params, frame: Frame, mask: mi.Bool,
+    def backward(self, integrator, scene: mi.Scene, params, frame: FramePlan, mask: mi.Bool,
                  grad: mi.Color3f, seed, spp: int, options: dict[str, Any]) -> None:
         r"""Accumulate :math:`\sum_p \delta S(p)^{\mathsf T}\partial S(p)/\partial\pi` into the
         gradients of the scene parameters (``grad`` = :math:`\delta S`, one entry per pixel,
@@ -298,7 +306,7 @@ class NestedAdjoint:
                 integrator.render_backward(scene, params, full, src, seed, spp)
 
     # -- forward mode
-    def forward(self, integrator, scene: mi.Scene, params, frame: Frame, mask: mi.Bool, seed,
+    def forward(self, integrator, scene: mi.Scene, params, frame: FramePlan, mask: mi.Bool, seed,
                 spp: int, options: dict[str, Any]) -> mi.Color3f:
         r""":math:`\partial S(p)/\partial\pi\cdot\delta\pi` at the traced pixels (``mask``),
         zero elsewhere, for the tangents set on the scene parameters."""
@@ -328,7 +336,7 @@ class NestedAdjoint:
         return out
 
     @staticmethod
-    def _plain_value(integrator, scene, frame: Frame, seed, spp: int, options) -> mi.Color3f:
+    def _plain_value(integrator, scene, frame: FramePlan, seed, spp: int, options) -> mi.Color3f:
         """The frame's shading buffer traced again (gradients on): same wavefront, same
         camera-ray sampling and estimator, the gradient pass's seed and spp."""
         ro = frame.reordered

@@ -22,6 +22,15 @@ from .reconstruction import Reconstruction
 from .reproject import Resolved
 
 
+#: Options the post-processing pass reads besides those its denoiser declares.
+READS = ("denoiser", "demodulate", "clamp")
+
+
+def reads(o: dict[str, Any]) -> tuple[str, ...]:
+    """The options the post-processing pass reads with the denoiser of ``o``."""
+    return READS + DENOISERS[o["denoiser"]].reads
+
+
 class PostProcessed(NamedTuple):
     image: mi.Color3f                 #: the frame's radiance
     filled: mi.Color3f                #: Voronoi fill, radiance
@@ -36,8 +45,8 @@ def post_pass(recon: Reconstruction, resolved: Resolved, gb: GBuffer, width: int
     """The denoiser of ``o["denoiser"]`` and remodulation (module docstring)."""
     entry = DENOISERS[o["denoiser"]]
     run = entry.differentiable or not grad_pass
-    ctx = DenoiseInput(recon.interpolated, gb, resolved, recon.nearest, width, height, o,
-                       grad_pass)
+    ctx = DenoiseInput(recon.interpolated, gb, resolved, recon.nearest, width, height,
+                       {k: o[k] for k in entry.reads}, grad_pass, recon.samples)
     out = Denoised(recon.interpolated)
     if entry.demodulated and run:
         out = as_denoised(entry.fn(ctx))

@@ -26,10 +26,24 @@ from .gbuffer import GBuffer
 from .reproject import Resolved
 
 
+#: Options the reconstruction pass reads besides those its method declares.
+READS = ("reconstruction", "demodulate", "sigma_p", "jfa", "max_radius", "tonemap_samples",
+         "tonemap", "exposure")
+
+
 class Reconstruction(NamedTuple):
     nearest: mi.UInt32          #: each pixel's nearest site (Jump Flooding)
     filled: mi.Color3f          #: Voronoi fill
     interpolated: mi.Color3f    #: the reconstruction method's image
+    #: samples the method averaged per pixel, where it declares a number (else None)
+    samples: mi.Float | None = None
+
+
+def reads(o: dict[str, Any]) -> tuple[str, ...]:
+    """The options the reconstruction pass reads with the method of ``o``."""
+    method = rec.RECONSTRUCTIONS[o["reconstruction"]]
+    return READS + tuple(method.options.values()) + \
+        ((method.averages,) if method.averages else ())
 
 
 def reconstruction_pass(resolved: Resolved, gb: GBuffer, width: int, height: int,
@@ -44,7 +58,8 @@ def reconstruction_pass(resolved: Resolved, gb: GBuffer, width: int, height: int
     radiance = resolved.shading
     if o["demodulate"]:
         radiance = demodulate(radiance, gb.albedo, gb.emission)
-    guided = rec.uses_guide(o["reconstruction"])
+    method = rec.RECONSTRUCTIONS[o["reconstruction"]]
+    guided = method.guided
     # sigma_p = 1 traces every pixel: a paper interpolation is then the identity (a pixel
     # whose samples were all rejected stays 0, or keeps its history); a guided
     # reconstruction still averages noisy samples.
@@ -58,14 +73,16 @@ def reconstruction_pass(resolved: Resolved, gb: GBuffer, width: int, height: int
                           weight=resolved.count, emission_edge=emission_edges) \
             if guided else None
         interpolated = filled if o["reconstruction"] == "voronoi" else _interpolate(
-            radiance, resolved.mask, nearest, guide, seed, width, height, o)
+            method, radiance, resolved.mask, nearest, guide, seed, width, height, o)
     if o["tonemap_samples"]:
         # Display values so far: back to radiance, so every later stage and buffer means
         # what it means without the option (the à-trous pass maps them forth again,
         # exactly: the round trip is the identity below the operator's cap).
         filled = inverse_tonemap(filled, o["tonemap"], o["exposure"])
         interpolated = inverse_tonemap(interpolated, o["tonemap"], o["exposure"])
-    return Reconstruction(nearest, filled, interpolated)
+    samples = None if method.averages is None else \
+        dr.opaque(mi.Float, o[method.averages]) + dr.zeros(mi.Float, width * height)
+    return Reconstruction(nearest, filled, interpolated, samples)
 
 
 def _nearest_sites(mask: mi.Bool, width: int, height: int, o: dict[str, Any],
@@ -78,12 +95,13 @@ def _nearest_sites(mask: mi.Bool, width: int, height: int, o: dict[str, Any],
         return rec.jump_flood(mask, width, height, variant=o["jfa"], max_gap=max_gap)
 
 
-def _interpolate(values: mi.Color3f, mask: mi.Bool, nearest: mi.UInt32, guide, seed,
-                 width: int, height: int, o: dict[str, Any]) -> mi.Color3f:
-    """The reconstruction method's image (``guide``: for guided methods)."""
-    return rec.reconstruct(
-        o["reconstruction"], values, mask, nearest, width, height,
-        max_radius=o["max_radius"], guide=guide, levels=o["guided_levels"],
-        target_samples=o["target_samples"], jitter=o["stochastic_jitter"],
-        tries=o["stochastic_tries"], inclusive=o["sibson_inclusive"],
-        seed=_sampling.opaque_seed(seed) ^ 0x6A09E667)
+def _interpolate(method: rec.Method, values: mi.Color3f, mask: mi.Bool, nearest: mi.UInt32,
+                 guide, seed, width: int, height: int, o: dict[str, Any]) -> mi.Color3f:
+    """The reconstruction method's image, with the parameters it declares (``guide``: for
+    guided methods)."""
+    params = {kw: o[name] for kw, name in method.options.items()}
+    if method.guided:
+        params["guide"] = guide
+    if method.seeded:
+        params["seed"] = _sampling.opaque_seed(seed) ^ 0x6A09E667
+    return method.fn(values, mask, nearest, width, height, max_radius=o["max_radius"], **params)

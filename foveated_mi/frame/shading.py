@@ -48,6 +48,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..kernels import luminance
+from ..postprocess import tonemap as _tonemap
 from .pixel_filter import FilterSample, FilterSampler
 
 
@@ -66,7 +67,7 @@ class ShadingBuffer(NamedTuple):
     count: mi.Float     #: accepted samples behind ``value``
 
 
-class ShadingResult(NamedTuple):
+class TracedSamples(NamedTuple):
     """The traced samples, one lane per sample (``rays * spp`` lanes, pixel-major)."""
     radiance: mi.Color3f   #: accepted radiance of each sample (0 where rejected), weighted
     ok: mi.Bool            #: sample accepted (finite, active)
@@ -124,7 +125,7 @@ def camera_rays(sensor: mi.Sensor, sampler: mi.Sampler, pixels: mi.UInt32, width
 def trace_wavefront(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingIntegrator,
                     pixels: mi.UInt32, width: int, height: int, *, spp: int, seed,
                     active: mi.Bool | None = None, clamp: float = 1e4,
-                    filter_sampler: FilterSampler | None = None) -> ShadingResult:
+                    filter_sampler: FilterSampler | None = None) -> TracedSamples:
     """Trace ``spp`` camera rays through each pixel of ``pixels`` with ``integrator``.
 
     ``active`` (``reorder='none'``) masks lanes of a full-frame wavefront instead.
@@ -170,10 +171,10 @@ def trace_wavefront(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingI
     big = mi.UInt32(too_big)
     dr.schedule(bad, big)
     rejected, clamped = dr.sum(bad), dr.sum(big)
-    return ShadingResult(L, ok, fs.position, mi.UInt32(rejected), mi.UInt32(clamped))
+    return TracedSamples(L, ok, fs.position, mi.UInt32(rejected), mi.UInt32(clamped))
 
 
-def develop_mean(samples: ShadingResult, pixels: mi.UInt32, spp: int, n_pixels: int
+def develop_mean(samples: TracedSamples, pixels: mi.UInt32, spp: int, n_pixels: int
                  ) -> ShadingBuffer:
     """``importance`` mode: each traced pixel holds the mean of its accepted samples.
 
@@ -196,7 +197,7 @@ def develop_mean(samples: ShadingResult, pixels: mi.UInt32, spp: int, n_pixels: 
     return ShadingBuffer(value, mask, m2, count)
 
 
-def develop_splat(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.Film
+def develop_splat(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.Film
                   ) -> ShadingBuffer:
     """``splat`` mode: Mitsuba's film estimator :math:`\\sum f L / \\sum f` at the traced pixels.
 
@@ -225,7 +226,7 @@ def develop_splat(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.
     return ShadingBuffer(value, mask, moment, count)
 
 
-def _splat_sources(samples: ShadingResult, pixels: mi.UInt32, film: mi.Film):
+def _splat_sources(samples: TracedSamples, pixels: mi.UInt32, film: mi.Film):
     """What every traced pixel's gather reads: the ray of each pixel (:data:`_NO_RAY` where
     none), each sample's position in image-block pixels and its squared luminance, and the
     block's border."""
@@ -247,7 +248,7 @@ def _splat_sources(samples: ShadingResult, pixels: mi.UInt32, film: mi.Film):
     return ray_of, pos, lum2, border
 
 
-def _splat_gather(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.Film,
+def _splat_gather(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.Film,
                   ray_of, pos, lum2, border: int):
     """Per lane (ray x sample index): the filter-weighted sums of the samples of the same
     index that reach its pixel, from the traced pixels within the filter's reach."""
@@ -288,7 +289,15 @@ def _splat_gather(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.
     return acc, m2, wsum
 
 
-def develop(samples: ShadingResult, pixels: mi.UInt32, spp: int, film: mi.Film,
+def tonemap_samples(samples: TracedSamples, tonemap: str, exposure: float) -> TracedSamples:
+    """Each sample tone-mapped before it is developed (option ``tonemap_samples``: the
+    authors' order, display values averaged; the formation maps its result back to
+    radiance). Rejected samples stay 0."""
+    return samples._replace(radiance=dr.select(
+        samples.ok, _tonemap(samples.radiance, tonemap, exposure), 0.0))
+
+
+def develop(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.Film,
             mode: str) -> ShadingBuffer:
     """The sparse shading buffer of a frame's samples (``mode`` in :data:`PIXEL_FILTERS`)."""
     if mode == "splat" and not film.rfilter().is_box_filter():

@@ -235,4 +235,6 @@ def atrous_stage(ctx: DenoiseInput) -> Denoised:
     return Denoised(image, filtered=filtered, tonemapped=tonemapped)
 
 
-register_denoiser("atrous", atrous_stage, differentiable=True, replayable=True)
+register_denoiser("atrous", atrous_stage, differentiable=True, replayable=True,
+                  reads=("atrous_iterations", "sigma_color", "sigma_normal", "sigma_position",
+                         "tonemap", "exposure"))

@@ -139,4 +139,5 @@ def oidn_stage(ctx: DenoiseInput) -> Denoised:
 # Trained on independent per-pixel noise: splatted (correlated) noise is left in place.
 register_denoiser("oidn", oidn_stage, differentiable=False, materials=True,
                   independent_noise=True, available=lambda: _dn.oidn_available(),
-                  requirement=f"pyoidn installed ({_dn.INSTALL_HINT})")
+                  requirement=f"pyoidn installed ({_dn.INSTALL_HINT})",
+                  reads=("oidn_quality", "clamp"))

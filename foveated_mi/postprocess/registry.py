@@ -31,8 +31,10 @@ class DenoiseInput(NamedTuple):
     nearest: mi.UInt32           #: each pixel's nearest site
     width: int
     height: int
-    options: dict[str, Any]      #: the integrator's validated options
+    options: dict[str, Any]      #: the options it declared (``reads``), validated
     grad_pass: bool = False      #: a gradient pass runs the image formation again
+    #: samples the reconstruction averaged per pixel, where its method declares a number
+    samples: mi.Float | None = None
 
 
 class Denoised(NamedTuple):
@@ -54,6 +56,7 @@ class Denoiser(NamedTuple):
     requirement: str
     replayable: bool = False
     independent_noise: bool = False
+    reads: tuple[str, ...] = ()
 
 
 #: Denoiser name -> :class:`Denoiser`, in registration order.
@@ -64,7 +67,7 @@ def register_denoiser(name: str, fn: Callable[[DenoiseInput], Any], *, different
                       demodulated: bool = False, materials: bool = False,
                       display_values: bool = True, available: Callable[[], bool] | None = None,
                       requirement: str = "", replayable: bool = False,
-                      independent_noise: bool = False) -> None:
+                      independent_noise: bool = False, reads: tuple[str, ...] = ()) -> None:
     """Make ``fn`` the denoiser ``name`` (the option value ``denoiser = name``).
 
     ``differentiable``: a gradient pass may differentiate it (else a gradient pass of a
@@ -77,10 +80,11 @@ def register_denoiser(name: str, fn: Callable[[DenoiseInput], Any], *, different
     Dr.Jit arithmetic only (no host call, no read of a value), so its kernels may be recorded
     once and replayed (:mod:`foveated_mi.frame.formation`). ``independent_noise``: it expects
     each pixel's noise independent of its neighbours' (a network trained on such noise), so
-    ``pixel_filter = "auto"`` gives it filter importance sampling instead of splatting."""
+    ``pixel_filter = "auto"`` gives it filter importance sampling instead of splatting.
+    ``reads``: the options it reads (``ctx.options`` holds exactly these)."""
     DENOISERS[name] = Denoiser(fn, bool(differentiable), bool(demodulated), bool(materials),
                                bool(display_values), available, requirement, bool(replayable),
-                               bool(independent_noise))
+                               bool(independent_noise), tuple(reads))
 
 
 def unregister_denoiser(name: str) -> None:

@@ -154,8 +154,7 @@ def svgf_stage(ctx: DenoiseInput) -> Denoised:
         _variance.sample_variance(res.shading, res.moment2, res.count, res.mask, gb.normal,
                                   gb.hit, width, height),
         res.count, res.mask, ctx.nearest,
-        samples=(dr.opaque(mi.Float, o["target_samples"]) + dr.zeros(mi.Float, width * height)
-                 if o["reconstruction"] == "guided" else None),
+        samples=ctx.samples,
         albedo=gb.albedo if o["demodulate"] else None)
     filtered = svgf(ctx.image, variance, gb.normal, gb.position, gb.hit, width, height,
                     iterations=levels, sigma_luminance=o["sigma_luminance"])
@@ -164,4 +163,5 @@ def svgf_stage(ctx: DenoiseInput) -> Denoised:
 
 # Models the noise of radiance, so not on display values (tonemap_samples).
 register_denoiser("svgf", svgf_stage, differentiable=True, demodulated=True,
-                  display_values=False, replayable=True)
+                  display_values=False, replayable=True,
+                  reads=("atrous_iterations", "sigma_luminance", "demodulate"))

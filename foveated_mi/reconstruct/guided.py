@@ -201,4 +201,6 @@ def _level(num: mi.Color3f, den: mi.Float, surface: Surface, width: int, height:
     return n_acc, d_acc, g_acc
 
 
-register_reconstruction("guided", guided)
+register_reconstruction("guided", guided, guided=True,
+                        options={"levels": "guided_levels", "target_samples": "target_samples"},
+                        averages="target_samples")

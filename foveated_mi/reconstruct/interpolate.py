@@ -351,6 +351,6 @@ def fast_sibson(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, wid
 
 
 register_reconstruction("voronoi", voronoi)
-register_reconstruction("sibson", sibson)
+register_reconstruction("sibson", sibson, options={"inclusive": "sibson_inclusive"})
 register_reconstruction("discrete_sibson", discrete_sibson)
 register_reconstruction("fast_sibson", fast_sibson)

@@ -1,32 +1,58 @@
-"""The reconstruction registry: method name -> function (docs/ARCHITECTURE.md).
+"""The reconstruction registry: method name -> function and what it declares (docs/ARCHITECTURE.md).
 
 Every method has the signature ``fn(shading, site_mask, nearest, width, height, *,
-max_radius=32, ...) -> mi.Color3f``. A method that also declares a ``guide`` keyword gets the
-frame's :class:`~foveated_mi.reconstruct.guided.Guide` (G-buffer and sample counts); the
-dispatcher passes each method only the keyword parameters it declares. A new method is one
-function plus one registration line beside it, ``register_reconstruction("name", fn)``; the
-options, the CLI and the docs learn of it from :data:`RECONSTRUCTIONS`.
+max_radius=32, ...) -> mi.Color3f``. It registers beside its code with what it reads::
+
+    register_reconstruction("guided", guided, guided=True,
+                            options={"levels": "guided_levels", ...}, averages="target_samples")
+
+``guided``: it takes the frame's :class:`~foveated_mi.reconstruct.guided.Guide` (G-buffer and
+sample counts) as ``guide``; ``seeded``: it takes the fill's ``seed``; ``options``: its keyword
+parameters, each set from the option named (the reconstruction pass passes exactly these);
+``averages``: the option whose value is the number of samples it averages per pixel, which a
+variance-guided denoiser reads. The options, the CLI and the docs learn of a method from
+:data:`RECONSTRUCTIONS`.
 """
 from __future__ import annotations
 
-import inspect
+from typing import Callable, NamedTuple
 
 import mitsuba as mi
 
 from ..validate import check_choice, check_int
 
-#: Method name -> function, in registration order.
-RECONSTRUCTIONS: dict = {}
+
+class Method(NamedTuple):
+    """A registered reconstruction method (see :func:`register_reconstruction`)."""
+    fn: Callable[..., mi.Color3f]
+    guided: bool
+    seeded: bool
+    options: dict[str, str]        #: keyword parameter -> the option that sets it
+    averages: str | None
+
+    @property
+    def keywords(self) -> set[str]:
+        """The keyword parameters it takes besides ``max_radius``."""
+        return set(self.options) | ({"guide"} if self.guided else set()) \
+            | ({"seed"} if self.seeded else set())
 
 
-def register_reconstruction(name: str, fn) -> None:
-    """Make ``fn`` the reconstruction method ``name`` (``reconstruction = name``)."""
-    RECONSTRUCTIONS[name] = fn
+#: Method name -> :class:`Method`, in registration order.
+RECONSTRUCTIONS: dict[str, Method] = {}
+
+
+def register_reconstruction(name: str, fn: Callable[..., mi.Color3f], *, guided: bool = False,
+                            seeded: bool = False, options: dict[str, str] | None = None,
+                            averages: str | None = None) -> None:
+    """Make ``fn`` the reconstruction method ``name`` (``reconstruction = name``), with what it
+    reads (module docstring)."""
+    RECONSTRUCTIONS[name] = Method(fn, bool(guided), bool(seeded), dict(options or {}),
+                                   averages)
 
 
 def uses_guide(method: str) -> bool:
     """Whether ``method`` takes the G-buffer guide (and so needs no noise-free sites)."""
-    return "guide" in inspect.signature(RECONSTRUCTIONS[method]).parameters
+    return RECONSTRUCTIONS[method].guided
 
 
 def reconstruct(method: str, shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32,
@@ -34,12 +60,11 @@ def reconstruct(method: str, shading: mi.Color3f, site_mask: mi.Bool, nearest: m
                 **params) -> mi.Color3f:
     """Interpolate with the method named ``method`` (a key of :data:`RECONSTRUCTIONS`).
 
-    ``guide`` and each of ``params`` go to the methods that declare them (see
-    :func:`uses_guide`); the others are ignored, so a caller can offer every method's
-    parameters at once."""
+    ``guide`` and each of ``params`` go to the methods that declare them; the others are
+    ignored, so a caller can offer every method's parameters at once."""
     check_choice("method", method, RECONSTRUCTIONS)
     max_radius = check_int("max_radius", max_radius, 1)
-    fn = RECONSTRUCTIONS[method]
-    accepted = inspect.signature(fn).parameters
-    extra = {k: v for k, v in {"guide": guide, **params}.items() if k in accepted}
-    return fn(shading, site_mask, nearest, width, height, max_radius=max_radius, **extra)
+    entry = RECONSTRUCTIONS[method]
+    offered = {"guide": guide, **params}
+    extra = {k: v for k, v in offered.items() if k in entry.keywords}
+    return entry.fn(shading, site_mask, nearest, width, height, max_radius=max_radius, **extra)

@@ -120,4 +120,5 @@ def stochastic(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, widt
     return dr.gather(mi.Color3f, value, chosen, has_site)
 
 
-register_reconstruction("stochastic", stochastic)
+register_reconstruction("stochastic", stochastic, guided=True, seeded=True,
+                        options={"jitter": "stochastic_jitter", "tries": "stochastic_tries"})

@@ -1,0 +1,109 @@
+"""The gradient pass's glue: the primal frame it differentiates, and the passes in order.
+
+``mi.render(scene, params)`` followed by ``dr.backward`` / ``dr.forward`` differentiates the
+last primal frame (:class:`PrimalFrame`): same sampling map, sites, weights and history. A
+primal frame that a gradient pass will follow forms its image on an AD copy of its traced
+values and keeps that graph (:func:`foveated_mi.frame.adjoint.record`), so the gradient pass
+only traverses it; without a kept graph (a direct call, a second pass) the formation runs
+again. The traced pixels' gradient then goes to the nested integrator's own adjoint
+(:class:`foveated_mi.frame.adjoint.NestedAdjoint`). The maths is in
+:mod:`foveated_mi.frame.adjoint`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import drjit as dr
+import mitsuba as mi
+
+from ..timing import StageTimer
+from ..validate import ParameterError
+from . import adjoint as _adjoint
+from .formation import Formed, FrozenFormation, FormationInput, form, replayable
+from .plan import FramePlan
+from .shading import ShadingBuffer
+
+
+@dataclass
+class PrimalFrame:
+    """What a gradient pass needs of its primal frame."""
+    plan: FramePlan
+    shading: ShadingBuffer            #: traced pixels' values (the primal's, detached)
+    scene_id: int
+    #: ``(x, image)``: the image formation's derivative graph from the traced values ``x``,
+    #: kept by a primal frame rendered for gradients; the first gradient pass consumes it.
+    recorded: tuple[mi.Color3f, mi.Color3f] | None = None
+
+    def take_recorded(self):
+        rec, self.recorded = self.recorded, None
+        return rec
+
+
+def formation_input(plan: FramePlan) -> FormationInput:
+    """The buffers of ``plan`` that a formation reads."""
+    return FormationInput(plan.gbuffer, plan.reprojection, plan.history, plan.width,
+                          plan.height, plan.spp, plan.fill_seed, plan.emission_edges)
+
+
+def form_primal(plan: FramePlan, shading: ShadingBuffer, o: dict[str, Any], timer: StageTimer,
+                frozen: FrozenFormation, record: bool) -> tuple[Formed, tuple | None]:
+    """A primal frame's image: ``(formed, recorded)``. With ``record`` (a gradient pass will
+    follow and its denoiser is differentiable) the derivative graph is kept; image and
+    buffers are detached either way (the history never carries a gradient into the next
+    frame). Otherwise the frozen replay forms it where nothing needs the passes traced."""
+    inp = formation_input(plan)
+    if not record:
+        if replayable(o, timer):
+            return frozen(shading, inp, o), None
+        return form(shading, inp, o, timer), None
+    x, formed = _adjoint.record(
+        lambda v: form(shading._replace(value=v), inp, o, timer, grad_pass=True),
+        shading.value)
+    return _adjoint.detached(formed), (x, formed.image)
+
+
+def formation_of(primal: PrimalFrame, o: dict[str, Any]) -> Callable[[mi.Color3f], mi.Color3f]:
+    """The primal frame's image as a function of its traced values, every weight held."""
+    inp = formation_input(primal.plan)
+
+    def image(value):
+        shading = primal.shading._replace(value=value)
+        return form(shading, inp, o, StageTimer(False), grad_pass=True).image
+    return image
+
+
+def _graph(primal: PrimalFrame, o: dict[str, Any]) -> tuple[mi.Color3f, mi.Color3f]:
+    """``(x, image)``: the graph the primal frame kept (consumed), else formed again."""
+    rec = primal.take_recorded()
+    return rec if rec is not None else _adjoint.record(formation_of(primal, o),
+                                                       primal.shading.value)
+
+
+def _to_color(tensor, plan: FramePlan, name: str) -> mi.Color3f:
+    shape = tuple(tensor.shape)
+    if shape != (plan.height, plan.width, 3):
+        raise ParameterError(name, f"<tensor of shape {shape}>",
+                             f"a tensor of shape {(plan.height, plan.width, 3)}")
+    return dr.unravel(mi.Color3f, tensor.array)
+
+
+def backward(nested_adjoint: _adjoint.NestedAdjoint, integrator, scene, params,
+             primal: PrimalFrame, grad_in, seed, spp, o: dict[str, Any]) -> None:
+    """Reverse mode: ``grad_in`` (H, W, 3) through the formation to the traced pixels, then
+    through the nested integrator's adjoint into the parameters' gradients."""
+    grad = _to_color(grad_in, primal.plan, "grad_in")
+    delta = _adjoint.recorded_backward(*_graph(primal, o), grad)
+    nested_adjoint.backward(integrator, scene, params, primal.plan, primal.shading.mask,
+                            delta, seed, spp, o)
+
+
+def forward(nested_adjoint: _adjoint.NestedAdjoint, integrator, scene, params,
+            primal: PrimalFrame, seed, spp, o: dict[str, Any]) -> mi.TensorXf:
+    """Forward mode: the traced pixels' tangent from the nested integrator, through the
+    formation. Returns the image tangent (H, W, 3)."""
+    plan = primal.plan
+    tangent = nested_adjoint.forward(integrator, scene, params, plan, primal.shading.mask,
+                                     seed, spp, o)
+    image = _adjoint.recorded_forward(*_graph(primal, o), tangent)
+    return mi.TensorXf(dr.ravel(image), shape=(plan.height, plan.width, 3))

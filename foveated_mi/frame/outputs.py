@@ -1,0 +1,118 @@
+"""What a primal frame leaves behind: its named buffers with their grids, and its stats.
+
+:func:`frame_outputs` gathers the plan's buffers (on the film grid) and the formation's (on
+the grid it declares) into a :class:`FrameOutputs`, with the frame's counters as device
+values. Reading :attr:`FrameOutputs.stats` or :meth:`FrameOutputs.export` is what
+synchronises; the frame itself never waits for them.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import drjit as dr
+import mitsuba as mi
+
+from ..kernels import NO_SITE
+from ..kernels.grid import Grid
+from ..timing import StageTimer
+from ..validate import ParameterError
+from .formation import FORMATIONS, Formed
+from .plan import FramePlan
+from .reorder import Reordered
+from .shading import TracedSamples
+
+
+class FrameOutputs:
+    """A frame's buffers (``buffers``: name -> flat array), the grid each lives on, and its
+    stats."""
+
+    def __init__(self, buffers: dict[str, Any], grids: dict[str, Grid],
+                 stats_raw: dict[str, Any]):
+        self.buffers = buffers
+        self.grids = grids
+        self._stats_raw = stats_raw
+        self._stats: dict[str, Any] | None = None
+
+    @property
+    def stats(self) -> dict[str, Any]:
+        """Stats as plain Python values (reading them synchronises)."""
+        if self._stats is None:
+            s = {}
+            for k, v in self._stats_raw.items():
+                if isinstance(v, (mi.UInt32, mi.Int32, mi.Float, mi.Bool)) or dr.is_array_v(v):
+                    v = v[0] if dr.width(v) == 1 else v
+                    v = int(v) if not isinstance(v, float) else float(v)
+                s[k] = v
+            if s:
+                s["ray_fraction"] = s["rays"] / s["pixels"]
+                s["edge_fraction"] = s["edge_rays"] / s["pixels"]
+                s["history_hit_rate"] = s["history_hits"] / s["pixels"]
+            self._stats = s
+        return dict(self._stats)
+
+    def export(self, name: str):
+        """Buffer ``name`` as a NumPy array (H, W, C), or (H, W) for scalars, on its grid.
+
+        ``nearest`` comes back as the (x, y) cell coordinates of each cell's site (-1 where
+        there is none); ``reprojection_map`` as (x, y, hit)."""
+        import numpy as np
+        if name not in self.buffers:
+            raise ParameterError("buffer", name, "one of " + ", ".join(sorted(self.buffers)))
+        v = self.buffers[name]
+        if isinstance(v, Reordered):
+            v = v.reordered_map
+        if v is None:
+            return None
+        grid = self.grids[name]
+        w, h = grid.width, grid.height
+        if name == "nearest":
+            idx = v.numpy().astype(np.int64)
+            none = idx == NO_SITE
+            out = np.stack([idx % w, idx // w], -1).astype(np.float32)
+            out[none] = -1
+            return out.reshape(h, w, 2)
+        if name == "reprojection_map":
+            c = v.coords.numpy() if hasattr(v.coords, "numpy") else np.array(v.coords)
+            return np.concatenate([np.asarray(c).T.reshape(h, w, 2),
+                                   v.hit.numpy().reshape(h, w, 1).astype(np.float32)], -1)
+        if name in ("wavefront", "row_counts"):
+            return v.numpy()
+        arr = np.asarray(v.numpy() if hasattr(v, "numpy") else v)
+        if arr.ndim == 2 and arr.shape[0] in (2, 3):
+            return arr.T.reshape(h, w, arr.shape[0])
+        return arr.reshape(h, w)
+
+
+def frame_outputs(plan: FramePlan, samples: TracedSamples, formed: Formed,
+                  o: dict[str, Any], timer: StageTimer, index: int) -> FrameOutputs:
+    """The buffers and stats of primal frame number ``index`` (module docstring)."""
+    gb, ro, reproj = plan.gbuffer, plan.reordered, plan.reprojection
+    entry = FORMATIONS[o["formation"]]
+    film = Grid.film(plan.width, plan.height)
+    grid = entry.grid(plan.width, plan.height, o)
+    planned = {
+        "position": gb.position, "normal": gb.normal, "depth": gb.depth, "hit": gb.hit,
+        "probability": plan.probability, "edges": plan.edges,
+        "sampling_map": plan.sampling_map, "reprojection_map": reproj,
+        # R is built on request only (buffer("reordered_map")): the launch does not need it.
+        "wavefront": ro.wavefront, "reordered_map": ro, "row_counts": ro.row_counts,
+    }
+    buffers = {**planned, **formed.buffers, "image": formed.image}
+    grids = {**{k: film for k in planned}, **{k: grid for k in formed.buffers}, "image": film}
+    dr.schedule(reproj.hit, *(formed.buffers[k] for k in entry.counted))
+    rays = dr.width(ro.wavefront) if ro.active is None else dr.count(plan.sampling_map)
+    stats = {
+        "width": plan.width, "height": plan.height, "pixels": plan.width * plan.height,
+        "rays": rays, "spp": plan.spp, "lanes": ro.lanes * plan.spp,
+        "lanes_launched": ro.lanes * plan.spp, "lanes_active": rays * plan.spp,
+        "reorder_swaps": ro.swaps if ro.swaps is not None else 0,
+        # Rays forced on depth edges (some the sampling probability would draw too).
+        "edge_rays": dr.count(plan.edges) if plan.edges is not None else 0,
+        "frame": index,
+        "history_hits": dr.count(reproj.hit), **entry.stats(formed.buffers),
+        "rejected_samples": samples.rejected, "clamped_samples": samples.clamped,
+        "timings_ms": timer.finish(), "gbuffer_reused": plan.gbuffer_reused,
+        "variant": mi.variant(),
+        **{k: (list(v) if k == "gaze" else v) for k, v in o.items() if k != "timing"},
+    }
+    return FrameOutputs(buffers, grids, stats)

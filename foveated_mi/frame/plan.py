@@ -1,0 +1,202 @@
+"""The frame's plan: everything it decides before tracing, and what carries over between frames.
+
+:class:`FramePlan` holds the decisions of the first passes (geometry, reprojection, sampling,
+reorder) that the rest of the frame and its gradient pass reuse. :class:`Planner` makes one
+per frame and keeps what lives across frames: the history, the frame count, the scene and
+camera state that decide a reset, and the caches of the G-buffer, the emission edges and the
+film filter's sampler.
+
+**Seeds.** Without history every frame uses the render's seed ``s``, so a frame is a pure
+function of the scene and ``s``. With history, frame 0 (after a reset) uses ``s`` and frame
+``t > 0`` uses ``sample_tea_32(s, t)[0]``, so the history converges under a fixed ``s``.
+``map_seed >= 0`` pins the sampling map to that seed. The stochastic fill always uses ``s``.
+
+**Resets and cuts.** The history is forgotten (the next frame is a first frame) on another
+scene or film size, and when a scene parameter other than the camera's changed. After a
+camera move that leaves fewer than :data:`CUT_HIT_FRACTION` of the pixels on the surface
+they saw, no pixel reads it and the frame is seeded as a first frame; both are decided on the
+device (:func:`~foveated_mi.frame.reproject.unless_cut`), so the frame never waits.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import drjit as dr
+import mitsuba as mi
+
+from ..postprocess import DENOISERS
+from ..timing import StageTimer
+from ..validate import check_int
+from . import gbuffer as _gbuffer
+from . import reorder as _reorder
+from . import reproject as _reproject
+from . import sampling as _sampling
+from .gbuffer import GBuffer
+from .pixel_filter import FilterSampler
+from .reorder import Reordered
+from .reproject import History, ReprojectionMap
+from .scene_state import GeometryCache, SceneState, scene_state
+
+#: A camera move after which fewer pixels than this fraction see the surface they saw in the
+#: previous frame is a cut: no pixel of the frame reads the history.
+CUT_HIT_FRACTION = 0.1
+
+
+@dataclass
+class FramePlan:
+    """What a frame decided before tracing (geometry, sampling, reprojection and reorder).
+
+    A gradient pass reuses the primal frame's: same sampling map, sites and history."""
+    sensor: mi.Sensor
+    width: int
+    height: int
+    spp: int
+    seed: int | mi.UInt32                      #: Monte Carlo seed of the shading pass
+    map_seed: int | mi.UInt32                  #: seed of the sampling map
+    gbuffer: GBuffer
+    edges: mi.Bool | None
+    sampling_map: mi.Bool
+    probability: mi.Float
+    reprojection: ReprojectionMap
+    reordered: Reordered
+    history: History | None                    #: history this frame read (a constant)
+    filter_sampler: FilterSampler
+    gbuffer_reused: bool = False               #: the G-buffer is the previous frame's
+    fill_seed: int = 0                         #: seed of the stochastic fill (the render's)
+    emission_edges: mi.Bool | None = None      #: footprints across an emitter's edge
+
+
+class Planner:
+    """Plans each frame (:meth:`plan`) and carries the history between frames (module
+    docstring)."""
+
+    def __init__(self):
+        self.history: History | None = None
+        self.index = 0                         #: frames rendered since the last reset
+        self._scene_ref = None
+        self._scene_state = self._camera_state = None
+        self._held: tuple = ()     # keeps the variables the states above name alive
+        self._camera_moved = False
+        self._geometry = GeometryCache()
+        self._emission_cache: tuple | None = None
+        self._filter_samplers: dict[tuple, FilterSampler] = {}
+
+    def reset(self) -> None:
+        """Forget the history (next frame starts fresh, as frame 0)."""
+        self.history = None
+        self.index = 0
+        self._geometry.clear()
+        self._emission_cache = None
+
+    def plan(self, scene: mi.Scene, sensor: mi.Sensor, seed, spp: int, o: dict[str, Any],
+             timer: StageTimer, state: SceneState | None = None) -> FramePlan:
+        """Geometry, reprojection, sampling and reorder passes: everything a frame decides
+        before it traces. None of it is differentiable (visibility and random choices)."""
+        width, height = _gbuffer.film_size(sensor)
+        spp = check_int("spp", spp if spp else sensor.sampler().sample_count(), 1)
+        state = state if state is not None else scene_state(scene, sensor)
+        self._check_reset(scene, state, width, height)
+        seed = (int(seed) if not dr.is_array_v(seed) else int(dr.slice(seed))) & 0xFFFFFFFF
+        with dr.suspend_grad():
+            # A still camera over an unchanged scene reuses the last G-buffer.
+            gb, reused = self._geometry.gbuffer(
+                scene, sensor, materials=materials_needed(o), state=state)
+            # Everything the G-buffer holds is evaluated with the pass: a lazy albedo would
+            # re-run the BSDF dispatch in every later kernel, and would point into the scene
+            # after the scene is gone (a gradient pass can outlive it).
+            timer.mark("gbuffer", gb.position, gb.normal, gb.depth, gb.hit, gb.direction,
+                       gb.albedo, gb.emission)
+            history = self.history if o["history"] else None
+            reproj, cut = self._reprojection(gb, history, sensor, width, height, o)
+            frame_seed = self._frame_seed(seed, cut, o["history"])
+            map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
+            # Traced every frame, like a depth edge: their sparse estimate converges only
+            # where every pixel within the filter's reach is traced too.
+            emitting = self._emission_edges(gb, sensor, width, height) \
+                if o["emission_edges"] else None
+            edges, smap, prob = _sampling.sampling_pass(gb, width, height, o, map_seed, emitting,
+                                                        sensor=sensor)
+            timer.mark("sampling", smap, prob, reproj.hit, reproj.index, edges)
+            ro = _reorder.reorder(smap, width, height, o["reorder"], o["block_height"])
+            timer.mark("reorder", ro.wavefront)
+        return FramePlan(sensor=sensor, width=width, height=height, spp=spp, seed=frame_seed,
+                         map_seed=map_seed, gbuffer=gb, edges=edges, sampling_map=smap,
+                         probability=prob, reprojection=reproj, reordered=ro, history=history,
+                         filter_sampler=self._filter_sampler(sensor, o["pixel_filter"]),
+                         gbuffer_reused=reused, fill_seed=seed, emission_edges=emitting)
+
+    def commit(self, plan: FramePlan, history: dict[str, Any] | None) -> None:
+        """After a primal frame: its history (``mean``, ``count``, ``moment2`` on the film,
+        None without history) becomes the next frame's, and the frame is counted."""
+        if history is not None:
+            self.history = History(**history, depth=plan.gbuffer.depth,
+                                   camera=_reproject.camera_state(plan.sensor),
+                                   width=plan.width, height=plan.height)
+        self.index += 1
+
+    def _check_reset(self, scene: mi.Scene, state: SceneState, width: int, height: int) -> None:
+        """Forget the history when it cannot describe this frame: another scene, another
+        film size, or a scene parameter changed. A camera move is not a reset: reprojection
+        handles it, and a cut discards the history on the device (:meth:`_reprojection`)."""
+        # Scenes take no weak references, and a strong one would make a scene <-> integrator
+        # cycle; the id is enough (a reused id still passes through the depth test).
+        h = self.history
+        if self._scene_ref != id(scene) or (h is not None and (h.width, h.height) != (width, height)) \
+                or state.scene != self._scene_state:
+            self.reset()
+            self._scene_ref = id(scene)
+        self._camera_moved = state.camera != self._camera_state
+        self._scene_state, self._camera_state = state.scene, state.camera
+        self._held = state.held
+
+    def _reprojection(self, gb: GBuffer, history: History | None, sensor: mi.Sensor,
+                      width: int, height: int, o: dict[str, Any]):
+        """The reprojection map, and the cut verdict after a camera move (else None)."""
+        reproj = _reproject.reprojection_map(gb.position, gb.hit, history, width, height,
+                                             tolerance=o["reprojection_tolerance"],
+                                             direction=gb.direction, mode=o["reprojection"],
+                                             reach=_gbuffer.filter_reach(sensor.film()))
+        if history is not None and self._camera_moved:
+            return _reproject.unless_cut(reproj, CUT_HIT_FRACTION)
+        return reproj, None
+
+    def _frame_seed(self, seed: int, cut, history: bool):
+        """The frame's Monte Carlo seed. Without history a frame is a pure function of
+        (scene, seed). With history, frame 0 uses the caller's seed as is (so sigma_p = 1
+        reproduces a plain render) and later frames decorrelate, so that the history
+        converges under a fixed seed."""
+        frame_seed = seed if (self.index == 0 or not history) else \
+            int(mi.sample_tea_32(seed, self.index)[0])
+        if cut is not None:
+            # After a cut the frame is a first frame, seeded as a fresh integrator's:
+            # chosen on the device, like the cut itself.
+            frame_seed = dr.select(cut, dr.opaque(mi.UInt32, seed),
+                                   dr.opaque(mi.UInt32, frame_seed))
+        return frame_seed
+
+    def _emission_edges(self, gb: GBuffer, sensor: mi.Sensor, width: int,
+                        height: int) -> mi.Bool:
+        """:func:`foveated_mi.frame.gbuffer.emission_edges` of ``gb``, kept while the G-buffer is
+        reused (a still camera)."""
+        reach = _gbuffer.filter_reach(sensor.film())
+        cached = self._emission_cache
+        if cached is not None and cached[0] is gb.emission and cached[1] == reach:
+            return cached[2]
+        mask = _gbuffer.emission_edges(gb.emission, width, height, reach)
+        dr.schedule(mask)
+        self._emission_cache = (gb.emission, reach, mask)
+        return mask
+
+    def _filter_sampler(self, sensor: mi.Sensor, mode: str) -> FilterSampler:
+        film = sensor.film()
+        key = (id(film), tuple(film.crop_size()), tuple(film.crop_offset()), mode)
+        fs = self._filter_samplers.get(key)
+        if fs is None:
+            fs = self._filter_samplers[key] = FilterSampler(film, importance=mode == "importance")
+        return fs
+
+
+def materials_needed(o: dict[str, Any]) -> bool:
+    """Whether the G-buffer must hold albedo and emission for these options."""
+    return bool(o["demodulate"] or o["emission_edges"] or DENOISERS[o["denoiser"]].materials)
