@@ -15,7 +15,7 @@ texture comes back at full resolution when :math:`\hat a` multiplies the result.
 handled by subtracting :math:`L_e` first, so a visible light or sky stays sharp. At a
 light's edge (the integrator's emission edges) the emission seen at the pixel's centre does
 not describe its footprint, which covers the light only in part: there :math:`L_e` is taken as
-0 (:func:`foveated_mi.frame.formation.form_image`), since :math:`L < L_e` would give negative
+0 (:func:`foveated_mi.frame.film.form_film`), since :math:`L < L_e` would give negative
 irradiance for the reconstruction to spread.
 
 **The floor** :math:`a_{\min}` (``ALBEDO_FLOOR`` = 0.4). Dividing by a small albedo amplifies
