@@ -9,9 +9,35 @@ import mitsuba as mi
 import tolerances
 from foveated_mi.kernels import (HeldLevel, Surface, for_each_tap, gather4, held_filter, packet,
                                  surface_energy)
+from foveated_mi.kernels.grid import Grid
+
+#: The film (clamped at every edge), a grid whose x axis wraps (an angle), and one that wraps
+#: both ways.
+GRIDS = {"film": (False, False), "wrap_x": (True, False), "wrap_xy": (True, True)}
 
 W, H = 24, 16
 N = W * H
+
+
+def _grid(name):
+    wx, wy = GRIDS[name]
+    return Grid(W, H, wrap_x=wx, wrap_y=wy)
+
+
+def _tap_np(xx, yy, step, dx, dy, name):
+    """NumPy's cell and inside flag of a tap under the grid's neighbour rule."""
+    wx, wy = GRIDS[name]
+    qx, qy = xx + step * dx, yy + step * dy
+    inside = np.ones_like(qx, bool)
+    if wx:
+        qx = qx % W
+    else:
+        inside &= (qx >= 0) & (qx < W)
+    if wy:
+        qy = qy % H
+    else:
+        inside &= (qy >= 0) & (qy < H)
+    return np.where(inside, qy * W + qx, 0), inside
 
 
 def _rand(seed, k=3):
@@ -19,30 +45,37 @@ def _rand(seed, k=3):
     return [mi.Float(rng.normal(size=N).astype(np.float32)) for _ in range(k)]
 
 
-def test_packets_and_taps_visit_the_5x5_neighbourhood():
+@pytest.mark.parametrize("grid", list(GRIDS))
+def test_packets_and_taps_visit_the_5x5_neighbourhood(grid):
     x, y, z = _rand(0)
     pk = packet(x, y, z, dr.arange(mi.Float, N))
     idx = dr.arange(mi.UInt32, N)
     got = gather4(pk, idx, mi.Bool(True))
     assert np.array_equal(got.w.numpy(), np.arange(N)) and np.array_equal(got.x.numpy(), x.numpy())
     # Sum of the tap indices inside the film, step 2, against NumPy.
-    count, = for_each_tap(W, H, 2, lambda t, c: (c + dr.select(t.inside, 1.0, 0.0),),
-                          (dr.zeros(mi.Float, N),), "count_taps")
+    count, qsum = for_each_tap(
+        _grid(grid), 2, lambda t, c, s: (c + dr.select(t.inside, 1.0, 0.0),
+                                         s + dr.select(t.inside, mi.Float(t.q), 0.0)),
+        (dr.zeros(mi.Float, N), dr.zeros(mi.Float, N)), "count_taps")
     yy, xx = np.mgrid[0:H, 0:W]
-    ref = sum(((xx + 2 * dx >= 0) & (xx + 2 * dx < W) & (yy + 2 * dy >= 0) & (yy + 2 * dy < H))
-              for dx in range(-2, 3) for dy in range(-2, 3))
-    assert np.array_equal(count.numpy().reshape(H, W), ref)
+    taps = [_tap_np(xx, yy, 2, dx, dy, grid) for dx in range(-2, 3) for dy in range(-2, 3)]
+    assert np.array_equal(count.numpy().reshape(H, W), sum(inside for _, inside in taps))
+    # Sums of at most 25 integers below 2^9: exact in float32.
+    assert np.array_equal(qsum.numpy().reshape(H, W), sum(np.where(i, q, 0) for q, i in taps))
+    if grid == "wrap_xy":
+        assert (count.numpy() == 25).all()
 
 
+@pytest.mark.parametrize("grid", list(GRIDS))
 @pytest.mark.parametrize("step", [1, 3])
-def test_rows_walk_visits_the_taps_in_the_loop_order(step):
+def test_rows_walk_visits_the_taps_in_the_loop_order(step, grid):
     # An order-sensitive fold of (q, inside, dx, dy, b3): both walks give the same value only
     # if they visit the same taps in the same order.
     def visit(t, h):
         code = mi.Float(t.q) * 8.0 + dr.select(t.inside, 1.0, 0.0) * 4.0 \
             + mi.Float(t.dx) * 2.0 + mi.Float(t.dy) + t.b3
         return (h * 1.0009765625 + code,)
-    got = {u: for_each_tap(W, H, step, visit, (dr.zeros(mi.Float, N),), f"order_{u}",
+    got = {u: for_each_tap(_grid(grid), step, visit, (dr.zeros(mi.Float, N),), f"order_{u}",
                            unroll=u)[0].numpy() for u in (True, False)}
     assert np.array_equal(got[True], got[False])
     ref = np.zeros((H, W), np.float32)
@@ -50,9 +83,7 @@ def test_rows_walk_visits_the_taps_in_the_loop_order(step):
     yy, xx = np.mgrid[0:H, 0:W]
     for dy in range(-2, 3):
         for dx in range(-2, 3):
-            qx, qy = xx + step * dx, yy + step * dy
-            inside = (qx >= 0) & (qx < W) & (qy >= 0) & (qy < H)
-            q = np.where(inside, qy * W + qx, 0)
+            q, inside = _tap_np(xx, yy, step, dx, dy, grid)
             b3 = np.array([1, 4, 6, 4, 1])[dx + 2] * np.array([1, 4, 6, 4, 1])[dy + 2] / 256
             code = q * 8.0 + inside * 4.0 + dx * 2.0 + dy + b3
             ref = ref * np.float32(1.0009765625) + code          # float64 from here on
@@ -63,7 +94,7 @@ def test_rows_walk_visits_the_taps_in_the_loop_order(step):
                              "tap fold vs NumPy")
 
 
-def _level(mode, seed=1):
+def _level(mode, seed=1, grid="film"):
     n0, n1, n2 = _rand(seed)
     hit = mi.Bool(np.random.default_rng(seed).random(N) > 0.2)
     surface = Surface.of(dr.normalize(mi.Vector3f(n0, n1, n2 + 3.0)), mi.Vector3f(*_rand(seed + 1)),
@@ -79,12 +110,17 @@ def _level(mode, seed=1):
         e = surface_energy(P[:3], Q[:3], 4.0, 2.0) + dr.squared_norm(P[3] - Q[3])
         return dr.select(tap.inside & (P[2] == Q[2]), tap.b3 * dr.exp(-e), 0.0)
 
-    return HeldLevel(W, H, 2, at, weight, normalized=mode != "plain", residual=mode == "residual")
+    return HeldLevel(_grid(grid), 2, at, weight, normalized=mode != "plain",
+                     residual=mode == "residual")
 
 
-@pytest.mark.parametrize("mode", ["normalized", "residual", "plain"])
-def test_held_level_reverse_is_the_transpose_of_forward(mode):
-    level = _level(mode)
+@pytest.mark.parametrize("mode,grid", [("normalized", "film"), ("residual", "film"),
+                                       ("plain", "film"), ("normalized", "wrap_x"),
+                                       ("residual", "wrap_xy")])
+def test_held_level_reverse_is_the_transpose_of_forward(mode, grid):
+    # On a wrapped grid too: p = q + s d and q = p - s d wrap alike, so the transpose that
+    # walks the taps from the other end stays exact.
+    level = _level(mode, grid=grid)
     x0 = mi.Color3f(*_rand(7))
     dx = mi.Color3f(*_rand(8))
     g = mi.Color3f(*_rand(9))

@@ -80,11 +80,11 @@ class Grid:
         back modulo its length (any offset, either side)."""
         inside = mi.Bool(True)
         if self.wrap_x:
-            qx = _wrap(qx, self.width)
+            qx = wrap(qx, self.width)
         else:
             inside &= (qx >= 0) & (qx < self.width)
         if self.wrap_y:
-            qy = _wrap(qy, self.height)
+            qy = wrap(qy, self.height)
         else:
             inside &= (qy >= 0) & (qy < self.height)
         return mi.UInt32(dr.select(inside, qy * self.width + qx, 0)), inside
@@ -103,7 +103,17 @@ class Grid:
         return self.neighbour(qx, qy)
 
 
-def _wrap(q: mi.Int32, n: int) -> mi.Int32:
+def wrap(q: mi.Int32, n: int) -> mi.Int32:
     """``q mod n`` in ``[0, n)`` for any integer ``q``."""
     r = q % n
     return dr.select(r < 0, r + n, r)
+
+
+def grid_of(width: int, height: int, grid: Grid | None = None) -> Grid:
+    """``grid``, which must be ``width`` x ``height``, or the film's grid of that size."""
+    if grid is None:
+        return Grid.film(width, height)
+    if (grid.width, grid.height) != (width, height):
+        raise ParameterError("grid", f"<{grid.width}x{grid.height} grid>",
+                             f"a grid of the buffers' size, {width}x{height}")
+    return grid

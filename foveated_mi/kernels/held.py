@@ -15,6 +15,7 @@ from typing import Any, Callable, NamedTuple
 import drjit as dr
 import mitsuba as mi
 
+from .grid import Grid
 from .pixels import gather4, packet
 from .taps import Tap, for_each_tap
 
@@ -26,7 +27,7 @@ class HeldLevel(NamedTuple):
 
     ``at(q, active)`` returns the data of pixel ``q`` the weights need (a tuple of arrays,
     gathered from packets); ``weight(P, Q, tap)`` the weight of tap pixel ``q`` (data ``Q``) in
-    the sum of pixel ``p`` (data ``P``), 0 for a tap outside the film. ``normalized``:
+    the sum of pixel ``p`` (data ``P``), 0 for a tap outside the grid. ``normalized``:
     ``y(p) = sum_q w(p, q) x(q) / W(p)``, ``W(p) = sum_q w(p, q)``, and ``y(p) = x(p)`` where
     ``W(p) = 0``; otherwise ``y(p) = sum_q w(p, q) x(q)``. ``residual`` evaluates a normalised
     level as ``x(p) + sum_q w(p, q) (x(q) - x(p)) / W(p)``, which keeps a constant image
@@ -35,8 +36,7 @@ class HeldLevel(NamedTuple):
     the values it filters, their finite part read from the tap's data, so that the primal pass
     gathers each tap once (the tangent and adjoint passes gather their own values).
     """
-    width: int
-    height: int
+    grid: Grid                #: the cells it filters (the film, or a formation's grid)
     step: Any
     at: Callable[[mi.UInt32, mi.Bool], tuple]
     weight: Callable[[tuple, tuple, "Tap"], mi.Float]
@@ -58,7 +58,7 @@ def _apply(level: HeldLevel, x: mi.Color3f, norm=None, extras: bool = True,
     earlier call reuses the primal's normalisation (``has``: ``W > 0``, and ``W`` where it is);
     ``primal``: ``x`` is the level's own input, whose values ``level.value`` reads from the
     taps' data. Returns ``(y, norm, extra sums)``."""
-    n = level.width * level.height
+    n = level.grid.size
     own_values = primal and level.value is not None
     if not own_values:
         # Scheduled before the taps' data is read, so that it joins the pending launch.
@@ -88,7 +88,7 @@ def _apply(level: HeldLevel, x: mi.Color3f, norm=None, extras: bool = True,
 
     zero = dr.zeros(mi.Float, n)
     n_extra = len(level.extra(P, P, zero)) if with_extra else 0
-    acc, wsum, *more = for_each_tap(level.width, level.height, level.step, visit,
+    acc, wsum, *more = for_each_tap(level.grid, level.step, visit,
                                     (dr.zeros(mi.Color3f, n), zero, *([zero] * n_extra)),
                                     level.label, level.unroll)
     # Every output of the loop in one launch: a kernel reading only one of them would run
@@ -109,7 +109,7 @@ def _transpose(level: HeldLevel, g: mi.Color3f, norm) -> mi.Color3f:
     """``x_bar(q) = sum_p w(p, q) g(p) / W(p)`` (+ ``g(q)`` where a normalised level kept
     ``x(q)``): the same taps walked from ``q``, each weight evaluated with the roles of the two
     pixels as in the primal, so the result is the exact transpose (gathers only)."""
-    n = level.width * level.height
+    n = level.grid.size
     g = mi.Color3f(g)
     gs = g if norm is None else dr.select(norm[0], g / norm[1], 0.0)
     gpk = packet(gs.x, gs.y, gs.z, dr.zeros(mi.Float, n))
@@ -124,7 +124,7 @@ def _transpose(level: HeldLevel, g: mi.Color3f, norm) -> mi.Color3f:
         v = gather4(gpk, tap.q, tap.inside)
         return (dr.fma(mi.Color3f(v.x, v.y, v.z), w, acc),)
 
-    acc, = for_each_tap(level.width, level.height, level.step, visit,
+    acc, = for_each_tap(level.grid, level.step, visit,
                         (dr.zeros(mi.Color3f, n),), level.label + "_transpose", unroll=False)
     dr.schedule(acc)
     if norm is None:

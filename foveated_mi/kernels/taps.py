@@ -15,6 +15,7 @@ from typing import Callable, NamedTuple
 import drjit as dr
 import mitsuba as mi
 
+from .grid import Grid, wrap
 from .pixels import gather4, packet, pixel_xy
 
 #: One-dimensional B3-spline taps (the 5x5 kernel is their outer product).
@@ -80,41 +81,52 @@ class Tap(NamedTuple):
         return b3(self.dx) * b3(self.dy)
 
 
-def for_each_tap(width: int, height: int, step, visit: Callable[..., tuple], state: tuple,
-                 label: str, unroll: bool = True) -> tuple:
-    """``state = visit(tap, *state)`` for the 25 taps of every pixel, spaced ``step`` pixels.
+def _axis(q: mi.Int32, n: int, wraps: bool):
+    """Coordinate ``q`` on an axis of ``n`` cells: wrapped (always inside), or with its
+    inside test (the caller keeps it as is where it lies outside)."""
+    if wraps:
+        return wrap(q, n), None
+    return q, (q >= 0) & (q < n)
 
-    ``visit`` receives a :class:`Tap` and returns the new state; taps outside the film are
-    visited too (``tap.inside`` false) so that the caller decides how a border renormalises.
-    ``unroll``: the loop runs over the 5 rows with each row's 5 taps unrolled (faster for the
-    à-trous and SVGF levels in ``benchmarks/bench_filters.py``; all 25 unrolled would take LLVM
-    seconds to compile), else over the 25 taps (faster for the heavier guided level and the
-    transposes). Both visit the taps in the same order. Returns the final state."""
+
+def for_each_tap(grid: Grid, step, visit: Callable[..., tuple], state: tuple, label: str,
+                 unroll: bool = True) -> tuple:
+    """``state = visit(tap, *state)`` for the 25 taps of every cell of ``grid``, spaced
+    ``step`` cells.
+
+    ``visit`` receives a :class:`Tap` and returns the new state. Along an axis the grid
+    clamps (the film), taps past its edge are visited too (``tap.inside`` false) so that the
+    caller decides how a border renormalises; along an axis it wraps (an angle), they come
+    back in on the other side. ``unroll``: the loop runs over the 5 rows with each row's 5
+    taps unrolled (faster for the à-trous and SVGF levels in ``benchmarks/bench_filters.py``;
+    all 25 unrolled would take LLVM seconds to compile), else over the 25 taps (faster for
+    the heavier guided level and the transposes). Both visit the taps in the same order.
+    Returns the final state."""
+    width, height = grid.width, grid.height
     px, py = pixel_xy(width, height)
+
+    def tap(qx, qy, row_in, dx, dy):
+        qx, col_in = _axis(qx, width, grid.wrap_x)
+        inside = row_in if col_in is None else (col_in if row_in is None else row_in & col_in)
+        if inside is None:
+            return Tap(mi.UInt32(qy * width + qx), mi.Bool(True), dx, dy)
+        return Tap(mi.UInt32(dr.select(inside, qy * width + qx, 0)), inside, dx, dy)
 
     if not unroll:
         def body1(k, *s):
             ty = k // 5
             dx, dy = mi.Int32(k - ty * 5) - 2, mi.Int32(ty) - 2
-            qx, qy = px + dx * step, py + dy * step
-            inside = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
-            q = mi.UInt32(dr.select(inside, qy * width + qx, 0))
-            return (k + 1, *visit(Tap(q, inside, dx, dy), *s))
+            qy, row_in = _axis(py + dy * step, height, grid.wrap_y)
+            return (k + 1, *visit(tap(px + dx * step, qy, row_in, dx, dy), *s))
         out = dr.while_loop(state=(mi.UInt32(0), *state), cond=lambda k, *_: k < 25,
                             body=body1, label=label, max_iterations=25)
         return tuple(out[1:])
 
     def body(k, *s):
         dy = mi.Int32(k) - 2
-        qy = py + dy * step
-        row_in = (qy >= 0) & (qy < height)
-        row = qy * width
+        qy, row_in = _axis(py + dy * step, height, grid.wrap_y)
         for d in range(-2, 3):
-            dx = mi.Int32(d)
-            qx = px + d * step
-            inside = row_in & (qx >= 0) & (qx < width)
-            q = mi.UInt32(dr.select(inside, row + qx, 0))
-            s = visit(Tap(q, inside, dx, dy), *s)
+            s = visit(tap(px + d * step, qy, row_in, mi.Int32(d), dy), *s)
         return (k + 1, *s)
 
     out = dr.while_loop(state=(mi.UInt32(0), *state), cond=lambda k, *_: k < 5, body=body,

@@ -27,6 +27,7 @@ import drjit as dr
 import mitsuba as mi
 
 from .demodulation import safe_albedo
+from .grid import Grid, grid_of
 from .pixels import NO_SITE, gather4, luminance, packet
 from .taps import Surface, for_each_tap
 
@@ -35,8 +36,10 @@ MIN_TEMPORAL_SAMPLES = 4.0
 
 
 def sample_variance(mean: mi.Color3f, moment2: mi.Float, count: mi.Float, mask: mi.Bool,
-                    normal: mi.Vector3f, hit: mi.Bool, width: int, height: int) -> mi.Float:
-    """Per-sample luminance variance :math:`s^2` of each pixel holding a value (0 elsewhere)."""
+                    normal: mi.Vector3f, hit: mi.Bool, width: int, height: int,
+                    grid: Grid | None = None) -> mi.Float:
+    """Per-sample luminance variance :math:`s^2` of each pixel holding a value (0 elsewhere);
+    ``grid``: the buffers' grid (default: the film of ``width`` x ``height``)."""
     mu = luminance(dr.detach(mean))
     n = dr.select(mask, dr.detach(count), 0.0)
     raw = dr.select(mask, dr.maximum(dr.detach(moment2) - mu * mu, 0.0), 0.0)
@@ -57,7 +60,8 @@ def sample_variance(mean: mi.Color3f, moment2: mi.Float, count: mi.Float, mask: 
         return s0 + v.x, dr.fma(v.x, v.y, s1), dr.fma(v.x, v.z, s2)
 
     zero = dr.zeros(mi.Float, width * height)
-    s0, s1, s2 = for_each_tap(width, height, 1, visit, (zero, zero, zero), "spatial_variance")
+    s0, s1, s2 = for_each_tap(grid_of(width, height, grid), 1, visit, (zero, zero, zero),
+                              "spatial_variance")
     inv = dr.rcp(dr.maximum(s0, 1.0))
     pooled = dr.maximum(s2 * inv - dr.square(s1 * inv), 0.0)
     spatial = pooled * dr.select(s0 > 1.0, s0 / dr.maximum(s0 - 1.0, 1.0), 1.0)

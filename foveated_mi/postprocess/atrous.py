@@ -78,6 +78,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..validate import ParameterError, check_int, check_sigma  # noqa: F401 (re-exported)
+from ..kernels.grid import Grid, grid_of
 from ..kernels import HeldLevel, Surface, gather4, held_filter, packet
 from .inverse import inverse_tonemap
 from .registry import DenoiseInput, Denoised, register_denoiser
@@ -135,7 +136,8 @@ def _surface(normal, position, valid: mi.Bool | None) -> Surface:
 
 def atrous(color: mi.Color3f, normal: mi.Array3f, position: mi.Array3f, width: int, height: int,
            *, iterations: int = 5, sigma_color: float = 0.5, sigma_normal: float = 0.5,
-           sigma_position: float = 0.5, valid: mi.Bool | None = None) -> mi.Color3f:
+           sigma_position: float = 0.5, valid: mi.Bool | None = None,
+           grid: Grid | None = None) -> mi.Color3f:
     """Edge-avoiding à-trous filter of a colour buffer guided by a G-buffer.
 
     Args:
@@ -151,12 +153,15 @@ def atrous(color: mi.Color3f, normal: mi.Array3f, position: mi.Array3f, width: i
         sigma_position: position sigma in scene units; inf disables it.
         valid: per-pixel G-buffer hit mask, or None to derive it from finite positions and
             non-zero finite normals.
+        grid: the buffers' grid and its neighbour rule (default: the film of ``width`` x
+            ``height``, clamped at its edges).
 
     Returns:
         The filtered colour (``color`` itself for ``iterations = 0``).
     """
     width = check_int("width", width, lo=1)
     height = check_int("height", height, lo=1)
+    grid = grid_of(width, height, grid)
     iterations = check_int("iterations", iterations, lo=0, hi=16)
     sigma_color = check_sigma("sigma_color", sigma_color)
     sigma_normal = check_sigma("sigma_normal", sigma_normal)
@@ -177,7 +182,7 @@ def atrous(color: mi.Color3f, normal: mi.Array3f, position: mi.Array3f, width: i
     for level in range(iterations):
         step = 1 << level
         c = _atrous_level(
-            c, surface, width, height,
+            c, surface, grid,
             step=dr.opaque(mi.Int32, step),
             inv_c=dr.opaque(mi.Float, inv_c0 * 4.0 ** level),        # sigma_rt_i = 2^-i sigma
             inv_n=dr.opaque(mi.Float, inv_n0 / float(step * step)),  # |dN|^2 / s^2 (listing)
@@ -185,7 +190,7 @@ def atrous(color: mi.Color3f, normal: mi.Array3f, position: mi.Array3f, width: i
     return c
 
 
-def _atrous_level(c: mi.Color3f, surface: Surface, width: int, height: int, *, step: mi.Int32,
+def _atrous_level(c: mi.Color3f, surface: Surface, grid: Grid, *, step: mi.Int32,
                   inv_c: mi.Float, inv_n: mi.Float, inv_x: mi.Float) -> mi.Color3f:
     """One à-trous level: one kernel walking the 25 taps (5 loop iterations of 5 unrolled
     taps: 25 unrolled copies need seconds of LLVM compile), with its weights held
@@ -214,7 +219,7 @@ def _atrous_level(c: mi.Color3f, surface: Surface, width: int, height: int, *, s
         use = tap.inside & fq & ~(vp ^ vq)               # hit-miss pairs never mix
         return dr.select(use, tap.b3 * dr.exp(-(e_rt + e_geo)), 0.0)
 
-    y, = held_filter(c, HeldLevel(width, height, step, at, weight, label="atrous_taps",
+    y, = held_filter(c, HeldLevel(grid, step, at, weight, label="atrous_taps",
                                   value=lambda Q: Q[0]))
     return y
 

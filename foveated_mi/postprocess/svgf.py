@@ -43,6 +43,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..kernels import variance as _variance
+from ..kernels.grid import Grid, grid_of
 from ..kernels import HeldLevel, Surface, gather4, held_filter, packet, pixel_xy, surface_energy
 from ..validate import ParameterError, check_int, check_range
 from .registry import DenoiseInput, Denoised, register_denoiser
@@ -52,16 +53,14 @@ _G3 = (0.25, 0.5, 0.25)
 EPSILON = 1e-10
 
 
-def _prefilter(var: mi.Float, width: int, height: int) -> mi.Float:
-    """3 x 3 Gaussian blur of the variance (SVGF), renormalised at the borders."""
-    px, py = pixel_xy(width, height)
-    acc = dr.zeros(mi.Float, width * height)
-    wsum = dr.zeros(mi.Float, width * height)
+def _prefilter(var: mi.Float, grid: Grid) -> mi.Float:
+    """3 x 3 Gaussian blur of the variance (SVGF), renormalised at clamped borders."""
+    px, py = pixel_xy(grid.width, grid.height)
+    acc = dr.zeros(mi.Float, grid.size)
+    wsum = dr.zeros(mi.Float, grid.size)
     for dy in (-1, 0, 1):
         for dx in (-1, 0, 1):
-            qx, qy = px + dx, py + dy
-            inside = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
-            q = mi.UInt32(dr.select(inside, qy * width + qx, 0))
+            q, inside = grid.neighbour(px + dx, py + dy)
             w = dr.select(inside, _G3[dx + 1] * _G3[dy + 1], 0.0)
             acc = dr.fma(w, dr.gather(mi.Float, var, q, inside), acc)
             wsum += w
@@ -71,13 +70,15 @@ def _prefilter(var: mi.Float, width: int, height: int) -> mi.Float:
 def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: mi.Vector3f,
          hit: mi.Bool, width: int, height: int, *, iterations: int = 5,
          sigma_luminance: float = 4.0, sigma_normal: float = 0.3,
-         sigma_plane: float = 0.1) -> mi.Color3f:
-    """Variance-guided à-trous filter of ``color`` (see the module docstring).
+         sigma_plane: float = 0.1, grid: Grid | None = None) -> mi.Color3f:
+    """Variance-guided à-trous filter of ``color`` (see the module docstring); ``grid``: the
+    buffers' grid (default: the film of ``width`` x ``height``).
 
     ``variance`` is the noise variance of each pixel's value (e.g. from
     :func:`foveated_mi.kernels.variance.estimate_variance`); 0 leaves a pixel's differences intact.
     """
-    n = width * height
+    grid = grid_of(width, height, grid)
+    n = grid.size
     iterations = check_int("iterations", iterations, 0, 16)
     sl = (math.inf if sigma_luminance == math.inf else
           check_range("sigma_luminance", sigma_luminance, 0.0, None, lo_open=True))
@@ -94,25 +95,25 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
     var = dr.select(dr.isfinite(variance), dr.maximum(dr.detach(variance), 0.0), 0.0)
     surface = Surface.of(normal, position, hit)
     for level in range(iterations):
-        c, var = _level(c, var, surface, width, height,
+        c, var = _level(c, var, surface, grid,
                         step=dr.opaque(mi.Int32, 1 << level),
                         sl=None if math.isinf(sl) else dr.opaque(mi.Float, sl),
                         inv_n=dr.opaque(mi.Float, inv_n), inv_x=dr.opaque(mi.Float, inv_x))
     return c
 
 
-def _level(c: mi.Color3f, var: mi.Float, surface: Surface, width: int, height: int, *, step,
+def _level(c: mi.Color3f, var: mi.Float, surface: Surface, grid: Grid, *, step,
            sl, inv_n, inv_x) -> tuple[mi.Color3f, mi.Float]:
     """One level, its weights held (:func:`~foveated_mi.kernels.held.held_filter`), the variance
     filtered alongside with the squared weights."""
-    n = width * height
+    n = grid.size
     dr.schedule(c, var)
     cd = dr.detach(c)
     finite = dr.isfinite(cd.x) & dr.isfinite(cd.y) & dr.isfinite(cd.z)
     cd = dr.select(finite, cd, 0.0)
     # sigma_luminance = inf switches the colour weight off (a purely geometric filter).
     denom = dr.zeros(mi.Float, n) if sl is None else \
-        sl * dr.sqrt(_prefilter(var, width, height)) + EPSILON
+        sl * dr.sqrt(_prefilter(var, grid)) + EPSILON
     # Colour and variance, finiteness as the variance's sign (variances are >= 0); the
     # colour distance's denominator of the centre pixel.
     src = packet(cd.x, cd.y, cd.z, dr.select(finite, var, -1.0))
@@ -135,7 +136,7 @@ def _level(c: mi.Color3f, var: mi.Float, surface: Surface, width: int, height: i
         return dr.select(use, tap.b3 * dr.exp(-(e_col + e_geo)), 0.0)
 
     y, v_acc, w_acc = held_filter(c, HeldLevel(
-        width, height, step, at, weight, residual=True,
+        grid, step, at, weight, residual=True,
         extra=lambda P, Q, w: (w * w * Q[2], w), label="svgf_taps", value=lambda Q: Q[0]))
     has = w_acc > 0
     inv = dr.rcp(dr.select(has, w_acc, 1.0))

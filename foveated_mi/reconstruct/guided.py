@@ -62,6 +62,7 @@ from typing import NamedTuple
 import drjit as dr
 import mitsuba as mi
 
+from ..kernels.grid import Grid, grid_of
 from ..kernels import HeldLevel, Surface, gather4, held_filter, packet, surface_energy
 from ..validate import ParameterError, check_int, check_range
 from .jfa import check_buffer, check_film, voronoi_fill
@@ -115,15 +116,17 @@ def check_guided_inputs(method: str, shading, site_mask, nearest, width, height,
 def guided(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: int,
            height: int, *, max_radius: int = 32, guide: Guide | None = None,
            levels: int = 5, target_samples: float = 32.0, sigma_normal: float = 0.3,
-           sigma_plane: float = 0.1) -> mi.Color3f:
+           sigma_plane: float = 0.1, grid: Grid | None = None) -> mi.Color3f:
     """Guided sparse reconstruction (see the module docstring).
 
     ``max_radius`` is accepted for the registry's uniform signature; the reach is set by
-    ``levels`` (about ``2^(levels+1)`` px).
+    ``levels`` (about ``2^(levels+1)`` px). ``grid``: the buffers' grid and its neighbour
+    rule (default: the film of ``width`` x ``height``).
     """
     width, height, edge = check_guided_inputs("guided", shading, site_mask, nearest, width,
                                               height, guide,
                                               weights=True)
+    grid = grid_of(width, height, grid)
     levels = check_int("levels", levels, 1, 12)
     target = dr.opaque(mi.Float, check_range("target_samples", target_samples, 0.0, 1e9,
                                              lo_open=True))
@@ -146,7 +149,7 @@ def guided(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: i
     remaining = 1.0 - tau
     est = value
     for level in range(levels):
-        num, den, gsum = _level(num, den, surface, width, height,
+        num, den, gsum = _level(num, den, surface, grid,
                                 step=dr.opaque(mi.Int32, 1 << level), inv_n=opaque(inv_n),
                                 inv_x=opaque(inv_x), edge=edge)
         # A weight below this is a denormal in the making: kernels flush those to zero or
@@ -167,14 +170,14 @@ def guided(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: i
 
 
 
-def _level(num: mi.Color3f, den: mi.Float, surface: Surface, width: int, height: int, *,
+def _level(num: mi.Color3f, den: mi.Float, surface: Surface, grid: Grid, *,
            step: mi.Int32, inv_n: mi.Float, inv_x: mi.Float, edge: mi.Bool | None = None
            ) -> tuple[mi.Color3f, mi.Float, mi.Float]:
     """One level of the cascade: a symbolic loop over the 25 taps (one kernel per level
     size, shared by all levels: the spacing is opaque), with its weights held
     (:func:`~foveated_mi.kernels.held.held_filter`): ``num`` carries the gradient, the sample weights
     ``den`` and the kernel mass are accumulated alongside."""
-    n = width * height
+    n = grid.size
     dr.schedule(num, den)
     # The emitter-edge flag rides in the sample-weight packet (1: on an emitter's edge).
     dpk = packet(dr.detach(den), dr.select(edge, 1.0, 0.0) if edge is not None
@@ -193,7 +196,7 @@ def _level(num: mi.Color3f, den: mi.Float, surface: Surface, width: int, height:
         return dr.select(ok, tap.b3 * dr.exp(-e), 0.0)
 
     n_acc, d_acc, g_acc = held_filter(num, HeldLevel(
-        width, height, step, at, weight, normalized=False,
+        grid, step, at, weight, normalized=False,
         extra=lambda P, Q, g: (g * Q[3], g), label="guided_taps", unroll=False))
     # All three outputs in one launch: a later kernel reading only one of them would run
     # the 25-tap loop again.
