@@ -87,6 +87,8 @@ class Grid:
             qy = wrap(qy, self.height)
         else:
             inside &= (qy >= 0) & (qy < self.height)
+        if self.wrap_x and self.wrap_y:       # every cell inside: one flag per cell
+            inside = dr.full(mi.Bool, True, max(dr.width(qx), dr.width(qy)))
         return mi.UInt32(dr.select(inside, qy * self.width + qx, 0)), inside
 
     def film_position(self, idx: mi.UInt32) -> mi.Point2f:

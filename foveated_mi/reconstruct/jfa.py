@@ -40,6 +40,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..kernels import NO_SITE, pixel_xy
+from ..kernels.grid import Grid, grid_of
 from ..validate import ParameterError, check_choice, check_int
 
 
@@ -100,37 +101,53 @@ def _pack(x: mi.Int32, y: mi.Int32) -> mi.UInt32:
     return mi.UInt32(x) | (mi.UInt32(y) << 16)
 
 
-def _jfa_pass(seed: mi.UInt32, x: mi.Int32, y: mi.Int32, width: int, height: int, k: int) -> mi.UInt32:
+def _jfa_pass(seed: mi.UInt32, x: mi.Int32, y: mi.Int32, grid: Grid, k: int) -> mi.UInt32:
     """One jump-flooding pass with step ``k`` over packed seeds ``x | y << 16``."""
+    width, height = grid.width, grid.height
     best = seed
-    best_d2 = _packed_d2(seed, x, y)
+    best_d2 = _packed_d2(seed, x, y, grid)
     for j in (-1, 0, 1):
         if j != 0 and k >= height:
-            continue  # every such neighbour lies outside the film: skip statically
+            continue  # every such neighbour lies outside the grid (or is itself): skip
         for i in (-1, 0, 1):
             if (i == 0 and j == 0) or (i != 0 and k >= width):
                 continue
-            nx, ny = x + i * k, y + j * k
-            inside = (nx >= 0) & (nx < width) & (ny >= 0) & (ny < height)
-            cand = dr.gather(mi.UInt32, seed, mi.UInt32(ny * width + nx), inside)
+            if grid.is_film:
+                nx, ny = x + i * k, y + j * k
+                inside = (nx >= 0) & (nx < width) & (ny >= 0) & (ny < height)
+                q = mi.UInt32(ny * width + nx)
+            else:
+                q, inside = grid.neighbour(x + i * k, y + j * k)
+            cand = dr.gather(mi.UInt32, seed, q, inside)
             cand = dr.select(inside, cand, NO_SITE)
-            d2 = _packed_d2(cand, x, y)
+            d2 = _packed_d2(cand, x, y, grid)
             better = (d2 < best_d2) | ((d2 == best_d2) & (cand < best))
             best = dr.select(better, cand, best)
             best_d2 = dr.select(better, d2, best_d2)
     return best
 
 
-def _packed_d2(packed: mi.UInt32, x: mi.Int32, y: mi.Int32) -> mi.UInt32:
-    """Squared distance from ``(x, y)`` to a packed site, ``0xFFFFFFFF`` for NO_SITE."""
+def _delta(d: mi.Int32, n: int, wraps: bool) -> mi.Int32:
+    """The offset ``d`` (``|d| < n``) along an axis: the shorter way round where it wraps."""
+    if not wraps:
+        return d
+    return dr.select(2 * d > n, d - n, dr.select(2 * d < -n, d + n, d))
+
+
+def _packed_d2(packed: mi.UInt32, x: mi.Int32, y: mi.Int32, grid: Grid | None = None
+               ) -> mi.UInt32:
+    """Squared distance from ``(x, y)`` to a packed site, ``0xFFFFFFFF`` for NO_SITE (across
+    a wrapped axis of ``grid``, the shorter way round)."""
     dx = mi.Int32(packed & 0xFFFF) - x
     dy = mi.Int32(packed >> 16) - y
+    if grid is not None:
+        dx, dy = _delta(dx, grid.width, grid.wrap_x), _delta(dy, grid.height, grid.wrap_y)
     d2 = mi.UInt32(dx * dx + dy * dy)
     return dr.select(packed == NO_SITE, _D2_INF, d2)
 
 
 def jump_flood(site_mask: mi.Bool, width: int, height: int, variant: str = "jfa+1",
-               max_gap: float | None = None) -> mi.UInt32:
+               max_gap: float | None = None, *, grid: Grid | None = None) -> mi.UInt32:
     """Index of the (approximately) nearest site for every pixel, by jump flooding.
 
     Args:
@@ -143,29 +160,33 @@ def jump_flood(site_mask: mi.Bool, width: int, height: int, variant: str = "jfa+
             replace). Fallback: a pixel left without a site (the bound was wrong) searches
             square rings around itself, out to ``4 max_gap`` pixels; packets of pixels that
             all have a site skip that search at the cost of one test.
+        grid: the cells and their neighbour rule (default: the film of ``width`` x
+            ``height``); across a wrapped axis, jumps and distances go round.
 
     Returns:
         ``mi.UInt32`` buffer: the pixel index ``s_y * W + s_x`` of the site assigned to each
         pixel; a site is assigned to itself. Without any site every entry is :data:`NO_SITE`.
     """
     width, height = check_film(width, height)
+    grid = grid_of(width, height, grid)
     check_choice("variant", variant, JFA_VARIANTS)
     check_buffer("site_mask", site_mask, width * height)
     x, y = pixel_xy(width, height)
     seed = dr.select(mi.Bool(site_mask), _pack(x, y), NO_SITE)
     for k in jfa_steps(width, height, variant, max_gap):
-        seed = _jfa_pass(seed, x, y, width, height, k)
+        seed = _jfa_pass(seed, x, y, grid, k)
     if max_gap is not None:
-        seed = _ring_search(seed, site_mask, x, y, width, height,
+        seed = _ring_search(seed, site_mask, x, y, grid,
                             dr.opaque(mi.Int32, min(max(width, height), int(4 * max_gap) + 1)))
     index = (seed >> 16) * width + (seed & 0xFFFF)
     return dr.select(seed == NO_SITE, NO_SITE, index)
 
 
-def _ring_search(seed: mi.UInt32, site_mask: mi.Bool, x: mi.Int32, y: mi.Int32, width: int,
-                 height: int, max_ring: mi.Int32) -> mi.UInt32:
+def _ring_search(seed: mi.UInt32, site_mask: mi.Bool, x: mi.Int32, y: mi.Int32, grid: Grid,
+                 max_ring: mi.Int32) -> mi.UInt32:
     """Nearest site of each pixel still without one, by scanning the square rings of
     Chebyshev radius 1, 2, ... ``max_ring`` around it (exact, ties as in JFA)."""
+    width, height = grid.width, grid.height
     dr.schedule(seed)
     lost = seed == NO_SITE
     mask = mi.Bool(site_mask)
@@ -179,11 +200,16 @@ def _ring_search(seed: mi.UInt32, site_mask: mi.Bool, x: mi.Int32, y: mi.Int32, 
                        dr.select(t < 3 * side, x + r - (t - 2 * side), x - r)))
         qy = dr.select(t < side, y - r, dr.select(t < 2 * side, y - r + (t - side),
                        dr.select(t < 3 * side, y + r, y + r - (t - 3 * side))))
-        inside = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
-        is_site = dr.gather(mi.Bool, mask, mi.UInt32(dr.select(inside, qy * width + qx, 0)),
-                            inside & active)
+        if grid.is_film:
+            inside = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
+            q = mi.UInt32(dr.select(inside, qy * width + qx, 0))
+        else:
+            q, inside = grid.neighbour(qx, qy)
+            qy = mi.Int32(q // width)
+            qx = mi.Int32(q) - qy * width
+        is_site = dr.gather(mi.Bool, mask, q, inside & active)
         cand = dr.select(is_site & inside, _pack(qx, qy), NO_SITE)
-        d2 = _packed_d2(cand, x, y)
+        d2 = _packed_d2(cand, x, y, grid)
         better = active & ((d2 < best_d2) | ((d2 == best_d2) & (cand < best)))
         best = dr.select(better, cand, best)
         best_d2 = dr.select(better, d2, best_d2)
