@@ -41,7 +41,7 @@ from ..timing import StageTimer
 from ..validate import check_choice
 from . import reproject as _reproject
 from . import sampling as _sampling
-from .gbuffer import GBuffer
+from ..kernels.buffers import GBuffer
 from .shading import ShadingBuffer
 
 #: Recorded configurations kept by a :class:`FrozenFormation` (least recently used dropped).

@@ -12,24 +12,13 @@ albedo so that textures come from this full-resolution buffer, not from sparse s
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
 
 from ..validate import check_int
 from ..kernels import film_size, pixel_coords, primary_rays
-
-
-class GBuffer(NamedTuple):
-    """Named outputs of the geometry pass, one entry per pixel."""
-    position: mi.Point3f   #: world-space hit point (0 on a miss)
-    normal: mi.Normal3f    #: shading normal (0 on a miss)
-    depth: mi.Float        #: distance from the camera centre to the hit (+inf on a miss)
-    hit: mi.Bool           #: whether the primary ray hit a surface
-    direction: mi.Vector3f  #: unit direction of the primary ray (reprojects the background)
-    albedo: mi.Color3f | None = None    #: diffuse albedo at the hit (0 on a miss)
-    emission: mi.Color3f | None = None  #: emitted radiance towards the camera
+from ..kernels.buffers import GBuffer
 
 
 def render_gbuffer(scene: mi.Scene, sensor: mi.Sensor, *, materials: bool = False) -> GBuffer:

@@ -32,7 +32,7 @@ from . import gbuffer as _gbuffer
 from . import reorder as _reorder
 from . import reproject as _reproject
 from . import sampling as _sampling
-from .gbuffer import GBuffer
+from ..kernels.buffers import GBuffer
 from .pixel_filter import FilterSampler
 from .reorder import Reordered
 from .reproject import History, ReprojectionMap

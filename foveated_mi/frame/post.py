@@ -17,9 +17,8 @@ import mitsuba as mi
 from ..postprocess import DENOISERS, DenoiseInput, Denoised
 from ..postprocess.registry import as_denoised
 from ..kernels import remodulate
-from .gbuffer import GBuffer
+from ..kernels.buffers import GBuffer, Resolved
 from .reconstruction import Reconstruction
-from .reproject import Resolved
 
 
 #: Options the post-processing pass reads besides those its denoiser declares.

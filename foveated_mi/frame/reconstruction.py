@@ -22,8 +22,7 @@ from .. import reconstruct as rec
 from ..postprocess.inverse import inverse_tonemap
 from . import sampling as _sampling
 from ..kernels import demodulate
-from .gbuffer import GBuffer
-from .reproject import Resolved
+from ..kernels.buffers import GBuffer, Resolved
 
 
 #: Options the reconstruction pass reads besides those its method declares.

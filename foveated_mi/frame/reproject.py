@@ -59,6 +59,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..kernels import pixel_coords
+from ..kernels.buffers import Resolved
 
 
 @dataclass
@@ -217,14 +218,6 @@ def unless_cut(reproj: ReprojectionMap, fraction: float) -> tuple[ReprojectionMa
     dr.scatter_reduce(dr.ReduceOp.Add, hits, mi.UInt32(1), mi.UInt32(0), agree)
     cut = mi.Float(dr.gather(mi.UInt32, hits, mi.UInt32(0))) < dr.opaque(mi.Float, fraction * n)
     return reproj._replace(hit=reproj.hit & ~cut), cut
-
-
-class Resolved(NamedTuple):
-    shading: mi.Color3f     #: shading buffer (value per pixel, see ``mask``)
-    mask: mi.Bool           #: pixel holds a value (traced or resampled)
-    count: mi.Float         #: history sample count after this frame
-    resampled: mi.Bool      #: pixel took its value from history only
-    moment2: mi.Float       #: mean squared sample luminance behind ``shading``
 
 
 def resolve(new: mi.Color3f, traced: mi.Bool, spp: int, reproj: ReprojectionMap,

@@ -19,7 +19,8 @@ from typing import Any
 import drjit as dr
 import mitsuba as mi
 
-from .gbuffer import GBuffer, render_gbuffer
+from ..kernels.buffers import GBuffer
+from .gbuffer import render_gbuffer
 
 #: Scene objects whose parameters are the camera's.
 CAMERA_TYPES = ("Sensor", "Film", "Sampler", "ReconstructionFilter")

@@ -14,13 +14,11 @@ learn of it from :data:`DENOISERS`. The post-processing pass
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Callable, NamedTuple
+from typing import Any, Callable, NamedTuple
 
 import mitsuba as mi
 
-if TYPE_CHECKING:  # the frame's types, for readers and checkers: no import at run time
-    from ..frame.gbuffer import GBuffer
-    from ..frame.reproject import Resolved
+from ..kernels.buffers import GBuffer, Resolved
 
 
 class DenoiseInput(NamedTuple):
