@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import gradcheck
+import tolerances
 from foveated_mi.options import parameter_table, validate_options
 from foveated_mi.postprocess import DENOISERS, register_denoiser, unregister_denoiser
 from foveated_mi.validate import ParameterError
@@ -86,3 +87,68 @@ def test_unregistered_it_is_gone():
     assert "identity" not in _denoiser_row(parameter_table())
     with pytest.raises(ParameterError, match="denoiser = 'identity' is invalid"):
         validate_options({"denoiser": "identity"})
+
+
+# -- the domain a denoiser declares -------------------------------------------------------
+
+def _frame(denoiser, **options):
+    from foveated_mi.integrators.foveated import FoveatedIntegrator
+    from foveated_mi.scenes import load_scene
+    scene = load_scene("cornell-box", width=24, height=20, spp=1,
+                       integrator={"type": "path", "max_depth": 2})
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="paper", denoiser=denoiser,
+                               **options)
+    image = np.array(mi.render(scene, integrator=integ, seed=1))
+    return integ, image
+
+
+@pytest.mark.parametrize("domain", ["radiance", "irradiance", "display"])
+def test_a_denoiser_gets_the_values_of_the_domain_it_declares(domain):
+    from foveated_mi.frame.domain import to_display
+    seen = []
+
+    def keep(ctx):
+        seen.append(np.array(ctx.image))
+        return ctx.image
+    register_denoiser("keep", keep, differentiable=True, domain=domain, materials=True)
+    try:
+        integ, image = _frame("keep", demodulate=True)
+    finally:
+        unregister_denoiser("keep")
+    got = seen[0].T.reshape(image.shape)
+    radiance = integ.buffer("interpolated")        # the reconstruction, albedo multiplied back
+    o = integ.options
+    if domain == "radiance":
+        expect = np.minimum(radiance, o["clamp"])
+    elif domain == "display":
+        expect = np.array(to_display(mi.Color3f(np.minimum(radiance, o["clamp"]).reshape(-1, 3).T),
+                                     o)).T.reshape(image.shape)
+    else:
+        # Irradiance: neither the albedo nor the clamp applied yet.
+        assert not np.allclose(got, np.minimum(radiance, o["clamp"]))
+        return
+    # The same operations on the same values: the tone map, evaluated in another kernel, may
+    # round its dozen operations differently (gamma_16 of the value).
+    np.testing.assert_allclose(got, expect, rtol=tolerances.gamma(16), atol=0)
+    if domain == "radiance":
+        # An identity leaves the frame as the reconstruction made it.
+        np.testing.assert_array_equal(image, np.minimum(radiance, o["clamp"]))
+
+
+def test_an_inactive_denoiser_is_not_called():
+    calls = []
+    register_denoiser("idle", lambda ctx: calls.append(1) or ctx.image, differentiable=True,
+                      domain="display", active=lambda o: False)
+    try:
+        integ, image = _frame("idle")
+    finally:
+        unregister_denoiser("idle")
+    assert calls == [] and integ.buffer("tonemapped") is None
+    np.testing.assert_array_equal(image, integ.buffer("interpolated"))
+
+
+def test_an_unknown_domain_is_refused_in_one_line():
+    with pytest.raises(ParameterError, match=r"domain = 'hdr' is invalid: expected one of "
+                                             r"'radiance', 'irradiance', 'display'"):
+        register_denoiser("bad", lambda ctx: ctx.image, differentiable=True, domain="hdr")
+    assert "bad" not in DENOISERS

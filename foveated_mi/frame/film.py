@@ -17,6 +17,7 @@ from ..timing import StageTimer
 from . import reproject as _reproject
 from . import sampling as _sampling
 from .formation import FormationInput, Formed, register_formation
+from . import domain
 from . import post as _post
 from . import reconstruction as _reconstruction
 from .post import post_pass
@@ -24,7 +25,7 @@ from .reconstruction import reconstruction_pass
 from .shading import ShadingBuffer
 
 #: Options the film formation reads itself (its passes declare theirs).
-READS = ("max_history",)
+READS = ("max_history", "demodulate", "tonemap_samples", "tonemap", "exposure")
 
 
 def jfa_bound(width: int, height: int, o: dict[str, Any]) -> int | None:
@@ -71,9 +72,13 @@ def form_film(shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any],
     resolved = _reproject.resolve(shading.value, shading.mask, inp.spp, inp.reprojection,
                                   inp.history, o["max_history"], shading.moment2)
     timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
-    # Reconstruction (§3.4): nearest sites, Voronoi fill and interpolation.
-    recon = reconstruction_pass(resolved, gb, width, height, o, seed=inp.fill_seed,
+    # Reconstruction (§3.4): nearest sites, Voronoi fill and interpolation, on irradiance
+    # with demodulate; a reconstruction of tone-mapped samples back to linear values.
+    recon = reconstruction_pass(domain.to_irradiance(resolved.shading, gb, o), resolved, gb,
+                                width, height, o, seed=inp.fill_seed,
                                 emission_edges=inp.emission_edges, max_gap=o["jfa_bound"])
+    recon = recon._replace(filled=domain.from_display_samples(recon.filled, o),
+                           interpolated=domain.from_display_samples(recon.interpolated, o))
     timer.mark("reconstruct", recon.nearest, recon.filled, recon.interpolated)
     # Post-processing (§3.5): the registered denoiser, the albedo multiplied back.
     post = post_pass(recon, resolved, gb, width, height, o, grad_pass)

@@ -1,12 +1,11 @@
 """Reconstruction pass (Kwon et al. 2019, §3.4): the resolved shading buffer to a full image.
 
-From the resolved shading buffer (:func:`foveated_mi.frame.reproject.resolve`) and the
-G-buffer: with ``demodulate`` the values become irradiance
-(:mod:`foveated_mi.frame.demodulate`), Jump Flooding finds each pixel's nearest site
-(``nearest``), the Voronoi fill copies its value (``filled``) and the method of
-``reconstruction`` (:data:`foveated_mi.reconstruct.RECONSTRUCTIONS`) interpolates
-(``interpolated``). With ``tonemap_samples`` the values are display values, mapped back to
-radiance here so that every later buffer means what it means without the option.
+From the working values of the resolved shading buffer (radiance, or irradiance with
+``demodulate``: :mod:`foveated_mi.frame.domain`), its mask and counts and the G-buffer: Jump
+Flooding finds each pixel's nearest site (``nearest``), the Voronoi fill copies its value
+(``filled``) and the method of ``reconstruction``
+(:data:`foveated_mi.reconstruct.RECONSTRUCTIONS`) interpolates (``interpolated``), with the
+parameters its registration declares.
 
 Every weight here comes from the G-buffer, the sampling map or detached values: the result
 is a fixed function of the shading values (:mod:`foveated_mi.frame.adjoint`).
@@ -19,15 +18,12 @@ import drjit as dr
 import mitsuba as mi
 
 from .. import reconstruct as rec
-from ..postprocess.inverse import inverse_tonemap
 from . import sampling as _sampling
-from ..kernels import demodulate
 from ..kernels.buffers import GBuffer, Resolved
 
 
 #: Options the reconstruction pass reads besides those its method declares.
-READS = ("reconstruction", "demodulate", "sigma_p", "jfa", "max_radius", "tonemap_samples",
-         "tonemap", "exposure")
+READS = ("reconstruction", "sigma_p", "jfa", "max_radius")
 
 
 class Reconstruction(NamedTuple):
@@ -45,18 +41,17 @@ def reads(o: dict[str, Any]) -> tuple[str, ...]:
         ((method.averages,) if method.averages else ())
 
 
-def reconstruction_pass(resolved: Resolved, gb: GBuffer, width: int, height: int,
-                        o: dict[str, Any], *, seed, emission_edges: mi.Bool | None = None,
+def reconstruction_pass(values: mi.Color3f, resolved: Resolved, gb: GBuffer, width: int,
+                        height: int, o: dict[str, Any], *, seed,
+                        emission_edges: mi.Bool | None = None,
                         max_gap: float | None) -> Reconstruction:
-    """``nearest``, ``filled`` and ``interpolated`` of a frame (module docstring); ``o``: the
-    integrator's options; ``seed``: the stochastic fill's (the render's seed, not the
+    """``nearest``, ``filled`` and ``interpolated`` of a frame's working ``values`` (module
+    docstring); ``o``: the options it reads; ``seed``: the stochastic fill's (the render's seed, not the
     frame's: over a still view the fill keeps its choices, so the frame changes only where
     new samples arrive); ``emission_edges``: pixels that lend values only to each other in
     the guided methods; ``max_gap``: the Jump Flooding bound (None: none; see
-    :func:`foveated_mi.frame.formation.jfa_bound`)."""
-    radiance = resolved.shading
-    if o["demodulate"]:
-        radiance = demodulate(radiance, gb.albedo, gb.emission)
+    :func:`foveated_mi.frame.film.jfa_bound`)."""
+    radiance = values
     method = rec.RECONSTRUCTIONS[o["reconstruction"]]
     guided = method.guided
     # sigma_p = 1 traces every pixel: a paper interpolation is then the identity (a pixel
@@ -73,12 +68,6 @@ def reconstruction_pass(resolved: Resolved, gb: GBuffer, width: int, height: int
             if guided else None
         interpolated = filled if o["reconstruction"] == "voronoi" else _interpolate(
             method, radiance, resolved.mask, nearest, guide, seed, width, height, o)
-    if o["tonemap_samples"]:
-        # Display values so far: back to radiance, so every later stage and buffer means
-        # what it means without the option (the à-trous pass maps them forth again,
-        # exactly: the round trip is the identity below the operator's cap).
-        filled = inverse_tonemap(filled, o["tonemap"], o["exposure"])
-        interpolated = inverse_tonemap(interpolated, o["tonemap"], o["exposure"])
     samples = None if method.averages is None else \
         dr.opaque(mi.Float, o[method.averages]) + dr.zeros(mi.Float, width * height)
     return Reconstruction(nearest, filled, interpolated, samples)

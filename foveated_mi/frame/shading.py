@@ -48,7 +48,6 @@ import drjit as dr
 import mitsuba as mi
 
 from ..kernels import luminance
-from ..postprocess import tonemap as _tonemap
 from .pixel_filter import FilterSample, FilterSampler
 
 
@@ -287,14 +286,6 @@ def _splat_gather(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.
             m2 += dr.gather(mi.Float, lum2, src, valid) * w
             wsum += w
     return acc, m2, wsum
-
-
-def tonemap_samples(samples: TracedSamples, tonemap: str, exposure: float) -> TracedSamples:
-    """Each sample tone-mapped before it is developed (option ``tonemap_samples``: the
-    authors' order, display values averaged; the formation maps its result back to
-    radiance). Rejected samples stay 0."""
-    return samples._replace(radiance=dr.select(
-        samples.ok, _tonemap(samples.radiance, tonemap, exposure), 0.0))
 
 
 def develop(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.Film,

@@ -47,8 +47,9 @@ from ..frame.outputs import FrameOutputs, frame_outputs
 from ..frame.plan import FramePlan, Planner
 from ..frame.reproject import History
 from ..frame.scene_state import SceneState, scene_state
+from ..frame.domain import tonemap_samples
 from ..frame.shading import (ShadingBuffer, TracedSamples, develop, is_ad_integrator,
-                             tonemap_samples, trace_wavefront)
+                             trace_wavefront)
 from ..options import (SCHEMA, from_properties, gradient_refusal, parameter_table,
                        pixel_filter_warning, validate_options)
 from ..timing import StageTimer
@@ -184,7 +185,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         """Per-sample tone mapping where asked, then the sparse shading buffer."""
         o = self._options
         if o["tonemap_samples"]:
-            samples = tonemap_samples(samples, o["tonemap"], o["exposure"])
+            samples = tonemap_samples(samples, o)
         return develop(samples, plan.reordered.wavefront, plan.spp, plan.sensor.film(),
                        o["pixel_filter"])
 

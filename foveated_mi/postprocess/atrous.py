@@ -80,9 +80,8 @@ import mitsuba as mi
 from ..validate import ParameterError, check_int, check_sigma  # noqa: F401 (re-exported)
 from ..kernels.grid import Grid, grid_of
 from ..kernels import HeldLevel, Surface, gather4, held_filter, packet
-from .inverse import inverse_tonemap
 from .registry import DenoiseInput, Denoised, register_denoiser
-from .tonemap import as_color3f, tonemap
+from .tonemap import as_color3f
 
 
 
@@ -224,22 +223,18 @@ def _atrous_level(c: mi.Color3f, surface: Surface, grid: Grid, *, step: mi.Int32
     return y
 
 
-def atrous_stage(ctx: DenoiseInput) -> Denoised:
-    """The ``atrous`` denoiser of a frame (paper §3.5): tone mapping, the à-trous filter in
-    the display domain, and the inverse tone map back to radiance."""
+def atrous_stage(ctx: DenoiseInput) -> mi.Color3f:
+    """The ``atrous`` denoiser of a frame (paper §3.5): the à-trous filter of the tone-mapped
+    image (its registration's display domain: the formation tone-maps before it and maps
+    the result back to radiance)."""
     o, gb = ctx.options, ctx.gbuffer
-    levels = o["atrous_iterations"]
-    if levels == 0:
-        return Denoised(ctx.image)
-    tonemapped = tonemap(ctx.image, o["tonemap"], o["exposure"])
-    filtered = atrous(tonemapped, gb.normal, gb.position, ctx.width, ctx.height,
-                      iterations=levels, sigma_color=o["sigma_color"],
-                      sigma_normal=o["sigma_normal"], sigma_position=o["sigma_position"],
-                      valid=gb.hit)
-    image = inverse_tonemap(filtered, o["tonemap"], o["exposure"])
-    return Denoised(image, filtered=filtered, tonemapped=tonemapped)
+    return atrous(ctx.image, gb.normal, gb.position, ctx.width, ctx.height,
+                  iterations=o["atrous_iterations"], sigma_color=o["sigma_color"],
+                  sigma_normal=o["sigma_normal"], sigma_position=o["sigma_position"],
+                  valid=gb.hit)
 
 
-register_denoiser("atrous", atrous_stage, differentiable=True, replayable=True,
-                  reads=("atrous_iterations", "sigma_color", "sigma_normal", "sigma_position",
-                         "tonemap", "exposure"))
+register_denoiser("atrous", atrous_stage, differentiable=True, domain="display",
+                  replayable=True,
+                  reads=("atrous_iterations", "sigma_color", "sigma_normal", "sigma_position"),
+                  active=lambda o: o["atrous_iterations"] > 0)

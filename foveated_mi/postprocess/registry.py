@@ -6,7 +6,7 @@ and whether this is a gradient pass) returning the filtered image, or a :class:`
 with its intermediate buffers. It registers beside its code, as ``mi.register_integrator``
 does::
 
-    register_denoiser("svgf", svgf_stage, differentiable=True, demodulated=True)
+    register_denoiser("svgf", svgf_stage, differentiable=True, domain="irradiance")
 
 The options (validation, CLI flags, the docstring's parameter table) and the gradient pass
 learn of it from :data:`DENOISERS`. The post-processing pass
@@ -19,6 +19,10 @@ from typing import Any, Callable, NamedTuple
 import mitsuba as mi
 
 from ..kernels.buffers import GBuffer, Resolved
+from ..validate import check_choice
+
+#: The value domains a denoiser may declare (:mod:`foveated_mi.frame.domain`).
+DOMAINS = ("radiance", "irradiance", "display")
 
 
 class DenoiseInput(NamedTuple):
@@ -47,7 +51,7 @@ class Denoiser(NamedTuple):
     """A registered denoiser (see :func:`register_denoiser`)."""
     fn: Callable[[DenoiseInput], "mi.Color3f | Denoised"]
     differentiable: bool
-    demodulated: bool
+    domain: str
     materials: bool
     display_values: bool
     available: Callable[[], bool] | None
@@ -55,6 +59,7 @@ class Denoiser(NamedTuple):
     replayable: bool = False
     independent_noise: bool = False
     reads: tuple[str, ...] = ()
+    active: Callable[[dict], bool] | None = None
 
 
 #: Denoiser name -> :class:`Denoiser`, in registration order.
@@ -62,16 +67,19 @@ DENOISERS: dict[str, Denoiser] = {}
 
 
 def register_denoiser(name: str, fn: Callable[[DenoiseInput], Any], *, differentiable: bool,
-                      demodulated: bool = False, materials: bool = False,
+                      domain: str = "radiance", materials: bool = False,
                       display_values: bool = True, available: Callable[[], bool] | None = None,
                       requirement: str = "", replayable: bool = False,
-                      independent_noise: bool = False, reads: tuple[str, ...] = ()) -> None:
+                      independent_noise: bool = False, reads: tuple[str, ...] = (),
+                      active: Callable[[dict], bool] | None = None) -> None:
     """Make ``fn`` the denoiser ``name`` (the option value ``denoiser = name``).
 
     ``differentiable``: a gradient pass may differentiate it (else a gradient pass of a
     frame that used it raises, and the image formation skips it when run for gradients).
-    ``demodulated``: it filters the reconstruction's own values (irradiance with
-    ``demodulate``) before the albedo is multiplied back; else it filters radiance.
+    ``domain``: the values ``ctx.image`` holds and it returns (:mod:`foveated_mi.frame.domain`):
+    ``"irradiance"``, the reconstruction's own values (irradiance with ``demodulate``) before
+    the albedo is multiplied back; ``"radiance"``, after it; ``"display"``, the tone-mapped
+    radiance, mapped back after it (the formation does both conversions).
     ``materials``: it reads the G-buffer's albedo and emission. ``display_values``: it also
     works on tone-mapped samples (``tonemap_samples``). ``available``: whether its
     dependency is installed; ``requirement`` says what to install. ``replayable``: it is
@@ -79,10 +87,13 @@ def register_denoiser(name: str, fn: Callable[[DenoiseInput], Any], *, different
     once and replayed (:mod:`foveated_mi.frame.formation`). ``independent_noise``: it expects
     each pixel's noise independent of its neighbours' (a network trained on such noise), so
     ``pixel_filter = "auto"`` gives it filter importance sampling instead of splatting.
-    ``reads``: the options it reads (``ctx.options`` holds exactly these)."""
-    DENOISERS[name] = Denoiser(fn, bool(differentiable), bool(demodulated), bool(materials),
+    ``reads``: the options it reads (``ctx.options`` holds exactly these). ``active(options)``:
+    whether it changes a frame with these options (else it is not called, and costs nothing:
+    no tone-mapping round trip either)."""
+    check_choice("domain", domain, DOMAINS)
+    DENOISERS[name] = Denoiser(fn, bool(differentiable), domain, bool(materials),
                                bool(display_values), available, requirement, bool(replayable),
-                               bool(independent_noise), tuple(reads))
+                               bool(independent_noise), tuple(reads), active)
 
 
 def unregister_denoiser(name: str) -> None:
@@ -95,4 +106,5 @@ def as_denoised(result: Any) -> Denoised:
     return result if isinstance(result, Denoised) else Denoised(result, filtered=result)
 
 
-register_denoiser("none", lambda ctx: Denoised(ctx.image), differentiable=True, replayable=True)
+register_denoiser("none", lambda ctx: Denoised(ctx.image), differentiable=True, replayable=True,
+                  active=lambda o: False)

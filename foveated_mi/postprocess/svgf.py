@@ -163,6 +163,7 @@ def svgf_stage(ctx: DenoiseInput) -> Denoised:
 
 
 # Models the noise of radiance, so not on display values (tonemap_samples).
-register_denoiser("svgf", svgf_stage, differentiable=True, demodulated=True,
+register_denoiser("svgf", svgf_stage, differentiable=True, domain="irradiance",
                   display_values=False, replayable=True,
-                  reads=("atrous_iterations", "sigma_luminance", "demodulate"))
+                  reads=("atrous_iterations", "sigma_luminance", "demodulate"),
+                  active=lambda o: o["atrous_iterations"] > 0)
