@@ -10,11 +10,10 @@ in [0, 1]. ``hdr=True`` for linear radiance (any value >= 0).
 Device and filter reuse: ``pyoidn.denoise`` already keeps one committed CPU device and one
 filter per filter type for the whole process and only rebinds the images and re-commits the
 filter per call. A wrapper that instead kept a ``pyoidn.Device`` / ``pyoidn.Filter`` with
-persistent image buffers of a fixed size (copy in, ``execute()``, copy out) measured the same
-(2-core machine, colour + albedo + normal, median of 5): 64x64 5.8 ms both, 256x256 82.1 vs
-82.1 ms, 640x360 295 vs 298 ms; outputs bit-identical. So :func:`denoise` on the CPU device
-calls ``pyoidn.denoise``. Only the first call of a process pays for the device (about 15 ms
-more at 128x128). The other paths below (OIDN buffers, memory owned by Dr.Jit) keep one
+persistent image buffers of a fixed size (copy in, ``execute()``, copy out) measured the same,
+with bit-identical outputs (``docs/results.md#oidns-device-and-filter-reuse``). So
+:func:`denoise` on the CPU device calls ``pyoidn.denoise``. Only the first call of a process
+pays for the device. The other paths below (OIDN buffers, memory owned by Dr.Jit) keep one
 device and one filter per device kind in the same way (:func:`run_filter`).
 
 **Device choice.** OIDN runs on its CPU device, or on its CUDA device on a ``cuda_*`` variant

@@ -27,8 +27,8 @@ defaults by a configuration tuned together; any option given explicitly wins ove
     ``|Gx| + |Gy| > 0.99`` in scene units) but does not call it (``samplingStep.cu`` line
     85 is commented out). That test is ``edge_detector = "sobel"`` with
     ``edge_threshold = 0.99``; the preset keeps the relative depth jump (0.1), because the
-    Sobel test in scene units marks 38 % (voxel-monument) to 78 % (voxel-city) of a 256²
-    frame as edges, above every ray budget of the paper's Table 1 (3.3 % to 19.8 %).
+    Sobel test in scene units marks more of a voxel frame as edges than every ray budget of
+    the paper's Table 1 (3.3 % to 19.8 %; ``docs/results.md#edge-rays-sobel-in-scene-units``).
     Rays are forced at depth edges only (``emission_edges`` off).
 ``oidn``
     For a Monte Carlo nested integrator, best measured at equal time with Intel Open Image
@@ -43,19 +43,17 @@ defaults by a configuration tuned together; any option given explicitly wins ove
 ``guided``
     The differentiable noise-aware pipeline, no extra dependency: albedo demodulation, the
     G-buffer-guided sparse reconstruction and the variance-guided à-trous filter (SVGF), which
-    stops smoothing where the history has converged; emission edges traced every frame. In
-    ``benchmarks/bench_equal_time.py`` (640x360, frame 16, still gaze; measured against the
-    earlier ``paper`` pipeline: compact reorder, capped history, five à-trous levels)
-    ``guided`` at 2 spp is ahead of it at 4 spp by
-    +2.9 / +6.1 dB (frame / fovea) on the staircase in 337 against 371 ms, and by
-    +2.1 / +8.5 dB on voxel-city in 272 against 228 ms.
+    stops smoothing where the history has converged; emission edges traced every frame. Its
+    figures at equal time against the earlier ``paper`` pipeline
+    (``benchmarks/bench_equal_time.py``): ``docs/results.md#equal-time``.
 ``auto`` (default)
     ``oidn`` when ``pyoidn`` can be imported, else ``guided``; ``guided`` whenever the frames
     are differentiated (a nested AD integrator such as ``prb``, or ``mi.render`` with
     parameters that require gradients), so that gradients are exact. ``stats["preset"]``
     names the one used.
 
-See ``benchmarks/bench_equal_time.py`` and the README for the measurements behind them.
+See ``docs/results.md#equal-time`` (``benchmarks/bench_equal_time.py``) for the measurements
+behind them.
 """
 from __future__ import annotations
 

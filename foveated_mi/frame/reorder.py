@@ -28,8 +28,8 @@ the same pixels; they differ in the shape of the launch, i.e. in how many lanes 
 ``tiles`` (an extension)
     ``compact`` in the order of :data:`TILE` x :data:`TILE` pixel tiles (row-major inside a
     tile and between tiles): the rays of one SIMD packet or warp then lie close together in
-    the image. Measured on voxel-city at 1024², 10 % rays, 2 cores: the trace stage 13 % faster
-    than ``compact`` (``python benchmarks/bench_reorder.py --size 1024 1024``). The same rays; each
+    the image (its trace stage against ``compact``'s: ``docs/results.md#ray-reordering``,
+    ``python benchmarks/bench_reorder.py --size 1024 1024``). The same rays; each
     pixel's random numbers come from another lane than in ``compact``.
 
 The reordered sampling map ``R`` (the paper's ``Ts``/``R`` buffer) is a permutation of all

@@ -337,8 +337,8 @@ def fast_sibson(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, wid
     area = area + mi.Float64(dr.select(up, 1.0, 0.0) + dr.select(down, 1.0, 0.0))
     # One reciprocal instead of three divisions: the Float64 rounding of c * m * (1 / m) is far
     # below half a Float32 ulp, so a constant image still rounds back to exactly c. A division,
-    # not dr.rcp: under fast math CUDA's Float64 rcp is rcp.approx (about 20 bits; 10 Float32
-    # ulps measured on an H200), a division stays div.rn.
+    # not dr.rcp: under fast math CUDA's Float64 rcp is rcp.approx (about 20 bits; see
+    # docs/results.md#how-the-h200-figures-were-measured), a division stays div.rn.
     inv = 1.0 / area
     out = mi.Color3f(mi.Float((s.x + extra.x) * inv), mi.Float((s.y + extra.y) * inv),
                      mi.Float((s.z + extra.z) * inv))

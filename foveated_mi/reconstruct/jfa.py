@@ -26,9 +26,8 @@ Jump Flooding Algorithm for Computing Discrete Voronoi Diagrams", ISVD 2007):
 The repairs fix near-misses only: a pixel whose true site never reached its neighbourhood
 keeps a wrong one, sometimes several pixels too far (e.g. two sites at (15, 7) and (31, 23) of
 a 32 x 32 film: 6.1 / 5.2 / 3.6 px too far with ``jfa`` / ``jfa+1`` / ``jfa+2``, exact with
-``1+jfa``; tests/test_jfa.py). Measured wrong-assignment rates on random sites
-(0.1 % .. 10 %, films 96 x 64 .. 128 x 128): ``jfa`` 0.05 %, ``jfa+1`` 0.005 %, ``jfa+2``
-0.0007 %, ``1+jfa`` 0 %.
+``1+jfa``; tests/test_jfa.py). Each variant's wrong-assignment rate on random sites:
+``docs/results.md#jump-floodings-wrong-assignments``.
 
 Ties between equally distant sites go to the smaller pixel index, so the result does not depend
 on evaluation order. Every pass is one kernel over ``W * H`` pixels; the step is a literal of

@@ -21,8 +21,8 @@ A traced pixel keeps its own value. The random numbers come from a per-pixel has
 ``seed``, so a frame is reproducible. The ``foveated`` integrator passes the render's seed,
 the same for every frame of a history: over a still view each pixel keeps its choice until a
 new site appears near it, so the frame changes only where new samples arrive (a fill drawn
-afresh every frame made a learned denoiser's output, and the PSNR of a still view, jump by
-up to 2.4 dB from frame to frame).
+afresh every frame made a learned denoiser's output, and the PSNR of a still view, jump from
+frame to frame: ``docs/results.md#the-stochastic-fill-in-a-still-view``).
 
 With demodulation (:mod:`foveated_mi.kernels.demodulation`) the chosen site's irradiance is
 multiplied by the pixel's own albedo, so textures stay sharp. The output is a gather of site values with

@@ -11,12 +11,12 @@ every exposed voxel face. The triangle count is therefore exactly
 with ``h = 0`` outside the grid; the final 2 are the ground plane (a rectangle). The grid
 always spans :data:`CITY_EXTENT` world units and the peak height is ``max(12, 0.45 size)``
 voxels, so the city keeps its proportions at any ``size`` and ``T`` grows roughly as
-``size**3``. Measured (seed 0; build + ``mi.load_dict`` on the 2-core machine,
-llvm_ad_rgb)::
+``size**3`` (seed 0)::
 
     size      32      64       96    128 (default)       200        256
     T      6,554  43,598  151,994        334,478   1,199,958  2,446,742
-    build  0.1 s   0.2 s    0.6 s        0.8-1.5 s     4.4 s      8.3 s
+
+Build times: ``docs/results.md#scene-build-time``.
 
 The whole city is one :class:`mi.Mesh` with a per-face colour attribute, built with NumPy at
 scene-build time (not in the render path). A sky (a gradient environment map, ``envmap=False``
