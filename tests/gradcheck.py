@@ -6,7 +6,8 @@ pixel weighting ``loss = sum(weights * image)``, with the sampling map pinned
 (``map_seed``) and history off, so that every render sees the same sampling map and sites.
 
 :data:`OPTION_SETS` lists image-formation configurations; the generic tests run on each of
-them. A stage added to ``_form_image`` should add its configurations here.
+them. A stage added to a formation (:mod:`foveated_mi.frame.film`) should add its configurations
+here.
 """
 from __future__ import annotations
 

@@ -17,10 +17,11 @@
 4. outputs: :mod:`.outputs` (the frame's buffers on their grids, and its stats)
 
 The gradient pass, :mod:`.gradient` (the glue) with :mod:`.adjoint` (the maths) and
-:mod:`.traced_sensor`, sits at the shading seam. The kernels every pass uses are below, in
-:mod:`foveated_mi.kernels`; the methods the passes call are in :mod:`foveated_mi.reconstruct`
-and :mod:`foveated_mi.postprocess`. The integrator (:mod:`foveated_mi.integrators.foveated`)
-only runs the passes in this order.
+:mod:`.traced_sensor`, sits at the shading seam. The value domains (radiance, irradiance,
+display values) and every conversion between them are in :mod:`.domain`. The kernels every
+pass uses are below, in :mod:`foveated_mi.kernels`; the methods the passes call are in
+:mod:`foveated_mi.reconstruct` and :mod:`foveated_mi.postprocess`. The integrator
+(:mod:`foveated_mi.integrators.foveated`) only runs the passes in this order.
 """
 from __future__ import annotations
 

@@ -3,7 +3,8 @@ r"""Gradients of a foveated frame: the seam, the image formation's adjoint, the 
 **The seam.** A frame is :math:`I = F(S)`, where :math:`S` is the developed shading buffer
 (:class:`foveated_mi.frame.shading.ShadingBuffer`: one radiance estimate :math:`S(p)` per traced
 pixel :math:`p`) and :math:`F` everything after it (history resolve, Jump Flooding,
-interpolation, tone mapping, à-trous, inverse tone mapping: ``FoveatedIntegrator._form_image``).
+interpolation, tone mapping, à-trous, inverse tone mapping: the registered formation,
+:func:`foveated_mi.frame.formation.form`).
 The gradient pass holds every decision of the primal frame: sampling map, sites, interpolation
 windows, filter weights and history. Every weight inside :math:`F` is computed from detached
 values, so with them held :math:`F` is linear in :math:`S` except for the tone map and its
