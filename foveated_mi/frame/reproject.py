@@ -17,13 +17,8 @@ copied into a block of pixels, which the denoisers (trained on, or modelling, in
 per-pixel noise) leave in place, and one history estimate weighted as if it were several.
 In exclusive mode a previous pixel serves only the pixel that lands nearest its centre (ties:
 the lowest index); the others miss and start afresh. A still camera maps every pixel onto
-itself, so it keeps all of its history. Measured on the Cornell box at 64² after the camera
-moves closer (``closer``), against a fresh first frame of the new view
-(``benchmarks/bench_camera_move.py``, seeds 5-7, ``docs/results/camera_move_nearest.json``
-and ``camera_move.json``): with nearest reads the first frame after the move was up to
-4.0 dB below it (``guided``, 32 frames of history, linear values) and the third still 2.8 dB
-below; with exclusive reads the first was at most 0.15 dB below it and the third at least
-0.2 dB above it, for ``guided`` and ``oidn`` after 1, 4 and 32 frames of history.
+itself, so it keeps all of its history. ``benchmarks/bench_camera_move.py`` measures both
+modes after the camera moves (``docs/results.md#history-after-a-camera-move``).
 
 A background pixel (the primary ray escapes) reprojects by its direction, the point at
 infinity :math:`q = M_{t-1} (d, 0)`, as in temporal anti-aliasing; it is a hit when the

@@ -1,5 +1,5 @@
 """Per-pixel kernels shared by the passes of a frame and the methods they call: the ground floor
-of the package (it imports Dr.Jit and Mitsuba only, nothing else of ``foveated_mi``).
+of the package (it imports Dr.Jit, Mitsuba, NumPy and :mod:`foveated_mi.validate` only).
 
 - :mod:`.pixels`: pixel coordinates, the film's size and pixel-centre rays, luminance, the
   ``NO_SITE`` mark, packets;
@@ -7,7 +7,10 @@ of the package (it imports Dr.Jit and Mitsuba only, nothing else of ``foveated_m
   surface test of the edge-stopping filters;
 - :mod:`.held`: a filter level with its weights held, and its exact transpose;
 - :mod:`.demodulation`: radiance to irradiance by the G-buffer's albedo, and back;
-- :mod:`.variance`: the per-pixel noise variance of the shading estimates (SVGF).
+- :mod:`.variance`: the per-pixel noise variance of the shading estimates (SVGF);
+- :mod:`.grid`: the grid a buffer lives on (its cells on the film, clamp or wrap);
+- :mod:`.polar`: a polar foveated buffer around the gaze;
+- :mod:`.buffers`: the named buffer bundles every layer passes (G-buffer, resolved history).
 """
 from __future__ import annotations
 

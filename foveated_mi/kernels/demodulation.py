@@ -23,22 +23,8 @@ a dark site's Monte Carlo noise, and a reconstruction that spreads that site int
 neighbour multiplies it back by the neighbour's albedo. The floor caps that gain at
 :math:`a_q / a_{\min}`; below it, demodulation is a constant scale (no effect). Black
 surfaces, specular materials whose diffuse albedo is 0 and misses are divided by the floor,
-which the remodulation undoes. Measured with ``python benchmarks/bench_demodulation.py``
-(one 2-spp frame without history, display-referred PSNR against 1024 spp; 2 cores,
-llvm_ad_rgb, 2026-11-25):
-
-======  ==========================  ============================  ======================
-floor   staircase 320x180, paper    staircase, ``guided`` preset  Cornell 48², paper
-        + demodulation (dB)         (dB)                          + demodulation (dB)
-======  ==========================  ============================  ======================
-0.001   11.92                       26.35                         27.64
-0.1     31.19                       29.29                         27.67
-0.25    32.49                       31.56                         27.69
-0.4     33.43                       33.43                         27.70
-======  ==========================  ============================  ======================
-
-against 33.95 dB (staircase) and 25.94 dB (Cornell) for the paper's pipeline without
-demodulation.
+which the remodulation undoes. The floor was chosen by
+``python benchmarks/bench_demodulation.py`` (``docs/results.md#albedo-demodulation``).
 
 Both maps are linear in the radiance (the G-buffer terms are fixed weights), so gradients pass
 straight through; :math:`\hat a` and :math:`L_e` carry none (they are held at their primal

@@ -4,10 +4,9 @@ and packets.
 
 **Packets.** A tap reads several buffers at ``q``. Four values of a pixel stored side by side
 (:func:`packet`) are gathered as one packet: one vector load per lane on the LLVM backend
-instead of four scalar gathers. With its colour, normal and position + hit flag in three
-packets, one à-trous level on voxel-city at 512² went from 56 to 12 ms
-(``benchmarks/bench_overhead.py``). Packets are built with ``dr.ravel``, so gradients flow
-through them like through the buffers they hold.
+instead of four scalar gathers (an à-trous level reads three: colour, normal, position +
+hit flag; ``docs/results.md#the-5x5-filters``). Packets are built with ``dr.ravel``, so
+gradients flow through them like through the buffers they hold.
 """
 from __future__ import annotations
 
