@@ -14,6 +14,9 @@ Cases (the film size is multiplied by ``--scale``):
     the shared staircase interior (skipped when absent), 640x360, path ``max_depth`` 8, 2 spp,
     the ``guided`` and ``oidn`` presets, the latter at OIDN's three quality levels (skipped
     without ``pyoidn``); OIDN reads the albedo and normal of the G-buffer.
+``voxel-static-vr`` / ``voxel-moving-vr`` / ``staircase-vr``
+    the same scenes under the ``vr`` preset at ``ray_budget`` 0.10: rays at the cells of a
+    log-polar buffer around the gaze, denoised there (SVGF), one warp to the film.
 ``table1-rungholt`` / ``table1-vokselia`` / ``table1-eye-exam``
     the paper's Table 1 budgets at 1024x1024, path ``max_depth`` 8, 1 spp, ``preset="paper"``:
     θ calibrated to 19.8 % (voxel-city, 200² blocks), 3.3 % (the shared voxel-monument) and
@@ -66,6 +69,16 @@ CASES = {
     "staircase-oidn-fast": dict(scene=STAIRCASE, size=(640, 360), max_depth=8, spp=2,
                                 preset="oidn", fraction=None, orbit=0.0,
                                 options={"oidn_quality": "fast"}),
+    # The vr preset: the formation in a log-polar buffer, its rays set by ray_budget.
+    "voxel-static-vr": dict(scene="voxel-city", size=(1024, 1024), max_depth=3, spp=1,
+                            preset="vr", fraction=None, orbit=0.0,
+                            options={"ray_budget": 0.10}),
+    "voxel-moving-vr": dict(scene="voxel-city", size=(1024, 1024), max_depth=3, spp=1,
+                            preset="vr", fraction=None, orbit=0.5,
+                            options={"ray_budget": 0.10}),
+    "staircase-vr": dict(scene=STAIRCASE, size=(640, 360), max_depth=8, spp=2,
+                         preset="vr", fraction=None, orbit=0.0,
+                         options={"ray_budget": 0.10}),
     "table1-rungholt": dict(scene="voxel-city", params={"size": 200}, size=(1024, 1024),
                             max_depth=8, spp=1, preset="paper", fraction=0.198, orbit=0.0),
     "table1-vokselia": dict(scene=os.path.join(SHARED, "voxel-monument", "scene.xml"),

@@ -243,7 +243,8 @@ _SCHEMA: tuple[Option, ...] = (
            choices=lambda: PRESET_NAMES,
            doc="``auto`` (default: ``oidn`` when ``pyoidn`` imports, else ``guided``; "
            "``guided`` for a nested AD integrator or a differentiated ``mi.render``) | "
-           "``oidn`` | ``guided`` | ``paper``: a tuned group of the defaults below (see "
+           "``oidn`` | ``guided`` | ``paper`` | ``vr`` (the formation in a log-polar buffer "
+           "around the gaze: ``formation = 'foveal'``): a tuned group of the defaults below (see "
            ":mod:`foveated_mi.options`); options given explicitly win"),
     Option("theta", 0.1, "float", "foveal radius θ in units of half the film diagonal",
            lo=0.0, lo_open=True),
@@ -255,15 +256,19 @@ _SCHEMA: tuple[Option, ...] = (
            "and the gaze ray, from the sensor's projection): P = σp there, whatever the "
            "camera's field of view; 0 (the default, and ``paper``) uses ``theta`` in film "
            "units. See :mod:`foveated_mi.frame.sampling`"),
-    Option("sampling_law", "kwon", "string", "the sampling probability: kwon (Eq. 1) or "
-           "acuity (density following the eye's minimum angle of resolution, ray_budget)",
+    Option("sampling_law", "kwon", "string", "the sampling probability: kwon (Eq. 1), "
+           "acuity (density following the eye's minimum angle of resolution, ray_budget) or "
+           "polar (the cells of a log-polar buffer, ray_budget)",
            choices=lambda: _sampling_laws(),
            doc="``kwon``: Eq. 1 of the paper (in degrees with ``theta_deg``); ``acuity``: "
            "the density follows the minimum angle of resolution, "
            "ω(e) = 1/48° + 0.022 e (Guenter et al. 2012), scaled to ``ray_budget`` with "
-           "the floor ``acuity_floor``. See :mod:`foveated_mi.frame.sampling`"),
+           "the floor ``acuity_floor``; ``polar``: the pixel under each cell of a log-polar "
+           "buffer around the gaze sized to ``ray_budget``, and the whole of its "
+           "full-resolution disc (:mod:`foveated_mi.kernels.polar`). See "
+           ":mod:`foveated_mi.frame.sampling`"),
     Option("ray_budget", 0.1, "float", "rays per frame as a fraction of the film's pixels "
-           "(sampling_law = acuity)", lo=0.0, hi=1.0, lo_open=True),
+           "(sampling_law = acuity or polar)", lo=0.0, hi=1.0, lo_open=True),
     Option("acuity_floor", 0.01, "float", "smallest probability of the acuity law "
            "(at most ray_budget)", lo=0.0, hi=1.0),
     Option("gaze", (0.5, 0.5), "point", "gaze in normalised film coordinates, origin top-left",
@@ -302,7 +307,9 @@ _SCHEMA: tuple[Option, ...] = (
            choices=lambda: formations(),
            doc="The image formation after the trace (:mod:`foveated_mi.frame.formation`): "
            "``film`` resolves the history, reconstructs and post-processes on the film's "
-           "pixels (§3.4-3.5)"),
+           "pixels (§3.4-3.5); ``foveal`` denoises in the log-polar buffer of "
+           "``sampling_law = 'polar'`` and warps it once to the film "
+           "(:mod:`foveated_mi.frame.foveal`)"),
     Option("reconstruction", "sibson", "string", "interpolation of the sparse shading buffer "
            "(§3.4)", choices=lambda: reconstructions(),
            doc="Interpolation of the sparse shading buffer (§3.4); ``guided`` and "
@@ -405,6 +412,10 @@ PRESETS: dict[str, dict[str, Any]] = {
              "denoiser": "oidn", "emission_edges": True, "reorder": "tiles"},
     "guided": {"demodulate": True, "reconstruction": "guided", "denoiser": "svgf",
                "emission_edges": True, "reorder": "tiles"},
+    # The formation in a log-polar buffer around the gaze, sized by the ray budget: no
+    # reconstruction on the film, the denoiser in the buffer, one warp.
+    "vr": {"sampling_law": "polar", "formation": "foveal", "ray_budget": 0.1,
+           "reorder": "compact", "edge_threshold": 0.0, "denoiser": "svgf"},
 }
 PRESET_NAMES = ("auto", *PRESETS)
 
@@ -451,6 +462,13 @@ def _check_combination(out: dict[str, Any]) -> None:
     if out["sampling_law"] == "acuity" and out["acuity_floor"] > out["ray_budget"]:
         raise ParameterError("acuity_floor", out["acuity_floor"],
                              f"a number <= ray_budget ({out['ray_budget']:g})")
+    if out["formation"] == "foveal":
+        # Its cells are the pixels the polar law traces, and it keeps radiance throughout.
+        if out["sampling_law"] != "polar":
+            raise ParameterError("sampling_law", out["sampling_law"],
+                                 "'polar' with formation = 'foveal'")
+        if out["tonemap_samples"]:
+            raise ParameterError("tonemap_samples", True, "False with formation = 'foveal'")
     entry = denoisers()[out["denoiser"]]
     if out["tonemap_samples"]:
         # The history and the reconstruction then hold display values: demodulation and

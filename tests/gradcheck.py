@@ -34,6 +34,8 @@ OPTION_SETS = [
     ("demodulate", {"demodulate": True}),
     ("stochastic", {"preset": "guided", "reconstruction": "stochastic", "denoiser": "svgf"}),
     ("svgf_every_pixel", {"preset": "guided", "denoiser": "svgf", "sigma_p": 1.0}),
+    ("vr", {"preset": "vr"}),
+    ("vr_atrous", {"preset": "vr", "denoiser": "atrous"}),
 ]
 
 BALL_CENTRE = (0.3, -0.6, 0.3)

@@ -72,6 +72,10 @@ CASES = [
     pytest.param(Case("direct_projective", "translation", VISIBILITY, grad_spp=128,
                       grad_seeds=6, fd_spp=1024, fd_seeds=6), marks=pytest.mark.slow),
     Case("prb_projective", "albedo", {"reconstruction": "fast_sibson"}),
+    # The foveal formation (denoising in the log-polar buffer, one warp), end to end.
+    Case("prb", "albedo", {"preset": "vr"}, grad_spp=256, grad_seeds=6, fd_spp=256, fd_seeds=6),
+    Case("path", "albedo", {"preset": "vr"}, grad_spp=256, grad_seeds=6, fd_spp=256,
+         fd_seeds=6),
 ]
 
 
@@ -122,7 +126,11 @@ def _formation_depth(integ) -> tuple[int, int]:
     inverse)."""
     o = integ.options
     fwd = rev = 2 + (2 if o["demodulate"] else 0)
-    if not (o["sigma_p"] >= 1.0 and o["reconstruction"] != "guided"):   # else the identity
+    if o["formation"] == "foveal":
+        # The buffer's cells are gathers (exact); the warp sums four weighted cells and
+        # divides by their weight (5 roundings), the fovea's seam blends two values (2).
+        fwd, rev = fwd + 7, rev + 7
+    elif not (o["sigma_p"] >= 1.0 and o["reconstruction"] != "guided"):   # else the identity
         traced = integ.buffer("traced")
         f, r = tolerances.reconstruction_depth(o["reconstruction"], integ.buffer("nearest"),
                                                traced, traced.shape[1], o["guided_levels"])

@@ -26,6 +26,7 @@ pass uses are below, in :mod:`foveated_mi.kernels`; the methods the passes call 
 from __future__ import annotations
 
 from . import film  # noqa: F401  (registers the "film" formation)
+from . import foveal  # noqa: F401  (registers the "foveal" formation)
 from .plan import FramePlan
 
 __all__ = ["FramePlan"]

@@ -34,6 +34,11 @@ def jfa_bound(width: int, height: int, o: dict[str, Any]) -> int | None:
     does with it anyway); None where the law bounds nothing."""
     if o["sampling_law"] == "acuity":
         gap = _sampling.gap_bound(width, height, o["acuity_floor"])
+    elif o["sampling_law"] == "polar":
+        # The widest cell, at the rings' reach: its pixel is at most a cell diagonal from
+        # any pixel it covers.
+        grid = _sampling.foveal_grid(width, height, float(o["ray_budget"]))
+        gap = 2.0 * float(grid.cell_size(grid.reach))
     elif o["theta_deg"] > 0:
         gap = None        # the law's smallest P needs the sensor's projection: no bound
     else:

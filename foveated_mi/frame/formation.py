@@ -58,6 +58,7 @@ class FormationInput(NamedTuple):
     spp: int
     fill_seed: Any                        #: the stochastic fill's seed (int or mi.UInt32)
     emission_edges: mi.Bool | None = None
+    gaze: mi.Point2f | None = None        #: the gaze's film position in pixels (opaque)
 
 
 class Formed(NamedTuple):
@@ -74,6 +75,7 @@ class Formation(NamedTuple):
     view: Callable[[int, int, dict], dict]
     stats: Callable[[dict], dict]
     counted: tuple[str, ...]
+    on_film: tuple[str, ...]
 
 
 #: Formation name -> :class:`Formation`, in registration order.
@@ -84,7 +86,8 @@ def register_formation(name: str, fn: Callable[..., Formed], *,
                        grid: Callable[[int, int, dict], Grid] | None = None,
                        view: Callable[[int, int, dict], dict] | None = None,
                        stats: Callable[[dict], dict] | None = None,
-                       counted: tuple[str, ...] = ()) -> None:
+                       counted: tuple[str, ...] = (), on_film: tuple[str, ...] = ()
+                       ) -> None:
     """Make ``fn`` the formation ``name`` (the option value ``formation = name``).
 
     ``grid(width, height, o)``: the grid of its buffers (default: the film's).
@@ -94,11 +97,12 @@ def register_formation(name: str, fn: Callable[..., Formed], *,
     cannot be read, and a value in it that changes every frame (the gaze) records again.
     ``stats(buffers)``: counters of the frame read from its buffers (device arrays, read
     when the stats are read); ``counted``: the buffers they count, evaluated together with
-    the frame's other counted buffers (one launch)."""
+    the frame's other counted buffers (one launch). ``on_film``: the buffers it returns on
+    the film's grid when its own grid is another (the image always is)."""
     FORMATIONS[name] = Formation(
         fn, grid if grid is not None else (lambda width, height, o: Grid.film(width, height)),
         view if view is not None else (lambda width, height, o: dict(o)),
-        stats if stats is not None else (lambda buffers: {}), tuple(counted))
+        stats if stats is not None else (lambda buffers: {}), tuple(counted), tuple(on_film))
 
 
 def unregister_formation(name: str) -> None:
@@ -134,7 +138,7 @@ def _record(arrays: dict, key: dict) -> dict:
     inp = FormationInput(GBuffer(**arrays["gbuffer"]),
                          _reproject.ReprojectionMap(**arrays["reprojection"]), history,
                          key["width"], key["height"], key["spp"], arrays["fill_seed"],
-                         arrays["emission_edges"])
+                         arrays["emission_edges"], arrays["gaze"])
     fn = FORMATIONS[key["formation"]].fn
     formed = fn(ShadingBuffer(**arrays["shading"]), inp, key["options"], StageTimer(False))
     return dict(formed._asdict())
@@ -184,7 +188,7 @@ class FrozenFormation:
             "history": None if h is None else {"mean": h.mean, "count": h.count,
                                                "moment2": h.moment2},
             "fill_seed": _sampling.opaque_seed(inp.fill_seed),
-            "emission_edges": inp.emission_edges,
+            "emission_edges": inp.emission_edges, "gaze": inp.gaze,
         }
         entry = FORMATIONS[o["formation"]]
         key = {"formation": o["formation"], "width": inp.width, "height": inp.height,

@@ -43,7 +43,7 @@ class PrimalFrame:
 def formation_input(plan: FramePlan) -> FormationInput:
     """The buffers of ``plan`` that a formation reads."""
     return FormationInput(plan.gbuffer, plan.reprojection, plan.history, plan.width,
-                          plan.height, plan.spp, plan.fill_seed, plan.emission_edges)
+                          plan.height, plan.spp, plan.fill_seed, plan.emission_edges, plan.gaze)
 
 
 def form_primal(plan: FramePlan, shading: ShadingBuffer, o: dict[str, Any], timer: StageTimer,

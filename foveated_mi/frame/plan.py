@@ -65,6 +65,7 @@ class FramePlan:
     gbuffer_reused: bool = False               #: the G-buffer is the previous frame's
     fill_seed: int = 0                         #: seed of the stochastic fill (the render's)
     emission_edges: mi.Bool | None = None      #: footprints across an emitter's edge
+    gaze: mi.Point2f | None = None             #: the gaze's film position in pixels (opaque)
 
 
 class Planner:
@@ -124,7 +125,8 @@ class Planner:
                          map_seed=map_seed, gbuffer=gb, edges=edges, sampling_map=smap,
                          probability=prob, reprojection=reproj, reordered=ro, history=history,
                          filter_sampler=self._filter_sampler(sensor, o["pixel_filter"]),
-                         gbuffer_reused=reused, fill_seed=seed, emission_edges=emitting)
+                         gbuffer_reused=reused, fill_seed=seed, emission_edges=emitting,
+                         gaze=_sampling.gaze_pixels(o["gaze"], width, height))
 
     def commit(self, plan: FramePlan, history: dict[str, Any] | None) -> None:
         """After a primal frame: its history (``mean``, ``count``, ``moment2`` on the film,

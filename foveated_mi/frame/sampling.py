@@ -53,7 +53,12 @@ import math
 import drjit as dr
 import mitsuba as mi
 
+import functools
+
+import numpy as np
+
 from ..kernels import pixel_coords
+from ..kernels.polar import PolarGrid, polar_grid
 from ..validate import check_range
 
 #: Minimum angle of resolution at the fovea, degrees (Guenter et al. 2012, §3).
@@ -63,7 +68,7 @@ ACUITY_SLOPE = 0.022
 #: Fixed-point steps that solve for the acuity law's scale (each one sum over the film).
 ACUITY_STEPS = 8
 
-SAMPLING_LAWS = ("kwon", "acuity")
+SAMPLING_LAWS = ("kwon", "acuity", "polar")
 
 #: Parameter ranges; the README's table of extremes is generated from the same numbers.
 THETA_RANGE = (0.0, math.inf)      # open at 0
@@ -287,6 +292,78 @@ def probability_in_degrees(directions: mi.Vector3f, sensor: mi.Sensor, o: dict) 
     return kwon_in_degrees(ecc, o["theta_deg"], o["sigma_p"])
 
 
+def _traced_pixels(grid: PolarGrid, width: int, height: int) -> int:
+    """Pixels :func:`polar_map` traces with the gaze at the film's centre (host, float64)."""
+    ring = np.arange(grid.height) + 0.5
+    angle = (np.arange(grid.width) + 0.5) * (2.0 * math.pi / grid.width)
+    r = grid._r_of_u(ring)[:, None]
+    x = np.floor(width / 2 + r * np.cos(angle)[None, :]).astype(np.int64).ravel()
+    y = np.floor(height / 2 + r * np.sin(angle)[None, :]).astype(np.int64).ravel()
+    on = (x >= 0) & (x < width) & (y >= 0) & (y < height)
+    traced = np.zeros(width * height, bool)
+    traced[y[on] * width + x[on]] = True
+    py, px = np.mgrid[0:height, 0:width]
+    traced |= ((px + 0.5 - width / 2) ** 2 + (py + 0.5 - height / 2) ** 2
+               <= grid.fovea ** 2).ravel()
+    return int(traced.sum())
+
+
+@functools.lru_cache(maxsize=16)
+def foveal_grid(width: int, height: int, budget: float) -> PolarGrid:
+    """The log-polar buffer of a ``width`` x ``height`` film whose traced pixels
+    (:func:`polar_map`: one per cell, and the full-resolution disc) number ``budget`` of the
+    film with the gaze at its centre. Near the gaze several cells share a pixel, so the
+    buffer is sized on the pixels, not the cells (host, once per film and budget)."""
+    target = budget * width * height
+    # Cells: at least one per traced pixel; near the gaze several share one, so up to a few
+    # cells per pixel of the budget.
+    lo, hi = budget, 16.0 * budget
+    if _traced_pixels(polar_grid(width, height, hi), width, height) <= target:
+        return polar_grid(width, height, hi)
+    for _ in range(30):       # more cells, more traced pixels: bisection on the cell budget
+        mid = 0.5 * (lo + hi)
+        if _traced_pixels(polar_grid(width, height, mid), width, height) < target:
+            lo = mid
+        else:
+            hi = mid
+    return polar_grid(width, height, hi)
+
+
+def gaze_pixels(gaze, width: int, height: int) -> mi.Point2f:
+    """The gaze's film position in pixels, opaque: a new gaze reuses every kernel."""
+    return mi.Point2f(dr.opaque(mi.Float, float(gaze[0]) * width),
+                      dr.opaque(mi.Float, float(gaze[1]) * height))
+
+
+def snapped_pixels(grid: PolarGrid, gaze: mi.Point2f, width: int, height: int
+                   ) -> tuple[mi.UInt32, mi.Bool]:
+    """The film pixel under each cell's centre, and whether it lies on the film."""
+    idx, _, _ = grid.cells()
+    p = grid.film_position(idx, gaze)
+    qx, qy = mi.Int32(dr.floor(p.x)), mi.Int32(dr.floor(p.y))
+    on = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
+    return mi.UInt32(dr.select(on, qy * width + qx, 0)), on
+
+
+def polar_map(width: int, height: int, gaze, budget: float, edges: mi.Bool | None = None
+              ) -> tuple[mi.Bool, mi.Float]:
+    """``sampling_law = "polar"``: the pixels under the cells of the log-polar buffer
+    (:func:`foveal_grid`), and every pixel of its full-resolution disc, so that each cell
+    has a traced pixel and the fovea is traced whole. Returns ``(sampling_map, probability)``
+    (1 where traced: the map is deterministic)."""
+    grid = foveal_grid(width, height, float(budget))
+    g = gaze_pixels(gaze, width, height)
+    q, on = snapped_pixels(grid, g, width, height)
+    smap = dr.zeros(mi.Bool, width * height)
+    dr.scatter(smap, mi.Bool(True), q, on)
+    _, x, y = pixel_coords(width, height)
+    d2 = dr.square(mi.Float(x) + 0.5 - g.x) + dr.square(mi.Float(y) + 0.5 - g.y)
+    smap |= d2 <= grid.fovea * grid.fovea
+    if edges is not None:
+        smap |= edges
+    return smap, dr.select(smap, 1.0, 0.0)
+
+
 def in_degrees(o: dict) -> bool:
     """Whether the options' sampling law works in degrees (needs the sensor's projection)."""
     return o["sampling_law"] == "acuity" or o["theta_deg"] > 0
@@ -311,6 +388,9 @@ def sampling_pass(gb, width: int, height: int, o: dict, seed, emitting: mi.Bool 
                             detector=o["edge_detector"])
     if emitting is not None:
         edges = emitting if edges is None else edges | emitting
+    if o["sampling_law"] == "polar":
+        smap, prob = polar_map(width, height, o["gaze"], o["ray_budget"], edges)
+        return edges, smap, prob
     smap, prob = sampling_map(width, height, gaze=o["gaze"], theta=o["theta"],
                               sigma_p=o["sigma_p"], seed=seed, edges=edges, probability=prob)
     return edges, smap, prob

@@ -156,10 +156,11 @@ def _inside_cells(width: int, height: int, film: tuple[int, int], grid: PolarGri
 def polar_grid(width: int, height: int, budget: float, *, offset: float = 0.0,
                kernel: float = 1.0) -> PolarGrid:
     """The polar grid of a ``width`` x ``height`` film whose cells on the film number
-    ``budget`` of its pixels with the gaze at its centre (module docstring). ``offset``:
+    ``budget`` of its pixels with the gaze at its centre (module docstring; above 1, more
+    cells than pixels: the fovea then reaches further). ``offset``:
     :math:`c` in pixels (0: log-polar); ``kernel``: :math:`\\alpha \\ge 1`. The rings reach the
     film's diagonal, so a gaze anywhere on the film has every pixel within them."""
-    budget = check_range("ray_budget", budget, 0.0, 1.0, lo_open=True)
+    budget = check_range("ray_budget", budget, 0.0, 16.0, lo_open=True)
     offset = check_range("offset", offset, 0.0, None)
     kernel = check_range("kernel", kernel, 1.0, 16.0)
     reach = math.hypot(width, height)

@@ -231,7 +231,7 @@ def atrous_stage(ctx: DenoiseInput) -> mi.Color3f:
     return atrous(ctx.image, gb.normal, gb.position, ctx.width, ctx.height,
                   iterations=o["atrous_iterations"], sigma_color=o["sigma_color"],
                   sigma_normal=o["sigma_normal"], sigma_position=o["sigma_position"],
-                  valid=gb.hit)
+                  valid=gb.hit, grid=ctx.grid)
 
 
 register_denoiser("atrous", atrous_stage, differentiable=True, domain="display",

@@ -19,6 +19,7 @@ from typing import Any, Callable, NamedTuple
 import mitsuba as mi
 
 from ..kernels.buffers import GBuffer, Resolved
+from ..kernels.grid import Grid
 from ..validate import check_choice
 
 #: The value domains a denoiser may declare (:mod:`foveated_mi.frame.domain`).
@@ -37,6 +38,8 @@ class DenoiseInput(NamedTuple):
     grad_pass: bool = False      #: a gradient pass runs the image formation again
     #: samples the reconstruction averaged per pixel, where its method declares a number
     samples: mi.Float | None = None
+    #: the buffers' grid and its neighbour rule (None: the film of ``width`` x ``height``)
+    grid: Grid | None = None
 
 
 class Denoised(NamedTuple):

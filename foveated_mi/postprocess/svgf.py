@@ -153,12 +153,12 @@ def svgf_stage(ctx: DenoiseInput) -> Denoised:
     width, height = ctx.width, ctx.height
     variance = _variance.estimate_variance(
         _variance.sample_variance(res.shading, res.moment2, res.count, res.mask, gb.normal,
-                                  gb.hit, width, height),
+                                  gb.hit, width, height, grid=ctx.grid),
         res.count, res.mask, ctx.nearest,
         samples=ctx.samples,
         albedo=gb.albedo if o["demodulate"] else None)
     filtered = svgf(ctx.image, variance, gb.normal, gb.position, gb.hit, width, height,
-                    iterations=levels, sigma_luminance=o["sigma_luminance"])
+                    iterations=levels, sigma_luminance=o["sigma_luminance"], grid=ctx.grid)
     return Denoised(filtered, filtered=filtered, variance=variance)
 
 

@@ -1,0 +1,165 @@
+"""The ``foveal`` formation: denoise in a log-polar buffer around the gaze, then warp once.
+
+The passes after the trace cost what the rays cost. With ``sampling_law = "polar"`` the frame
+traces the pixel under each cell of the log-polar buffer
+(:func:`foveated_mi.frame.sampling.foveal_grid`, sized by ``ray_budget``) and every pixel
+of its full-resolution disc. Then:
+
+1. **History resolve** (Fig. 4) on the film's pixels, as the ``film`` formation does: the
+   traced pixels blended with the reprojected history, so a moving head keeps it.
+2. **The buffer**: each cell takes its pixel's value, normal, position and counts; a cell off
+   the film, or whose pixel holds nothing yet, holds nothing (a non-finite value that every
+   filter tap and the warp leave out).
+3. **Denoising in the buffer** (§3.5): the registered denoiser on the buffer's grid, in the
+   domain it declares; taps wrap around in angle.
+4. **One warp to the film**: each pixel's continuous cell coordinates, bilinear over the
+   cells that hold a value (wrapping in angle, clamping radially). In the fovea disc every
+   pixel was traced: it shows its own resolved value, blended into the warp across the
+   disc's last :data:`SEAM` pixels.
+
+There is no Jump Flooding and no interpolation on the film. Every weight comes from the
+buffer's geometry, the G-buffer or detached values, so the image is a fixed function of the
+traced values, and the gradient pass differentiates it like the ``film`` formation (gathers
+and held filter levels).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import drjit as dr
+import mitsuba as mi
+
+from ..kernels import NO_SITE  # noqa: F401  (the nearest-site convention: each cell its own)
+from ..kernels.buffers import GBuffer, Resolved
+from ..kernels.grid import Grid
+from ..kernels.polar import PolarGrid
+from ..postprocess import DENOISERS, DenoiseInput, Denoised
+from ..postprocess.registry import as_denoised
+from ..timing import StageTimer
+from . import domain
+from . import reproject as _reproject
+from .film import film_stats
+from .formation import FormationInput, Formed, register_formation
+from .sampling import foveal_grid, snapped_pixels
+from .shading import ShadingBuffer
+
+#: Pixels over which the fovea's own values blend into the warped buffer at the disc's edge.
+SEAM = 2.0
+
+#: Options the formation reads besides its denoiser's.
+READS = ("max_history", "ray_budget", "denoiser", "clamp", "demodulate")
+
+#: The buffers it returns on the film's grid (the others are on the buffer's).
+ON_FILM = ("traced", "shading", "shading_mask", "history_count", "resampled", "image")
+
+
+def foveal_view(width: int, height: int, o: dict[str, Any]) -> dict[str, Any]:
+    """The options as the formation reads them (the gaze enters as an input array)."""
+    entry = DENOISERS[o["denoiser"]]
+    names = READS + (("tonemap", "exposure") if entry.domain == "display" else ()) + entry.reads
+    return {k: o[k] for k in dict.fromkeys(names)}
+
+
+def foveal_buffer_grid(width: int, height: int, o: dict[str, Any]) -> PolarGrid:
+    """The buffer's grid for a film and the options' ray budget."""
+    return foveal_grid(width, height, float(o["ray_budget"]))
+
+
+def _cells(resolved: Resolved, gb: GBuffer, q: mi.UInt32, has: mi.Bool):
+    """Each cell's value, counts and G-buffer, from its pixel."""
+    nan = dr.nan
+    value = dr.select(has, dr.gather(mi.Color3f, resolved.shading, q, has), nan)
+    res = Resolved(value, has, dr.gather(mi.Float, resolved.count, q, has),
+                   dr.zeros(mi.Bool, dr.width(q)), dr.gather(mi.Float, resolved.moment2, q, has))
+    take = lambda t, v: None if v is None else dr.gather(t, v, q, has)  # noqa: E731
+    cgb = GBuffer(position=take(mi.Point3f, gb.position), normal=take(mi.Normal3f, gb.normal),
+                  depth=take(mi.Float, gb.depth), hit=take(mi.Bool, gb.hit) & has,
+                  direction=take(mi.Vector3f, gb.direction), albedo=take(mi.Color3f, gb.albedo),
+                  emission=take(mi.Color3f, gb.emission))
+    return res, cgb
+
+
+def _denoise(res: Resolved, cgb: GBuffer, grid: PolarGrid, o: dict[str, Any],
+             grad_pass: bool) -> Denoised:
+    """The registered denoiser on the buffer, in the domain it declares."""
+    entry = DENOISERS[o["denoiser"]]
+    run = (entry.differentiable or not grad_pass) and (entry.active is None or entry.active(o))
+    values = domain.to_irradiance(res.shading, cgb, o)
+    if not run:
+        return Denoised(res.shading)
+    ctx = DenoiseInput(values, cgb, res, dr.arange(mi.UInt32, grid.size), grid.width,
+                       grid.height, {k: o[k] for k in entry.reads}, grad_pass, None, grid)
+    if entry.domain == "irradiance":
+        out = as_denoised(entry.fn(ctx))
+        return out._replace(image=domain.to_radiance(out.image, cgb, o, clamp=True))
+    if entry.domain == "display":
+        tonemapped = domain.to_display(res.shading, o)
+        filtered = as_denoised(entry.fn(ctx._replace(image=tonemapped))).image
+        return Denoised(domain.from_display(filtered, o), filtered=filtered,
+                        tonemapped=tonemapped)
+    # A network sees no non-finite value: the empty cells are black (the warp skips them).
+    return as_denoised(entry.fn(ctx._replace(image=dr.select(res.mask, res.shading, 0.0))))
+
+
+def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, width: int,
+         height: int) -> mi.Color3f:
+    """The buffer on the film: bilinear over the four cells around each pixel's continuous
+    cell coordinates that are ``valid`` and finite (wrapping in angle, clamping radially);
+    0 where none is."""
+    film = Grid.film(width, height)
+    idx, _, _ = film.cells()
+    c = grid.coords_at(film.film_position(idx), gaze)
+    u, v = c.x - 0.5, c.y - 0.5
+    x0, y0 = dr.floor(u), dr.floor(v)
+    fx, fy = u - x0, v - y0
+    acc = dr.zeros(mi.Color3f, film.size)
+    wsum = dr.zeros(mi.Float, film.size)
+    for dy, wy in ((0, 1.0 - fy), (1, fy)):
+        for dx, wx in ((0, 1.0 - fx), (1, fx)):
+            qy = dr.clip(mi.Int32(y0) + dy, 0, grid.height - 1)
+            q, _ = grid.neighbour(mi.Int32(x0) + dx, qy)
+            cq = dr.gather(mi.Color3f, cells, q)
+            w = dr.detach(wx * wy)
+            ok = dr.gather(mi.Bool, valid, q) & dr.isfinite(cq.x) & dr.isfinite(cq.y) \
+                & dr.isfinite(cq.z)
+            w = dr.select(ok, w, 0.0)
+            acc += dr.select(ok, cq, 0.0) * w
+            wsum += w
+    return dr.select(wsum > 0.0, acc / dr.select(wsum > 0.0, wsum, 1.0), 0.0)
+
+
+def form_foveal(shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any],
+                timer: StageTimer, grad_pass: bool = False) -> Formed:
+    """History resolve on the film, denoising in the buffer, one warp (module docstring)."""
+    width, height = inp.width, inp.height
+    grid = foveal_buffer_grid(width, height, o)
+    # History resolve (Fig. 4): this frame's samples blended with the reprojected history.
+    resolved = _reproject.resolve(shading.value, shading.mask, inp.spp, inp.reprojection,
+                                  inp.history, o["max_history"], shading.moment2)
+    timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
+    # The buffer: each cell from the pixel under its centre.
+    q, on = snapped_pixels(grid, inp.gaze, width, height)
+    has = on & dr.gather(mi.Bool, resolved.mask, q, on)
+    res, cgb = _cells(resolved, inp.gbuffer, q, has)
+    timer.mark("reconstruct", res.shading, res.count, cgb.normal, cgb.position)
+    # Denoising in the buffer (§3.5), then one warp to the film.
+    out = _denoise(res, cgb, grid, o, grad_pass)
+    warped = warp(out.image, has, grid, inp.gaze, width, height)
+    # The fovea disc shows its own pixels, blended into the warp across the seam.
+    film = Grid.film(width, height)
+    p = film.film_position(film.cells()[0])
+    r = dr.norm(p - inp.gaze)
+    t = dr.clip((grid.fovea - r) / SEAM, 0.0, 1.0)
+    own = resolved.mask & (t > 0.0)
+    image = dr.select(own, dr.lerp(warped, resolved.shading, t), warped)
+    timer.mark("post", image)
+    buffers = {"traced": shading.mask, "shading": resolved.shading,
+               "shading_mask": resolved.mask, "history_count": resolved.count,
+               "resampled": resolved.resampled, "cells": res.shading, "cell_mask": has,
+               "filtered": out.filtered, "tonemapped": out.tonemapped, "image": image}
+    history = {"mean": resolved.shading, "count": resolved.count, "moment2": resolved.moment2}
+    return Formed(image, buffers, history)
+
+
+register_formation("foveal", form_foveal, grid=foveal_buffer_grid, view=foveal_view,
+                   stats=film_stats, counted=("resampled", "shading_mask"), on_film=ON_FILM)

@@ -1,0 +1,141 @@
+"""The ``vr`` preset: rays at the cells of a log-polar buffer, denoising there, one warp.
+
+Its ray count meets the budget, a moving gaze compiles nothing, a budget of the whole film
+converges to the full render, the fovea shows its own traced pixels, any gaze and aspect ratio
+covers the film, and a bad combination gets one line."""
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from foveated_mi.integrators.foveated import FoveatedIntegrator
+from foveated_mi.scenes import load_scene
+from foveated_mi.validate import ParameterError
+
+
+def _scene(size=(64, 48), spp=1, integrator=None):
+    return load_scene("cornell-box", width=size[0], height=size[1], spp=spp,
+                      integrator=integrator or {"type": "path", "max_depth": 3})
+
+
+@pytest.mark.parametrize("budget", [0.1, 0.25])
+@pytest.mark.parametrize("size", [(96, 64), (160, 90)])
+def test_the_ray_count_meets_the_budget(budget, size):
+    scene = _scene(size)
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", ray_budget=budget)
+    mi.render(scene, integrator=integ, seed=0)
+    # The buffer is sized on the traced pixels with the gaze at the film's centre; the count
+    # moves by a column of cells: 2 % of the budget, or one column on the smallest film.
+    rays = integ.stats["rays"]
+    grid_rings = integ.buffer("cells").shape[0]
+    target = budget * size[0] * size[1]
+    assert abs(rays - target) <= max(0.02 * target, grid_rings), (rays, target)
+
+
+def test_a_moving_gaze_compiles_nothing_from_frame_3():
+    scene = _scene()
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
+    compiled = []
+    for k in range(6):
+        integ.gaze = (0.3 + 0.07 * k, 0.6 - 0.05 * k)
+        with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+            dr.kernel_history_clear()
+            np.array(mi.render(scene, integrator=integ, seed=k))
+            hist = dr.kernel_history([dr.KernelType.JIT])
+        compiled.append(sum(1 for h in hist if not h.get("cache_hit", True)))
+    assert compiled[3:] == [0, 0, 0], compiled
+
+
+def test_the_whole_film_as_budget_is_the_frame_that_traces_every_pixel():
+    # Every pixel traced: the fovea covers the film and shows its own pixels, the very
+    # samples of the film formation tracing every pixel with the same launch and seed.
+    scene = _scene((48, 40), spp=2)
+    same = dict(denoiser="none", history=False, pixel_filter="importance", reorder="compact",
+                edge_threshold=0.0)
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", ray_budget=1.0, **same)
+    image = np.array(mi.render(scene, integrator=integ, spp=2, seed=4))
+    assert integ.stats["ray_fraction"] == 1.0
+    every = FoveatedIntegrator(nested=scene.integrator(), preset="paper", sigma_p=1.0, **same)
+    plain = np.array(mi.render(scene, integrator=every, spp=2, seed=4))
+    np.testing.assert_array_equal(image, plain)
+
+
+def test_the_error_falls_as_the_budget_rises():
+    scene = _scene((64, 48), spp=4)
+    ref = np.array(mi.render(scene, integrator=scene.integrator(), spp=256, seed=9))
+    err = []
+    for budget in (0.1, 0.3, 0.7):
+        integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", ray_budget=budget,
+                                   history=False)
+        image = np.array(mi.render(scene, integrator=integ, spp=4, seed=1))
+        err.append(float(np.mean((image - ref) ** 2)))
+    assert err[0] > err[1] > err[2], err
+
+
+@pytest.mark.parametrize("gaze", [(0.5, 0.5), (0.0, 0.0), (1.0, 0.3), (0.97, 0.99)])
+@pytest.mark.parametrize("size", [(64, 48), (40, 90)])
+def test_every_pixel_gets_a_value_at_any_gaze_and_aspect(gaze, size):
+    scene = _scene(size, spp=2)
+    plain = np.array(mi.render(scene, integrator=scene.integrator(), spp=64, seed=1))
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", gaze=gaze)
+    image = np.array(mi.render(scene, integrator=integ, spp=2, seed=3))
+    assert np.isfinite(image).all()
+    # Wherever the scene shows something, the frame does: a pixel left black there is one
+    # the warp did not reach.
+    lit = plain.sum(-1) > 1e-3
+    assert lit.mean() > 0.3
+    assert (image.sum(-1)[lit] > 0).mean() > 0.99
+
+
+def test_the_fovea_shows_its_own_traced_pixels():
+    scene = _scene((64, 48), spp=2)
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", history=False)
+    image = np.array(mi.render(scene, integrator=integ, seed=5))
+    shading = integ.buffer("shading")
+    yy, xx = np.mgrid[0:48, 0:64]
+    from foveated_mi.frame.foveal import SEAM
+    from foveated_mi.frame.sampling import foveal_grid
+    grid = foveal_grid(64, 48, integ.options["ray_budget"])
+    r = np.hypot(xx + 0.5 - 32, yy + 0.5 - 24)
+    inner = r <= grid.fovea - SEAM
+    assert inner.sum() > 10
+    np.testing.assert_array_equal(image[inner], shading[inner])
+
+
+def test_the_buffer_and_its_grid_are_exported():
+    scene = _scene((64, 48))
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
+    mi.render(scene, integrator=integ, seed=0)
+    cells = integ.buffer("cells")
+    assert cells.ndim == 3 and cells.shape[2] == 3 and cells.shape[:2] != (48, 64)
+    assert integ.buffer("shading").shape == (48, 64, 3)
+    assert integ.buffer("cell_mask").shape == cells.shape[:2]
+    assert integ.stats["formation"] == "foveal" and integ.stats["sampling_law"] == "polar"
+
+
+def test_a_still_view_accumulates_history_in_the_traced_pixels():
+    scene = _scene((64, 48), spp=1)
+    ref = np.array(mi.render(scene, integrator=scene.integrator(), spp=512, seed=9))
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", denoiser="none")
+    err = []
+    for k in range(8):
+        mi.render(scene, integrator=integ, spp=1, seed=k)
+        traced = integ.buffer("traced").astype(bool)
+        err.append(float(np.mean((integ.buffer("shading")[traced] - ref[traced]) ** 2)))
+    # The traced pixels' Monte Carlo error falls as samples accumulate (8 frames: about 1/8).
+    assert err[-1] < 0.4 * err[0], err
+    # A still gaze traces the same pixels every frame: each holds all 8 frames' samples.
+    assert integ.buffer("history_count")[traced].min() == 8.0
+
+
+@pytest.mark.parametrize("bad,match", [
+    ({"formation": "foveal", "sampling_law": "kwon"},
+     r"sampling_law = 'kwon' is invalid: expected 'polar' with formation = 'foveal'"),
+    ({"preset": "vr", "tonemap_samples": True},
+     r"tonemap_samples = True is invalid: expected False with formation = 'foveal'"),
+    ({"preset": "vr", "ray_budget": 0.0}, r"ray_budget = 0\.0 is invalid"),
+])
+def test_bad_combinations_get_one_line(bad, match):
+    with pytest.raises(ParameterError, match=match) as e:
+        FoveatedIntegrator(**bad)
+    assert "\n" not in str(e.value)
