@@ -263,9 +263,10 @@ _SCHEMA: tuple[Option, ...] = (
            doc="``kwon``: Eq. 1 of the paper (in degrees with ``theta_deg``); ``acuity``: "
            "the density follows the minimum angle of resolution, "
            "ω(e) = 1/48° + 0.022 e (Guenter et al. 2012), scaled to ``ray_budget`` with "
-           "the floor ``acuity_floor``; ``polar``: the pixel under each cell of a log-polar "
-           "buffer around the gaze sized to ``ray_budget``, and the whole of its "
-           "full-resolution disc (:mod:`foveated_mi.kernels.polar`). See "
+           "the floor ``acuity_floor``; ``polar``: every pixel within ``theta`` of the gaze "
+           "(a full-resolution disc), and the pixel under each cell of a log-polar buffer "
+           "outside it whose cells are as large as the rest of ``ray_budget`` allows "
+           "(:mod:`foveated_mi.kernels.polar`). See "
            ":mod:`foveated_mi.frame.sampling`"),
     Option("ray_budget", 0.1, "float", "rays per frame as a fraction of the film's pixels "
            "(sampling_law = acuity or polar)", lo=0.0, hi=1.0, lo_open=True),
@@ -414,7 +415,7 @@ PRESETS: dict[str, dict[str, Any]] = {
                "emission_edges": True, "reorder": "tiles"},
     # The formation in a log-polar buffer around the gaze, sized by the ray budget: no
     # reconstruction on the film, the denoiser in the buffer, one warp.
-    "vr": {"sampling_law": "polar", "formation": "foveal", "ray_budget": 0.1,
+    "vr": {"sampling_law": "polar", "formation": "foveal", "ray_budget": 0.1, "theta": 0.15,
            "reorder": "compact", "edge_threshold": 0.0, "denoiser": "svgf"},
 }
 PRESET_NAMES = ("auto", *PRESETS)

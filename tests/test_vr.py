@@ -52,7 +52,9 @@ def test_the_whole_film_as_budget_is_the_frame_that_traces_every_pixel():
     scene = _scene((48, 40), spp=2)
     same = dict(denoiser="none", history=False, pixel_filter="importance", reorder="compact",
                 edge_threshold=0.0)
-    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", ray_budget=1.0, **same)
+    # theta = 2: the full-resolution disc covers the whole film.
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", ray_budget=1.0,
+                               theta=2.0, **same)
     image = np.array(mi.render(scene, integrator=integ, spp=2, seed=4))
     assert integ.stats["ray_fraction"] == 1.0
     every = FoveatedIntegrator(nested=scene.integrator(), preset="paper", sigma_p=1.0, **same)
@@ -94,8 +96,10 @@ def test_the_fovea_shows_its_own_traced_pixels():
     shading = integ.buffer("shading")
     yy, xx = np.mgrid[0:48, 0:64]
     from foveated_mi.frame.foveal import SEAM
-    from foveated_mi.frame.sampling import foveal_grid
-    grid = foveal_grid(64, 48, integ.options["ray_budget"])
+    from foveated_mi.frame.sampling import foveal_grid, fovea_radius
+    grid = foveal_grid(64, 48, integ.options["ray_budget"],
+                       fovea_radius(64, 48, integ.options["theta"]))
+    assert grid.fovea == fovea_radius(64, 48, integ.options["theta"])
     r = np.hypot(xx + 0.5 - 32, yy + 0.5 - 24)
     inner = r <= grid.fovea - SEAM
     assert inner.sum() > 10
@@ -139,3 +143,15 @@ def test_bad_combinations_get_one_line(bad, match):
     with pytest.raises(ParameterError, match=match) as e:
         FoveatedIntegrator(**bad)
     assert "\n" not in str(e.value)
+
+
+def test_a_disc_larger_than_the_budget_is_traced_whole_with_a_warning():
+    scene = _scene((64, 48))
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", theta=0.5,
+                               ray_budget=0.1)
+    with pytest.warns(UserWarning, match=r"ray_budget = 0\.1 is below the 0\.\d+ of the film "
+                                         r"that the full-resolution disc \(theta\) traces"):
+        image = np.array(mi.render(scene, integrator=integ, seed=0))
+    assert np.isfinite(image).all()
+    # The disc (θ = 0.5 of half the diagonal: 20 px) and a few coarse cells: above the budget.
+    assert integ.stats["ray_fraction"] > 0.3

@@ -37,7 +37,8 @@ def jfa_bound(width: int, height: int, o: dict[str, Any]) -> int | None:
     elif o["sampling_law"] == "polar":
         # The widest cell, at the rings' reach: its pixel is at most a cell diagonal from
         # any pixel it covers.
-        grid = _sampling.foveal_grid(width, height, float(o["ray_budget"]))
+        grid = _sampling.foveal_grid(width, height, float(o["ray_budget"]),
+                                     _sampling.fovea_radius(width, height, o["theta"]))
         gap = 2.0 * float(grid.cell_size(grid.reach))
     elif o["theta_deg"] > 0:
         gap = None        # the law's smallest P needs the sensor's projection: no bound

@@ -40,14 +40,14 @@ from . import domain
 from . import reproject as _reproject
 from .film import film_stats
 from .formation import FormationInput, Formed, register_formation
-from .sampling import foveal_grid, snapped_pixels
+from .sampling import foveal_grid, fovea_radius, snapped_pixels
 from .shading import ShadingBuffer
 
 #: Pixels over which the fovea's own values blend into the warped buffer at the disc's edge.
 SEAM = 2.0
 
 #: Options the formation reads besides its denoiser's.
-READS = ("max_history", "ray_budget", "denoiser", "clamp", "demodulate")
+READS = ("max_history", "ray_budget", "theta", "denoiser", "clamp", "demodulate")
 
 #: The buffers it returns on the film's grid (the others are on the buffer's).
 ON_FILM = ("traced", "shading", "shading_mask", "history_count", "resampled", "image")
@@ -62,7 +62,8 @@ def foveal_view(width: int, height: int, o: dict[str, Any]) -> dict[str, Any]:
 
 def foveal_buffer_grid(width: int, height: int, o: dict[str, Any]) -> PolarGrid:
     """The buffer's grid for a film and the options' ray budget."""
-    return foveal_grid(width, height, float(o["ray_budget"]))
+    return foveal_grid(width, height, float(o["ray_budget"]),
+                       fovea_radius(width, height, o["theta"]))
 
 
 def _cells(resolved: Resolved, gb: GBuffer, q: mi.UInt32, has: mi.Bool):

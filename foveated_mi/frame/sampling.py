@@ -58,7 +58,7 @@ import functools
 import numpy as np
 
 from ..kernels import pixel_coords
-from ..kernels.polar import PolarGrid, polar_grid
+from ..kernels.polar import PolarGrid, polar_grid_of
 from ..validate import check_range
 
 #: Minimum angle of resolution at the fovea, degrees (Guenter et al. 2012, §3).
@@ -292,41 +292,59 @@ def probability_in_degrees(directions: mi.Vector3f, sensor: mi.Sensor, o: dict) 
     return kwon_in_degrees(ecc, o["theta_deg"], o["sigma_p"])
 
 
-def _traced_pixels(grid: PolarGrid, width: int, height: int) -> int:
-    """Pixels :func:`polar_map` traces with the gaze at the film's centre (host, float64)."""
-    ring = np.arange(grid.height) + 0.5
-    angle = (np.arange(grid.width) + 0.5) * (2.0 * math.pi / grid.width)
-    r = grid._r_of_u(ring)[:, None]
-    x = np.floor(width / 2 + r * np.cos(angle)[None, :]).astype(np.int64).ravel()
-    y = np.floor(height / 2 + r * np.sin(angle)[None, :]).astype(np.int64).ravel()
-    on = (x >= 0) & (x < width) & (y >= 0) & (y < height)
+def _traced_pixels(grid: PolarGrid | None, width: int, height: int,
+                   fovea: float | None = None) -> int:
+    """Pixels :func:`polar_map` traces with the gaze at the film's centre (host, float64);
+    without a grid, the disc's alone."""
     traced = np.zeros(width * height, bool)
-    traced[y[on] * width + x[on]] = True
+    if grid is not None:
+        ring = np.arange(grid.height) + 0.5
+        angle = (np.arange(grid.width) + 0.5) * (2.0 * math.pi / grid.width)
+        r = grid._r_of_u(ring)[:, None]
+        x = np.floor(width / 2 + r * np.cos(angle)[None, :]).astype(np.int64).ravel()
+        y = np.floor(height / 2 + r * np.sin(angle)[None, :]).astype(np.int64).ravel()
+        on = (x >= 0) & (x < width) & (y >= 0) & (y < height)
+        traced[y[on] * width + x[on]] = True
+        fovea = grid.fovea
     py, px = np.mgrid[0:height, 0:width]
     traced |= ((px + 0.5 - width / 2) ** 2 + (py + 0.5 - height / 2) ** 2
-               <= grid.fovea ** 2).ravel()
+               <= fovea ** 2).ravel()
     return int(traced.sum())
 
 
+def fovea_radius(width: int, height: int, theta: float) -> float:
+    """The full-resolution disc of ``sampling_law = "polar"``: θ in units of half the film's
+    diagonal (as Eq. 1's θ), in pixels."""
+    return float(theta) * 0.5 * math.hypot(width, height)
+
+
 @functools.lru_cache(maxsize=16)
-def foveal_grid(width: int, height: int, budget: float) -> PolarGrid:
-    """The log-polar buffer of a ``width`` x ``height`` film whose traced pixels
-    (:func:`polar_map`: one per cell, and the full-resolution disc) number ``budget`` of the
-    film with the gaze at its centre. Near the gaze several cells share a pixel, so the
-    buffer is sized on the pixels, not the cells (host, once per film and budget)."""
-    target = budget * width * height
-    # Cells: at least one per traced pixel; near the gaze several share one, so up to a few
-    # cells per pixel of the budget.
-    lo, hi = budget, 16.0 * budget
-    if _traced_pixels(polar_grid(width, height, hi), width, height) <= target:
-        return polar_grid(width, height, hi)
-    for _ in range(30):       # more cells, more traced pixels: bisection on the cell budget
-        mid = 0.5 * (lo + hi)
-        if _traced_pixels(polar_grid(width, height, mid), width, height) < target:
+def foveal_grid(width: int, height: int, budget: float, fovea: float) -> PolarGrid:
+    """The log-polar buffer of a ``width`` x ``height`` film with a full-resolution disc of
+    radius ``fovea`` (pixels, traced whole) and cells outside it as large as the rest of the
+    budget allows: the pixels :func:`polar_map` traces number ``budget`` of the film with the
+    gaze at its centre (host, once per film, budget and disc). A disc that alone needs
+    more than the budget is traced whole, with the coarsest cells outside it, and a warning
+    says so once."""
+    n = width * height
+    target = budget * n
+    lo, hi = 0.05, math.hypot(width, height)      # the cells' size at the disc's edge
+    disc = _traced_pixels(None, width, height, fovea)
+    if disc > target:
+        import warnings
+        warnings.warn(f"ray_budget = {budget!r} is below the {disc / n:.4g} of the film that "
+                      f"the full-resolution disc (theta) traces: the frame traces the disc "
+                      f"and the coarsest cells around it", UserWarning, stacklevel=2)
+        return polar_grid_of(width, height, fovea, hi)
+    if _traced_pixels(polar_grid_of(width, height, fovea, lo), width, height) <= target:
+        return polar_grid_of(width, height, fovea, lo)
+    for _ in range(40):       # larger cells, fewer traced pixels: bisection
+        mid = (lo * hi) ** 0.5
+        if _traced_pixels(polar_grid_of(width, height, fovea, mid), width, height) > target:
             lo = mid
         else:
             hi = mid
-    return polar_grid(width, height, hi)
+    return polar_grid_of(width, height, fovea, hi)
 
 
 def gaze_pixels(gaze, width: int, height: int) -> mi.Point2f:
@@ -345,13 +363,13 @@ def snapped_pixels(grid: PolarGrid, gaze: mi.Point2f, width: int, height: int
     return mi.UInt32(dr.select(on, qy * width + qx, 0)), on
 
 
-def polar_map(width: int, height: int, gaze, budget: float, edges: mi.Bool | None = None
-              ) -> tuple[mi.Bool, mi.Float]:
-    """``sampling_law = "polar"``: the pixels under the cells of the log-polar buffer
-    (:func:`foveal_grid`), and every pixel of its full-resolution disc, so that each cell
-    has a traced pixel and the fovea is traced whole. Returns ``(sampling_map, probability)``
-    (1 where traced: the map is deterministic)."""
-    grid = foveal_grid(width, height, float(budget))
+def polar_map(width: int, height: int, gaze, budget: float, theta: float,
+              edges: mi.Bool | None = None) -> tuple[mi.Bool, mi.Float]:
+    """``sampling_law = "polar"``: every pixel of the full-resolution disc of radius θ
+    around the gaze, and the pixel under each cell of the log-polar buffer outside it
+    (:func:`foveal_grid`: the rest of ``budget``), so that each cell has a traced pixel.
+    Returns ``(sampling_map, probability)`` (1 where traced: the map is deterministic)."""
+    grid = foveal_grid(width, height, float(budget), fovea_radius(width, height, theta))
     g = gaze_pixels(gaze, width, height)
     q, on = snapped_pixels(grid, g, width, height)
     smap = dr.zeros(mi.Bool, width * height)
@@ -389,7 +407,7 @@ def sampling_pass(gb, width: int, height: int, o: dict, seed, emitting: mi.Bool 
     if emitting is not None:
         edges = emitting if edges is None else edges | emitting
     if o["sampling_law"] == "polar":
-        smap, prob = polar_map(width, height, o["gaze"], o["ray_budget"], edges)
+        smap, prob = polar_map(width, height, o["gaze"], o["ray_budget"], o["theta"], edges)
         return edges, smap, prob
     smap, prob = sampling_map(width, height, gaze=o["gaze"], theta=o["theta"],
                               sigma_p=o["sigma_p"], seed=seed, edges=edges, probability=prob)

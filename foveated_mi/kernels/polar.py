@@ -56,22 +56,23 @@ class PolarGrid(Grid):
     offset: float = 0.0
     kernel: float = 1.0
     reach: float = 1.0
+    pitch: float = 1.0
 
     @property
     def _k(self) -> float:
-        return self.fovea + self.offset
+        return (self.fovea + self.offset) / self.pitch
 
     @property
     def _U(self) -> float:
-        return radial_log(self.reach, self.fovea, self.offset)
+        return radial_log(self.reach, self.fovea, self.offset, self.pitch)
 
     def _u_of_r(self, r):
         """Radial coordinate of distance ``r`` (Dr.Jit or NumPy)."""
-        r0, k = self.fovea, self._k
+        r0, k, s0 = self.fovea, self._k, self.pitch
         lib = dr if dr.is_array_v(r) else np
-        log = lib.log(lib.maximum(r + self.offset, 1e-30) / k)
-        ut = lib.where(r <= r0, r, r0 + k * log) if lib is np else \
-            dr.select(r <= r0, r, r0 + k * log)
+        log = lib.log(lib.maximum(r + self.offset, 1e-30) / (r0 + self.offset))
+        ut = lib.where(r <= r0, r / s0, r0 / s0 + k * log) if lib is np else \
+            dr.select(r <= r0, r / s0, r0 / s0 + k * log)
         if self.kernel == 1.0:
             return ut
         U = self._U
@@ -79,11 +80,13 @@ class PolarGrid(Grid):
 
     def _r_of_u(self, u):
         """Distance from the gaze of radial coordinate ``u``."""
-        r0, k = self.fovea, self._k
+        r0, k, s0 = self.fovea, self._k, self.pitch
         lib = dr if dr.is_array_v(u) else np
         ut = u if self.kernel == 1.0 else self._U * (lib.maximum(u, 0.0) / self._U) ** self.kernel
-        outer = k * lib.exp((ut - r0) / k) - self.offset
-        return lib.where(ut <= r0, ut, outer) if lib is np else dr.select(ut <= r0, ut, outer)
+        u0 = r0 / s0
+        outer = (r0 + self.offset) * lib.exp((ut - u0) / k) - self.offset
+        return lib.where(ut <= u0, ut * s0, outer) if lib is np else \
+            dr.select(ut <= u0, ut * s0, outer)
 
     def film_position(self, idx: mi.UInt32, gaze: mi.Point2f | None = None) -> mi.Point2f:
         """Film position (pixels) of the centre of cell ``idx`` for the gaze at film pixel
@@ -135,11 +138,12 @@ def _gaze(gaze) -> mi.Point2f:
     return gaze if isinstance(gaze, mi.Point2f) else mi.Point2f(*(float(v) for v in gaze))
 
 
-def radial_log(r: float, fovea: float, offset: float) -> float:
-    """:math:`\\tilde u(r)` of the module docstring (host scalar)."""
+def radial_log(r: float, fovea: float, offset: float, pitch: float = 1.0) -> float:
+    """:math:`\\tilde u(r)` of the module docstring (host scalar), rings ``pitch`` pixels
+    apart at the fovea's edge."""
     if r <= fovea:
-        return float(r)
-    return fovea + (fovea + offset) * math.log((r + offset) / (fovea + offset))
+        return float(r) / pitch
+    return (fovea + (fovea + offset) * math.log((r + offset) / (fovea + offset))) / pitch
 
 
 def _inside_cells(width: int, height: int, film: tuple[int, int], grid: PolarGrid) -> int:
@@ -151,6 +155,19 @@ def _inside_cells(width: int, height: int, film: tuple[int, int], grid: PolarGri
     x = W / 2 + r * np.cos(angle)[None, :]
     y = H / 2 + r * np.sin(angle)[None, :]
     return int(((x >= 0) & (x < W) & (y >= 0) & (y < H)).sum())
+
+
+def polar_grid_of(width: int, height: int, fovea: float, pitch: float, *, offset: float = 0.0,
+                  kernel: float = 1.0) -> PolarGrid:
+    """The polar grid of a film with its fovea's radius (pixels) and the cells' size at the
+    fovea's edge (``pitch`` pixels, both ways): ``2 pi (fovea + offset) / pitch`` angles and
+    the rings out to the film's diagonal."""
+    reach = math.hypot(width, height)
+    angles = max(3, int(math.ceil(TWO_PI * (fovea + offset) / pitch)))
+    # The ring count after the kernel equals the isotropic one (it moves rings inward).
+    rings = max(1, int(math.ceil(radial_log(reach, fovea, offset, pitch))))
+    return PolarGrid(angles, rings, wrap_x=True, film_size=(width, height), fovea=fovea,
+                     offset=offset, kernel=kernel, reach=reach, pitch=pitch)
 
 
 def polar_grid(width: int, height: int, budget: float, *, offset: float = 0.0,
@@ -167,11 +184,7 @@ def polar_grid(width: int, height: int, budget: float, *, offset: float = 0.0,
     target = budget * width * height
 
     def make(r0: float) -> PolarGrid:
-        angles = max(3, int(math.ceil(TWO_PI * (r0 + offset))))
-        # The ring count after the kernel equals the isotropic one (it moves rings inward).
-        rings = max(1, int(math.ceil(radial_log(reach, r0, offset))))
-        return PolarGrid(angles, rings, wrap_x=True, film_size=(width, height), fovea=r0,
-                         offset=offset, kernel=kernel, reach=reach)
+        return polar_grid_of(width, height, r0, 1.0, offset=offset, kernel=kernel)
 
     lo, hi = 0.5, reach
     if _inside_cells(make(hi).width, make(hi).height, (width, height), make(hi)) < target:
