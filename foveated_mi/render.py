@@ -69,17 +69,22 @@ def _json(stats):
 
 
 def frame_layers(integ: FoveatedIntegrator, image: np.ndarray) -> dict[str, np.ndarray]:
-    """The EXR layers of the integrator's last frame as (H, W, C) float32 arrays."""
+    """The EXR layers of the integrator's last frame as (H, W, C) float32 arrays: those of
+    :data:`EXR_LAYERS` that the frame's formation made on the film's pixels (a formation
+    that works in another buffer has no ``nearest``, and its ``filtered`` lies on its own
+    grid)."""
+    h, w = image.shape[:2]
+
     def get(name):
-        v = integ.buffer(name)
-        return None if v is None else np.asarray(v, dtype=np.float32)
+        v = integ.buffer(name) if name in integ.buffers else None
+        v = None if v is None else np.asarray(v, dtype=np.float32)
+        return v if v is not None and v.shape[:2] == (h, w) else None
     out = {"image": image.astype(np.float32)}
     out["sampling_map"] = get("sampling_map")[..., None]
     shading = get("shading")
     mask = get("shading_mask")[..., None]
     out["shading"] = np.concatenate([shading * mask, mask], -1)
-    out["nearest"] = get("nearest")
-    for name in ("filled", "interpolated", "tonemapped", "filtered"):
+    for name in ("nearest", "filled", "interpolated", "tonemapped", "filtered"):
         v = get(name)
         if v is not None:
             out[name] = v

@@ -103,3 +103,16 @@ def test_max_depth_and_seed_flags(tmp_path, capsys):
                         "--out", str(exr)], capsys)
     assert code == 2 and err.strip() == ("foveated-mi: error: --seed = -1 is invalid: expected "
                                          "an integer >= 0 and <= 4294967295")
+
+
+def test_render_with_the_vr_preset_writes_the_film_layers_it_has(tmp_path, capsys):
+    exr = tmp_path / "vr.exr"
+    code, out, err = run(["render", "cornell-box", "--preset", "vr", "--size", "48", "32",
+                          "--warmup", "0", "--out", str(exr)], capsys)
+    assert code == 0, err
+    layers = read_exr(exr)
+    for name, c in [("image", 3), ("sampling_map", 1), ("shading", 4), ("depth", 1)]:
+        assert layers[name].shape == (32, 48, c), name
+    # The foveal formation reconstructs nothing on the film: no nearest-site layer, and its
+    # filtered buffer lies on the polar grid, not the film.
+    assert "nearest" not in layers and "filtered" not in layers

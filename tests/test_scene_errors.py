@@ -26,8 +26,8 @@ BAD = {
               "theta = -1.0 is invalid: expected a finite number > 0"),
     "unknown": ('<float name="thetta" value="0.2"/>',
                 "thetta = 0.2 is invalid: expected a parameter of the foveated integrator: "),
-    "preset": ('<string name="preset" value="vr"/>',
-               "preset = 'vr' is invalid: expected one of 'auto', 'paper'"),
+    "preset": ('<string name="preset" value="hmd"/>',
+               "preset = 'hmd' is invalid: expected one of 'auto', 'paper'"),
 }
 
 

@@ -258,4 +258,3 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         return self._outputs.export(name)
 
 
-mi.register_integrator("foveated", lambda props: FoveatedIntegrator(props))
