@@ -36,6 +36,7 @@ OPTION_SETS = [
     ("svgf_every_pixel", {"preset": "guided", "denoiser": "svgf", "sigma_p": 1.0}),
     ("vr", {"preset": "vr"}),
     ("vr_atrous", {"preset": "vr", "denoiser": "atrous"}),
+    ("vr_demodulate", {"preset": "vr", "demodulate": True}),
 ]
 
 BALL_CENTRE = (0.3, -0.6, 0.3)

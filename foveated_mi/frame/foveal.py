@@ -7,13 +7,16 @@ of its full-resolution disc. Then:
 
 1. **History resolve** (Fig. 4) on the film's pixels, as the ``film`` formation does: the
    traced pixels blended with the reprojected history, so a moving head keeps it.
-2. **The buffer**: each cell takes its pixel's value, normal, position and counts; a cell off
+2. **The buffer**: each cell takes its pixel's working value (irradiance with ``demodulate``:
+   :mod:`foveated_mi.frame.domain`), normal, position and counts; a cell off
    the film, or whose pixel holds nothing yet, holds nothing (a non-finite value that every
    filter tap and the warp leave out).
 3. **Denoising in the buffer** (§3.5): the registered denoiser on the buffer's grid, in the
    domain it declares; taps wrap around in angle.
 4. **One warp to the film**: each pixel's continuous cell coordinates, bilinear over the
-   cells that hold a value (wrapping in angle, clamping radially). In the fovea disc every
+   cells that hold a value (wrapping in angle, clamping radially), then the albedo of the
+   film's own G-buffer multiplied back with ``demodulate``: the texture's detail is the
+   film's, whatever the cells' size. In the fovea disc every
    pixel was traced: it shows its own resolved value, blended into the warp across the
    disc's last :data:`SEAM` pixels.
 
@@ -66,10 +69,10 @@ def foveal_buffer_grid(width: int, height: int, o: dict[str, Any]) -> PolarGrid:
                        fovea_radius(width, height, o["theta"]))
 
 
-def _cells(resolved: Resolved, gb: GBuffer, q: mi.UInt32, has: mi.Bool):
-    """Each cell's value, counts and G-buffer, from its pixel."""
+def _cells(values: mi.Color3f, resolved: Resolved, gb: GBuffer, q: mi.UInt32, has: mi.Bool):
+    """Each cell's working value, counts and G-buffer, from its pixel."""
     nan = dr.nan
-    value = dr.select(has, dr.gather(mi.Color3f, resolved.shading, q, has), nan)
+    value = dr.select(has, dr.gather(mi.Color3f, values, q, has), nan)
     res = Resolved(value, has, dr.gather(mi.Float, resolved.count, q, has),
                    dr.zeros(mi.Bool, dr.width(q)), dr.gather(mi.Float, resolved.moment2, q, has))
     take = lambda t, v: None if v is None else dr.gather(t, v, q, has)  # noqa: E731
@@ -82,24 +85,25 @@ def _cells(resolved: Resolved, gb: GBuffer, q: mi.UInt32, has: mi.Bool):
 
 def _denoise(res: Resolved, cgb: GBuffer, grid: PolarGrid, o: dict[str, Any],
              grad_pass: bool) -> Denoised:
-    """The registered denoiser on the buffer, in the domain it declares."""
+    """The registered denoiser on the buffer's working values (irradiance with
+    ``demodulate``), in the domain it declares; returns working values."""
     entry = DENOISERS[o["denoiser"]]
     run = (entry.differentiable or not grad_pass) and (entry.active is None or entry.active(o))
-    values = domain.to_irradiance(res.shading, cgb, o)
     if not run:
         return Denoised(res.shading)
-    ctx = DenoiseInput(values, cgb, res, dr.arange(mi.UInt32, grid.size), grid.width,
+    ctx = DenoiseInput(res.shading, cgb, res, dr.arange(mi.UInt32, grid.size), grid.width,
                        grid.height, {k: o[k] for k in entry.reads}, grad_pass, None, grid)
     if entry.domain == "irradiance":
-        out = as_denoised(entry.fn(ctx))
-        return out._replace(image=domain.to_radiance(out.image, cgb, o, clamp=True))
+        return as_denoised(entry.fn(ctx))
+    radiance = domain.to_radiance(res.shading, cgb, o)
     if entry.domain == "display":
-        tonemapped = domain.to_display(res.shading, o)
+        tonemapped = domain.to_display(radiance, o)
         filtered = as_denoised(entry.fn(ctx._replace(image=tonemapped))).image
-        return Denoised(domain.from_display(filtered, o), filtered=filtered,
-                        tonemapped=tonemapped)
+        return Denoised(domain.to_irradiance(domain.from_display(filtered, o), cgb, o),
+                        filtered=filtered, tonemapped=tonemapped)
     # A network sees no non-finite value: the empty cells are black (the warp skips them).
-    return as_denoised(entry.fn(ctx._replace(image=dr.select(res.mask, res.shading, 0.0))))
+    out = as_denoised(entry.fn(ctx._replace(image=dr.select(res.mask, radiance, 0.0))))
+    return out._replace(image=domain.to_irradiance(out.image, cgb, o))
 
 
 def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, width: int,
@@ -141,11 +145,18 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any],
     # The buffer: each cell from the pixel under its centre.
     q, on = snapped_pixels(grid, inp.gaze, width, height)
     has = on & dr.gather(mi.Bool, resolved.mask, q, on)
-    res, cgb = _cells(resolved, inp.gbuffer, q, has)
+    gb = inp.gbuffer
+    if o["demodulate"] and inp.emission_edges is not None:
+        # As in the film formation: an emitter's edge is divided by the albedo only.
+        gb = gb._replace(emission=dr.select(inp.emission_edges, 0.0, gb.emission))
+    # The working values: irradiance with demodulate, so that the albedo's detail comes
+    # back at the film's resolution after the warp.
+    res, cgb = _cells(domain.to_irradiance(resolved.shading, gb, o), resolved, gb, q, has)
     timer.mark("reconstruct", res.shading, res.count, cgb.normal, cgb.position)
-    # Denoising in the buffer (§3.5), then one warp to the film.
+    # Denoising in the buffer (§3.5), one warp to the film, the albedo multiplied back there.
     out = _denoise(res, cgb, grid, o, grad_pass)
-    warped = warp(out.image, has, grid, inp.gaze, width, height)
+    warped = domain.to_radiance(warp(out.image, has, grid, inp.gaze, width, height), gb, o,
+                                clamp=True)
     # The fovea disc shows its own pixels, blended into the warp across the seam.
     film = Grid.film(width, height)
     p = film.film_position(film.cells()[0])
