@@ -311,6 +311,13 @@ _SCHEMA: tuple[Option, ...] = (
            "pixels (§3.4-3.5); ``foveal`` denoises in the log-polar buffer of "
            "``sampling_law = 'polar'`` and warps it once to the film "
            "(:mod:`foveated_mi.frame.foveal`)"),
+    Option("foveal_upsampling", "bilinear", "string", "the warp of the foveal formation's "
+           "buffer to the film: bilinear, or joint (weighted by the full-resolution G-buffer)",
+           choices=("bilinear", "joint"),
+           doc="How ``formation = 'foveal'`` warps its buffer to the film: ``bilinear`` over "
+           "the four cells around a pixel, or ``joint``, a joint bilateral upsampling whose "
+           "weights also stop at the film G-buffer's surface edges "
+           "(:func:`foveated_mi.frame.foveal.warp`)"),
     Option("reconstruction", "sibson", "string", "interpolation of the sparse shading buffer "
            "(§3.4)", choices=lambda: reconstructions(),
            doc="Interpolation of the sparse shading buffer (§3.4); ``guided`` and "

@@ -37,6 +37,7 @@ OPTION_SETS = [
     ("vr", {"preset": "vr"}),
     ("vr_atrous", {"preset": "vr", "denoiser": "atrous"}),
     ("vr_demodulate", {"preset": "vr", "demodulate": True}),
+    ("vr_joint", {"preset": "vr", "foveal_upsampling": "joint"}),
 ]
 
 BALL_CENTRE = (0.3, -0.6, 0.3)

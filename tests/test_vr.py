@@ -8,6 +8,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
+import tolerances
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.scenes import load_scene
 from foveated_mi.validate import ParameterError
@@ -155,3 +156,33 @@ def test_a_disc_larger_than_the_budget_is_traced_whole_with_a_warning():
     assert np.isfinite(image).all()
     # The disc (θ = 0.5 of half the diagonal: 20 px) and a few coarse cells: above the budget.
     assert integ.stats["ray_fraction"] > 0.3
+
+
+def test_the_joint_warp_is_bilinear_on_one_surface_and_stops_at_an_edge():
+    from foveated_mi.frame.foveal import warp
+    from foveated_mi.kernels.polar import polar_grid_of
+    from foveated_mi.kernels.taps import Surface
+    W, H = 32, 24
+    grid = polar_grid_of(W, H, 3.0, 2.0)
+    gaze = mi.Point2f(W / 2, H / 2)
+    rng = np.random.default_rng(0)
+    cells = mi.Color3f(*(mi.Float(rng.random(grid.size).astype(np.float32)) for _ in range(3)))
+    valid = dr.full(mi.Bool, True, grid.size)
+    plane = lambda n: Surface.of(mi.Vector3f(0, 0, 1) + dr.zeros(mi.Vector3f, n),  # noqa: E731
+                                 dr.zeros(mi.Vector3f, n), dr.full(mi.Bool, True, n))
+    bilinear = np.array(warp(cells, valid, grid, gaze, W, H))
+    joint = np.array(warp(cells, valid, grid, gaze, W, H, (plane(W * H), plane(grid.size))))
+    # One surface everywhere: every edge-stopping weight is exp(0) = 1.
+    np.testing.assert_array_equal(joint, bilinear)
+    # Cells on the sky lend nothing to a pixel on a surface (where a surface cell is near).
+    on = rng.random(grid.size) < 0.5
+    sky = Surface.of(mi.Vector3f(0, 0, 1) + dr.zeros(mi.Vector3f, grid.size),
+                     dr.zeros(mi.Vector3f, grid.size), mi.Bool(on))
+    mixed = np.array(warp(cells, valid, grid, gaze, W, H, (plane(W * H), sky)))
+    assert np.isfinite(mixed).all() and not np.array_equal(mixed, bilinear)
+    # Every pixel's value is then a convex mix of the surface cells alone, where it has one.
+    only = np.array(warp(dr.select(mi.Bool(on), cells, 0.0), mi.Bool(on), grid, gaze, W, H))
+    near = np.array(warp(mi.Color3f(1.0) + dr.zeros(mi.Color3f, grid.size), mi.Bool(on), grid,
+                         gaze, W, H))[0] > 0
+    # Four weighted terms, their sum and a division, in float32 (values below 1).
+    np.testing.assert_allclose(mixed[:, near], only[:, near], rtol=0, atol=tolerances.gamma(8))

@@ -33,6 +33,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..kernels import NO_SITE  # noqa: F401  (the nearest-site convention: each cell its own)
+from ..kernels.taps import Surface, surface_energy
 from ..kernels.buffers import GBuffer, Resolved
 from ..kernels.grid import Grid
 from ..kernels.polar import PolarGrid
@@ -50,7 +51,8 @@ from .shading import ShadingBuffer
 SEAM = 2.0
 
 #: Options the formation reads besides its denoiser's.
-READS = ("max_history", "ray_budget", "theta", "denoiser", "clamp", "demodulate")
+READS = ("max_history", "ray_budget", "theta", "denoiser", "clamp", "demodulate",
+         "foveal_upsampling")
 
 #: The buffers it returns on the film's grid (the others are on the buffer's).
 ON_FILM = ("traced", "shading", "shading_mask", "history_count", "resampled", "image")
@@ -107,10 +109,13 @@ def _denoise(res: Resolved, cgb: GBuffer, grid: PolarGrid, o: dict[str, Any],
 
 
 def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, width: int,
-         height: int) -> mi.Color3f:
+         height: int, guide: tuple[Surface, Surface] | None = None) -> mi.Color3f:
     """The buffer on the film: bilinear over the four cells around each pixel's continuous
     cell coordinates that are ``valid`` and finite (wrapping in angle, clamping radially);
-    0 where none is."""
+    0 where none is. ``guide = (film, cells)``: the film's and the cells' G-buffers, whose
+    edge-stopping weight (:func:`~foveated_mi.kernels.taps.surface_energy`, σn = 0.3 and
+    σx = 0.1, as SVGF's) multiplies each cell's (a joint bilateral upsampling: a cell on
+    another surface lends little; where all four do, the plain bilinear weights)."""
     film = Grid.film(width, height)
     idx, _, _ = film.cells()
     c = grid.coords_at(film.film_position(idx), gaze)
@@ -119,6 +124,10 @@ def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, w
     fx, fy = u - x0, v - y0
     acc = dr.zeros(mi.Color3f, film.size)
     wsum = dr.zeros(mi.Float, film.size)
+    plain, psum = dr.zeros(mi.Color3f, film.size), dr.zeros(mi.Float, film.size)
+    if guide is not None:
+        here = guide[0].at(idx, mi.Bool(True))
+        inv_n, inv_x = dr.opaque(mi.Float, 1.0 / 0.3 ** 2), dr.opaque(mi.Float, 1.0 / 0.1 ** 2)
     for dy, wy in ((0, 1.0 - fy), (1, fy)):
         for dx, wx in ((0, 1.0 - fx), (1, fx)):
             qy = dr.clip(mi.Int32(y0) + dy, 0, grid.height - 1)
@@ -128,8 +137,20 @@ def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, w
             ok = dr.gather(mi.Bool, valid, q) & dr.isfinite(cq.x) & dr.isfinite(cq.y) \
                 & dr.isfinite(cq.z)
             w = dr.select(ok, w, 0.0)
-            acc += dr.select(ok, cq, 0.0) * w
+            cq = dr.select(ok, cq, 0.0)
+            if guide is not None:
+                plain += cq * w
+                psum += w
+                there = guide[1].at(q, ok)
+                w = w * dr.detach(dr.select(here[2] == there[2],
+                                            dr.exp(-surface_energy(here, there, inv_n, inv_x)),
+                                            0.0))
+            acc += cq * w
             wsum += w
+    if guide is not None:
+        # Where no cell lies on the pixel's surface, the plain bilinear weights.
+        use = wsum > 1e-4 * psum
+        acc, wsum = dr.select(use, acc, plain), dr.select(use, wsum, psum)
     return dr.select(wsum > 0.0, acc / dr.select(wsum > 0.0, wsum, 1.0), 0.0)
 
 
@@ -155,8 +176,12 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any],
     timer.mark("reconstruct", res.shading, res.count, cgb.normal, cgb.position)
     # Denoising in the buffer (§3.5), one warp to the film, the albedo multiplied back there.
     out = _denoise(res, cgb, grid, o, grad_pass)
-    warped = domain.to_radiance(warp(out.image, has, grid, inp.gaze, width, height), gb, o,
-                                clamp=True)
+    guide = None
+    if o["foveal_upsampling"] == "joint":
+        guide = (Surface.of(gb.normal, gb.position, gb.hit),
+                 Surface.of(cgb.normal, cgb.position, cgb.hit))
+    warped = domain.to_radiance(warp(out.image, has, grid, inp.gaze, width, height, guide), gb,
+                                o, clamp=True)
     # The fovea disc shows its own pixels, blended into the warp across the seam.
     film = Grid.film(width, height)
     p = film.film_position(film.cells()[0])
