@@ -423,7 +423,8 @@ PRESETS: dict[str, dict[str, Any]] = {
     # The formation in a log-polar buffer around the gaze, sized by the ray budget: no
     # reconstruction on the film, the denoiser in the buffer, one warp.
     "vr": {"sampling_law": "polar", "formation": "foveal", "ray_budget": 0.1, "theta": 0.15,
-           "reorder": "compact", "edge_threshold": 0.0, "denoiser": "svgf"},
+           "reorder": "compact", "edge_threshold": 0.0, "denoiser": "svgf",
+           "atrous_iterations": 2},
 }
 PRESET_NAMES = ("auto", *PRESETS)
 

@@ -3,7 +3,7 @@ same number of kernels every frame, and no more than the frame-time benchmark re
 (``benchmarks/bench_overhead.py``, README "Frame time": 27 / 30 for `paper` still / moving at
 1024², 47 for `guided`; here `guided` also traces the light's edges: 43 / 48, and on a
 moving camera its exclusive history reads add the one scatter that claims each previous
-pixel, and the test of the sky around silhouettes one more: 50; ``vr`` 29 / 32, as
+pixel, and the test of the sky around silhouettes one more: 50; ``vr`` 23 / 26, as
 ``voxel-static-vr`` / ``voxel-moving-vr`` report)."""
 import drjit as dr
 import mitsuba as mi
