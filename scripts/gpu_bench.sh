@@ -169,12 +169,12 @@ step reorder_$S2 60 "bench_reorder $S2² (every mode)" "$VPY" $B/bench_reorder.p
 
 if [ -f $B/bench_overhead.py ]; then
   # Every case whose scene is here (a case without its scene is skipped with a line).
-  CASES=${GPU_BENCH_OVERHEAD_CASES:-voxel-static voxel-moving staircase-guided staircase-oidn table1-rungholt table1-vokselia table1-eye-exam}
+  CASES=${GPU_BENCH_OVERHEAD_CASES:-voxel-static voxel-moving staircase-guided staircase-oidn voxel-static-vr voxel-moving-vr staircase-vr table1-rungholt table1-vokselia table1-eye-exam}
   [ $LOCAL = 1 ] && CASES=${GPU_BENCH_OVERHEAD_CASES:-voxel-static}
   step overhead 120 "bench_overhead (per-stage table: $CASES)" "$VPY" $B/bench_overhead.py \
     --cases $CASES --scale $OSCALE ${GPU_BENCH_OVERHEAD_ARGS:-} --out "$OUT/overhead.json"
   # The paper's frame size (2048²): on a GPU a 1024² frame is launch-bound.
-  CASES2=${GPU_BENCH_OVERHEAD_CASES_2X:-voxel-static voxel-moving table1-rungholt table1-vokselia table1-eye-exam}
+  CASES2=${GPU_BENCH_OVERHEAD_CASES_2X:-voxel-static voxel-moving voxel-static-vr voxel-moving-vr table1-rungholt table1-vokselia table1-eye-exam}
   [ $LOCAL = 1 ] && CASES2=${GPU_BENCH_OVERHEAD_CASES_2X:-voxel-static}
   step overhead_2x 90 "bench_overhead at twice the size ($CASES2)" "$VPY" $B/bench_overhead.py \
     --cases $CASES2 --scale $OSCALE2 --frames 3 --warmup 2 ${GPU_BENCH_OVERHEAD_ARGS:-} \
