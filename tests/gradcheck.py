@@ -36,6 +36,12 @@ OPTION_SETS = [
     ("svgf_every_pixel", {"preset": "guided", "denoiser": "svgf", "sigma_p": 1.0}),
     ("vr", {"preset": "vr"}),
     ("vr_atrous", {"preset": "vr", "denoiser": "atrous"}),
+]
+
+#: Variants of a formation in OPTION_SETS that change only weights or value domains: checked by
+#: the dot-product test alone (the adjoint is the transpose), which the other tests' shared
+#: code paths make enough.
+TRANSPOSE_ONLY = [
     ("vr_demodulate", {"preset": "vr", "demodulate": True}),
     ("vr_joint", {"preset": "vr", "foveal_upsampling": "joint"}),
 ]

@@ -75,7 +75,7 @@ def test_the_error_falls_as_the_budget_rises():
     assert err[0] > err[1] > err[2], err
 
 
-@pytest.mark.parametrize("gaze", [(0.5, 0.5), (0.0, 0.0), (1.0, 0.3), (0.97, 0.99)])
+@pytest.mark.parametrize("gaze", [(0.5, 0.5), (0.0, 0.0), (0.97, 0.99)])
 @pytest.mark.parametrize("size", [(64, 48), (40, 90)])
 def test_every_pixel_gets_a_value_at_any_gaze_and_aspect(gaze, size):
     scene = _scene(size, spp=2)
