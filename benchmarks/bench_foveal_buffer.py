@@ -5,7 +5,8 @@
 
 A buffer is judged without noise: each of its cells on the film takes the converged
 reference's value at the cell's centre (bilinear: what one ray there would converge to), and
-one bilinear warp (wrapping in angle) brings the buffer back to the film. The error against
+the ``foveal`` formation's warp (:func:`foveated_mi.frame.foveal.warp`: bilinear over the
+cells on the film, wrapping in angle) brings the buffer back. The error against
 the reference, display-referred (Reinhard then sRGB), is the buffer's own: what it cannot
 represent at that budget, in the fovea (eccentricity < ``--fovea-deg``) and beyond it, by
 eccentricity band. The film's own sparse formation at the same budget is the baseline: the
@@ -22,19 +23,19 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import time
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 import foveated_mi  # noqa: F401  (sets a variant)
-from common import machine, md_table, median, write_json
+from common import machine, md_table, median, timed, write_json
 
 from foveated_mi import viewer
 from foveated_mi.frame.sampling import ACUITY_OMEGA0, ACUITY_SLOPE
 from foveated_mi.kernels.grid import Grid
-from foveated_mi.kernels.polar import PolarGrid, polar_grid
+from foveated_mi.frame.foveal import warp
+from foveated_mi.kernels.polar import polar_grid
 from foveated_mi.render import to_display
 
 
@@ -50,36 +51,6 @@ def _bilinear(image: mi.Color3f, width: int, height: int, p: mi.Point2f) -> mi.C
             qy = dr.clip(mi.Int32(y0) + dy, 0, height - 1)
             out += dr.gather(mi.Color3f, image, mi.UInt32(qy * width + qx)) * (wx * wy)
     return out
-
-
-def warp(buffer: mi.Color3f, grid: PolarGrid, width: int, height: int, gaze: mi.Point2f
-         ) -> mi.Color3f:
-    """The buffer on the film: a bilinear lookup of each pixel's continuous cell coordinates,
-    wrapping in angle, clamping radially."""
-    film = Grid.film(width, height)
-    idx, _, _ = film.cells()
-    c = grid.coords_at(film.film_position(idx), gaze)
-    u, v = c.x - 0.5, c.y - 0.5
-    x0, y0 = dr.floor(u), dr.floor(v)
-    fx, fy = u - x0, v - y0
-    out = dr.zeros(mi.Color3f, film.size)
-    for dy, wy in ((0, 1.0 - fy), (1, fy)):
-        for dx, wx in ((0, 1.0 - fx), (1, fx)):
-            qy = dr.clip(mi.Int32(y0) + dy, 0, grid.height - 1)
-            q, _ = grid.neighbour(mi.Int32(x0) + dx, qy)
-            out += dr.gather(mi.Color3f, buffer, q) * (wx * wy)
-    return out
-
-
-def _timed(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        dr.eval(out)
-        dr.sync_thread()
-        times.append(1e3 * (time.perf_counter() - t0))
-    return median(times)
 
 
 def _psnr(ref_d, test_d, mask) -> float:
@@ -130,8 +101,9 @@ def run(scene_name: str, size, budget: float, fov: float, fovea_deg: float, ref_
             on = (pos.x >= 0) & (pos.x < W) & (pos.y >= 0) & (pos.y < H)
             buffer = dr.select(on, _bilinear(ref, W, H, pos), 0.0)
             dr.eval(buffer)
-            image = warp(buffer, grid, W, H, gaze_px)
-            ms = _timed(lambda: warp(buffer, grid, W, H, gaze_px), repeats)
+            image = warp(buffer, on, grid, gaze_px, W, H)
+            ms = median([timed(warp, buffer, on, grid, gaze_px, W, H)[1]
+                         for _ in range(repeats)])
             img = np.array(image).T.reshape(H, W, 3)
             test_d = to_display(img)
             row = {"gaze": list(g), "buffer": name, "cells": grid.size,
@@ -143,7 +115,7 @@ def run(scene_name: str, size, budget: float, fov: float, fovea_deg: float, ref_
             rows.append(row)
         form, rays = _film_baseline(ref, W, H, budget, tuple(g))
         image = form()
-        ms = _timed(form, repeats)
+        ms = median([timed(form)[1] for _ in range(repeats)])
         test_d = to_display(np.array(image).T.reshape(H, W, 3))
         row = {"gaze": list(g), "buffer": "film (paper: Jump Flooding + Sibson)", "cells": W * H,
                "rays": rays / (W * H), "fovea_px": None, "angles": None, "rings": None,

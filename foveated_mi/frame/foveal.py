@@ -32,7 +32,6 @@ from typing import Any
 import drjit as dr
 import mitsuba as mi
 
-from ..kernels import NO_SITE  # noqa: F401  (the nearest-site convention: each cell its own)
 from ..kernels.taps import Surface, surface_energy
 from ..kernels.buffers import GBuffer, Resolved
 from ..kernels.grid import Grid

@@ -58,7 +58,7 @@ import functools
 import numpy as np
 
 from ..kernels import pixel_coords
-from ..kernels.polar import PolarGrid, polar_grid_of
+from ..kernels.polar import PolarGrid, centres_at_film_centre, polar_grid_of
 from ..validate import check_range
 
 #: Minimum angle of resolution at the fovea, degrees (Guenter et al. 2012, §3).
@@ -298,11 +298,7 @@ def _traced_pixels(grid: PolarGrid | None, width: int, height: int,
     without a grid, the disc's alone."""
     traced = np.zeros(width * height, bool)
     if grid is not None:
-        ring = np.arange(grid.height) + 0.5
-        angle = (np.arange(grid.width) + 0.5) * (2.0 * math.pi / grid.width)
-        r = grid._r_of_u(ring)[:, None]
-        x = np.floor(width / 2 + r * np.cos(angle)[None, :]).astype(np.int64).ravel()
-        y = np.floor(height / 2 + r * np.sin(angle)[None, :]).astype(np.int64).ravel()
+        x, y = (np.floor(c).astype(np.int64) for c in centres_at_film_centre(grid))
         on = (x >= 0) & (x < width) & (y >= 0) & (y < height)
         traced[y[on] * width + x[on]] = True
         fovea = grid.fovea

@@ -146,14 +146,20 @@ def radial_log(r: float, fovea: float, offset: float, pitch: float = 1.0) -> flo
     return (fovea + (fovea + offset) * math.log((r + offset) / (fovea + offset))) / pitch
 
 
-def _inside_cells(width: int, height: int, film: tuple[int, int], grid: PolarGrid) -> int:
+def centres_at_film_centre(grid: PolarGrid) -> tuple[np.ndarray, np.ndarray]:
+    """Film positions ``(x, y)`` of every cell's centre with the gaze at the film's centre
+    (host, float64: what a budget is sized on)."""
+    W, H = grid.film_shape
+    r = grid._r_of_u(np.arange(grid.height) + 0.5)[:, None]
+    angle = (np.arange(grid.width) + 0.5) * (TWO_PI / grid.width)
+    return ((W / 2 + r * np.cos(angle)[None, :]).ravel(),
+            (H / 2 + r * np.sin(angle)[None, :]).ravel())
+
+
+def _inside_cells(grid: PolarGrid) -> int:
     """Cells whose centre lies on the film, for the gaze at the film's centre (host)."""
-    W, H = film
-    ring = np.arange(height) + 0.5
-    angle = (np.arange(width) + 0.5) * (TWO_PI / width)
-    r = grid._r_of_u(ring)[:, None]
-    x = W / 2 + r * np.cos(angle)[None, :]
-    y = H / 2 + r * np.sin(angle)[None, :]
+    W, H = grid.film_shape
+    x, y = centres_at_film_centre(grid)
     return int(((x >= 0) & (x < W) & (y >= 0) & (y < H)).sum())
 
 
@@ -187,12 +193,12 @@ def polar_grid(width: int, height: int, budget: float, *, offset: float = 0.0,
         return polar_grid_of(width, height, r0, 1.0, offset=offset, kernel=kernel)
 
     lo, hi = 0.5, reach
-    if _inside_cells(make(hi).width, make(hi).height, (width, height), make(hi)) < target:
+    if _inside_cells(make(hi)) < target:
         return make(hi)       # the budget is the whole film, or more
     for _ in range(40):       # the inside count grows with r0: bisection
         mid = 0.5 * (lo + hi)
         g = make(mid)
-        if _inside_cells(g.width, g.height, (width, height), g) < target:
+        if _inside_cells(g) < target:
             lo = mid
         else:
             hi = mid
