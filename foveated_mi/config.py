@@ -18,7 +18,7 @@ Layout (every key optional except ``scene``)::
     theta = 0.1
     [camera]                      # absent: the scene's own camera, static
     interpolation = "catmull_rom" # linear | catmull_rom | step
-    [[camera.keyframes]]          # t plus any of origin, target, up, fov, cut; missing
+    [[camera.keyframes]]          # t plus any of origin, target, up, fov, yaw, cut; missing
     t = 0.0                       # values come from the scene's camera
     origin = [-60, 30, -60]
     [gaze]                        # absent: fixed at the centre
@@ -221,15 +221,18 @@ def _foveated(ctx: TableContext, table: Any) -> dict:
     return table
 
 
-def _camera(ctx: TableContext, table: Any, scene: str) -> CameraPath | None:
+def _camera(ctx: TableContext, table: Any, scene: str,
+            defaults: dict | None = None) -> CameraPath | None:
+    """The ``[camera]`` table as a path; the keys a keyframe leaves out come from
+    ``defaults`` (a camera dict), else from the scene's own camera."""
     if table is None:
         return None
     from .scenes import scene_camera
     table = dict(ctx.table("camera", table))
-    pose_keys = ("origin", "target", "up", "fov")
+    pose_keys = ("origin", "target", "up", "fov", "yaw")
     ctx.known("camera", table, ("interpolation", "keyframes", "cut_threshold") + pose_keys)
     try:
-        defaults = scene_camera(scene)
+        defaults = defaults if defaults is not None else scene_camera(scene)
     except ParameterError as e:
         raise ctx.rename(e) from None
     interpolation = table.pop("interpolation", "linear")

@@ -3,7 +3,7 @@
 Every path has ``at(t)`` and ``at_frame(index, fps) = at(index / fps)``. Before the first and
 after the last keyframe a path holds its end value.
 
-Camera (:class:`CameraPath`): keyframes ``{"t", "origin", "target", "up", "fov"}``
+Camera (:class:`CameraPath`): keyframes ``{"t", "origin", "target", "up", "fov", "yaw"}``
 interpolated component-wise (``up`` re-normalised) with
 
 * ``"linear"``: :math:`p(t) = (1 - s) p_i + s p_{i+1}`, :math:`s = (t - t_i)/(t_{i+1} - t_i)`;
@@ -18,6 +18,10 @@ A **cut** (the camera jumps, the runner should drop the temporal history) is a s
 second keyframe has ``"cut": true``, or whose two keyframes are less than ``cut_threshold``
 seconds apart (default 1 ms; two keyframes at the same time are always a cut), or any
 segment under ``"step"``. From the cut's time on, the second keyframe's value holds.
+
+``yaw`` (degrees, default 0) turns the view about the keyframe's ``up`` axis, positive to the
+right, after interpolation: a head turning at a constant rate is two keyframes with linear
+interpolation, whatever the scene's own camera (which fills ``origin``, ``target``, ``up``).
 :meth:`CameraPath.cut_between` tells whether a cut lies in ``(t0, t1]``.
 
 Gaze, in normalised film coordinates (origin top-left, x right, y down; values outside
@@ -106,6 +110,12 @@ class _Keyframes:
         return h00 * v[i] + h10 * dt * self.m[i] + h01 * v[j] + h11 * dt * self.m[j]
 
 
+def _rotate(d: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
+    """``d`` rotated by ``angle`` (radians, right-handed) about the unit ``axis`` (Rodrigues)."""
+    c, s = math.cos(angle), math.sin(angle)
+    return d * c + np.cross(axis, d) * s + axis * float(np.dot(axis, d)) * (1.0 - c)
+
+
 def _check_time(name: str, value: Any) -> float:
     return check_finite(name, value)
 
@@ -181,7 +191,7 @@ class CameraPath(_Path):
         times = [kf["t"] for kf in self.keyframes]
         _check_times(kname, times)
         t = np.array(times, dtype=np.float64)
-        values = np.array([kf["origin"] + kf["target"] + kf["up"] + [kf["fov"]]
+        values = np.array([kf["origin"] + kf["target"] + kf["up"] + [kf["fov"], kf["yaw"]]
                            for kf in self.keyframes], dtype=np.float64)
         cut = np.array([False] + [self.keyframes[k]["cut"]
                                   or t[k] - t[k - 1] < max(self.cut_threshold, 1e-12)
@@ -191,8 +201,8 @@ class CameraPath(_Path):
     @staticmethod
     def _check_keyframe(name: str, kf: Any, defaults: dict | None) -> dict:
         if not isinstance(kf, dict):
-            raise ParameterError(name, kf, "a table with t, origin, target, up, fov")
-        allowed = ("t", "cut") + _CAMERA_KEYS
+            raise ParameterError(name, kf, "a table with t, origin, target, up, fov, yaw")
+        allowed = ("t", "cut", "yaw") + _CAMERA_KEYS
         for key in kf:
             if key not in allowed:
                 raise ParameterError(f"{name}.{key}", kf[key],
@@ -200,7 +210,9 @@ class CameraPath(_Path):
         if "t" not in kf:
             raise ParameterError(f"{name}.t", None, "a time in seconds (required)")
         out: dict[str, Any] = {"t": _check_time(f"{name}.t", kf["t"]),
-                               "cut": _check_bool(f"{name}.cut", kf.get("cut", False))}
+                               "cut": _check_bool(f"{name}.cut", kf.get("cut", False)),
+                               "yaw": check_range(f"{name}.yaw", kf.get("yaw", 0.0), -3600.0,
+                                                  3600.0)}
         for key in _CAMERA_KEYS:
             if key in kf:
                 value = kf[key]
@@ -246,6 +258,8 @@ class CameraPath(_Path):
         n = float(np.linalg.norm(up))
         if n > 0:
             up = up / n
+        if v[10] != 0.0:          # the head turned right by yaw about its up axis
+            target = origin + _rotate(target - origin, up, -math.radians(v[10]))
         return dict(origin=[float(c) for c in origin], target=[float(c) for c in target],
                     up=[float(c) for c in up], fov=float(v[9]))
 

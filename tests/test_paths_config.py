@@ -306,3 +306,21 @@ def test_config_with_xml_scene_relative_to_the_file(tmp_path, shared_scene):
     assert cfg.scene == os.path.abspath(xml)
     assert cfg.camera_at(0)["origin"] == pytest.approx([230, -118, 230])
     assert cfg.camera.at(0.5)["fov"] == pytest.approx((45 + 30) / 2)
+
+
+def test_yaw_turns_the_head_right_at_a_constant_rate():
+    """yaw (degrees, positive to the right) turns the view about the keyframe's up axis after
+    interpolation: Mitsuba's camera has +x on the film's left, so a right turn of 90 degrees
+    looks along -x; two linear keyframes turn at a constant rate."""
+    cam = {"origin": [1.0, 2.0, 3.0], "target": [1.0, 2.0, 4.0], "up": [0.0, 1.0, 0.0],
+           "fov": 90.0}
+    p = CameraPath([{"t": 0.0, **cam}, {"t": 1.0, **cam, "yaw": 90.0}])
+    d = np.subtract(p.at(1.0)["target"], p.at(1.0)["origin"])
+    assert d == pytest.approx([-1.0, 0.0, 0.0], abs=4 * np.finfo(float).eps)
+    dirs = [np.subtract(p.at(k / 8)["target"], cam["origin"]) for k in range(9)]
+    steps = [math.degrees(math.acos(np.clip(np.dot(a, b), -1.0, 1.0)))
+             for a, b in zip(dirs, dirs[1:])]
+    assert steps == pytest.approx([90.0 / 8] * 8, abs=1e-6)
+    assert all(np.linalg.norm(d) == pytest.approx(1.0) for d in dirs)   # no zoom
+    with pytest.raises(ParameterError, match=r"camera\.keyframes\[0\]\.yaw = 'left'"):
+        CameraPath([{"t": 0.0, **cam, "yaw": "left"}])
