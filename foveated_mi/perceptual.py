@@ -39,12 +39,19 @@ import numpy as np
 from .validate import ParameterError, check_point2, check_range
 
 __all__ = ["available", "display_names", "jod", "jod_video", "INSTALL_HINT", "DEFAULT_DISPLAY",
-           "COLUMNS"]
+           "COLUMNS", "columns"]
 
 INSTALL_HINT = "pip install -e '.[perceptual]'"
 DEFAULT_DISPLAY = "standard_fhd"
 #: Columns a study adds to ``results.csv`` when the extra is installed.
 COLUMNS = ("jod",)
+
+
+def columns(motion: bool, monitor: bool) -> tuple[str, ...]:
+    """The JOD columns of a study (with the extra): ``jod``, ``jod_video`` in motion, and
+    their ``_monitor`` twins with a second viewing condition (``[viewer] monitor``)."""
+    base = COLUMNS + (("jod_video",) if motion else ())
+    return base + (tuple(f"{c}_monitor" for c in base) if monitor else ())
 
 
 def available() -> bool:

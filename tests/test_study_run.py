@@ -497,3 +497,100 @@ def test_a_gaze_path_alone_keeps_one_reference_and_the_camera(tmp_path, monkeypa
     [ref] = [np.load(p) for p in (tmp_path / "o" / "references").glob("*.npy")]
     assert ref.shape == (16, 24, 3)
     assert all(r["frame"] == 6 for r in read_rows(res.results_path))
+
+
+def test_a_study_camera_sets_the_field_of_view_and_turns_the_head():
+    """camera = { fov, yaw, ... } over the scene's own camera: a headset's field of view for
+    any scene; it is part of the scene's identity and of its reference's key, and a study
+    without it keeps its ids."""
+    import mitsuba as mi
+    from foveated_mi import viewer
+    from foveated_mi.scenes import scene_camera
+    from foveated_mi.study import parse_study
+    from foveated_mi.study.tasks import get_scene, reference_key
+    base = {"scenes": [{"scene": "cornell-box"}], "size": [24, 16],
+            "foveated": {"grid": {"reconstruction": ["voronoi"]}}}
+    plain = parse_study(base).scenes[0]
+    turned = parse_study({**base, "camera": {"fov": 100.0, "yaw": 30.0}}).scenes[0]
+    own = scene_camera("cornell-box")
+    assert plain.camera is None and "camera" not in plain.load_spec() \
+        and "camera" not in plain.identity()
+    assert turned.camera["fov"] == 100.0 and turned.camera["origin"] == own["origin"]
+    d0 = np.subtract(own["target"], own["origin"])
+    d1 = np.subtract(turned.camera["target"], turned.camera["origin"])
+    cos = np.dot(d0, d1) / np.linalg.norm(d0) / np.linalg.norm(d1)
+    assert math.degrees(math.acos(cos)) == pytest.approx(30.0, abs=1e-6)
+    assert turned.identity()["camera"] == turned.camera
+    v = mi.variant()
+    assert reference_key(plain, v) != reference_key(turned, v)
+    sensor = get_scene(turned.load_spec(), v).sensors()[0]
+    # the horizontal field of view across the film's edges (pixel edges, not centres)
+    assert viewer.horizontal_fov(sensor) == pytest.approx(100.0, abs=1e-3)
+    # a scene's own table wins over the study's
+    own_fov = parse_study({**base, "camera": {"fov": 100.0},
+                           "scenes": [{"scene": "cornell-box", "camera": {"fov": 60.0}}]})
+    assert own_fov.scenes[0].camera["fov"] == 60.0
+
+
+@pytest.mark.parametrize("text, key", [
+    ("camera = { fov = 0 }\n", "camera.fov"),
+    ("camera = { yaw = 'left' }\n", "camera.yaw"),
+    ("camera = { zoom = 2 }\n", "camera.zoom"),
+    ("camera = 100\n", "camera"),
+    ('[viewer]\nfov = "sensor"\nmonitor = { ppd = 0 }\n', "viewer.monitor.ppd"),
+    ('[viewer]\nfov = "sensor"\nmonitor = { dpi = 3 }\n', "viewer.monitor.dpi"),
+    ('[viewer]\nfov = "sensor"\nmonitor = 67\n', "viewer.monitor"),
+])
+def test_bad_camera_and_monitor_tables_are_one_line(tmp_path, text, key):
+    from foveated_mi.study import load_study
+    from foveated_mi.validate import ParameterError
+    body = '[[scenes]]\nscene = "cornell-box"\n[foveated.grid]\nreconstruction = ["voronoi"]\n'
+    top, tables = (text, "") if text.startswith("camera") else ("", text)
+    with pytest.raises(ParameterError) as e:
+        load_study(study_file(tmp_path, top + body + tables))
+    assert f"{key} = " in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
+def test_a_monitor_column_needs_a_monitor(tmp_path):
+    from foveated_mi.validate import ParameterError
+    text = MOTION.replace("seed = 2\n", 'seed = 2\nmetric = "jod_video_monitor"\n')
+    with pytest.raises(ParameterError) as e:
+        run_study(study_file(tmp_path, text), out=str(tmp_path / "o"), progress=False,
+                  echo=None)
+    assert "metric = 'jod_video_monitor'" in str(e.value) and "\n" not in str(e.value)
+
+
+@pytest.mark.skipif(not __import__("foveated_mi.perceptual").perceptual.available(),
+                    reason="needs the perceptual extra (pyfvvdp, torch)")
+def test_a_second_viewing_condition_scores_the_same_frames(tmp_path):
+    """[viewer] monitor: the frames a headset row showed are also scored as a video on a
+    monitor at 67 ppd (jod_video_monitor), rendered once; the study's columns are what
+    perceptual.jod_video gives on those frames under each condition."""
+    import mitsuba as mi
+    from foveated_mi import perceptual, viewer
+    from foveated_mi.study import load_study
+    from foveated_mi.study.tasks import expand_tasks, get_scene, run_sequence_task
+    text = MOTION.replace('fov = "sensor"\n', 'fov = "sensor"\nmonitor = { ppd = 67.0 }\n')
+    path = study_file(tmp_path, text.replace("seed = 2\n",
+                                             'seed = 2\nmetric = "jod_video_monitor"\n'))
+    res = run_study(path, out=str(tmp_path / "o"), progress=False, echo=None)
+    assert res.failed == [] and res.metric == "jod_video_monitor"
+    rows = {r["method"]: r for r in read_rows(res.results_path)}
+    spec = load_study(path)
+    [ref] = [np.load(p) for p in (tmp_path / "o" / "references").glob("*.npy")]
+    task = next(t for t in expand_tasks(spec, mi.variant()) if t["method"] == "foveated")
+    row, shown = run_sequence_task({**task, "jod": True}, ref)
+    refs, tests = np.stack([r for r, _ in shown]), np.stack([t for _, t in shown])
+    gazes = spec.scenes[0].motion["gazes"]
+    sensor = get_scene(task["scene"], mi.variant()).sensors()[0]
+    hmd = perceptual.jod_video(refs, tests, fixations=gazes, fps=30,
+                               fov_horizontal=viewer.horizontal_fov(sensor),
+                               display=spec.perceptual["display"])
+    mon = perceptual.jod_video(refs, tests, fixations=gazes, fps=30, ppd=67.0,
+                               display="standard_fhd")
+    assert row["jod_video"] == pytest.approx(hmd, abs=1e-6)
+    assert row["jod_video_monitor"] == pytest.approx(mon, abs=1e-6)
+    assert hmd != pytest.approx(mon, abs=1e-3)           # two conditions, two scores
+    # the study's rows come from the same frames (fixed seeds)
+    assert rows["foveated"]["jod_video_monitor"] == pytest.approx(mon, abs=1e-4)
+    assert all(0.0 < r["jod_video_monitor"] <= 10.0 for r in rows.values())

@@ -22,13 +22,14 @@ from __future__ import annotations
 
 import json
 import math
+import statistics
 from dataclasses import dataclass, field
 from typing import Any
 
 from .aggregate import Margin, aggregate, margin
 
 __all__ = ["Verdict", "equal_time_verdicts", "verdict_lines", "verdict_sentence", "speedup",
-           "TARGETS"]
+           "speedup_over_seeds", "Speedup", "TARGETS"]
 
 #: (name, frame, column, needed margin, against): "uniform" is the baseline without history
 #: (frame 1: it does not change with the frame), "history" the uniform frame with the same
@@ -163,6 +164,48 @@ def speedup(cell: dict, family: list[dict], column: str) -> tuple[float, str]:
             f = (q - ya) / (yb - ya)
             return math.exp(math.log(ta) + f * (math.log(tb) - math.log(ta))) / t0, "="
     return math.nan, "="
+
+
+@dataclass
+class Speedup:
+    """A cell's speed-up at equal quality against a family (:func:`speedup`): on the cells'
+    means (``ratio``, ``relation``) and seed by seed (``per_seed``: ``(ratio, relation)``
+    pairs; ``mean`` and ``sd`` over the seeds whose ratio is finite)."""
+    ratio: float
+    relation: str
+    per_seed: list[tuple[float, str]]
+    mean: float
+    sd: float
+
+    @property
+    def tie(self) -> bool:
+        """x1 lies within the spread over seeds (every seed's ratio exact)."""
+        return self.exact and math.isfinite(self.sd) and abs(self.mean - 1.0) < self.sd
+
+    @property
+    def exact(self) -> bool:
+        return all(r == "=" for _, r in self.per_seed)
+
+    def text(self) -> str:
+        if not math.isfinite(self.ratio):
+            return "-"
+        rel = {"=": "", ">": "≥", "<": "≤"}[self.relation]
+        spread = f" ± {self.sd:.2f}" if self.exact and math.isfinite(self.sd) else ""
+        return f"{rel}×{self.ratio:.2f}{spread}"
+
+
+def speedup_over_seeds(cell: dict, family: list[dict], column: str) -> Speedup:
+    """:func:`speedup` of an aggregated ``cell`` against a ``family`` of aggregated cells, on
+    the means and for each of the cell's seeds against the family's rows of that seed."""
+    ratio, rel = speedup(cell, family, column)
+    per_seed = []
+    for r in cell.get("rows") or [cell]:
+        rows = [x for c in family for x in (c.get("rows") or [c])
+                if x.get("seed") == r.get("seed")]
+        per_seed.append(speedup(r, rows, column))
+    xs = [x for x, _ in per_seed if math.isfinite(x)]
+    return Speedup(ratio, rel, per_seed, sum(xs) / len(xs) if xs else math.nan,
+                   statistics.stdev(xs) if len(xs) > 1 else math.nan)
 
 
 def _label(cell: dict) -> str:

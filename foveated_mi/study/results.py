@@ -51,6 +51,7 @@ def columns(extra: Iterable[str] = ()) -> list[str]:
 #: Columns read back as numbers by :func:`read_rows` (besides any ``*_ms`` column).
 NUMERIC_COLUMNS = frozenset(("seed", "theta", "sigma_p", "spp", "frame", "rays",
                              "ray_fraction", "samples", "time_ms", *COMPARE_KEYS, "jod", "jod_video",
+                             "jod_monitor", "jod_video_monitor",
                              "history_hit_rate", "width", "height", "repeats"))
 
 

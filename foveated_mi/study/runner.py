@@ -166,17 +166,22 @@ def _prepare_study(study, out, executor, scheduler, size, metric, variant):
     if metric is not None and metric not in QUALITY_COLUMNS:
         raise ParameterError("--metric", metric, "one of " + ", ".join(QUALITY_COLUMNS))
     metric = metric or spec.metric
-    if metric in ("jod", "jod_video"):
+    if metric.startswith("jod"):
         from .. import perceptual
         motion = any(s.motion is not None for s in spec.scenes)
+        monitor = "monitor" in spec.perceptual
         if not (spec.perceptual.get("jod") and perceptual.available()) or \
-                (metric == "jod_video") != motion:
+                metric not in perceptual.columns(motion, monitor) or \
+                (metric.startswith("jod_video")) != motion:
             if not perceptual.available():
                 why = f"FovVideoVDP installed ({perceptual.INSTALL_HINT})"
             elif not spec.perceptual.get("jod"):
                 why = "[metrics] jod = true"
+            elif metric.endswith("_monitor") and not monitor:
+                why = "a [viewer] monitor table"
             else:
-                why = "a study without [motion]" if metric == "jod" else "a [motion] table"
+                why = "a study without [motion]" if not metric.startswith("jod_video") \
+                    else "a [motion] table"
             raise ParameterError("metric", metric, f"a column this study computes: {metric} "
                                  f"needs {why}")
     out_dir = out if out is not None else os.path.join("out", "studies", spec.name)
@@ -216,7 +221,7 @@ def _execute(tasks, scenes, file_refs, ex, with_jod, v, executor, progress,
     from .results import ResultsFile, columns
     spec, results_path = result.spec, result.results_path
     motion = any(s.motion is not None for s in spec.scenes)
-    extra = (perceptual.COLUMNS + (("jod_video",) if motion else ())) if with_jod else ()
+    extra = perceptual.columns(motion, "monitor" in spec.perceptual) if with_jod else ()
     with ResultsFile(results_path, columns(extra)) as results:
         if results.repaired_bytes:
             say(f"note: {results_path}: removed a partly written last line "

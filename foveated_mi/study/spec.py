@@ -11,6 +11,8 @@ Layout (every key optional except ``scenes``)::
     metric = "psnr_fovea"       # quality axis of the Pareto plot (a quality column)
     size = [256, 256]           # defaults for every scene (each [[scenes]] may override):
     gaze = [0.5, 0.5]           #   film size, gaze (normalised film coords, origin top-left),
+    camera = { fov = 100 }      #   the camera: any of origin, target, up, fov (degrees along
+                                #   x), yaw (degrees, to the right) over the scene's own one,
     [integrator]                #   nested integrator (default: path, max_depth 8)
     type = "path"
     max_depth = 8
@@ -40,14 +42,18 @@ Layout (every key optional except ``scenes``)::
                                 #   and JOD at the pixels per degree of the gaze, the fovea
                                 #   within metrics.fovea_deg of the gaze ray
     display = "standard_hmd"    #   the display's photometry (as metrics.display)
+    monitor = { ppd = 67.0, display = "standard_fhd" }   # also JOD as seen on a monitor at
+                                #   ppd (columns jod_monitor, jod_video_monitor): the same
+                                #   frames judged under both conditions, rendered once
 
     [motion]                    # rows are sequences instead of frames of a still view
     frames = 45                 #   frames per sequence (>= 2), shown at fps
     fps = 90
     [motion.camera]             #   the camera path (the sequence format of configs/*.toml;
     interpolation = "linear"    #   absent: each scene's own camera, still); each scene's own
-    [[motion.camera.keyframes]] #   camera fills the keys a keyframe leaves out
-    t = 0.0
+    [[motion.camera.keyframes]] #   camera (or the study's camera) fills the keys a keyframe
+    t = 0.0                     #   leaves out; yaw = degrees to the right turns the head
+    yaw = -9.0
     [motion.gaze]               #   the gaze path (fixed, keyframes, saccades, csv; absent:
     type = "saccades"           #   each scene's gaze, still)
     targets = [[0.3, 0.5], [0.7, 0.4]]
@@ -111,7 +117,7 @@ __all__ = ["StudySpec", "SceneSpec", "load_study", "parse_study", "QUALITY_COLUM
 
 #: Columns a study can put on the Pareto plot's quality axis (``jod``: with the perceptual
 #: extra and ``[metrics] jod = true``; ``jod_video``: also under ``[motion]``).
-QUALITY_COLUMNS = (*COMPARE_KEYS, "jod", "jod_video")
+QUALITY_COLUMNS = (*COMPARE_KEYS, "jod", "jod_video", "jod_monitor", "jod_video_monitor")
 DEFAULT_INTEGRATOR = {"type": "path", "max_depth": 8}
 DEFAULT_REFERENCE_SPP = 256
 DEFAULT_METRICS = {"theta": 0.1, "sigma_p": 0.8, "ppd": 67.0, "flip": True, "exposure": 0.0}
@@ -120,10 +126,10 @@ DEFAULT_METRICS = {"theta": 0.1, "sigma_p": 0.8, "ppd": 67.0, "flip": True, "exp
 DEFAULT_PERCEPTUAL = {"jod": True, "display": "standard_fhd"}
 
 _TOP_KEYS = ("description", "seed", "seeds", "repeats", "warmup", "metric", "size", "gaze",
-             "integrator", "reference", "scenes", "metrics", "viewer", "motion", "foveated",
+             "camera", "integrator", "reference", "scenes", "metrics", "viewer", "motion", "foveated",
              "uniform")
-_SCENE_KEYS = ("scene", "label", "size", "gaze", "params", "integrator", "reference",
-               "optional")
+_SCENE_KEYS = ("scene", "label", "size", "gaze", "camera", "params", "integrator",
+               "reference", "optional")
 _REFERENCE_KEYS = ("spp", "seed", "file", "layer")
 _EXTRA_KEYS = ("spp", "frames")          # foveated keys that are not integrator options
 _FORBIDDEN = {"gaze": "no gaze here: set it per scene (gaze = [x, y])",
@@ -142,6 +148,9 @@ class SceneSpec:
     integrator: dict = field(default_factory=lambda: dict(DEFAULT_INTEGRATOR))
     reference: dict = field(default_factory=lambda: {"spp": DEFAULT_REFERENCE_SPP, "seed": 1})
     optional: bool = False
+    #: The camera dict ``{origin, target, up, fov}`` when the study sets one (``camera``),
+    #: else None (the scene's own)
+    camera: dict | None = None
     #: ``{"fps", "cameras": [camera dict per frame] or None, "gazes": [[x, y] per frame]}``
     #: under ``[motion]``, else None
     motion: dict | None = None
@@ -158,8 +167,11 @@ class SceneSpec:
 
     def load_spec(self) -> dict:
         """Plain dict a worker needs to load the scene (no Mitsuba objects)."""
-        return {"source": self.source, "width": self.size[0], "height": self.size[1],
-                "params": dict(self.params), "integrator": dict(self.integrator)}
+        out = {"source": self.source, "width": self.size[0], "height": self.size[1],
+               "params": dict(self.params), "integrator": dict(self.integrator)}
+        if self.camera is not None:
+            out["camera"] = dict(self.camera)
+        return out
 
     def identity(self) -> dict:
         """What identifies the scene's results (machine-independent: the TOML spelling)."""
@@ -167,6 +179,8 @@ class SceneSpec:
         out = {"scene": self.name, "label": self.label, "size": list(self.size),
                "gaze": list(self.gaze),
                "params": self.params, "integrator": self.integrator, "reference": ref}
+        if self.camera is not None:
+            out["camera"] = self.camera
         if self.motion is not None:
             out["motion"] = self.motion
         return out
@@ -218,6 +232,7 @@ def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
     defaults = {
         "size": _size(ctx, "size", data.get("size", [256, 256])),
         "gaze": _gaze(ctx, "gaze", data.get("gaze", [0.5, 0.5])),
+        "camera": _camera_keys(ctx, "camera", data["camera"]) if "camera" in data else None,
         "integrator": _integrator(ctx, "integrator", data.get("integrator", DEFAULT_INTEGRATOR)),
         "reference": _reference(ctx, "reference", data.get("reference", {}), base_dir),
     }
@@ -359,10 +374,38 @@ def _scene(ctx: TableContext, key: str, table: Any, defaults: dict, base_dir: st
     gaze = _gaze(ctx, f"{key}.gaze", table["gaze"]) if "gaze" in table else defaults["gaze"]
     integ = _integrator(ctx, f"{key}.integrator", table["integrator"]) \
         if "integrator" in table else defaults["integrator"]
+    keys = _camera_keys(ctx, f"{key}.camera", table["camera"]) if "camera" in table \
+        else defaults["camera"]
+    camera = None
+    if keys is not None and (source in builtin.SCENES or os.path.isfile(source)):
+        camera = _scene_camera(ctx, f"{key}.camera", keys, source)
     ref = _reference(ctx, f"{key}.reference", table["reference"], base_dir,
                      defaults["reference"]) if "reference" in table else defaults["reference"]
     return SceneSpec(name=name, source=source, label=label, size=size, gaze=gaze,
-                     params=params, integrator=integ, reference=ref, optional=optional)
+                     params=params, integrator=integ, reference=ref, optional=optional,
+                     camera=camera)
+
+
+_CAMERA_KEYS = ("origin", "target", "up", "fov", "yaw")
+
+
+def _camera_keys(ctx: TableContext, key: str, value: Any) -> dict:
+    """A ``camera`` table: any of origin, target, up, fov and yaw (checked with the scene's)."""
+    table = dict(ctx.table(key, value))
+    ctx.known(key, table, _CAMERA_KEYS)
+    return table
+
+
+def _scene_camera(ctx: TableContext, key: str, keys: dict, source: str) -> dict:
+    """The scene's own camera with the study's ``keys`` over it (``yaw`` turns it right)."""
+    from ..paths import CameraPath
+    from ..scenes import scene_camera
+    try:
+        path = CameraPath([{"t": 0.0, **keys}], defaults=scene_camera(source), name=key)
+    except ParameterError as e:       # one static keyframe: name the study's own key
+        raise ctx.error(e.name.replace(f"{key}.keyframes[0]", key), e.value,
+                        e.allowed) from None
+    return path.at(0.0)
 
 
 def _motion(ctx: TableContext, table: Any, scenes: list, base_dir: str) -> list:
@@ -385,7 +428,8 @@ def _motion(ctx: TableContext, table: Any, scenes: list, base_dir: str) -> list:
         camera = None
         if "camera" in table and not scene.missing:
             # each scene's own camera fills the keys a keyframe leaves out
-            path = _with_prefix(ctx, "motion", lambda c: _camera(c, table["camera"], scene.source))
+            path = _with_prefix(ctx, "motion", lambda c: _camera(c, table["camera"], scene.source,
+                                                                  scene.camera))
             camera = [path.at(k / fps) for k in range(frames)]
         gazes = [list(map(float, gaze.at(k / fps))) for k in range(frames)] if gaze else \
             [list(scene.gaze)] * frames
@@ -415,13 +459,15 @@ def _viewer(ctx: TableContext, table: Any, fovea_deg, perceptual: dict) -> dict:
                             "\"sensor\" (degrees need the sensor's field of view)")
         return {}
     table = dict(ctx.table("viewer", table))
-    ctx.known("viewer", table, ("fov", "display"))
+    ctx.known("viewer", table, ("fov", "display", "monitor"))
+    from ..perceptual import check_display
     if "display" in table:
-        from ..perceptual import check_display
         try:
             perceptual["display"] = check_display("viewer.display", table["display"])
         except ParameterError as e:
             raise ctx.rename(e) from None
+    if "monitor" in table:
+        perceptual["monitor"] = _monitor(ctx, table["monitor"])
     if "fov" not in table:
         raise ctx.error("viewer.fov", None, "\"sensor\" (the film spans the sensor's field "
                         "of view)")
@@ -433,6 +479,22 @@ def _viewer(ctx: TableContext, table: Any, fovea_deg, perceptual: dict) -> dict:
     except ParameterError as e:
         raise ctx.rename(e) from None
     return {"viewer": fov, "fovea_deg": deg}
+
+
+def _monitor(ctx: TableContext, table: Any) -> dict:
+    """``[viewer] monitor``: a second viewing condition, a monitor at ``ppd`` pixels per degree
+    with a display model's photometry (default standard_fhd)."""
+    from ..perceptual import check_display
+    from ..validate import check_range
+    table = dict(ctx.table("viewer.monitor", table))
+    ctx.known("viewer.monitor", table, ("ppd", "display"))
+    try:
+        return {"ppd": check_range("viewer.monitor.ppd", table.get("ppd", 67.0), 0.0, None,
+                                   lo_open=True),
+                "display": check_display("viewer.monitor.display",
+                                         table.get("display", DEFAULT_PERCEPTUAL["display"]))}
+    except ParameterError as e:
+        raise ctx.rename(e) from None
 
 
 def _metrics(ctx: TableContext, table: Any) -> tuple[dict, dict]:

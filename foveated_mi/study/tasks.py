@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["expand_tasks", "reference_task", "reference_key", "run_task", "run_reference_task",
-           "get_scene", "scene_cache_info", "clear_scene_cache", "task_id"]
+           "run_sequence_task", "get_scene", "scene_cache_info", "clear_scene_cache", "task_id"]
 
 #: Test hook (not API): when set to a path that does not exist, the first task a process runs
 #: creates that file and kills its own process, to test that a dead worker's task is retried.
@@ -65,7 +65,7 @@ def reference_key(scene, variant: str) -> str:
     """Cache key of a rendered reference: scene, size, parameters, integrator, spp, seed,
     camera and variant (and the XML file's modification time)."""
     from ..scenes import scene_camera
-    camera = scene_camera(scene.source)
+    camera = scene.camera or scene_camera(scene.source)
     mtime = None if scene.builtin else os.stat(scene.source).st_mtime_ns
     key = {"scene": scene.name, "size": list(scene.size), "params": scene.params,
            "integrator": scene.integrator, "spp": scene.reference["spp"],
@@ -150,7 +150,7 @@ def _hashed_metrics(spec) -> dict:
     """The metric settings in task ids: the perceptual ones only where they differ from their
     defaults (studies written before them keep their ids, and resume)."""
     from .spec import DEFAULT_PERCEPTUAL
-    extra = {k: v for k, v in _perceptual(spec).items() if v != DEFAULT_PERCEPTUAL[k]}
+    extra = {k: v for k, v in _perceptual(spec).items() if v != DEFAULT_PERCEPTUAL.get(k)}
     return {**spec.metrics, **extra}
 
 
@@ -185,7 +185,8 @@ def get_scene(load_spec: dict, variant: str):
         assert mi.variant() == variant
         scene = load_scene(load_spec["source"], width=load_spec["width"],
                            height=load_spec["height"], spp=1,
-                           integrator=load_spec["integrator"], **load_spec["params"])
+                           integrator=load_spec["integrator"], camera=load_spec.get("camera"),
+                           **load_spec["params"])
         _SCENES[key] = scene
         _LOADS["count"] += 1
     return scene
@@ -268,13 +269,27 @@ def _quality(reference_display: np.ndarray, image: np.ndarray, task: dict,
         out["jod"] = jod(reference_display, test, gaze=tuple(task["gaze"]),
                          ppd=viewing["ppd"], fov_horizontal=viewing["fov"],
                          display=task["perceptual"]["display"])
+        monitor = task["perceptual"].get("monitor")
+        if monitor is not None:           # the same frame on a monitor
+            out["jod_monitor"] = jod(reference_display, test, gaze=tuple(task["gaze"]),
+                                     ppd=monitor["ppd"], display=monitor["display"])
     return out
 
 
-def _sequence_row(scene, task: dict, reference: np.ndarray) -> dict:
+def run_sequence_task(task: dict, reference: np.ndarray) -> tuple[dict, list]:
+    """One ``[motion]`` task, as :func:`run_task` runs it, with the frames it showed:
+    ``(row, shown)``, ``shown`` a (reference, image) pair of display-referred (H, W, 3)
+    arrays per frame (for pictures and videos of a sequence)."""
+    _prepare_worker(task)
+    scene = get_scene(task["scene"], task["variant"])
+    return _sequence_row(scene, task, reference, keep=True)
+
+
+def _sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = False):
     """One sequence of ``[motion]`` (spec module docstring): each frame moved, fixated,
     rendered and scored against its own reference; the row's time is the median frame time
-    after the first, its quality the mean over frames (+ ``jod_video``)."""
+    after the first, its quality the mean over frames (+ ``jod_video``). With ``keep``:
+    ``(row, shown)``."""
     motion = task["motion"]
     gazes = motion["gazes"]
     n = len(gazes)
@@ -291,12 +306,16 @@ def _sequence_row(scene, task: dict, reference: np.ndarray) -> dict:
     if task.get("jod"):
         from ..perceptual import jod_video
         viewing = _viewing(scene, task)
-        row["jod_video"] = jod_video(np.stack([r for r, _ in shown]),
-                                     np.stack([t for _, t in shown]), fixations=gazes,
-                                     fps=motion["fps"], ppd=viewing["ppd"],
-                                     fov_horizontal=viewing["fov"],
+        ref, test = np.stack([r for r, _ in shown]), np.stack([t for _, t in shown])
+        row["jod_video"] = jod_video(ref, test, fixations=gazes, fps=motion["fps"],
+                                     ppd=viewing["ppd"], fov_horizontal=viewing["fov"],
                                      display=task["perceptual"]["display"])
-    return row
+        monitor = task["perceptual"].get("monitor")
+        if monitor is not None:           # the same video on a monitor
+            row["jod_video_monitor"] = jod_video(ref, test, fixations=gazes,
+                                                 fps=motion["fps"], ppd=monitor["ppd"],
+                                                 display=monitor["display"])
+    return (row, shown) if keep else row
 
 
 def _sequence_renderer(scene, task: dict, gaze):
