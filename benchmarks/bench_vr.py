@@ -1,0 +1,336 @@
+"""The VR study: foveated presets against uniform rendering, in a headset and on a monitor.
+
+Runs ``configs/studies/vr.toml`` (a 100-degree camera whose head turns at 30 degrees per second
+while the eyes saccade every 300 ms, shown at 90 Hz; each row one sequence scored frame by
+frame against a 256-spp reference of that frame's camera, and as a video by FovVideoVDP). The
+same frames are judged under two viewing conditions:
+
+* **headset** (``jod_video``): the film spans the sensor's field of view, ``standard_hmd``
+  photometry; the fovea columns within 5 degrees of the gaze ray;
+* **monitor** (``jod_video_monitor``): the film on a ``standard_fhd`` monitor at 67 pixels
+  per degree.
+
+Then it writes, to ``--results`` (default ``docs/results/``):
+
+* ``vr.md``: every cell (mean ± standard deviation over the seeds) and, per condition and
+  scene, the **speed-up at equal video JOD** of each foveated configuration against each
+  uniform family (uniform, + OIDN, + the same history, + the same history and OIDN; 1, 2 and 4
+  spp): the time the family needs to reach the configuration's ``jod_video``, read along its
+  best-so-far curve in log time (:func:`foveated_mi.study.equal_time.speedup`), over the
+  configuration's time; ``>`` where the family never reaches it, ``<`` where its fastest
+  cell already does. Per seed, then mean ± standard deviation over seeds;
+* ``vr.json``: the same, machine-readable;
+* ``vr_eccentricity.png``: PSNR against eccentricity in degrees (5-degree rings, all frames
+  of seed 0 under the headset) per configuration;
+* ``vr_side_by_side.mp4`` and ``vr_side_by_side.png`` (its middle frame): reference, the
+  ``vr`` preset and uniform + history + OIDN at 1 spp, side by side, the gaze marked.
+
+Without the perceptual extra (``pip install -e '.[perceptual]'``) there is no JOD: the tables
+fall back to fovea PSNR (one condition) and say so. Times are medians of each sequence's
+frames after the first, on this machine, comparable within one run only.
+
+    python benchmarks/bench_vr.py [--size 1152 648] [--frames 54] [--seeds 0 1 2]
+                                  [--scenes voxel-city staircase] [--out out/vr]
+
+The study resumes: a second run only renders what ``out/vr/results.csv`` lacks.
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import math
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, ".."))
+
+STUDY = os.path.join(HERE, "..", "configs", "studies", "vr.toml")
+RESULTS = os.path.join(HERE, "..", "docs", "results")
+#: Viewing condition -> its video JOD column.
+CONDITIONS = {"headset": "jod_video", "monitor": "jod_video_monitor"}
+#: The uniform families a foveated configuration is measured against.
+FAMILIES = ("uniform", "uniform+oidn", "uniform+history", "uniform+history+oidn")
+RING_DEG = 5.0
+
+
+def overridden(data: dict, a) -> dict:
+    """The study table with the command line's size, frames, seeds and scenes."""
+    d = copy.deepcopy(data)
+    if a.size:
+        d["size"] = list(a.size)
+    if a.frames:
+        d["motion"]["frames"] = a.frames
+    if a.seeds:
+        d["seeds"] = list(a.seeds)
+    if a.scenes:
+        keep = [s for s in d["scenes"] if _scene_name(s) in a.scenes]
+        if not keep:
+            from foveated_mi.validate import ParameterError
+            raise ParameterError("--scenes", a.scenes, "names among " + ", ".join(
+                _scene_name(s) for s in d["scenes"]))
+        d["scenes"] = keep
+    return d
+
+
+def _scene_name(s: dict) -> str:
+    name = s["scene"]
+    return os.path.basename(os.path.dirname(name)) if name.endswith("scene.xml") else name
+
+
+def label(row: dict) -> str:
+    if row["method"] == "foveated":
+        opts = json.loads(row["config"]).get("options", {})
+        return f"{opts.get('preset', 'auto')} {row['spp']:.0f} spp"
+    return f"{row['method']} {row['spp']:.0f} spp"
+
+
+def speedups(rows: list[dict], column: str) -> list[dict]:
+    """Per scene, foveated configuration and uniform family: the speed-up at equal
+    ``column`` on the means and seed by seed (module docstring)."""
+    from foveated_mi.study.aggregate import aggregate
+    from foveated_mi.study.equal_time import speedup_over_seeds
+    out = []
+    for scene in sorted({r["scene"] for r in rows}):
+        cells = aggregate([r for r in rows if r["scene"] == scene])
+        for cell in (c for c in cells if c["method"] == "foveated"):
+            for fam in FAMILIES:
+                family = [c for c in cells if c["method"] == fam]
+                if family:
+                    s = speedup_over_seeds(cell, family, column)
+                    out.append({"scene": scene, "configuration": label(cell), "family": fam,
+                                "column": column, "ratio": s.ratio, "relation": s.relation,
+                                "per_seed": s.per_seed, "seed_mean": s.mean, "seed_sd": s.sd,
+                                "text": s.text(), "time_ms": cell["time_ms"],
+                                "quality": cell.get(column)})
+    return out
+
+
+def _ratio_text(s: dict) -> str:
+    seeds = ", ".join({"=": "", ">": "≥", "<": "≤"}[r] + f"{x:.2f}"
+                      for x, r in s["per_seed"] if math.isfinite(x))
+    return s["text"] + (f" ({seeds})" if seeds else "")
+
+
+def _pm(r: dict, col: str, fmt: str = ".2f") -> str:
+    v = r.get(col)
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "-"
+    sd = r.get(f"{col}_sd", math.nan)
+    return format(v, fmt) + (f" ± {format(sd, fmt)}" if not math.isnan(sd) else "")
+
+
+def cells_table(rows: list[dict], columns: list[str]) -> list[str]:
+    from foveated_mi.study.aggregate import aggregate
+    cells = aggregate(rows)
+    cols = [c for c in dict.fromkeys(columns) if c != "psnr_fovea"]
+    out = ["| scene | configuration | seeds | time ms | rays | PSNR | fovea | periphery | "
+           + " | ".join(cols) + " |", "|---|---|---|---|---|---|---|---|" + "---|" * len(cols)]
+    for r in sorted(cells, key=lambda r: (r["scene"], r["method"] != "foveated", label(r))):
+        out.append(f"| {r['scene']} | {label(r)} | {r['seeds']} | {_pm(r, 'time_ms', '.0f')} "
+                   f"| {r['ray_fraction']:.0%} | {_pm(r, 'psnr')} | {_pm(r, 'psnr_fovea')} "
+                   f"| {_pm(r, 'psnr_periphery')} | "
+                   + " | ".join(_pm(r, c) for c in cols) + " |")
+    return out
+
+
+def speedup_table(sps: list[dict]) -> list[str]:
+    fams = [f for f in FAMILIES if any(s["family"] == f for s in sps)]
+    out = ["| scene | configuration | time ms | " + " | ".join(fams) + " |",
+           "|---|---|---|" + "---|" * len(fams)]
+    keys = list(dict.fromkeys((s["scene"], s["configuration"]) for s in sps))
+    for scene, conf in keys:
+        mine = {s["family"]: s for s in sps if (s["scene"], s["configuration"]) == (scene, conf)}
+        first = next(iter(mine.values()))
+        out.append(f"| {scene} | {conf} | {first['time_ms']:.0f} | "
+                   + " | ".join(_ratio_text(mine[f]) if f in mine else "-" for f in fams) + " |")
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# pictures: seed 0 under the headset, the first scene
+# ---------------------------------------------------------------------------------------------
+
+def picture_tasks(spec, variant: str) -> list[dict]:
+    """Seed 0 of each foveated configuration and of the 1-spp uniform families, first scene
+    (no JOD: the pictures need the frames only)."""
+    from foveated_mi.study.tasks import expand_tasks
+    return [{**t, "jod": False} for t in expand_tasks(spec, variant)
+            if t["seed"] == spec.seeds[0] and t["label"] == spec.scenes[0].label
+            and (t["method"] == "foveated" or (t["spp"] == 1 and t["method"] in FAMILIES))]
+
+
+def reference_of(spec, out: str, variant: str) -> np.ndarray:
+    from foveated_mi.study.tasks import reference_key
+    scene = spec.scenes[0]
+    return np.load(os.path.join(out, "references",
+                                f"{scene.label}-{reference_key(scene, variant)}.npy"))
+
+
+def eccentricity_psnr(shown: list, eccs: list, edges: np.ndarray) -> np.ndarray:
+    """PSNR (data range 1) of all frames' pixels in each eccentricity ring ``edges``."""
+    se = np.zeros(len(edges) - 1)
+    n = np.zeros(len(edges) - 1)
+    for (ref, img), ecc in zip(shown, eccs):
+        err = np.mean((img.astype(np.float64) - ref) ** 2, axis=-1)
+        k = np.clip(np.digitize(ecc, edges) - 1, 0, len(edges) - 2)
+        se += np.bincount(k.ravel(), err.ravel(), len(edges) - 1)
+        n += np.bincount(k.ravel(), minlength=len(edges) - 1)
+    mse = np.where(n > 0, se / np.maximum(n, 1), np.nan)
+    return 10.0 * np.log10(1.0 / np.maximum(mse, 1e-12))
+
+
+def mark_gaze(img: np.ndarray, gaze, radius: int) -> np.ndarray:
+    """``img`` (display values) with a ring of ``radius`` pixels around the gaze point."""
+    h, w = img.shape[:2]
+    out = img.copy()
+    yy, xx = np.mgrid[0:h, 0:w]
+    d = np.hypot(xx + 0.5 - gaze[0] * w, yy + 0.5 - gaze[1] * h)
+    ring = np.abs(d - radius) < 1.2
+    out[ring] = (1.0, 0.2, 0.1)
+    return out
+
+
+def pictures(spec, out: str, results: str, variant: str) -> dict:
+    """The eccentricity plot and the side-by-side video (module docstring)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from foveated_mi import viewer
+    from foveated_mi.sequence import write_video
+    from foveated_mi.study.tasks import get_scene, run_sequence_task
+    reference = reference_of(spec, out, variant)
+    tasks = picture_tasks(spec, variant)
+    scene = get_scene(tasks[0]["scene"], variant)
+    sensor = scene.sensors()[0]
+    gazes = tasks[0]["motion"]["gazes"]
+    eccs = [viewer.eccentricity_map(sensor, g) for g in gazes]
+    edges = np.arange(0.0, max(float(e.max()) for e in eccs) + RING_DEG, RING_DEG)
+    curves, frames = {}, {}
+    for t in tasks:
+        row, shown = run_sequence_task(t, reference)
+        name = label(row)
+        curves[name] = eccentricity_psnr(shown, eccs, edges)
+        frames[name] = shown
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    mid = 0.5 * (edges[1:] + edges[:-1])
+    for name, psnr in curves.items():
+        ax.plot(mid, psnr, marker="o" if name.startswith(("vr", "oidn", "guided", "paper"))
+                else "s", linestyle="-" if not name.startswith("uniform") else "--", label=name)
+    ax.set_xlabel("eccentricity (degrees from the gaze ray)")
+    ax.set_ylabel("PSNR (display-referred), all frames")
+    ax.set_title(f"{spec.scenes[0].label}, headset, seed {spec.seeds[0]}: error against "
+                 "eccentricity", fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    png = os.path.join(results, "vr_eccentricity.png")
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    # reference | vr | uniform + history + OIDN, gaze ringed at the fovea's 5 degrees
+    fov_name = next(n for n in frames if n.startswith("vr 1"))
+    uni_name = next((n for n in frames if n.startswith("uniform+history+oidn")),
+                    next(n for n in frames if n.startswith("uniform")))
+    ppd = viewer.pixels_per_degree(sensor, (0.5, 0.5))
+    radius = max(3, int(round(5.0 * ppd)))
+    strip = []
+    for k, g in enumerate(gazes):
+        ref = frames[fov_name][k][0]
+        panels = [ref, frames[fov_name][k][1], frames[uni_name][k][1]]
+        strip.append((np.clip(np.concatenate([mark_gaze(p, g, radius) for p in panels], 1),
+                              0, 1) * 255 + 0.5).astype(np.uint8))
+    mp4 = os.path.join(results, "vr_side_by_side.mp4")
+    write_video(mp4, strip, spec.scenes[0].motion["fps"])
+    import imageio.v3 as iio
+    still = os.path.join(results, "vr_side_by_side.png")
+    iio.imwrite(still, strip[len(strip) // 2])
+    return {"eccentricity_edges_deg": edges.tolist(),
+            "eccentricity_psnr": {k: [None if not math.isfinite(x) else float(x) for x in v]
+                                  for k, v in curves.items()},
+            "video": os.path.basename(mp4), "panels": ["reference", fov_name, uni_name]}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--size", type=int, nargs=2, default=None, metavar=("W", "H"),
+                    help="film size (default: the study's 1152 648)")
+    ap.add_argument("--frames", type=int, default=None, help="frames per sequence (default 54)")
+    ap.add_argument("--seeds", type=int, nargs="+", default=None)
+    ap.add_argument("--scenes", nargs="+", default=None,
+                    help="scenes by name (voxel-city, staircase)")
+    ap.add_argument("--out", default=os.path.join("out", "vr"))
+    ap.add_argument("--results", default=RESULTS, help="where the tables and pictures go")
+    ap.add_argument("--variant", default=None, help="Mitsuba variant (default: as the package "
+                    "chooses)")
+    ap.add_argument("--no-pictures", action="store_true")
+    ap.add_argument("--no-progress", action="store_true")
+    a = ap.parse_args(argv)
+
+    import foveated_mi  # noqa: F401
+    import mitsuba as mi
+    from foveated_mi import perceptual
+    from foveated_mi.config import read_toml
+    from foveated_mi.study import parse_study, run_study
+
+    t0 = time.perf_counter()
+    data = overridden(read_toml("study", STUDY)[0], a)
+    conditions = dict(CONDITIONS) if perceptual.available() else {"headset": "psnr_fovea"}
+    os.makedirs(a.results, exist_ok=True)
+    report = {"machine": {"processor": platform.processor() or platform.machine(),
+                          "cores": os.cpu_count(), "variant": mi.variant()},
+              "date": time.strftime("%Y-%m-%d"), "columns": conditions,
+              "size": data["size"], "frames": data["motion"]["frames"],
+              "seeds": data["seeds"], "conditions": {}}
+    cmd = "python benchmarks/bench_vr.py" + "".join(
+        f" --{k} {' '.join(map(str, v)) if isinstance(v, list) else v}"
+        for k, v in (("size", a.size), ("frames", a.frames), ("seeds", a.seeds),
+                     ("scenes", a.scenes)) if v)
+    lines = [f"# The VR study ({data['size'][0]}x{data['size'][1]}, {mi.variant()})", "",
+             f"Command: `{cmd}`  ",
+             f"Machine: {report['machine']['processor']}, {os.cpu_count()} cores, "
+             f"{mi.variant()}; date {report['date']}.  ",
+             f"Each row: a sequence of {data['motion']['frames']} frames at "
+             f"{data['motion']['fps']} Hz (the head turning at 30°/s, a saccade every 300 ms, "
+             f"a {data['camera']['fov']:g}° camera), time the median frame after the first, "
+             f"quality against a {data['reference']['spp']}-spp reference per frame; "
+             f"mean ± standard deviation over seeds {data['seeds']}. Quality: "
+             + ", ".join(f"`{c}` ({k})" for k, c in conditions.items())
+             + ("" if perceptual.available() else
+                " (no FovVideoVDP here: the perceptual extra is not installed)") + ".", ""]
+    spec = parse_study(data, base_dir=os.path.dirname(STUDY), source=STUDY, name="vr")
+    res = run_study(spec, out=a.out, progress=not a.no_progress, variant=a.variant)
+    for cond, column in conditions.items():
+        sps = speedups(res.rows, column)
+        report["conditions"][cond] = {"column": column, "speedups": sps}
+        lines += [f"## {cond.capitalize()} (`{column}`)", "",
+                  "Speed-up at equal " + column + " against each uniform family (mean over "
+                  "seeds; ± the spread of the per-seed ratios; per seed in brackets):", "",
+                  *speedup_table(sps), ""]
+    lines += ["## Every cell", "", *cells_table(res.rows, list(conditions.values())), ""]
+    failed = res.failed
+    if not a.no_pictures:
+        report["pictures"] = pictures(spec, a.out, a.results, mi.variant())
+        lines += ["## Pictures", "", "![error against eccentricity](vr_eccentricity.png)", "",
+                  f"![side by side]({'vr_side_by_side.png'}) — reference, "
+                  f"{report['pictures']['panels'][1]}, {report['pictures']['panels'][2]} "
+                  "(seed 0, headset; the ring is 5° around the gaze); video: "
+                  "[vr_side_by_side.mp4](vr_side_by_side.mp4)", ""]
+    if failed:
+        lines += ["## Failed tasks", "", *[f"* {f}" for f in failed], ""]
+    report["seconds"] = time.perf_counter() - t0
+    lines.append(f"Run time: {report['seconds'] / 60:.1f} min.")
+    with open(os.path.join(a.results, "vr.md"), "w") as f:
+        f.write("\n".join(lines) + "\n")
+    with open(os.path.join(a.results, "vr.json"), "w") as f:
+        json.dump(report, f, indent=1, default=float)
+    print("\n".join(lines))
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

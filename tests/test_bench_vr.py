@@ -1,0 +1,69 @@
+"""The VR study's benchmark: its rings of eccentricity, its options and, in the slow tier, a
+tiny run end to end."""
+import json
+import math
+import os
+
+import numpy as np
+import pytest
+
+BENCH = os.path.join(os.path.dirname(__file__), "..", "benchmarks")
+
+
+@pytest.fixture
+def bench(monkeypatch):
+    monkeypatch.syspath_prepend(BENCH)
+    import bench_vr
+    return bench_vr
+
+
+def test_psnr_by_eccentricity_pools_every_frame_of_a_ring(bench):
+    """Two frames; the error is 0.1 within 5 degrees and 0.01 beyond, so the rings' PSNRs are
+    20 and 40 dB whatever the gaze; a ring no pixel falls in is nan."""
+    h, w = 8, 12
+    ref = np.full((h, w, 3), 0.5)
+    eccs, shown = [], []
+    for gx in (2, 9):
+        ecc = np.hypot(np.arange(w)[None, :] - gx, np.arange(h)[:, None] - 4.0)
+        err = np.where(ecc < 5.0, 0.1, 0.01)[..., None]
+        eccs.append(ecc)
+        shown.append((ref, ref + err))
+    psnr = bench.eccentricity_psnr(shown, eccs, np.array([0.0, 5.0, 50.0, 60.0]))
+    # float64 sums of a few hundred equal squares: far below 1e-9 dB
+    assert psnr[:2] == pytest.approx([20.0, 40.0], abs=1e-9) and math.isnan(psnr[2])
+
+
+def test_the_gaze_ring_marks_only_its_circle(bench):
+    img = np.zeros((40, 60, 3))
+    out = bench.mark_gaze(img, (0.5, 0.5), 10)
+    ys, xs = np.nonzero(out[..., 0] > 0)
+    d = np.hypot(xs + 0.5 - 30, ys + 0.5 - 20)
+    assert len(d) > 0 and np.all(np.abs(d - 10) < 1.2) and np.all(img == 0)
+
+
+def test_unknown_scenes_are_one_line(bench):
+    from foveated_mi.validate import ParameterError
+    from foveated_mi.config import read_toml
+    data = read_toml("study", bench.STUDY)[0]
+    args = type("A", (), {"size": None, "frames": None, "seeds": None, "scenes": ["lego"]})
+    with pytest.raises(ParameterError) as e:
+        bench.overridden(data, args)
+    assert "--scenes" in str(e.value) and "voxel-city" in str(e.value) \
+        and "\n" not in str(e.value)
+
+
+@pytest.mark.slow
+def test_a_tiny_vr_study_runs_end_to_end(bench, tmp_path):
+    res = tmp_path / "res"
+    assert bench.main(["--size", "32", "18", "--frames", "4", "--seeds", "0", "--scenes",
+                       "voxel-city", "--out", str(tmp_path / "vr"), "--results", str(res),
+                       "--no-progress"]) == 0
+    report = json.loads((res / "vr.json").read_text())
+    sps = [s for c in report["conditions"].values() for s in c["speedups"]]
+    # every foveated configuration against every uniform family, per condition
+    from foveated_mi.denoise import oidn_available
+    assert len(sps) == len(report["conditions"]) * 5 * (4 if oidn_available() else 2)
+    assert all(s["family"] in bench.FAMILIES for s in sps)
+    assert (res / "vr_eccentricity.png").stat().st_size > 0
+    assert (res / "vr_side_by_side.mp4").stat().st_size > 0
+    assert "Speed-up at equal" in (res / "vr.md").read_text()
