@@ -72,9 +72,17 @@ def test_demo_runs_end_to_end_and_resumes(tmp_path, capsys):
     # header; per seed: foveated configs x frames, uniform (+ OIDN), with history x frames
     assert len(rows) == 1 + 3 * (2 * 2 + 4 - (0 if _oidn() else 2) + 2 * 2 * 2)
     assert any(p.suffix == ".npy" for p in (out / "references").iterdir())
+    # the headset part: a 100-degree camera, vr and the default preset, its own sentence
+    assert "In a headset: voxel-city 32x18 through a 100° camera, the film spanning it " \
+           "(standard_hmd" in text and "foveated (vr) 4 spp" in text
+    head = [line for line in text.splitlines() if line.startswith("In the headset, vr at ")]
+    assert len(head) == 1 and "uniform + the same history + " in head[0] and "3 seeds" in head[0]
+    hrows = (out / "headset" / "results.csv").read_text().splitlines()
+    assert len(hrows) == 1 + 3 * (3 * 2 + 4 - (0 if _oidn() else 2) + 2 * 2 * 2)
     # A second run re-renders nothing: same rows, no duplicates.
     assert main(["demo", "--size", "32", "18", "--out", str(out), "--no-progress"]) == 0
     assert (out / "results.csv").read_text().splitlines() == rows
+    assert (out / "headset" / "results.csv").read_text().splitlines() == hrows
 
 
 def _oidn():
@@ -156,3 +164,42 @@ def test_speedup_at_equal_quality_interpolates_in_log_time():
     assert speedup({**cell, "jod": 9.9}, fam, "jod") == (pytest.approx(5.0), ">")
     assert speedup({**cell, "jod": 7.0}, fam, "jod") == (pytest.approx(1.25), "<")
     assert math.isnan(speedup(cell, fam, "psnr_eccentricity")[0])
+
+
+def _vr(spp, time_ms, jod, seed):
+    return {**_row("foveated", spp, 16, time_ms, 30.0, 30.0, "vr"), "jod": jod,
+            "seed": float(seed)}
+
+
+@pytest.mark.parametrize("time_ms, jod, word", [
+    (80.0, 8.5, "foveation paid;"),                               # x1.77 every seed
+    (150.0, 8.5, "foveation did not pay at equal quality here;"),  # x0.94
+    (80.0, 9.9, "foveation paid;"),                               # never reached: >= x5
+    (500.0, 9.9, "never reached it, even in its slowest configuration: no verdict"),
+    (80.0, 7.0, "cheapest configuration already does better: no verdict"),
+    (120.0, 7.0, "foveation did not pay at equal quality here;"),  # <= x0.83
+])
+def test_the_headset_sentence_reads_the_speedup_seed_by_seed(time_ms, jod, word):
+    """The vr cell at frame 16 against uniform + the same history + OIDN over spp, per seed:
+    the family reaches JOD 8 / 9 / 9.5 in 100 / 200 / 400 ms."""
+    from foveated_mi.demo import headset_sentence
+    from foveated_mi.study.aggregate import aggregate
+    rows = []
+    for seed in range(3):
+        rows.append(_vr(1, time_ms, jod, seed))
+        rows += [_hist(s, 16, t, 0.0, seed=seed, jod=q)
+                 for s, t, q in ((1, 100.0, 8.0), (2, 200.0, 9.0), (4, 400.0, 9.5))]
+    text = headset_sentence(aggregate(rows), "jod")
+    assert word in text and "uniform + the same history + OIDN" in text and "3 seeds" in text
+
+
+def test_the_headset_sentence_names_a_tie_within_the_spread():
+    from foveated_mi.demo import headset_sentence
+    from foveated_mi.study.aggregate import aggregate
+    # per-seed speed-ups 100 * 2 ** f / t: about x0.8, x1.0, x1.3 (a spread over x1)
+    rows = [_vr(1, t, 8.0 + f, seed) for seed, (t, f) in enumerate(((125.0, 0.0),
+                                                                     (100.0, 0.0),
+                                                                     (100.0, 0.4)))]
+    rows += [_hist(s, 16, t, 0.0, seed=seed, jod=q) for seed in range(3)
+             for s, t, q in ((1, 100.0, 8.0), (2, 200.0, 9.0), (4, 400.0, 9.5))]
+    assert "a tie within the spread over seeds" in headset_sentence(aggregate(rows), "jod")
