@@ -23,7 +23,7 @@
 # GPU_BENCH_DEADLINE (seconds for the whole run, default 470), GPU_BENCH_TESTS (pytest
 # targets, default tests), GPU_BENCH_PARITY_TESTS (run first: the backend-parity and kernel-budget
 # tests), GPU_BENCH_MAXFAIL (25), GPU_BENCH_ONLY (step names to run, e.g. "overhead tests_parity";
-# install, scenes and variant always run; default every step), GPU_BENCH_OVERHEAD_CASES and
+# install, scenes and variant always run; default every step but the opt-in "vr"), GPU_BENCH_OVERHEAD_CASES and
 # GPU_BENCH_OVERHEAD_CASES_2X (bench_overhead's cases at 1024² and 2048²), GPU_BENCH_OVERHEAD_ARGS
 # (more bench_overhead arguments, e.g. --no-freeze).
 set -u
@@ -213,6 +213,21 @@ if missing=$(have_modules "${STUDY_MODULES[@]}"); then
     --out "$OUT/equal_time_cell" --no-progress
 else
   skip equal_time_cell "the study's quality metrics need $missing (not in the wheelhouse)"
+fi
+
+# The VR study at the size it was written for (1152x648 across 100 degrees, 54 frames at 90 Hz,
+# 256-spp references per frame), voxel-city, one seed: opt-in (GPU_BENCH_ONLY="vr"), as it
+# needs most of a run's deadline. Without torch in the wheelhouse it scores fovea PSNR only.
+if [[ " ${GPU_BENCH_ONLY:-} " == *" vr "* ]]; then
+  if missing=$(have_modules "${STUDY_MODULES[@]}"); then
+    step vr 420 "VR study (configs/studies/vr.toml), voxel-city, seed 0" "$VPY" $B/bench_vr.py \
+      --variant "$VARIANT" --seeds 0 --scenes voxel-city --out "$OUT/vr" \
+      --results "$OUT/vr/results" --no-progress
+  else
+    skip vr "the study's quality metrics need $missing (not in the wheelhouse)"
+  fi
+else
+  skip vr "opt-in: GPU_BENCH_ONLY=\"vr\""
 fi
 
 if missing=$(have_modules pytest); then
