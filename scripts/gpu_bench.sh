@@ -23,8 +23,8 @@
 # GPU_BENCH_DEADLINE (seconds for the whole run, default 470), GPU_BENCH_TESTS (pytest
 # targets, default tests), GPU_BENCH_PARITY_TESTS (run first: the backend-parity and kernel-budget
 # tests), GPU_BENCH_MAXFAIL (25), GPU_BENCH_ONLY (step names to run, e.g. "overhead tests_parity";
-# install, scenes and variant always run; default every step but the opt-in "vr"), GPU_BENCH_OVERHEAD_CASES and
-# GPU_BENCH_OVERHEAD_CASES_2X (bench_overhead's cases at 1024² and 2048²), GPU_BENCH_OVERHEAD_ARGS
+# install, scenes and variant always run; default every step but the opt-in "vr"),
+# GPU_BENCH_OVERHEAD_CASES and GPU_BENCH_OVERHEAD_CASES_2X (bench_overhead's cases at 1024² and 2048²), GPU_BENCH_OVERHEAD_ARGS
 # (more bench_overhead arguments, e.g. --no-freeze).
 set -u
 cd "$(dirname "$0")/.."

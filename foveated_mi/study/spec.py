@@ -126,8 +126,8 @@ DEFAULT_METRICS = {"theta": 0.1, "sigma_p": 0.8, "ppd": 67.0, "flip": True, "exp
 DEFAULT_PERCEPTUAL = {"jod": True, "display": "standard_fhd"}
 
 _TOP_KEYS = ("description", "seed", "seeds", "repeats", "warmup", "metric", "size", "gaze",
-             "camera", "integrator", "reference", "scenes", "metrics", "viewer", "motion", "foveated",
-             "uniform")
+             "camera", "integrator", "reference", "scenes", "metrics", "viewer", "motion",
+             "foveated", "uniform")
 _SCENE_KEYS = ("scene", "label", "size", "gaze", "camera", "params", "integrator",
                "reference", "optional")
 _REFERENCE_KEYS = ("spp", "seed", "file", "layer")
