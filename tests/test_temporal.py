@@ -161,7 +161,8 @@ def test_camera_teleport_rejects_history():
 
 from hypothesis import given, settings, strategies as st  # noqa: E402
 
-from foveated_mi.frame.reproject import camera_state, reprojection_map, History  # noqa: E402
+from foveated_mi.frame.reproject import (camera_state, reprojection_map, still_map,  # noqa: E402
+                                         History)
 
 
 @settings(max_examples=12, deadline=None)
@@ -186,6 +187,13 @@ def test_reprojection_is_identity_for_a_static_camera(ox, oy, oz, fov, tx, ty):
     hit = gb.hit.numpy()
     np.testing.assert_array_equal(rm.hit.numpy(), hit)
     np.testing.assert_array_equal(rm.index.numpy()[hit], np.arange(n)[hit])
+    # With the primary rays' directions the sky reprojects too: every pixel lands on itself,
+    # which is the map a still camera takes without projecting (still_map).
+    full = reprojection_map(gb.position, gb.hit, hist, 23, 17, direction=gb.direction)
+    still = still_map(hist, 23, 17)
+    np.testing.assert_array_equal(full.hit.numpy(), still.hit.numpy())
+    np.testing.assert_array_equal(full.index.numpy(), still.index.numpy())
+    assert still.hit.numpy().all()
 
 
 def test_depth_is_measured_from_the_camera_centre_with_a_near_clip():
@@ -213,3 +221,24 @@ def test_depth_is_measured_from_the_camera_centre_with_a_near_clip():
     scale = np.linalg.norm(np.abs(p) + np.abs(o), axis=-1)[hit]
     tolerances.assert_within(integ.buffer("depth")[hit], want, tolerances.chain_bound(scale, 12),
                              "depth")
+
+
+def test_a_still_camera_skips_the_projection_and_a_moving_one_does_not(monkeypatch):
+    """A still camera over an unchanged scene reuses its G-buffer and maps every pixel onto
+    itself without projecting it; after a move the projection runs again."""
+    from foveated_mi.frame import reproject
+    from foveated_mi.scenes import apply_camera, camera_of, load_scene
+    scene = load_scene("cornell-box", width=24, height=16, spp=1)
+    calls = []
+    full = reproject.reprojection_map
+    monkeypatch.setattr(reproject, "reprojection_map",
+                        lambda *a, **k: calls.append(1) or full(*a, **k))
+    integ = FoveatedIntegrator(preset="guided")
+    for _ in range(3):
+        mi.render(scene, integrator=integ)
+    assert len(calls) == 1            # the first frame only (no history yet)
+    assert integ.buffer("reprojection_map")[..., 2].any()
+    cam = camera_of(scene)
+    apply_camera(scene, {**cam, "origin": [cam["origin"][0] + 0.05, *cam["origin"][1:]]})
+    mi.render(scene, integrator=integ)
+    assert len(calls) == 2

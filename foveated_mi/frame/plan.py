@@ -109,7 +109,7 @@ class Planner:
             timer.mark("gbuffer", gb.position, gb.normal, gb.depth, gb.hit, gb.direction,
                        gb.albedo, gb.emission)
             history = self.history if o["history"] else None
-            reproj, cut = self._reprojection(gb, history, sensor, width, height, o)
+            reproj, cut = self._reprojection(gb, history, sensor, width, height, o, reused)
             frame_seed = self._frame_seed(seed, cut, o["history"])
             map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
             # Traced every frame, like a depth edge: their sparse estimate converges only
@@ -153,8 +153,12 @@ class Planner:
         self._held = state.held
 
     def _reprojection(self, gb: GBuffer, history: History | None, sensor: mi.Sensor,
-                      width: int, height: int, o: dict[str, Any]):
-        """The reprojection map, and the cut verdict after a camera move (else None)."""
+                      width: int, height: int, o: dict[str, Any], still: bool = False):
+        """The reprojection map, and the cut verdict after a camera move (else None). A still
+        camera over an unchanged scene (``still``: the G-buffer reused) maps every pixel onto
+        itself, without projecting it."""
+        if history is not None and still and not self._camera_moved:
+            return _reproject.still_map(history, width, height), None
         reproj = _reproject.reprojection_map(gb.position, gb.hit, history, width, height,
                                              tolerance=o["reprojection_tolerance"],
                                              direction=gb.direction, mode=o["reprojection"],

@@ -169,6 +169,20 @@ def reprojection_map(position: mi.Point3f, hit: mi.Bool, history: History | None
     return ReprojectionMap(uv, hits, prev, agree)
 
 
+def still_map(history: History, width: int, height: int) -> ReprojectionMap:
+    """The reprojection map of a still camera over an unchanged scene (the G-buffer reused):
+    every pixel lands on its own centre, on the surface (or sky) it saw, and is its previous
+    pixel's nearest claim, so :func:`reprojection_map` would return this, up to rounding of
+    the projection. A hit where the history holds samples; no projection, depth test or
+    claim is computed (the frame's film-sized passes follow the rays: a still head pays
+    nothing for its history's addresses)."""
+    n = width * height
+    _, cx, cy = pixel_coords(width, height)
+    coords = mi.Point2f(mi.Float(cx) + 0.5, mi.Float(cy) + 0.5)
+    return ReprojectionMap(coords, history.count > 0, dr.arange(mi.UInt32, n),
+                           dr.full(mi.Bool, True, n))
+
+
 def _any_within(values, x: mi.Int32, y: mi.Int32, width: int, height: int, reach: int,
                 active: mi.Bool, test=None) -> mi.Bool:
     """Whether ``test(values)`` (``values`` itself: a mi.Bool) holds at any pixel of the square
