@@ -44,6 +44,8 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
 
+from common import pm as _pm  # noqa: E402
+
 STUDY = os.path.join(HERE, "..", "configs", "studies", "equal_time.toml")
 RESULTS = os.path.join(HERE, "..", "docs", "results")
 
@@ -61,14 +63,6 @@ def _label(row: dict) -> str:
 
 def _f(v, fmt=".2f") -> str:
     return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt)
-
-
-def _pm(r: dict, col: str, fmt: str = ".2f") -> str:
-    v = r.get(col)
-    if v is None or (isinstance(v, float) and math.isnan(v)):
-        return "-"
-    sd = r.get(f"{col}_sd", math.nan)
-    return format(v, fmt) + (f" ± {format(sd, fmt)}" if not math.isnan(sd) else "")
 
 
 def rows_table(rows: list[dict]) -> list[str]:

@@ -50,6 +50,8 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
 
+from common import pm as _pm  # noqa: E402
+
 STUDY = os.path.join(HERE, "..", "configs", "studies", "vr.toml")
 RESULTS = os.path.join(HERE, "..", "docs", "results")
 #: Viewing condition -> its video JOD column.
@@ -115,14 +117,6 @@ def _ratio_text(s: dict) -> str:
     seeds = ", ".join({"=": "", ">": "≥", "<": "≤"}[r] + f"{x:.2f}"
                       for x, r in s["per_seed"] if math.isfinite(x))
     return s["text"] + (f" ({seeds})" if seeds else "")
-
-
-def _pm(r: dict, col: str, fmt: str = ".2f") -> str:
-    v = r.get(col)
-    if v is None or (isinstance(v, float) and math.isnan(v)):
-        return "-"
-    sd = r.get(f"{col}_sd", math.nan)
-    return format(v, fmt) + (f" ± {format(sd, fmt)}" if not math.isnan(sd) else "")
 
 
 def cells_table(rows: list[dict], columns: list[str]) -> list[str]:
