@@ -318,6 +318,15 @@ _SCHEMA: tuple[Option, ...] = (
            "the four cells around a pixel, or ``joint``, a joint bilateral upsampling whose "
            "weights also stop at the film G-buffer's surface edges "
            "(:func:`foveated_mi.frame.foveal.warp`)"),
+    Option("foveal_space", "buffer", "string", "where the foveal formation keeps its "
+           "G-buffer and history: on the buffer's samples, or on the film's pixels",
+           choices=("buffer", "film"),
+           doc="Where ``formation = 'foveal'`` keeps its geometry and history: ``buffer`` "
+           "casts the G-buffer at the buffer's samples only and reprojects the history "
+           "sample to sample, so that nothing but the warp runs on every film pixel "
+           "(:mod:`foveated_mi.frame.buffer_space`); ``film`` keeps a full-resolution "
+           "G-buffer and the history on the film's pixels (needed by ``foveal_upsampling = "
+           "'joint'`` and ``emission_edges``)"),
     Option("reconstruction", "sibson", "string", "interpolation of the sparse shading buffer "
            "(§3.4)", choices=lambda: reconstructions(),
            doc="Interpolation of the sparse shading buffer (§3.4); ``guided`` and "
@@ -478,6 +487,16 @@ def _check_combination(out: dict[str, Any]) -> None:
                                  "'polar' with formation = 'foveal'")
         if out["tonemap_samples"]:
             raise ParameterError("tonemap_samples", True, "False with formation = 'foveal'")
+        if out["foveal_space"] == "buffer":
+            # Nothing full-resolution exists to read: no film G-buffer, no film history.
+            why = "with foveal_space = 'buffer' (set foveal_space = 'film' to use it)"
+            if out["foveal_upsampling"] != "bilinear":
+                raise ParameterError("foveal_upsampling", out["foveal_upsampling"],
+                                     f"'bilinear' {why}")
+            if out["emission_edges"]:
+                raise ParameterError("emission_edges", True, f"False {why}")
+            if out["edge_threshold"] > 0:
+                raise ParameterError("edge_threshold", out["edge_threshold"], f"0 {why}")
     entry = denoisers()[out["denoiser"]]
     if out["tonemap_samples"]:
         # The history and the reconstruction then hold display values: demodulation and

@@ -72,7 +72,8 @@ def frame_layers(integ: FoveatedIntegrator, image: np.ndarray) -> dict[str, np.n
     """The EXR layers of the integrator's last frame as (H, W, C) float32 arrays: those of
     :data:`EXR_LAYERS` that the frame's formation made on the film's pixels (a formation
     that works in another buffer has no ``nearest``, and its ``filtered`` lies on its own
-    grid)."""
+    grid; one that keeps its G-buffer and history on its samples has no ``shading`` or
+    ``depth`` on the film)."""
     h, w = image.shape[:2]
 
     def get(name):
@@ -81,15 +82,17 @@ def frame_layers(integ: FoveatedIntegrator, image: np.ndarray) -> dict[str, np.n
         return v if v is not None and v.shape[:2] == (h, w) else None
     out = {"image": image.astype(np.float32)}
     out["sampling_map"] = get("sampling_map")[..., None]
-    shading = get("shading")
-    mask = get("shading_mask")[..., None]
-    out["shading"] = np.concatenate([shading * mask, mask], -1)
+    shading, mask = get("shading"), get("shading_mask")
+    if shading is not None and mask is not None:       # none on a formation's own samples
+        out["shading"] = np.concatenate([shading * mask[..., None], mask[..., None]], -1)
     for name in ("nearest", "filled", "interpolated", "tonemapped", "filtered"):
         v = get(name)
         if v is not None:
             out[name] = v
-    out["probability"] = get("probability")[..., None]
-    out["depth"] = get("depth")[..., None]
+    for name in ("probability", "depth"):
+        v = get(name)
+        if v is not None:
+            out[name] = v[..., None]
     return out
 
 

@@ -43,7 +43,8 @@ OPTION_SETS = [
 #: code paths make enough.
 TRANSPOSE_ONLY = [
     ("vr_demodulate", {"preset": "vr", "demodulate": True}),
-    ("vr_joint", {"preset": "vr", "foveal_upsampling": "joint"}),
+    ("vr_joint", {"preset": "vr", "foveal_space": "film", "foveal_upsampling": "joint"}),
+    ("vr_film", {"preset": "vr", "foveal_space": "film"}),
 ]
 
 BALL_CENTRE = (0.3, -0.6, 0.3)

@@ -105,13 +105,20 @@ def test_max_depth_and_seed_flags(tmp_path, capsys):
                                          "an integer >= 0 and <= 4294967295")
 
 
-def test_render_with_the_vr_preset_writes_the_film_layers_it_has(tmp_path, capsys):
+@pytest.mark.parametrize("space", ["buffer", "film"])
+def test_render_with_the_vr_preset_writes_the_film_layers_it_has(tmp_path, capsys, space):
     exr = tmp_path / "vr.exr"
     code, out, err = run(["render", "cornell-box", "--preset", "vr", "--size", "48", "32",
-                          "--warmup", "0", "--out", str(exr)], capsys)
+                          "--foveal-space", space, "--warmup", "0", "--out", str(exr)], capsys)
     assert code == 0, err
     layers = read_exr(exr)
-    for name, c in [("image", 3), ("sampling_map", 1), ("shading", 4), ("depth", 1)]:
+    on_film = [("image", 3), ("sampling_map", 1), ("probability", 1)]
+    if space == "film":
+        on_film += [("shading", 4), ("depth", 1)]
+    else:
+        # Its G-buffer and history are on the buffer's samples: nothing of them on the film.
+        assert "shading" not in layers and "depth" not in layers
+    for name, c in on_film:
         assert layers[name].shape == (32, 48, c), name
     # The foveal formation reconstructs nothing on the film: no nearest-site layer, and its
     # filtered buffer lies on the polar grid, not the film.

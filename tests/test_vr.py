@@ -92,7 +92,8 @@ def test_every_pixel_gets_a_value_at_any_gaze_and_aspect(gaze, size):
 
 def test_the_fovea_shows_its_own_traced_pixels():
     scene = _scene((64, 48), spp=2)
-    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", history=False)
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", history=False,
+                               foveal_space="film")
     image = np.array(mi.render(scene, integrator=integ, seed=5))
     shading = integ.buffer("shading")
     yy, xx = np.mgrid[0:48, 0:64]
@@ -105,32 +106,64 @@ def test_the_fovea_shows_its_own_traced_pixels():
     inner = r <= grid.fovea - SEAM
     assert inner.sum() > 10
     np.testing.assert_array_equal(image[inner], shading[inner])
+    # Kept on the buffer's samples, the disc shows the same traced values: its own samples.
+    on_samples = FoveatedIntegrator(nested=scene.integrator(), preset="vr", history=False)
+    assert on_samples.options["foveal_space"] == "buffer"
+    same = np.array(mi.render(scene, integrator=on_samples, seed=5))
+    np.testing.assert_array_equal(same[inner], shading[inner])
+    assert not np.array_equal(same[~inner], image[~inner])    # the cells differ outside
 
 
-def test_the_buffer_and_its_grid_are_exported():
+@pytest.mark.parametrize("space", ["buffer", "film"])
+def test_the_buffer_and_its_grid_are_exported(space):
     scene = _scene((64, 48))
-    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", foveal_space=space)
     mi.render(scene, integrator=integ, seed=0)
     cells = integ.buffer("cells")
     assert cells.ndim == 3 and cells.shape[2] == 3 and cells.shape[:2] != (48, 64)
-    assert integ.buffer("shading").shape == (48, 64, 3)
     assert integ.buffer("cell_mask").shape == cells.shape[:2]
     assert integ.stats["formation"] == "foveal" and integ.stats["sampling_law"] == "polar"
+    if space == "film":
+        assert integ.buffer("shading").shape == (48, 64, 3)
+        return
+    # On the samples: the cells, then the disc's square patch, each at its film pixel.
+    from foveated_mi.frame.buffer_space import layout
+    lay = layout(64, 48, integ.options)
+    assert cells.shape[:2] == (lay.grid.height, lay.grid.width)
+    assert integ.buffer("shading").shape == (1, lay.size, 3)
+    pixel, on = integ.buffer("sample_pixel")[0], integ.buffer("sample_on")[0].astype(bool)
+    traced = integ.buffer("traced").astype(bool).ravel()
+    # Every sample on the film was traced, and every traced pixel is a sample.
+    assert traced[pixel[on]].all()
+    assert set(np.flatnonzero(traced)) == set(pixel[on].tolist())
 
 
-def test_a_still_view_accumulates_history_in_the_traced_pixels():
+def _ref_at(ref, integ, space):
+    """The reference at what holds history: the traced pixels, or the samples on the film."""
+    if space == "film":
+        traced = integ.buffer("traced").astype(bool)
+        return integ.buffer("shading")[traced], ref[traced], integ.buffer("history_count")[traced]
+    on = integ.buffer("sample_on")[0].astype(bool)
+    pixel = integ.buffer("sample_pixel")[0][on]
+    return (integ.buffer("shading")[0][on], ref.reshape(-1, 3)[pixel],
+            integ.buffer("history_count")[0][on])
+
+
+@pytest.mark.parametrize("space", ["buffer", "film"])
+def test_a_still_view_accumulates_history_in_the_traced_pixels(space):
     scene = _scene((64, 48), spp=1)
     ref = np.array(mi.render(scene, integrator=scene.integrator(), spp=512, seed=9))
-    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", denoiser="none")
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", denoiser="none",
+                               foveal_space=space)
     err = []
     for k in range(8):
         mi.render(scene, integrator=integ, spp=1, seed=k)
-        traced = integ.buffer("traced").astype(bool)
-        err.append(float(np.mean((integ.buffer("shading")[traced] - ref[traced]) ** 2)))
+        mine, theirs, count = _ref_at(ref, integ, space)
+        err.append(float(np.mean((mine - theirs) ** 2)))
     # The traced pixels' Monte Carlo error falls as samples accumulate (8 frames: about 1/8).
     assert err[-1] < 0.4 * err[0], err
     # A still gaze traces the same pixels every frame: each holds all 8 frames' samples.
-    assert integ.buffer("history_count")[traced].min() == 8.0
+    assert count.min() == 8.0
 
 
 @pytest.mark.parametrize("bad,match", [

@@ -59,6 +59,10 @@ class FormationInput(NamedTuple):
     fill_seed: Any                        #: the stochastic fill's seed (int or mi.UInt32)
     emission_edges: mi.Bool | None = None
     gaze: mi.Point2f | None = None        #: the gaze's film position in pixels (opaque)
+    #: ``(pixels, on)`` of the foveal buffer's samples when it keeps nothing on the film
+    #: (:mod:`foveated_mi.frame.buffer_space`); the G-buffer, reprojection and history are
+    #: then on the samples
+    samples: tuple | None = None
 
 
 class Formed(NamedTuple):
@@ -66,6 +70,7 @@ class Formed(NamedTuple):
     image: mi.Color3f                     #: the frame's radiance, one value per film pixel
     buffers: dict[str, Any]               #: named buffers (flat arrays or None) on its grid
     history: dict[str, Any] | None        #: ``mean``, ``count``, ``moment2`` per film pixel
+    #: (or per sample, where the plan is on samples)
 
 
 class Formation(NamedTuple):
@@ -76,6 +81,7 @@ class Formation(NamedTuple):
     stats: Callable[[dict], dict]
     counted: tuple[str, ...]
     on_film: tuple[str, ...]
+    grids: Callable[[int, int, dict], dict]
 
 
 #: Formation name -> :class:`Formation`, in registration order.
@@ -86,8 +92,8 @@ def register_formation(name: str, fn: Callable[..., Formed], *,
                        grid: Callable[[int, int, dict], Grid] | None = None,
                        view: Callable[[int, int, dict], dict] | None = None,
                        stats: Callable[[dict], dict] | None = None,
-                       counted: tuple[str, ...] = (), on_film: tuple[str, ...] = ()
-                       ) -> None:
+                       counted: tuple[str, ...] = (), on_film: tuple[str, ...] = (),
+                       grids: Callable[[int, int, dict], dict] | None = None) -> None:
     """Make ``fn`` the formation ``name`` (the option value ``formation = name``).
 
     ``grid(width, height, o)``: the grid of its buffers (default: the film's).
@@ -98,11 +104,14 @@ def register_formation(name: str, fn: Callable[..., Formed], *,
     ``stats(buffers)``: counters of the frame read from its buffers (device arrays, read
     when the stats are read); ``counted``: the buffers they count, evaluated together with
     the frame's other counted buffers (one launch). ``on_film``: the buffers it returns on
-    the film's grid when its own grid is another (the image always is)."""
+    the film's grid when its own grid is another (the image always is). ``grids(width,
+    height, o)``: buffer name -> grid for those on a third grid, the plan's included (a
+    formation whose plan keeps its G-buffer on its own samples)."""
     FORMATIONS[name] = Formation(
         fn, grid if grid is not None else (lambda width, height, o: Grid.film(width, height)),
         view if view is not None else (lambda width, height, o: dict(o)),
-        stats if stats is not None else (lambda buffers: {}), tuple(counted), tuple(on_film))
+        stats if stats is not None else (lambda buffers: {}), tuple(counted), tuple(on_film),
+        grids if grids is not None else (lambda width, height, o: {}))
 
 
 def unregister_formation(name: str) -> None:
@@ -138,7 +147,8 @@ def _record(arrays: dict, key: dict) -> dict:
     inp = FormationInput(GBuffer(**arrays["gbuffer"]),
                          _reproject.ReprojectionMap(**arrays["reprojection"]), history,
                          key["width"], key["height"], key["spp"], arrays["fill_seed"],
-                         arrays["emission_edges"], arrays["gaze"])
+                         arrays["emission_edges"], arrays["gaze"],
+                         None if arrays["samples"] is None else tuple(arrays["samples"]))
     fn = FORMATIONS[key["formation"]].fn
     formed = fn(ShadingBuffer(**arrays["shading"]), inp, key["options"], StageTimer(False))
     return dict(formed._asdict())
@@ -189,6 +199,7 @@ class FrozenFormation:
                                                "moment2": h.moment2},
             "fill_seed": _sampling.opaque_seed(inp.fill_seed),
             "emission_edges": inp.emission_edges, "gaze": inp.gaze,
+            "samples": None if inp.samples is None else list(inp.samples),
         }
         entry = FORMATIONS[o["formation"]]
         key = {"formation": o["formation"], "width": inp.width, "height": inp.height,

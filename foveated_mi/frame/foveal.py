@@ -39,6 +39,7 @@ from ..kernels.polar import PolarGrid
 from ..postprocess import DENOISERS, DenoiseInput, Denoised
 from ..postprocess.registry import as_denoised
 from ..timing import StageTimer
+from . import buffer_space as _buffer_space
 from . import domain
 from . import reproject as _reproject
 from .film import film_stats
@@ -51,10 +52,14 @@ SEAM = 2.0
 
 #: Options the formation reads besides its denoiser's.
 READS = ("max_history", "ray_budget", "theta", "denoiser", "clamp", "demodulate",
-         "foveal_upsampling")
+         "foveal_upsampling", "foveal_space")
 
 #: The buffers it returns on the film's grid (the others are on the buffer's).
 ON_FILM = ("traced", "shading", "shading_mask", "history_count", "resampled", "image")
+
+#: With ``foveal_space = "buffer"``: the buffers on the samples (cells, then the disc's patch).
+ON_SAMPLES = ("shading", "shading_mask", "history_count", "resampled", "sample_on", "sample_pixel",
+              "position", "normal", "depth", "hit", "reprojection_map")
 
 
 def foveal_view(width: int, height: int, o: dict[str, Any]) -> dict[str, Any]:
@@ -65,7 +70,10 @@ def foveal_view(width: int, height: int, o: dict[str, Any]) -> dict[str, Any]:
 
 
 def foveal_buffer_grid(width: int, height: int, o: dict[str, Any]) -> PolarGrid:
-    """The buffer's grid for a film and the options' ray budget."""
+    """The buffer's grid for a film and the options' ray budget (without the rings inside
+    the disc where the disc's pixels are samples themselves: ``foveal_space = "buffer"``)."""
+    if o["foveal_space"] == "buffer":
+        return _buffer_space.layout(width, height, o).grid
     return foveal_grid(width, height, float(o["ray_budget"]),
                        fovea_radius(width, height, o["theta"]))
 
@@ -155,7 +163,9 @@ def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, w
 
 def form_foveal(shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any],
                 timer: StageTimer, grad_pass: bool = False) -> Formed:
-    """History resolve on the film, denoising in the buffer, one warp (module docstring)."""
+    """History resolve, denoising in the buffer, one warp (module docstring)."""
+    if inp.samples is not None:
+        return _form_on_samples(shading, inp, o, timer, grad_pass)
     width, height = inp.width, inp.height
     grid = foveal_buffer_grid(width, height, o)
     # History resolve (Fig. 4): this frame's samples blended with the reprojected history.
@@ -197,5 +207,81 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any],
     return Formed(image, buffers, history)
 
 
+def _form_on_samples(shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any],
+                     timer: StageTimer, grad_pass: bool) -> Formed:
+    """``foveal_space = "buffer"``: the history resolve on the buffer's samples, denoising
+    in the buffer, the albedo multiplied back on its cells, one warp; the disc shows its own
+    samples (:mod:`foveated_mi.frame.buffer_space`). Only the warp and the disc's blend run
+    on the film's pixels."""
+    width, height = inp.width, inp.height
+    lay = _buffer_space.layout(width, height, o)
+    grid, nc = lay.grid, lay.cells
+    pixels, on = inp.samples
+    gb = inp.gbuffer
+    # This frame's samples, read at their pixels, then blended with their own history.
+    traced = on & dr.gather(mi.Bool, shading.mask, pixels, on)
+    value = dr.gather(mi.Color3f, shading.value, pixels, traced)
+    m2 = dr.gather(mi.Float, shading.moment2, pixels, traced)
+    resolved = _reproject.resolve(value, traced, inp.spp, inp.reprojection, inp.history,
+                                  o["max_history"], m2)
+    timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
+    # The cells: the first samples, in the working domain (irradiance with demodulate).
+    c = dr.arange(mi.UInt32, nc)
+    has = dr.gather(mi.Bool, resolved.mask, c)
+    take = lambda t, v: None if v is None else dr.gather(t, v, c)  # noqa: E731
+    cgb = GBuffer(position=take(mi.Point3f, gb.position), normal=take(mi.Normal3f, gb.normal),
+                  depth=take(mi.Float, gb.depth), hit=take(mi.Bool, gb.hit) & has,
+                  direction=take(mi.Vector3f, gb.direction), albedo=take(mi.Color3f, gb.albedo),
+                  emission=take(mi.Color3f, gb.emission))
+    cells = dr.select(has, domain.to_irradiance(take(mi.Color3f, resolved.shading), cgb, o),
+                      dr.nan)
+    res = Resolved(cells, has, take(mi.Float, resolved.count), dr.zeros(mi.Bool, nc),
+                   take(mi.Float, resolved.moment2))
+    timer.mark("reconstruct", res.shading, res.count, cgb.normal, cgb.position)
+    # Denoising in the buffer (§3.5); each cell's albedo multiplied back before the warp:
+    # there is no full-resolution albedo to take it from.
+    out = _denoise(res, cgb, grid, o, grad_pass)
+    radiance = domain.to_radiance(out.image, cgb, o, clamp=True)
+    warped = warp(radiance, has, grid, inp.gaze, width, height)
+    # The disc shows its own samples, blended into the warp across the seam.
+    film = Grid.film(width, height)
+    idx, x, y = film.cells()
+    p = film.film_position(idx)
+    t = dr.clip((grid.fovea - dr.norm(p - inp.gaze)) / SEAM, 0.0, 1.0)
+    k, in_disc = _buffer_space.disc_sample(lay, mi.Int32(x), mi.Int32(y), inp.gaze)
+    own = in_disc & (t > 0.0)
+    own &= dr.gather(mi.Bool, resolved.mask, k, own)
+    mine = dr.gather(mi.Color3f, resolved.shading, k, own)
+    image = dr.select(own, dr.lerp(warped, mine, t), warped)
+    timer.mark("post", image)
+    buffers = {"traced": shading.mask, "shading": resolved.shading,
+               "shading_mask": resolved.mask, "history_count": resolved.count,
+               "resampled": resolved.resampled, "sample_on": on, "sample_pixel": pixels,
+               "cells": res.shading,
+               "cell_mask": has, "filtered": out.filtered, "tonemapped": out.tonemapped,
+               "image": image}
+    history = {"mean": resolved.shading, "count": resolved.count, "moment2": resolved.moment2}
+    return Formed(image, buffers, history)
+
+
+def foveal_grids(width: int, height: int, o: dict[str, Any]) -> dict[str, Grid]:
+    """The buffers that live on the samples (``foveal_space = "buffer"``), and their grid."""
+    if o["foveal_space"] != "buffer":
+        return {}
+    samples = _buffer_space.layout(width, height, o).samples_grid
+    return {name: samples for name in ON_SAMPLES}
+
+
+def foveal_stats(buffers: dict[str, Any]) -> dict[str, Any]:
+    """Film pixels, or buffer samples, that took their value from the history only, and
+    those without a value (a sample off the film is none)."""
+    on = buffers.get("sample_on")
+    if on is None:
+        return film_stats(buffers)
+    return {"resampled": dr.count(buffers["resampled"]),
+            "holes": dr.count(on & ~buffers["shading_mask"])}
+
+
 register_formation("foveal", form_foveal, grid=foveal_buffer_grid, view=foveal_view,
-                   stats=film_stats, counted=("resampled", "shading_mask"), on_film=ON_FILM)
+                   stats=foveal_stats, counted=("resampled", "shading_mask"), on_film=ON_FILM,
+                   grids=foveal_grids)

@@ -29,11 +29,20 @@ def render_gbuffer(scene: mi.Scene, sensor: mi.Sensor, *, materials: bool = Fals
     used as fixed weights of the image formation (see :mod:`foveated_mi.kernels.demodulation`).
     """
     width, height = film_size(sensor)
+    _, x, y = pixel_coords(width, height)
+    return gbuffer_at(scene, sensor, x, y, width, height, materials=materials)
+
+
+def gbuffer_at(scene: mi.Scene, sensor: mi.Sensor, x: mi.UInt32, y: mi.UInt32, width: int,
+               height: int, active: mi.Bool | bool = True, *, materials: bool = False
+               ) -> GBuffer:
+    """The G-buffer of the pixel centres ``(x, y)`` only, one entry per lane (a miss where
+    not ``active``): what a formation that keeps nothing on the film casts at its samples."""
     with dr.suspend_grad():
-        _, x, y = pixel_coords(width, height)
         ray = primary_rays(sensor, x, y, width, height)
-        si = scene.ray_intersect(mi.Ray3f(ray), ray_flags=mi.RayFlags.All, coherent=True)
-        hit = si.is_valid()
+        si = scene.ray_intersect(mi.Ray3f(ray), ray_flags=mi.RayFlags.All, coherent=True,
+                                 active=mi.Bool(active))
+        hit = si.is_valid() & active
         position = dr.select(hit, si.p, mi.Point3f(0.0))
         normal = dr.select(hit, si.sh_frame.n, mi.Normal3f(0.0))
         # Not si.t: perspective rays start on the near-clip plane, while the reprojection

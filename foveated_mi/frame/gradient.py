@@ -43,7 +43,8 @@ class PrimalFrame:
 def formation_input(plan: FramePlan) -> FormationInput:
     """The buffers of ``plan`` that a formation reads."""
     return FormationInput(plan.gbuffer, plan.reprojection, plan.history, plan.width,
-                          plan.height, plan.spp, plan.fill_seed, plan.emission_edges, plan.gaze)
+                          plan.height, plan.spp, plan.fill_seed, plan.emission_edges, plan.gaze,
+                          plan.samples)
 
 
 def form_primal(plan: FramePlan, shading: ShadingBuffer, o: dict[str, Any], timer: StageTimer,

@@ -98,8 +98,10 @@ def frame_outputs(plan: FramePlan, samples: TracedSamples, formed: Formed,
         "wavefront": ro.wavefront, "reordered_map": ro, "row_counts": ro.row_counts,
     }
     buffers = {**planned, **formed.buffers, "image": formed.image}
-    grids = {**{k: film for k in planned},
-             **{k: film if k in entry.on_film else grid for k in formed.buffers}, "image": film}
+    other = entry.grids(plan.width, plan.height, o)
+    grids = {**{k: other.get(k, film) for k in planned},
+             **{k: other.get(k, film if k in entry.on_film else grid) for k in formed.buffers},
+             "image": film}
     dr.schedule(reproj.hit, *(formed.buffers[k] for k in entry.counted))
     rays = dr.width(ro.wavefront) if ro.active is None else dr.count(plan.sampling_map)
     stats = {

@@ -28,6 +28,7 @@ import mitsuba as mi
 from ..postprocess import DENOISERS
 from ..timing import StageTimer
 from ..validate import check_int
+from . import buffer_space as _buffer_space
 from . import gbuffer as _gbuffer
 from . import reorder as _reorder
 from . import reproject as _reproject
@@ -66,6 +67,10 @@ class FramePlan:
     fill_seed: int = 0                         #: seed of the stochastic fill (the render's)
     emission_edges: mi.Bool | None = None      #: footprints across an emitter's edge
     gaze: mi.Point2f | None = None             #: the gaze's film position in pixels (opaque)
+    #: ``(pixels, on)`` of the foveal buffer's samples, where the plan is on them
+    #: (:func:`on_samples`): the G-buffer, reprojection map and history are then per sample
+    samples: tuple | None = None
+    layout: Any = None                         #: their :class:`~.buffer_space.SampleLayout`
 
 
 class Planner:
@@ -82,6 +87,8 @@ class Planner:
         self._geometry = GeometryCache()
         self._emission_cache: tuple | None = None
         self._filter_samplers: dict[tuple, FilterSampler] = {}
+        self._gaze = None                      # the last frame's gaze (options' tuple)
+        self._samples_cache: tuple | None = None
 
     def reset(self) -> None:
         """Forget the history (next frame starts fresh, as frame 0)."""
@@ -89,6 +96,7 @@ class Planner:
         self.index = 0
         self._geometry.clear()
         self._emission_cache = None
+        self._samples_cache = None
 
     def plan(self, scene: mi.Scene, sensor: mi.Sensor, seed, spp: int, o: dict[str, Any],
              timer: StageTimer, state: SceneState | None = None) -> FramePlan:
@@ -99,6 +107,8 @@ class Planner:
         state = state if state is not None else scene_state(scene, sensor)
         self._check_reset(scene, state, width, height)
         seed = (int(seed) if not dr.is_array_v(seed) else int(dr.slice(seed))) & 0xFFFFFFFF
+        if on_samples(o):
+            return self._plan_samples(scene, sensor, seed, spp, o, timer, state, width, height)
         with dr.suspend_grad():
             # A still camera over an unchanged scene reuses the last G-buffer.
             gb, reused = self._geometry.gbuffer(
@@ -109,6 +119,8 @@ class Planner:
             timer.mark("gbuffer", gb.position, gb.normal, gb.depth, gb.hit, gb.direction,
                        gb.albedo, gb.emission)
             history = self.history if o["history"] else None
+            if history is not None and history.layout is not None:
+                history = None        # kept on a foveal buffer's samples: not the film's
             reproj, cut = self._reprojection(gb, history, sensor, width, height, o, reused)
             frame_seed = self._frame_seed(seed, cut, o["history"])
             map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
@@ -128,13 +140,71 @@ class Planner:
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=emitting,
                          gaze=_sampling.gaze_pixels(o["gaze"], width, height))
 
+    def _plan_samples(self, scene, sensor, seed: int, spp: int, o: dict[str, Any],
+                      timer: StageTimer, state: SceneState, width: int, height: int
+                      ) -> FramePlan:
+        """The plan of a foveal buffer that keeps nothing on the film
+        (:mod:`foveated_mi.frame.buffer_space`): the G-buffer at its samples only, the
+        history reprojected sample to sample, the polar map and its launch."""
+        lay = _buffer_space.layout(width, height, o)
+        gaze = _sampling.gaze_pixels(o["gaze"], width, height)
+        gaze_key = tuple(float(v) for v in o["gaze"])
+        materials = materials_needed(o)
+        with dr.suspend_grad():
+            # A still camera and gaze over an unchanged scene reuse the samples' G-buffer.
+            key = (state.camera, state.scene, gaze_key, lay, materials, width, height)
+            cached = self._samples_cache
+            reused = cached is not None and cached[0] == key
+            if reused:
+                pixels, on, gb = cached[1]
+            else:
+                pixels, on = _buffer_space.sample_pixels(lay, gaze, width, height)
+                y = pixels // width
+                gb = _gbuffer.gbuffer_at(scene, sensor, pixels - y * width, y, width, height,
+                                         on, materials=materials)
+                self._samples_cache = (key, (pixels, on, gb))
+            timer.mark("gbuffer", pixels, on, gb.position, gb.normal, gb.depth, gb.hit,
+                       gb.direction, gb.albedo, gb.emission)
+            history = self.history if o["history"] else None
+            if history is not None and history.layout != lay:
+                history = None        # kept on the film, or on another buffer's samples
+            if history is not None and reused and not self._camera_moved \
+                    and self._gaze == gaze_key:
+                reproj, cut = _buffer_space.still_map(history, lay.size), None
+            else:
+                reproj = _buffer_space.reprojection_map(
+                    gb, history, lay, width, height, tolerance=o["reprojection_tolerance"],
+                    mode=o["reprojection"])
+                cut = None
+                if history is not None and self._camera_moved:
+                    reproj, cut = _reproject.unless_cut(reproj, CUT_HIT_FRACTION)
+            self._gaze = gaze_key
+            frame_seed = self._frame_seed(seed, cut, o["history"])
+            map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
+            smap, prob = _sampling.polar_map(width, height, o["gaze"], o["ray_budget"],
+                                             o["theta"])
+            timer.mark("sampling", smap, prob, reproj.hit, reproj.index)
+            ro = _reorder.reorder(smap, width, height, o["reorder"], o["block_height"])
+            timer.mark("reorder", ro.wavefront)
+        return FramePlan(sensor=sensor, width=width, height=height, spp=spp, seed=frame_seed,
+                         map_seed=map_seed, gbuffer=gb, edges=None, sampling_map=smap,
+                         probability=prob, reprojection=reproj, reordered=ro, history=history,
+                         filter_sampler=self._filter_sampler(sensor, o["pixel_filter"]),
+                         gbuffer_reused=reused, fill_seed=seed, emission_edges=None,
+                         gaze=gaze, samples=(pixels, on), layout=lay)
+
     def commit(self, plan: FramePlan, history: dict[str, Any] | None) -> None:
         """After a primal frame: its history (``mean``, ``count``, ``moment2`` on the film,
         None without history) becomes the next frame's, and the frame is counted."""
         if history is not None:
-            self.history = History(**history, depth=plan.gbuffer.depth,
+            gb = plan.gbuffer
+            on_samples = plan.layout is not None
+            self.history = History(**history, depth=gb.depth,
                                    camera=_reproject.camera_state(plan.sensor),
-                                   width=plan.width, height=plan.height)
+                                   width=plan.width, height=plan.height, layout=plan.layout,
+                                   position=gb.position if on_samples else None,
+                                   normal=gb.normal if on_samples else None,
+                                   gaze=plan.gaze if on_samples else None)
         self.index += 1
 
     def _check_reset(self, scene: mi.Scene, state: SceneState, width: int, height: int) -> None:
@@ -201,6 +271,12 @@ class Planner:
         if fs is None:
             fs = self._filter_samplers[key] = FilterSampler(film, importance=mode == "importance")
         return fs
+
+
+def on_samples(o: dict[str, Any]) -> bool:
+    """Whether the frame's plan is on the foveal buffer's samples, not the film's pixels
+    (``formation = "foveal"`` with ``foveal_space = "buffer"``)."""
+    return o["formation"] == "foveal" and o["foveal_space"] == "buffer"
 
 
 def materials_needed(o: dict[str, Any]) -> bool:

@@ -74,6 +74,12 @@ class History:
     camera: CameraState
     width: int
     height: int
+    #: Kept on the foveal buffer's samples (:mod:`foveated_mi.frame.buffer_space`): their
+    #: layout, hit points, normals and the gaze (None: kept on the film's pixels).
+    layout: object | None = None
+    position: mi.Point3f | None = None
+    normal: mi.Normal3f | None = None
+    gaze: mi.Point2f | None = None
 
 
 class ReprojectionMap(NamedTuple):

@@ -57,6 +57,9 @@ class PolarGrid(Grid):
     kernel: float = 1.0
     reach: float = 1.0
     pitch: float = 1.0
+    #: Rings left out inside the fovea (:meth:`outside_fovea`): ring 0 is then the one
+    #: that straddles :math:`r_0`, and a position nearer the gaze has ``u < 0``.
+    skip: int = 0
 
     @property
     def _k(self) -> float:
@@ -74,14 +77,15 @@ class PolarGrid(Grid):
         ut = lib.where(r <= r0, r / s0, r0 / s0 + k * log) if lib is np else \
             dr.select(r <= r0, r / s0, r0 / s0 + k * log)
         if self.kernel == 1.0:
-            return ut
+            return ut - self.skip
         U = self._U
-        return U * (lib.maximum(ut, 0.0) / U) ** (1.0 / self.kernel)
+        return U * (lib.maximum(ut, 0.0) / U) ** (1.0 / self.kernel) - self.skip
 
     def _r_of_u(self, u):
         """Distance from the gaze of radial coordinate ``u``."""
         r0, k, s0 = self.fovea, self._k, self.pitch
         lib = dr if dr.is_array_v(u) else np
+        u = u + self.skip
         ut = u if self.kernel == 1.0 else self._U * (lib.maximum(u, 0.0) / self._U) ** self.kernel
         u0 = r0 / s0
         outer = (r0 + self.offset) * lib.exp((ut - u0) / k) - self.offset
@@ -122,9 +126,18 @@ class PolarGrid(Grid):
         c = self.coords_at(p, gaze)
         ring = mi.Int32(dr.floor(c.y))
         inside = ring < self.height
-        ring = dr.minimum(ring, self.height - 1)
+        ring = dr.clip(ring, 0, self.height - 1)
         q, _ = self.neighbour(mi.Int32(dr.floor(c.x)), ring)
         return q, inside
+
+    def outside_fovea(self) -> "PolarGrid":
+        """This grid without its rings inside the fovea, where a formation holds the
+        full-resolution pixels themselves: ring 0 straddles :math:`r_0` (the same rings
+        outside, the same cells there)."""
+        import dataclasses
+        skip = int(math.floor(float(self._u_of_r(np.float64(self.fovea))) + self.skip))
+        skip = max(0, min(skip, self.height + self.skip - 1))
+        return dataclasses.replace(self, height=self.height + self.skip - skip, skip=skip)
 
     def cell_size(self, r):
         """Size of a cell at distance ``r`` from the gaze, in film pixels (radial extent)."""

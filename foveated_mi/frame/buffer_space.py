@@ -1,0 +1,192 @@
+r"""The foveal buffer's own samples: where its rays land, their G-buffer, and their history.
+
+With ``foveal_space = "buffer"`` (the ``vr`` preset) the foveal formation keeps nothing on
+the film but the image it warps there, so that its cost follows the rays, with the head
+moving too. Its *samples* are, in this order:
+
+- the cells of the log-polar grid (:func:`foveated_mi.frame.sampling.foveal_grid`), each at
+  the pixel under its centre (:func:`~foveated_mi.frame.sampling.snapped_pixels`);
+- the pixels of a square patch around the gaze, :attr:`SampleLayout.side` pixels across,
+  that hold the full-resolution disc: those whose centre lies within its radius
+  :math:`r_0` (the others are off).
+
+These are the pixels the polar sampling law traces (cells inside the disc share its
+pixels). The plan casts the G-buffer at the samples only
+(:func:`~foveated_mi.frame.gbuffer.gbuffer_at`), the history lives on them, and it is
+reprojected sample to sample (:func:`reprojection_map`), so neither the geometry nor the
+history costs a film-sized pass.
+
+**Reprojection in the buffer.** A sample's primary hit :math:`x` (its direction on a miss)
+is projected with the previous camera to film position :math:`p'`. The previous sample that
+holds :math:`p'` (:func:`sample_at`: the previous disc's pixel when that pixel's centre lies
+in the previous disc, else the previous grid's cell containing :math:`p'`, both around the
+previous gaze) is read when it lies on the same surface: its hit point :math:`x_j` and
+normal :math:`n_j` satisfy :math:`|n_j \cdot (x - x_j)| \le \tau\,\lVert x - c\rVert`
+(:math:`\tau` = ``reprojection_tolerance``, :math:`c` the previous camera's centre) and
+:math:`n \cdot n_j \ge` :data:`NORMAL_AGREEMENT`. A plane test, not the film's depth test:
+a cell's sample sits anywhere within a cell many pixels wide, where depths differ along a
+slanted surface but the plane does not. A miss reads a previous miss. With ``exclusive``
+reads (the default) a previous sample serves only the sample landing nearest its pixel's
+centre, so a gaze move that makes cells finer does not copy one noisy value into several.
+
+A still camera over an unchanged scene with the gaze still maps every sample onto itself
+(:func:`still_map`); a camera cut is judged on the samples as on the film
+(:func:`~foveated_mi.frame.reproject.unless_cut`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+
+from ..kernels.buffers import GBuffer
+from ..kernels.grid import Grid
+from ..kernels.polar import PolarGrid
+from .reproject import History, ReprojectionMap, project
+from .sampling import foveal_grid, fovea_radius
+
+#: Smallest cosine between a sample's normal and its previous sample's for one surface.
+NORMAL_AGREEMENT = 0.9
+
+
+@dataclass(frozen=True)
+class SampleLayout:
+    """The samples of a film and its options: the grid's cells, then the disc's patch."""
+    grid: PolarGrid
+    side: int                  #: pixels across the square patch that holds the disc
+
+    @property
+    def cells(self) -> int:
+        return self.grid.size
+
+    @property
+    def size(self) -> int:
+        """Number of samples (cells, then patch pixels)."""
+        return self.grid.size + self.side * self.side
+
+    @property
+    def samples_grid(self) -> Grid:
+        """The samples as a one-row grid (for ``buffer()``)."""
+        return Grid(self.size, 1)
+
+
+def layout(width: int, height: int, o: dict) -> SampleLayout:
+    """The samples of a ``width`` x ``height`` film for the options' budget and disc."""
+    r0 = fovea_radius(width, height, o["theta"])
+    # The disc's pixels are samples themselves: the grid's rings inside it would be copies.
+    grid = foveal_grid(width, height, float(o["ray_budget"]), r0).outside_fovea()
+    # Pixel centres within r0 of any gaze span at most floor(2 r0) + 1 columns.
+    return SampleLayout(grid, int(math.floor(2.0 * grid.fovea)) + 2)
+
+
+def _patch_origin(lay: SampleLayout, gaze: mi.Point2f) -> tuple[mi.Int32, mi.Int32]:
+    """The patch's top-left pixel: the first column and row whose centres can lie in the
+    disc around ``gaze``."""
+    r0 = lay.grid.fovea
+    return mi.Int32(dr.ceil(gaze.x - r0 - 0.5)), mi.Int32(dr.ceil(gaze.y - r0 - 0.5))
+
+
+def sample_pixels(lay: SampleLayout, gaze: mi.Point2f, width: int, height: int
+                  ) -> tuple[mi.UInt32, mi.Bool]:
+    """Each sample's film pixel (flat index) and whether it is on: on the film, and for a
+    patch pixel, its centre in the disc."""
+    grid, nc = lay.grid, lay.cells
+    idx = dr.arange(mi.UInt32, lay.size)
+    is_cell = idx < nc
+    p = grid.film_position(dr.select(is_cell, idx, 0), gaze)
+    k = mi.Int32(dr.select(is_cell, 0, idx - nc))
+    x0, y0 = _patch_origin(lay, gaze)
+    row = k // lay.side
+    px = dr.select(is_cell, mi.Int32(dr.floor(p.x)), x0 + (k - row * lay.side))
+    py = dr.select(is_cell, mi.Int32(dr.floor(p.y)), y0 + row)
+    on = (px >= 0) & (px < width) & (py >= 0) & (py < height)
+    r0 = lay.grid.fovea
+    d2 = dr.square(mi.Float(px) + 0.5 - gaze.x) + dr.square(mi.Float(py) + 0.5 - gaze.y)
+    on &= is_cell | (d2 <= r0 * r0)
+    return mi.UInt32(dr.select(on, py * width + px, 0)), on
+
+
+def disc_sample(lay: SampleLayout, x: mi.Int32, y: mi.Int32, gaze: mi.Point2f
+                ) -> tuple[mi.UInt32, mi.Bool]:
+    """The patch sample of pixel ``(x, y)``, and whether its centre lies in the disc."""
+    r0 = lay.grid.fovea
+    d2 = dr.square(mi.Float(x) + 0.5 - gaze.x) + dr.square(mi.Float(y) + 0.5 - gaze.y)
+    inside = d2 <= r0 * r0
+    x0, y0 = _patch_origin(lay, gaze)
+    k = (y - y0) * lay.side + (x - x0)
+    inside &= (k >= 0) & (k < lay.side * lay.side)
+    return mi.UInt32(lay.cells + dr.select(inside, k, 0)), inside
+
+
+def sample_at(lay: SampleLayout, p: mi.Point2f, gaze: mi.Point2f
+              ) -> tuple[mi.UInt32, mi.Bool, mi.Point2f]:
+    """The sample holding film position ``p`` for the gaze at ``gaze``: the disc's pixel
+    when that pixel's centre lies in the disc, else the grid's cell containing ``p``.
+    Returns its index, whether ``p`` lies within the grid's rings, and the centre of the
+    sample's pixel (what an exclusive read measures from)."""
+    x, y = mi.Int32(dr.floor(p.x)), mi.Int32(dr.floor(p.y))
+    disc, in_disc = disc_sample(lay, x, y, gaze)
+    cell, in_grid = lay.grid.cell_at(p, gaze)
+    c = lay.grid.film_position(cell, gaze)
+    centre = dr.select(in_disc, mi.Point2f(mi.Float(x) + 0.5, mi.Float(y) + 0.5),
+                       mi.Point2f(dr.floor(c.x) + 0.5, dr.floor(c.y) + 0.5))
+    return dr.select(in_disc, disc, cell), in_disc | in_grid, centre
+
+
+def still_map(history: History, n: int) -> ReprojectionMap:
+    """Every sample onto itself (a still camera and gaze over an unchanged scene): a hit
+    where the history holds samples; nothing is projected."""
+    return ReprojectionMap(dr.zeros(mi.Point2f, n), history.count > 0, dr.arange(mi.UInt32, n),
+                           dr.full(mi.Bool, True, n))
+
+
+def reprojection_map(gb: GBuffer, history: History | None, lay: SampleLayout, width: int,
+                     height: int, *, tolerance: float = 0.02, mode: str = "exclusive"
+                     ) -> ReprojectionMap:
+    """Reverse-reproject the samples' G-buffer into the previous frame's samples (module
+    docstring). ``coords`` are the previous film positions (pixels)."""
+    n = lay.size
+    if history is None:
+        return ReprojectionMap(dr.zeros(mi.Point2f, n), dr.zeros(mi.Bool, n),
+                               dr.zeros(mi.UInt32, n), dr.zeros(mi.Bool, n))
+    hit, x, d = gb.hit, gb.position, gb.direction
+    m = history.camera.matrix
+    q = m @ mi.Vector4f(x.x, x.y, x.z, 1.0)
+    qd = m @ mi.Vector4f(d.x, d.y, d.z, 0.0)
+    qq = dr.select(hit, q, qd)
+    inv_w = dr.rcp(qq.w)
+    uv = mi.Point2f(qq.x * inv_w * width, qq.y * inv_w * height)
+    # A point behind the previous camera projects, mirrored, into its film: never seen.
+    inside = (qq.w > 0) & dr.isfinite(uv.x) & dr.isfinite(uv.y) & (uv.x >= 0) & \
+        (uv.y >= 0) & (uv.x < width) & (uv.y < height)
+    j, in_grid, centre = sample_at(lay, uv, history.gaze)
+    inside &= in_grid
+    prev_depth = dr.gather(mi.Float, history.depth, j, inside)
+    prev_x = dr.gather(mi.Point3f, history.position, j, inside)
+    prev_n = mi.Vector3f(dr.gather(mi.Normal3f, history.normal, j, inside))
+    prev_count = dr.gather(mi.Float, history.count, j, inside)
+    _, dist = project(history.camera, x, width, height)
+    tol = dr.opaque(mi.Float, tolerance)
+    same_surface = hit & dr.isfinite(prev_depth) & \
+        (dr.abs(dr.dot(prev_n, x - prev_x)) <= tol * dist) & \
+        (dr.dot(prev_n, mi.Vector3f(gb.normal)) >= NORMAL_AGREEMENT)
+    same_background = ~hit & ~dr.isfinite(prev_depth)
+    agree = inside & (same_surface | same_background)
+    hits = agree & (prev_count > 0)
+    if mode == "exclusive":
+        hits &= _nearest_claim(uv, centre, j, hits, n)
+    return ReprojectionMap(uv, hits, j, agree)
+
+
+def _nearest_claim(uv: mi.Point2f, centre: mi.Point2f, prev: mi.UInt32, claims: mi.Bool,
+                   n: int) -> mi.Bool:
+    """Which of the ``claims`` win their previous sample ``prev``: the one landing nearest
+    its pixel's centre, ties to the lowest sample index (an order-free minimum)."""
+    d2 = dr.reinterpret_array(mi.UInt32, dr.square(uv.x - centre.x) +
+                              dr.square(uv.y - centre.y))
+    key = (mi.UInt64(d2) << 32) | mi.UInt64(dr.arange(mi.UInt32, n))
+    best = dr.full(mi.UInt64, 0xFFFFFFFFFFFFFFFF, n)
+    dr.scatter_reduce(dr.ReduceOp.Min, best, key, prev, claims)
+    return claims & (dr.gather(mi.UInt64, best, prev, claims) == key)
