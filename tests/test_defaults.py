@@ -86,7 +86,7 @@ def _look(target):
 
 
 @pytest.mark.parametrize("change", ["cut", "parameter", "size"])
-@pytest.mark.parametrize("preset", PRESETS)
+@pytest.mark.parametrize("preset", PRESETS + ["vr"])
 def test_no_ghost_after_a_change(preset, change):
     """After 8 still frames, a camera cut (the camera turns around: no pixel finds its
     history), a scene parameter change (a wall's colour) or a new film size gives a frame

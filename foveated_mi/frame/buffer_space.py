@@ -142,11 +142,12 @@ def still_map(history: History, n: int) -> ReprojectionMap:
                            dr.full(mi.Bool, True, n))
 
 
-def reprojection_map(gb: GBuffer, history: History | None, lay: SampleLayout, width: int,
-                     height: int, *, tolerance: float = 0.02, mode: str = "exclusive"
-                     ) -> ReprojectionMap:
+def reprojection_map(gb: GBuffer, on: mi.Bool, history: History | None, lay: SampleLayout,
+                     width: int, height: int, *, tolerance: float = 0.02,
+                     mode: str = "exclusive") -> ReprojectionMap:
     """Reverse-reproject the samples' G-buffer into the previous frame's samples (module
-    docstring). ``coords`` are the previous film positions (pixels)."""
+    docstring); a sample that is off (``on`` false) reads nothing and claims nothing.
+    ``coords`` are the previous film positions (pixels)."""
     n = lay.size
     if history is None:
         return ReprojectionMap(dr.zeros(mi.Point2f, n), dr.zeros(mi.Bool, n),
@@ -159,7 +160,7 @@ def reprojection_map(gb: GBuffer, history: History | None, lay: SampleLayout, wi
     inv_w = dr.rcp(qq.w)
     uv = mi.Point2f(qq.x * inv_w * width, qq.y * inv_w * height)
     # A point behind the previous camera projects, mirrored, into its film: never seen.
-    inside = (qq.w > 0) & dr.isfinite(uv.x) & dr.isfinite(uv.y) & (uv.x >= 0) & \
+    inside = on & (qq.w > 0) & dr.isfinite(uv.x) & dr.isfinite(uv.y) & (uv.x >= 0) & \
         (uv.y >= 0) & (uv.x < width) & (uv.y < height)
     j, in_grid, centre = sample_at(lay, uv, history.gaze)
     inside &= in_grid

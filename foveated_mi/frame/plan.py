@@ -173,7 +173,7 @@ class Planner:
                 reproj, cut = _buffer_space.still_map(history, lay.size), None
             else:
                 reproj = _buffer_space.reprojection_map(
-                    gb, history, lay, width, height, tolerance=o["reprojection_tolerance"],
+                    gb, on, history, lay, width, height, tolerance=o["reprojection_tolerance"],
                     mode=o["reprojection"])
                 cut = None
                 if history is not None and self._camera_moved:

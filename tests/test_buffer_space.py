@@ -1,0 +1,233 @@
+"""The foveal buffer's own samples (``foveal_space = "buffer"``, the ``vr`` preset's default):
+the grid without rings inside the disc keeps those outside, every sample finds itself at its
+own film position, a gaze move reads the disc pixels the two discs share, a still view
+projects nothing, a moving head keeps its history without the frame getting worse than a
+fresh one, and what needs a full-resolution buffer is refused in one line."""
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from foveated_mi.frame import buffer_space
+from foveated_mi.frame.sampling import foveal_grid, fovea_radius, gaze_pixels
+from foveated_mi.integrators.foveated import FoveatedIntegrator
+from foveated_mi.metrics import psnr
+from foveated_mi.options import validate_options
+from foveated_mi.render import to_display
+from foveated_mi.scenes import load_scene
+from foveated_mi.validate import ParameterError
+
+
+def _layout(width, height, **options):
+    return buffer_space.layout(width, height, validate_options({"preset": "vr", **options}))
+
+
+@pytest.mark.parametrize("size,budget", [((96, 64), 0.1), ((160, 90), 0.25), ((40, 90), 0.1)])
+def test_the_grid_without_inner_rings_keeps_every_ring_outside_the_disc(size, budget):
+    W, H = size
+    r0 = fovea_radius(W, H, 0.15)
+    full = foveal_grid(W, H, budget, r0)
+    outer = full.outside_fovea()
+    assert outer.skip > 0 and outer.height == full.height - outer.skip
+    assert outer.width == full.width
+    # The same cells outside: cell i of the outer grid is cell i + skip rows of the full one.
+    g = mi.Point2f(W * 0.4, H * 0.6)
+    i = dr.arange(mi.UInt32, outer.size)
+    a = np.array(outer.film_position(i, g))
+    b = np.array(full.film_position(i + outer.skip * outer.width, g))
+    # Positions of at most the diagonal, from a log and an exp in float32.
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-5 * np.hypot(W, H))
+    # Ring 0 straddles the disc's edge: no ring lies wholly inside it.
+    inner_edge = outer._r_of_u(np.float64(0.0))
+    assert inner_edge <= r0 < outer._r_of_u(np.float64(1.0))
+
+
+@pytest.mark.parametrize("gaze", [(0.5, 0.5), (0.1, 0.85), (0.0, 0.0), (0.99, 0.3)])
+def test_every_sample_finds_itself_at_its_own_film_position(gaze):
+    W, H = 96, 64
+    lay = _layout(W, H)
+    g = gaze_pixels(gaze, W, H)
+    pixels, on = buffer_space.sample_pixels(lay, g, W, H)
+    idx = dr.arange(mi.UInt32, lay.size)
+    is_cell = idx < lay.cells
+    centre = lay.grid.film_position(dr.select(is_cell, idx, 0), g)
+    y = pixels // W
+    px = mi.Point2f(mi.Float(pixels - y * W) + 0.5, mi.Float(y) + 0.5)
+    # A disc sample at its pixel's centre, a cell at its own centre.
+    at = dr.select(is_cell, centre, px)
+    j, inside, _ = buffer_space.sample_at(lay, at, g)
+    on, j, inside, cell = (np.array(v) for v in (on, j, inside, is_cell))
+    disc = on & ~cell
+    np.testing.assert_array_equal(j[disc], np.flatnonzero(disc))
+    assert inside[on].all()
+    # A cell's centre lies in that cell, except within the disc, which holds it instead.
+    gx, gy = gaze[0] * W, gaze[1] * H
+    c = np.array(centre)
+    outside = on & cell & (np.hypot(c[0] - gx, c[1] - gy) > lay.grid.fovea + 1.0)
+    assert outside.sum() > 50
+    np.testing.assert_array_equal(j[outside], np.flatnonzero(outside))
+    # The disc's samples are the film's pixels whose centre lies within r0 of the gaze,
+    # each once (at the film's edge, the part of the disc on the film).
+    pix = np.array(pixels)[disc]
+    yy, xx = np.mgrid[0:H, 0:W]
+    # float32 on the device against float64 here: a centre within 1e-4 px of the circle may
+    # fall either way.
+    d = np.hypot(xx + 0.5 - gx, yy + 0.5 - gy).ravel()
+    assert len(set(pix.tolist())) == len(pix)
+    assert set(np.flatnonzero(d <= lay.grid.fovea - 1e-4)) <= set(pix.tolist())
+    assert set(pix.tolist()) <= set(np.flatnonzero(d <= lay.grid.fovea + 1e-4))
+    assert disc.sum() > 10
+
+
+def _scene(size=(64, 48)):
+    return load_scene("cornell-box", width=size[0], height=size[1], spp=1,
+                      integrator={"type": "path", "max_depth": 3})
+
+
+def test_a_gaze_move_reads_the_disc_pixels_both_discs_hold():
+    W, H = 64, 48
+    scene = _scene((W, H))
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", denoiser="none",
+                               theta=0.3)
+    integ.gaze = (0.45, 0.5)
+    mi.render(scene, integrator=integ, seed=0)
+    before = set(np.flatnonzero(integ.buffer("traced").ravel()).tolist())
+    integ.gaze = (0.55, 0.45)
+    mi.render(scene, integrator=integ, seed=1)
+    lay = buffer_space.layout(W, H, integ.options)
+    pixel = integ.buffer("sample_pixel")[0]
+    on = integ.buffer("sample_on")[0].astype(bool)
+    count = integ.buffer("history_count")[0]
+    disc = on & (np.arange(lay.size) >= lay.cells)
+    shared = disc & np.isin(pixel, list(before))
+    # The camera is still: every disc pixel traced in both frames holds both samples, one
+    # traced in this frame only holds one.
+    gx, gy = 0.45 * W, 0.5 * H
+    yy, xx = np.divmod(pixel, W)
+    was_disc = np.hypot(xx + 0.5 - gx, yy + 0.5 - gy) <= lay.grid.fovea
+    assert (shared & was_disc).sum() > 100
+    np.testing.assert_array_equal(count[shared & was_disc], 2.0)
+    np.testing.assert_array_equal(count[disc & ~shared], 1.0)
+
+
+def test_a_still_view_projects_nothing_and_a_gaze_move_does(monkeypatch):
+    scene = _scene()
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
+    calls = []
+    real = buffer_space.reprojection_map
+    monkeypatch.setattr(buffer_space, "reprojection_map",
+                        lambda *a, **k: calls.append(1) or real(*a, **k))
+    for k in range(4):
+        mi.render(scene, integrator=integ, seed=k)
+    # The first frame has no history, the second reads it through a projection... and
+    # from then on a still camera and gaze reuse the samples' G-buffer and map.
+    assert len(calls) == 1, calls
+    assert integ.stats["history_hits"] > 0
+    integ.gaze = (0.3, 0.4)
+    mi.render(scene, integrator=integ, seed=9)
+    assert len(calls) == 2
+
+
+def _look(origin):
+    return mi.ScalarTransform4f().look_at(origin=origin, target=[0, 0, 0], up=[0, 1, 0])
+
+
+def test_a_moving_head_keeps_its_history_and_the_frame_is_no_worse_than_a_fresh_one():
+    """A camera orbiting 0.6 degrees a frame with the gaze drifting: the samples find their
+    surfaces again (most read history), and the frame is no worse than a fresh integrator's
+    first frame of the same view (the history never costs quality)."""
+    size = 64
+    scene = _scene((size, size))
+    params = mi.traverse(scene)
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
+    for k in range(10):
+        a = np.radians(0.6 * k)
+        params["sensor.to_world"] = _look([3.9 * np.sin(a), 0.0, 3.9 * np.cos(a)])
+        params.update()
+        integ.gaze = (0.5 + 0.01 * k, 0.5)
+        img = np.array(mi.render(scene, integrator=integ, seed=k))
+    hits = integ.stats["history_hits"]
+    on = integ.buffer("sample_on")[0].astype(bool)
+    assert hits > 0.6 * on.sum(), (hits, on.sum())
+    fresh = FoveatedIntegrator(nested=scene.integrator(), preset="vr", gaze=integ.gaze)
+    first = np.array(mi.render(scene, integrator=fresh, seed=9))
+    ref = to_display(np.array(mi.render(scene, integrator=scene.integrator(), spp=256,
+                                        seed=99)))
+    gain = psnr(ref, to_display(img), 1.0) - psnr(ref, to_display(first), 1.0)
+    assert gain > 0.0, gain
+
+
+def test_a_camera_cut_reads_no_history():
+    scene = _scene()
+    params = mi.traverse(scene)
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
+    for k in range(3):
+        mi.render(scene, integrator=integ, seed=k)
+    params["sensor.to_world"] = mi.ScalarTransform4f().look_at(
+        origin=[0, 0, 3.9], target=[0, 0, 10], up=[0, 1, 0])
+    params.update()
+    mi.render(scene, integrator=integ, seed=5)
+    assert integ.stats["history_hits"] == 0
+    on = integ.buffer("sample_on")[0].astype(bool)
+    assert (integ.buffer("history_count")[0][on] <= 1.0).all()
+
+
+@pytest.mark.parametrize("bad,match", [
+    ({"foveal_upsampling": "joint"}, r"foveal_upsampling = 'joint' is invalid: expected "
+                                     r"'bilinear' with foveal_space = 'buffer'"),
+    ({"emission_edges": True}, r"emission_edges = True is invalid: expected False with "
+                               r"foveal_space = 'buffer'"),
+    ({"edge_threshold": 0.1}, r"edge_threshold = 0\.1 is invalid: expected 0 with "
+                              r"foveal_space = 'buffer'"),
+    ({"foveal_space": "screen"}, r"foveal_space = 'screen' is invalid"),
+])
+def test_what_needs_the_full_resolution_buffer_is_refused_in_one_line(bad, match):
+    with pytest.raises(ParameterError, match=match) as e:
+        FoveatedIntegrator(preset="vr", **bad)
+    assert "\n" not in str(e.value)
+    if "foveal_space" not in bad:
+        FoveatedIntegrator(preset="vr", foveal_space="film", **bad)   # there it works
+
+
+def _plane_samples(sensor, lay, gaze, W, H, z, normal):
+    """The samples' G-buffer of the plane at height ``z`` with the given normal."""
+    from foveated_mi.kernels.buffers import GBuffer
+    from foveated_mi.kernels.pixels import primary_rays
+    pixels, on = buffer_space.sample_pixels(lay, gaze, W, H)
+    y = pixels // W
+    ray = primary_rays(sensor, pixels - y * W, y, W, H)
+    t = (z - ray.o.z) / ray.d.z
+    p = ray.o + t * ray.d
+    n = mi.Normal3f(*normal) + dr.zeros(mi.Normal3f, lay.size)
+    return GBuffer(position=mi.Point3f(p), normal=n, depth=dr.norm(p - ray.o), hit=on,
+                   direction=mi.Vector3f(ray.d)), on
+
+
+@pytest.mark.parametrize("z,normal,hits", [(0.0, (0, 0, 1), True), (0.5, (0, 0, 1), False),
+                                           (0.0, (1, 0, 0), False)])
+def test_a_sample_reads_its_history_only_on_the_surface_it_saw(z, normal, hits):
+    """A still camera over the plane z = 0: the same plane reads every sample's history; a
+    plane in front of it (a disocclusion's foreground) or a surface facing elsewhere reads
+    none."""
+    from foveated_mi.frame.reproject import History, camera_state
+    W = H = 32
+    sensor = mi.load_dict({"type": "perspective", "fov": 60, "to_world":
+                           mi.ScalarTransform4f().look_at(origin=[0, 0, 5], target=[0, 0, 0],
+                                                          up=[0, 1, 0]),
+                           "film": {"type": "hdrfilm", "width": W, "height": H}})
+    lay = _layout(W, H)
+    gaze = gaze_pixels((0.5, 0.5), W, H)
+    seen, on = _plane_samples(sensor, lay, gaze, W, H, 0.0, (0, 0, 1))
+    n = lay.size
+    history = History(mean=dr.zeros(mi.Color3f, n), count=dr.full(mi.Float, 1.0, n),
+                      moment2=dr.zeros(mi.Float, n), depth=dr.select(on, seen.depth, dr.inf),
+                      camera=camera_state(sensor), width=W, height=H, layout=lay,
+                      position=seen.position, normal=seen.normal, gaze=gaze)
+    now, _ = _plane_samples(sensor, lay, gaze, W, H, z, normal)
+    m = buffer_space.reprojection_map(now, on, history, lay, W, H, mode="nearest")
+    hit, on = np.array(m.hit), np.array(on)
+    assert on.sum() > 100
+    if hits:
+        assert hit[on].all() and not hit[~on].any()
+    else:
+        assert not hit.any()
