@@ -16,7 +16,10 @@ Cases (the film size is multiplied by ``--scale``):
     without ``pyoidn``); OIDN reads the albedo and normal of the G-buffer.
 ``voxel-static-vr`` / ``voxel-moving-vr`` / ``staircase-vr``
     the same scenes under the ``vr`` preset at ``ray_budget`` 0.10: rays at the cells of a
-    log-polar buffer around the gaze, denoised there (SVGF), one warp to the film.
+    log-polar buffer around the gaze, denoised there (SVGF), one warp to the film; the
+    G-buffer and history on the buffer's samples. ``-vr-film``: the same with them on the
+    film's pixels (``foveal_space = "film"``). ``staircase-vr-oidn``: OIDN in the buffer
+    (skipped without ``pyoidn``).
 ``table1-rungholt`` / ``table1-vokselia`` / ``table1-eye-exam``
     the paper's Table 1 budgets at 1024x1024, path ``max_depth`` 8, 1 spp, ``preset="paper"``:
     θ calibrated to 19.8 % (voxel-city, 200² blocks), 3.3 % (the shared voxel-monument) and
@@ -79,6 +82,17 @@ CASES = {
     "staircase-vr": dict(scene=STAIRCASE, size=(640, 360), max_depth=8, spp=2,
                          preset="vr", fraction=None, orbit=0.0,
                          options={"ray_budget": 0.10}),
+    # The same, with the G-buffer and history on the film's pixels (foveal_space = "film").
+    "voxel-static-vr-film": dict(scene="voxel-city", size=(1024, 1024), max_depth=3, spp=1,
+                                 preset="vr", fraction=None, orbit=0.0,
+                                 options={"ray_budget": 0.10, "foveal_space": "film"}),
+    "voxel-moving-vr-film": dict(scene="voxel-city", size=(1024, 1024), max_depth=3, spp=1,
+                                 preset="vr", fraction=None, orbit=0.5,
+                                 options={"ray_budget": 0.10, "foveal_space": "film"}),
+    # OIDN in the buffer (padded across its seam), the network's cost following the cells.
+    "staircase-vr-oidn": dict(scene=STAIRCASE, size=(640, 360), max_depth=8, spp=2,
+                              preset="vr", fraction=None, orbit=0.0,
+                              options={"ray_budget": 0.10, "denoiser": "oidn"}),
     "table1-rungholt": dict(scene="voxel-city", params={"size": 200}, size=(1024, 1024),
                             max_depth=8, spp=1, preset="paper", fraction=0.198, orbit=0.0),
     "table1-vokselia": dict(scene=os.path.join(SHARED, "voxel-monument", "scene.xml"),
@@ -132,7 +146,7 @@ def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int,
     if spec["scene"].endswith(".xml") and not os.path.exists(spec["scene"]):
         print(f"{name}: skipped (scene not found: {os.path.abspath(spec['scene'])})")
         return None
-    if spec["preset"] == "oidn":
+    if spec["preset"] == "oidn" or spec.get("options", {}).get("denoiser") == "oidn":
         from foveated_mi.denoise import oidn_available
         if not oidn_available():
             print(f"{name}: skipped (pyoidn is not installed)")

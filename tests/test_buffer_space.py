@@ -231,3 +231,56 @@ def test_a_sample_reads_its_history_only_on_the_surface_it_saw(z, normal, hits):
         assert hit[on].all() and not hit[~on].any()
     else:
         assert not hit.any()
+
+
+def test_a_denoiser_that_sees_a_plain_image_gets_the_buffer_padded_across_its_seam():
+    """A registered denoiser that knows no neighbour rule (as a network) blurs each row of the
+    image it is given with its left and right neighbours, clamped at the image's edges. In
+    the foveal buffer it must see across the seam at angle 0: the result equals the wrapped
+    blur of the buffer, the seam's columns included."""
+    from foveated_mi.postprocess import registry
+    from foveated_mi.postprocess.registry import register_denoiser
+
+    def row_blur(ctx):
+        idx = dr.arange(mi.UInt32, ctx.width * ctx.height)
+        y = idx // ctx.width
+        x = mi.Int32(idx - y * ctx.width)
+        acc = dr.zeros(mi.Color3f, dr.width(idx))
+        for dx in (-1, 0, 1):
+            q = y * ctx.width + mi.UInt32(dr.clip(x + dx, 0, ctx.width - 1))
+            acc += dr.gather(mi.Color3f, ctx.image, q)
+        return acc / 3.0
+
+    register_denoiser("row_blur", row_blur, differentiable=False, domain="irradiance")
+    try:
+        scene = _scene()
+        integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", denoiser="none",
+                                   history=False)
+        mi.render(scene, integrator=integ, seed=3)
+        cells = integ.buffer("cells")
+        blurred = FoveatedIntegrator(nested=scene.integrator(), preset="vr",
+                                     denoiser="row_blur", history=False)
+        mi.render(scene, integrator=blurred, seed=3)
+        out = blurred.buffer("filtered")
+    finally:
+        registry.unregister_denoiser("row_blur")
+    expected = (np.roll(cells, 1, axis=1) + cells + np.roll(cells, -1, axis=1)) / 3.0
+    ok = np.isfinite(expected).all(-1)
+    assert ok[:, 0].sum() > 3 and ok[:, -1].sum() > 3
+    # Three terms summed and a division in float32 (values of order 1).
+    np.testing.assert_allclose(out[ok], expected[ok], rtol=4e-7 * 4, atol=1e-6)
+
+
+@pytest.mark.skipif(not __import__("foveated_mi.denoise", fromlist=["x"]).oidn_available(),
+                    reason="pyoidn not installed")
+def test_oidn_runs_in_the_buffer():
+    scene = _scene((96, 64))
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", denoiser="oidn")
+    image = np.array(mi.render(scene, integrator=integ, seed=1))
+    assert np.isfinite(image).all()
+    cells = integ.buffer("cells")
+    filtered = integ.buffer("filtered")
+    assert filtered.shape == cells.shape          # on the buffer's grid, cropped back
+    ok = integ.buffer("cell_mask").astype(bool)
+    assert np.isfinite(filtered[ok]).all()
+    assert not np.allclose(filtered[ok], cells[ok])   # it filtered something

@@ -34,7 +34,7 @@ import mitsuba as mi
 
 from ..kernels.taps import Surface, surface_energy
 from ..kernels.buffers import GBuffer, Resolved
-from ..kernels.grid import Grid
+from ..kernels.grid import Grid, wrap_padding
 from ..kernels.polar import PolarGrid
 from ..postprocess import DENOISERS, DenoiseInput, Denoised
 from ..postprocess.registry import as_denoised
@@ -102,17 +102,48 @@ def _denoise(res: Resolved, cgb: GBuffer, grid: PolarGrid, o: dict[str, Any],
         return Denoised(res.shading)
     ctx = DenoiseInput(res.shading, cgb, res, dr.arange(mi.UInt32, grid.size), grid.width,
                        grid.height, {k: o[k] for k in entry.reads}, grad_pass, None, grid)
+    call = entry.fn if entry.grid_aware else _padded(entry.fn, grid)
     if entry.domain == "irradiance":
-        return as_denoised(entry.fn(ctx))
+        return as_denoised(call(ctx))
     radiance = domain.to_radiance(res.shading, cgb, o)
     if entry.domain == "display":
         tonemapped = domain.to_display(radiance, o)
-        filtered = as_denoised(entry.fn(ctx._replace(image=tonemapped))).image
+        filtered = as_denoised(call(ctx._replace(image=tonemapped))).image
         return Denoised(domain.to_irradiance(domain.from_display(filtered, o), cgb, o),
                         filtered=filtered, tonemapped=tonemapped)
     # A network sees no non-finite value: the empty cells are black (the warp skips them).
-    out = as_denoised(entry.fn(ctx._replace(image=dr.select(res.mask, radiance, 0.0))))
+    out = as_denoised(call(ctx._replace(image=dr.select(res.mask, radiance, 0.0))))
     return out._replace(image=domain.to_irradiance(out.image, cgb, o))
+
+
+#: Columns of the other side added on each side of the buffer's angle axis for a denoiser
+#: that sees a plain image (a network): its view across the seam at angle 0.
+PAD = 32
+
+
+def _padded(fn, grid: PolarGrid):
+    """``fn`` on the buffer padded across its wrapped angle axis, its result cropped back,
+    for a denoiser that knows no neighbour rule: the seam at angle 0 is then no image edge
+    to it."""
+    padded, source, back = wrap_padding(grid, PAD)
+
+    def pad(v, t=None):
+        return None if v is None else dr.gather(t or type(v), v, source)
+
+    def crop(v):
+        return None if v is None else dr.gather(type(v), v, back)
+
+    def call(ctx: DenoiseInput) -> Denoised:
+        gb, res = ctx.gbuffer, ctx.resolved
+        wide = ctx._replace(
+            image=pad(ctx.image),
+            gbuffer=GBuffer(*(pad(v) for v in gb)),
+            resolved=Resolved(*(pad(v) for v in res)),
+            nearest=dr.arange(mi.UInt32, padded.size), width=padded.width,
+            height=padded.height, samples=pad(ctx.samples), grid=padded)
+        out = as_denoised(fn(wide))
+        return Denoised(*(crop(v) for v in out))
+    return call
 
 
 def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, width: int,

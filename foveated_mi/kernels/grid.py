@@ -105,6 +105,22 @@ class Grid:
         return self.neighbour(qx, qy)
 
 
+def wrap_padding(grid: Grid, pad: int) -> tuple[Grid, mi.UInt32, mi.UInt32]:
+    """A plain image of ``grid`` for a method that knows no neighbour rule (a network): the
+    grid with ``pad`` columns of the other side added on each side of its wrapped x axis.
+    Returns the padded grid (clamped), the cell of ``grid`` each padded cell copies, and the
+    padded cell of each cell of ``grid`` (to crop the result back)."""
+    if not grid.wrap_x:
+        idx = dr.arange(mi.UInt32, grid.size)
+        return grid, idx, idx
+    pad = min(int(pad), grid.width)
+    padded = Grid(grid.width + 2 * pad, grid.height, wrap_y=grid.wrap_y)
+    _, x, y = padded.cells()
+    source, _ = grid.neighbour(x - pad, y)
+    _, gx, gy = grid.cells()
+    return padded, source, mi.UInt32(gy * padded.width + gx + pad)
+
+
 def wrap(q: mi.Int32, n: int) -> mi.Int32:
     """``q mod n`` in ``[0, n)`` for any integer ``q``."""
     r = q % n

@@ -237,4 +237,4 @@ def atrous_stage(ctx: DenoiseInput) -> mi.Color3f:
 register_denoiser("atrous", atrous_stage, differentiable=True, domain="display",
                   replayable=True,
                   reads=("atrous_iterations", "sigma_color", "sigma_normal", "sigma_position"),
-                  active=lambda o: o["atrous_iterations"] > 0)
+                  active=lambda o: o["atrous_iterations"] > 0, grid_aware=True)

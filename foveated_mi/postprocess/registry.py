@@ -63,6 +63,7 @@ class Denoiser(NamedTuple):
     independent_noise: bool = False
     reads: tuple[str, ...] = ()
     active: Callable[[dict], bool] | None = None
+    grid_aware: bool = False
 
 
 #: Denoiser name -> :class:`Denoiser`, in registration order.
@@ -74,7 +75,8 @@ def register_denoiser(name: str, fn: Callable[[DenoiseInput], Any], *, different
                       display_values: bool = True, available: Callable[[], bool] | None = None,
                       requirement: str = "", replayable: bool = False,
                       independent_noise: bool = False, reads: tuple[str, ...] = (),
-                      active: Callable[[dict], bool] | None = None) -> None:
+                      active: Callable[[dict], bool] | None = None,
+                      grid_aware: bool = False) -> None:
     """Make ``fn`` the denoiser ``name`` (the option value ``denoiser = name``).
 
     ``differentiable``: a gradient pass may differentiate it (else a gradient pass of a
@@ -92,11 +94,14 @@ def register_denoiser(name: str, fn: Callable[[DenoiseInput], Any], *, different
     ``pixel_filter = "auto"`` gives it filter importance sampling instead of splatting.
     ``reads``: the options it reads (``ctx.options`` holds exactly these). ``active(options)``:
     whether it changes a frame with these options (else it is not called, and costs nothing:
-    no tone-mapping round trip either)."""
+    no tone-mapping round trip either). ``grid_aware``: it reads neighbours through
+    ``ctx.grid``'s neighbour rule (a wrapped axis wraps); a formation in a buffer with a
+    wrapped axis hands any other denoiser a plain image padded with the columns of the other
+    side, and crops the result (:func:`foveated_mi.kernels.grid.wrap_padding`)."""
     check_choice("domain", domain, DOMAINS)
     DENOISERS[name] = Denoiser(fn, bool(differentiable), domain, bool(materials),
                                bool(display_values), available, requirement, bool(replayable),
-                               bool(independent_noise), tuple(reads), active)
+                               bool(independent_noise), tuple(reads), active, bool(grid_aware))
 
 
 def unregister_denoiser(name: str) -> None:
@@ -110,4 +115,5 @@ def as_denoised(result: Any) -> Denoised:
 
 
 register_denoiser("none", lambda ctx: Denoised(ctx.image), differentiable=True, replayable=True,
+                  grid_aware=True,
                   active=lambda o: False)

@@ -166,4 +166,4 @@ def svgf_stage(ctx: DenoiseInput) -> Denoised:
 register_denoiser("svgf", svgf_stage, differentiable=True, domain="irradiance",
                   display_values=False, replayable=True,
                   reads=("atrous_iterations", "sigma_luminance", "demodulate"),
-                  active=lambda o: o["atrous_iterations"] > 0)
+                  active=lambda o: o["atrous_iterations"] > 0, grid_aware=True)
