@@ -214,6 +214,21 @@ def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int,
             "image_to_host": to_host, "freeze": freeze}
 
 
+def parse_sets(items: list[str]) -> dict:
+    """``["reorder='tiles'", "ray_budget=0.2"]`` -> the options they set."""
+    import ast
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ValueError(f"--set {item!r}: expected OPTION=VALUE")
+        try:
+            out[key] = ast.literal_eval(value)
+        except (ValueError, SyntaxError):
+            out[key] = value          # a bare word: a string option's value
+    return out
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--cases", nargs="+", default=list(DEFAULT_CASES), choices=list(CASES),
@@ -225,16 +240,26 @@ def main(argv=None):
                    help="also copy every image to a NumPy array inside the timed region")
     p.add_argument("--no-freeze", action="store_true",
                    help="trace the passes after the trace every frame (option freeze=false)")
+    p.add_argument("--set", action="append", default=[], metavar="OPTION=VALUE",
+                   help="an option of the foveated integrator for every case, over the "
+                        "case's own (a Python literal, e.g. --set reorder='tiles'); repeatable")
     p.add_argument("--variant")
     p.add_argument("--out", help="JSON results")
     a = p.parse_args(argv)
+    try:
+        overrides = parse_sets(a.set)
+    except ValueError as e:
+        p.error(str(e))
     if not (a.scale > 0 and a.frames >= 1 and a.warmup >= 0):
         p.error(f"--scale must be > 0 (got {a.scale}), --frames >= 1 (got {a.frames}), "
                 f"--warmup >= 0 (got {a.warmup})")
     foveated_mi.set_variant(a.variant)
     rows, results = [], []
     for name in a.cases:
-        r = run_case(name, CASES[name], scale=a.scale, frames=a.frames, warmup=a.warmup,
+        spec = CASES[name]
+        if overrides:
+            spec = {**spec, "options": {**spec.get("options", {}), **overrides}}
+        r = run_case(name, spec, scale=a.scale, frames=a.frames, warmup=a.warmup,
                      to_host=a.to_host, freeze=not a.no_freeze)
         if r is None:
             continue
@@ -250,7 +275,7 @@ def main(argv=None):
                     *(f"{s} ms (x full)" for s in STAGES), "overhead x full", "kernels/frame",
                     "kernel ms", "compiled (frame >= 3)"], rows))
     print(f"\n{machine()}; medians of {a.frames} frames after {a.warmup} warm-up frames")
-    write_json(a.out, {"machine": machine(), "results": results})
+    write_json(a.out, {"machine": machine(), "options": overrides, "results": results})
     return 0
 
 

@@ -88,7 +88,9 @@ def _scene_name(s: dict) -> str:
 def label(row: dict) -> str:
     if row["method"] == "foveated":
         opts = json.loads(row["config"]).get("options", {})
-        return f"{opts.get('preset', 'auto')} {row['spp']:.0f} spp"
+        # The options set besides the preset tell two rows of one preset apart.
+        rest = "".join(f", {k} {v}" for k, v in sorted(opts.items()) if k != "preset")
+        return f"{opts.get('preset', 'auto')} {row['spp']:.0f} spp{rest}"
     return f"{row['method']} {row['spp']:.0f} spp"
 
 

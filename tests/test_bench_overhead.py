@@ -50,3 +50,18 @@ def test_forced_evaluates_the_image_inside_the_timed_region(bench):
 def test_bad_arguments_name_the_value(bench):
     with pytest.raises(SystemExit):
         bench.main(["--scale", "0"])
+
+
+def test_set_overrides_every_case_and_is_recorded(bench, tmp_path):
+    assert bench.parse_sets(["reorder='tiles'", "ray_budget=0.2", "foveal_space=film"]) == \
+        {"reorder": "tiles", "ray_budget": 0.2, "foveal_space": "film"}
+    with pytest.raises(ValueError, match="expected OPTION=VALUE"):
+        bench.parse_sets(["reorder"])
+    out = tmp_path / "overhead.json"
+    assert bench.main(["--cases", "voxel-static-vr", "--scale", "0.0625", "--frames", "1",
+                       "--warmup", "3", "--set", "reorder='tiles'", "--out", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert data["options"] == {"reorder": "tiles"}
+    r = data["results"][0]
+    assert r["options"] == {"ray_budget": 0.10, "reorder": "tiles"}
+    assert r["size"] == [64, 64] and r["preset"] == "vr"

@@ -7,6 +7,8 @@
    - reprojection: :mod:`.reproject` (§3.1, the reprojection map)
    - sampling: :mod:`.sampling` (§3.1, the sampling map and its forced edge rays)
    - reorder: :mod:`.reorder` (§3.2, Strategies 1 and 2)
+   - or, for a foveal buffer that keeps nothing on the film, :mod:`.buffer_space` (the
+     G-buffer at its samples and their reprojection) in place of the first two
 2. sparse shading: :mod:`.shading`, with :mod:`.pixel_filter` (§3.3, the shading buffer)
 3. formation: :mod:`.formation` (the registry and the frozen replay) calls the registered
    formation; :mod:`.film`, the paper's, runs on the film's pixels:

@@ -3,20 +3,30 @@
 The passes after the trace cost what the rays cost. With ``sampling_law = "polar"`` the frame
 traces the pixel under each cell of the log-polar buffer
 (:func:`foveated_mi.frame.sampling.foveal_grid`, sized by ``ray_budget``) and every pixel
-of its full-resolution disc. Then:
+of its full-resolution disc. Where the frame keeps its geometry and history is
+``foveal_space``:
 
-1. **History resolve** (Fig. 4) on the film's pixels, as the ``film`` formation does: the
-   traced pixels blended with the reprojected history, so a moving head keeps it.
-2. **The buffer**: each cell takes its pixel's working value (irradiance with ``demodulate``:
-   :mod:`foveated_mi.frame.domain`), normal, position and counts; a cell off
-   the film, or whose pixel holds nothing yet, holds nothing (a non-finite value that every
-   filter tap and the warp leave out).
-3. **Denoising in the buffer** (§3.5): the registered denoiser on the buffer's grid, in the
-   domain it declares; taps wrap around in angle.
-4. **One warp to the film**: each pixel's continuous cell coordinates, bilinear over the
-   cells that hold a value (wrapping in angle, clamping radially), then the albedo of the
-   film's own G-buffer multiplied back with ``demodulate``: the texture's detail is the
-   film's, whatever the cells' size. In the fovea disc every
+``buffer`` (the ``vr`` preset)
+    On the buffer's *samples*: its cells outside the disc, then the disc's pixels
+    (:mod:`foveated_mi.frame.buffer_space`). The plan casts the G-buffer at the samples
+    only and reprojects the history sample to sample; nothing is film-sized but the traced
+    values and the image.
+``film``
+    On the film's pixels: a full-resolution G-buffer, the history resolved on the traced
+    pixels as the ``film`` formation does (Fig. 4), the cells gathered from their pixels, and
+    the albedo multiplied back per pixel after the warp (``demodulate``).
+
+Then, in either:
+
+1. **History resolve** (Fig. 4): the traced values blended with the reprojected history,
+   so a moving head keeps it. A cell or disc pixel that holds nothing yet holds a non-finite
+   value that every filter tap and the warp leave out.
+2. **Denoising in the buffer** (§3.5): the registered denoiser on the buffer's grid, in the
+   domain it declares (irradiance with ``demodulate``: :mod:`foveated_mi.frame.domain`);
+   taps wrap around in angle, and a denoiser that sees a plain image (a network) gets the
+   buffer padded across the seam at angle 0 (:func:`_padded`).
+3. **One warp to the film**: each pixel's continuous cell coordinates, bilinear over the
+   cells that hold a value (wrapping in angle, clamping radially). In the fovea disc every
    pixel was traced: it shows its own resolved value, blended into the warp across the
    disc's last :data:`SEAM` pixels.
 
