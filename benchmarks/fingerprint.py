@@ -48,6 +48,9 @@ CONFIGS = {
     "demodulate-atrous": ({"preset": "guided", "denoiser": "atrous"}, "cornell-box", 2, False),
     "no-freeze": ({"preset": "guided", "freeze": False}, "cornell-box", 2, False),
     "every-pixel": ({"preset": "paper", "sigma_p": 1.0}, "cornell-box", 1, False),
+    "vr": ({"preset": "vr"}, "cornell-box", 3, False),
+    "vr-moving": ({"preset": "vr"}, "cornell-box", 4, True),
+    "vr-film-moving": ({"preset": "vr", "foveal_space": "film"}, "cornell-box", 4, True),
 }
 
 BUFFERS = ("image", "shading", "shading_mask", "history_count", "nearest", "filled",
