@@ -181,8 +181,10 @@ class Planner:
             self._gaze = gaze_key
             frame_seed = self._frame_seed(seed, cut, o["history"])
             map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
-            smap, prob = _sampling.polar_map(width, height, o["gaze"], o["ray_budget"],
-                                             o["theta"])
+            # The sampling map: the samples' pixels (the cells' and the disc's).
+            smap = dr.zeros(mi.Bool, width * height)
+            dr.scatter(smap, mi.Bool(True), pixels, on)
+            prob = dr.select(smap, 1.0, 0.0)
             timer.mark("sampling", smap, prob, reproj.hit, reproj.index)
             ro = _reorder.reorder(smap, width, height, o["reorder"], o["block_height"])
             timer.mark("reorder", ro.wavefront)
