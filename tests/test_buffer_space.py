@@ -88,7 +88,7 @@ def test_a_gaze_move_reads_the_disc_pixels_both_discs_hold():
     W, H = 64, 48
     scene = _scene((W, H))
     integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", denoiser="none",
-                               theta=0.3)
+                               theta=0.3, ray_budget=0.3)
     integ.gaze = (0.45, 0.5)
     mi.render(scene, integrator=integ, seed=0)
     before = set(np.flatnonzero(integ.buffer("traced").ravel()).tolist())
