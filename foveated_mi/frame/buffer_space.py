@@ -25,9 +25,13 @@ normal :math:`n_j` satisfy :math:`|n_j \cdot (x - x_j)| \le \tau\,\lVert x - c\r
 (:math:`\tau` = ``reprojection_tolerance``, :math:`c` the previous camera's centre) and
 :math:`n \cdot n_j \ge` :data:`NORMAL_AGREEMENT`. A plane test, not the film's depth test:
 a cell's sample sits anywhere within a cell many pixels wide, where depths differ along a
-slanted surface but the plane does not. A miss reads a previous miss. With ``exclusive``
-reads (the default) a previous sample serves only the sample landing nearest its pixel's
-centre, so a gaze move that makes cells finer does not copy one noisy value into several.
+slanted surface but the plane does not. A miss reads a previous miss. A disc pixel reads
+only a previous sample whose pixel it lands in (a pixel's history, as on the film), never a
+coarse cell's value from the pixel beside it. With ``exclusive``
+reads (the default) a previous sample serves only the cell, and only the disc pixel, landing
+nearest its pixel's centre, so a gaze move that makes cells finer does not copy one noisy
+value into several cells (a cell of the rings at the disc's edge and the disc pixel under it
+share their pixel, and each keeps its history).
 
 A still camera over an unchanged scene with the gaze still maps every sample onto itself
 (:func:`still_map`); a camera cut is judged on the samples as on the film
@@ -176,18 +180,25 @@ def reprojection_map(gb: GBuffer, on: mi.Bool, history: History | None, lay: Sam
     same_background = ~hit & ~dr.isfinite(prev_depth)
     agree = inside & (same_surface | same_background)
     hits = agree & (prev_count > 0)
+    # A disc pixel's history is a pixel's: it reads a previous sample only when it lands in
+    # that sample's pixel, never a coarser cell's value from a pixel beside it.
+    pixel = (dr.abs(uv.x - centre.x) <= 0.5) & (dr.abs(uv.y - centre.y) <= 0.5)
+    hits &= (dr.arange(mi.UInt32, n) < lay.cells) | pixel
     if mode == "exclusive":
-        hits &= _nearest_claim(uv, centre, j, hits, n)
+        # Exclusive within each part: a cell and a disc pixel on one pixel (the rings at the
+        # disc's edge) both read it; the denoiser sees the cells alone.
+        part = mi.UInt32(dr.select(dr.arange(mi.UInt32, n) < lay.cells, 0, n))
+        hits &= _nearest_claim(uv, centre, j + part, hits, n, 2 * n)
     return ReprojectionMap(uv, hits, j, agree)
 
 
-def _nearest_claim(uv: mi.Point2f, centre: mi.Point2f, prev: mi.UInt32, claims: mi.Bool,
-                   n: int) -> mi.Bool:
-    """Which of the ``claims`` win their previous sample ``prev``: the one landing nearest
-    its pixel's centre, ties to the lowest sample index (an order-free minimum)."""
+def _nearest_claim(uv: mi.Point2f, centre: mi.Point2f, target: mi.UInt32, claims: mi.Bool,
+                   n: int, targets: int) -> mi.Bool:
+    """Which of the ``n`` ``claims`` win their ``target`` (one of ``targets``): the one landing
+    nearest its pixel's centre, ties to the lowest sample index (an order-free minimum)."""
     d2 = dr.reinterpret_array(mi.UInt32, dr.square(uv.x - centre.x) +
                               dr.square(uv.y - centre.y))
     key = (mi.UInt64(d2) << 32) | mi.UInt64(dr.arange(mi.UInt32, n))
-    best = dr.full(mi.UInt64, 0xFFFFFFFFFFFFFFFF, n)
-    dr.scatter_reduce(dr.ReduceOp.Min, best, key, prev, claims)
-    return claims & (dr.gather(mi.UInt64, best, prev, claims) == key)
+    best = dr.full(mi.UInt64, 0xFFFFFFFFFFFFFFFF, targets)
+    dr.scatter_reduce(dr.ReduceOp.Min, best, key, target, claims)
+    return claims & (dr.gather(mi.UInt64, best, target, claims) == key)
