@@ -284,3 +284,21 @@ def test_oidn_runs_in_the_buffer():
     ok = integ.buffer("cell_mask").astype(bool)
     assert np.isfinite(filtered[ok]).all()
     assert not np.allclose(filtered[ok], cells[ok])   # it filtered something
+
+
+def test_a_moving_head_and_gaze_compile_nothing_from_frame_3():
+    scene = _scene()
+    params = mi.traverse(scene)
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
+    compiled = []
+    for k in range(6):
+        a = np.radians(0.5 * k)
+        params["sensor.to_world"] = _look([3.9 * np.sin(a), 0.0, 3.9 * np.cos(a)])
+        params.update()
+        integ.gaze = (0.4 + 0.05 * k, 0.5 - 0.03 * k)
+        with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+            dr.kernel_history_clear()
+            np.array(mi.render(scene, integrator=integ, seed=k))
+            hist = dr.kernel_history([dr.KernelType.JIT])
+        compiled.append(sum(1 for h in hist if not h.get("cache_hit", True)))
+    assert compiled[3:] == [0, 0, 0], compiled
