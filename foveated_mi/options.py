@@ -430,9 +430,11 @@ PRESETS: dict[str, dict[str, Any]] = {
     "guided": {"demodulate": True, "reconstruction": "guided", "denoiser": "svgf",
                "emission_edges": True, "reorder": "tiles"},
     # The formation in a log-polar buffer around the gaze, sized by the ray budget: no
-    # reconstruction on the film, the denoiser in the buffer, one warp.
+    # reconstruction on the film, the denoiser in the buffer, one warp. Tiles: the launch of
+    # its samples built in tile order costs what compact's does, and its scattered rays
+    # trace faster in 2D packets (docs/results.md#the-vr-preset).
     "vr": {"sampling_law": "polar", "formation": "foveal", "ray_budget": 0.1, "theta": 0.15,
-           "reorder": "compact", "edge_threshold": 0.0, "denoiser": "svgf",
+           "reorder": "tiles", "edge_threshold": 0.0, "denoiser": "svgf",
            "atrous_iterations": 2},
 }
 PRESET_NAMES = ("auto", *PRESETS)

@@ -302,3 +302,22 @@ def test_a_moving_head_and_gaze_compile_nothing_from_frame_3():
             hist = dr.kernel_history([dr.KernelType.JIT])
         compiled.append(sum(1 for h in hist if not h.get("cache_hit", True)))
     assert compiled[3:] == [0, 0, 0], compiled
+
+
+@pytest.mark.parametrize("mode", ["compact", "tiles", "rows_blocks"])
+@pytest.mark.parametrize("size", [(61, 37), (64, 48)])
+def test_the_launch_of_a_set_of_pixels_is_the_launch_of_its_map(mode, size):
+    """Built from the pixels (in tile order directly for ``tiles``), the launch and the map
+    are those of :func:`reorder` on the map the pixels make, repeats traced once."""
+    from foveated_mi.frame.reorder import launch_of_pixels, reorder
+    W, H = size
+    rng = np.random.default_rng(7)
+    pixels = mi.UInt32(rng.integers(0, W * H, 900).astype(np.uint32))   # with repeats
+    on = mi.Bool(rng.random(900) < 0.8)
+    ro, smap = launch_of_pixels(pixels, on, W, H, mode)
+    expected = np.zeros(W * H, bool)
+    expected[np.array(pixels)[np.array(on)]] = True
+    np.testing.assert_array_equal(np.array(smap), expected)
+    ref = reorder(mi.Bool(expected), W, H, mode)
+    np.testing.assert_array_equal(np.array(ro.wavefront), np.array(ref.wavefront))
+    assert (ro.active is None) == (ref.active is None)

@@ -181,12 +181,11 @@ class Planner:
             self._gaze = gaze_key
             frame_seed = self._frame_seed(seed, cut, o["history"])
             map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
-            # The sampling map: the samples' pixels (the cells' and the disc's).
-            smap = dr.zeros(mi.Bool, width * height)
-            dr.scatter(smap, mi.Bool(True), pixels, on)
+            timer.mark("sampling", reproj.hit, reproj.index)
+            # The launch of the samples' pixels, and the sampling map they make.
+            ro, smap = _reorder.launch_of_pixels(pixels, on, width, height, o["reorder"],
+                                                 o["block_height"])
             prob = dr.select(smap, 1.0, 0.0)
-            timer.mark("sampling", smap, prob, reproj.hit, reproj.index)
-            ro = _reorder.reorder(smap, width, height, o["reorder"], o["block_height"])
             timer.mark("reorder", ro.wavefront)
         return FramePlan(sensor=sensor, width=width, height=height, spp=spp, seed=frame_seed,
                          map_seed=map_seed, gbuffer=gb, edges=None, sampling_map=smap,

@@ -283,3 +283,40 @@ def reorder(sampling_map: mi.Bool, width: int, height: int, mode: str = "compact
         at = dr.compress(dr.gather(mi.Bool, sampling_map, order))
         return Reordered(dr.gather(mi.UInt32, order, at), None, None, mode)
     return _row_launch(sampling_map, width, height, mode, block_height)
+
+
+def launch_of_pixels(pixels: mi.UInt32, on: mi.Bool, width: int, height: int,
+                     mode: str = "compact", block_height: int = 8) -> tuple[Reordered, mi.Bool]:
+    """The launch of a set of pixels (``pixels`` where ``on``; repeats traced once) and the
+    sampling map they make, for a plan that knows its pixels rather than a map (the foveal
+    buffer's samples). ``compact``: row-major, as :func:`reorder`. ``tiles``: in
+    :data:`TILE` x :data:`TILE` tiles, built in tile order directly (a tile index is
+    arithmetic on the pixel), so the launch costs what ``compact``'s does, with no
+    film-sized gather; the film-order map is then a lazy gather, evaluated only where it is
+    read. Other modes: :func:`reorder` of the map."""
+    check_choice("reorder", mode, REORDER_MODES)
+    y = pixels // width
+    x = pixels - y * width
+    if mode != "tiles":
+        smap = dr.zeros(mi.Bool, width * height)
+        dr.scatter(smap, mi.Bool(True), pixels, on)
+        return reorder(smap, width, height, mode, block_height), smap
+    tiles_x, tiles_y = -(-width // TILE), -(-height // TILE)
+    area = TILE * TILE
+
+    def tile_index(x, y):
+        return ((y // TILE) * tiles_x + x // TILE) * area + (y % TILE) * TILE + x % TILE
+    tmap = dr.zeros(mi.Bool, tiles_x * tiles_y * area)
+    dr.scatter(tmap, mi.Bool(True), tile_index(x, y), on)
+    at = dr.compress(tmap)
+    t, r = at // area, at % area
+    wavefront = ((t // tiles_x) * TILE + r // TILE) * width + (t % tiles_x) * TILE + r % TILE
+    _, fx, fy = _pixel_xy(width, height)
+    smap = dr.gather(mi.Bool, tmap, tile_index(fx, fy))
+    return Reordered(wavefront, None, None, mode), smap
+
+
+def _pixel_xy(width: int, height: int) -> tuple[mi.UInt32, mi.UInt32, mi.UInt32]:
+    idx = dr.arange(mi.UInt32, width * height)
+    y = idx // width
+    return idx, idx - y * width, y
