@@ -48,7 +48,7 @@ import mitsuba as mi
 from ..kernels.buffers import GBuffer
 from ..kernels.grid import Grid
 from ..kernels.polar import PolarGrid
-from .reproject import History, ReprojectionMap, project
+from .reproject import History, ReprojectionMap, nearest_claim
 from .sampling import foveal_grid, fovea_radius
 
 #: Smallest cosine between a sample's normal and its previous sample's for one surface.
@@ -172,7 +172,7 @@ def reprojection_map(gb: GBuffer, on: mi.Bool, history: History | None, lay: Sam
     prev_x = dr.gather(mi.Point3f, history.position, j, inside)
     prev_n = mi.Vector3f(dr.gather(mi.Normal3f, history.normal, j, inside))
     prev_count = dr.gather(mi.Float, history.count, j, inside)
-    _, dist = project(history.camera, x, width, height)
+    dist = dr.norm(x - history.camera.origin)
     tol = dr.opaque(mi.Float, tolerance)
     same_surface = hit & dr.isfinite(prev_depth) & \
         (dr.abs(dr.dot(prev_n, x - prev_x)) <= tol * dist) & \
@@ -188,17 +188,6 @@ def reprojection_map(gb: GBuffer, on: mi.Bool, history: History | None, lay: Sam
         # Exclusive within each part: a cell and a disc pixel on one pixel (the rings at the
         # disc's edge) both read it; the denoiser sees the cells alone.
         part = mi.UInt32(dr.select(dr.arange(mi.UInt32, n) < lay.cells, 0, n))
-        hits &= _nearest_claim(uv, centre, j + part, hits, n, 2 * n)
+        hits &= nearest_claim(uv, centre, j + part, hits, 2 * n)
     return ReprojectionMap(uv, hits, j, agree)
 
-
-def _nearest_claim(uv: mi.Point2f, centre: mi.Point2f, target: mi.UInt32, claims: mi.Bool,
-                   n: int, targets: int) -> mi.Bool:
-    """Which of the ``n`` ``claims`` win their ``target`` (one of ``targets``): the one landing
-    nearest its pixel's centre, ties to the lowest sample index (an order-free minimum)."""
-    d2 = dr.reinterpret_array(mi.UInt32, dr.square(uv.x - centre.x) +
-                              dr.square(uv.y - centre.y))
-    key = (mi.UInt64(d2) << 32) | mi.UInt64(dr.arange(mi.UInt32, n))
-    best = dr.full(mi.UInt64, 0xFFFFFFFFFFFFFFFF, targets)
-    dr.scatter_reduce(dr.ReduceOp.Min, best, key, target, claims)
-    return claims & (dr.gather(mi.UInt64, best, target, claims) == key)

@@ -94,12 +94,15 @@ def _cells(values: mi.Color3f, resolved: Resolved, gb: GBuffer, q: mi.UInt32, ha
     value = dr.select(has, dr.gather(mi.Color3f, values, q, has), nan)
     res = Resolved(value, has, dr.gather(mi.Float, resolved.count, q, has),
                    dr.zeros(mi.Bool, dr.width(q)), dr.gather(mi.Float, resolved.moment2, q, has))
-    take = lambda t, v: None if v is None else dr.gather(t, v, q, has)  # noqa: E731
-    cgb = GBuffer(position=take(mi.Point3f, gb.position), normal=take(mi.Normal3f, gb.normal),
-                  depth=take(mi.Float, gb.depth), hit=take(mi.Bool, gb.hit) & has,
-                  direction=take(mi.Vector3f, gb.direction), albedo=take(mi.Color3f, gb.albedo),
-                  emission=take(mi.Color3f, gb.emission))
-    return res, cgb
+    cgb = _gather(gb, q, has)
+    return res, cgb._replace(hit=cgb.hit & has)
+
+
+def _gather(bundle, index: mi.UInt32, active: mi.Bool | bool = True):
+    """Every buffer of a named bundle (a ``GBuffer``, ``Resolved``) at ``index`` (None stays
+    None)."""
+    return type(bundle)(*(None if v is None else dr.gather(type(v), v, index, active)
+                          for v in bundle))
 
 
 def _denoise(res: Resolved, cgb: GBuffer, grid: PolarGrid, o: dict[str, Any],
@@ -137,22 +140,16 @@ def _padded(fn, grid: PolarGrid):
     to it."""
     padded, source, back = wrap_padding(grid, PAD)
 
-    def pad(v, t=None):
-        return None if v is None else dr.gather(t or type(v), v, source)
-
-    def crop(v):
-        return None if v is None else dr.gather(type(v), v, back)
+    def pad(v):
+        return None if v is None else dr.gather(type(v), v, source)
 
     def call(ctx: DenoiseInput) -> Denoised:
-        gb, res = ctx.gbuffer, ctx.resolved
         wide = ctx._replace(
-            image=pad(ctx.image),
-            gbuffer=GBuffer(*(pad(v) for v in gb)),
-            resolved=Resolved(*(pad(v) for v in res)),
+            image=pad(ctx.image), gbuffer=_gather(ctx.gbuffer, source),
+            resolved=_gather(ctx.resolved, source),
             nearest=dr.arange(mi.UInt32, padded.size), width=padded.width,
             height=padded.height, samples=pad(ctx.samples), grid=padded)
-        out = as_denoised(fn(wide))
-        return Denoised(*(crop(v) for v in out))
+        return _gather(as_denoised(fn(wide)), back)
     return call
 
 
@@ -268,16 +265,12 @@ def _form_on_samples(shading: ShadingBuffer, inp: FormationInput, o: dict[str, A
     timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
     # The cells: the first samples, in the working domain (irradiance with demodulate).
     c = dr.arange(mi.UInt32, nc)
-    has = dr.gather(mi.Bool, resolved.mask, c)
-    take = lambda t, v: None if v is None else dr.gather(t, v, c)  # noqa: E731
-    cgb = GBuffer(position=take(mi.Point3f, gb.position), normal=take(mi.Normal3f, gb.normal),
-                  depth=take(mi.Float, gb.depth), hit=take(mi.Bool, gb.hit) & has,
-                  direction=take(mi.Vector3f, gb.direction), albedo=take(mi.Color3f, gb.albedo),
-                  emission=take(mi.Color3f, gb.emission))
-    cells = dr.select(has, domain.to_irradiance(take(mi.Color3f, resolved.shading), cgb, o),
-                      dr.nan)
-    res = Resolved(cells, has, take(mi.Float, resolved.count), dr.zeros(mi.Bool, nc),
-                   take(mi.Float, resolved.moment2))
+    cr = _gather(resolved, c)
+    has = cr.mask
+    cgb = _gather(gb, c)
+    cgb = cgb._replace(hit=cgb.hit & has)
+    cells = dr.select(has, domain.to_irradiance(cr.shading, cgb, o), dr.nan)
+    res = Resolved(cells, has, cr.count, dr.zeros(mi.Bool, nc), cr.moment2)
     timer.mark("reconstruct", res.shading, res.count, cgb.normal, cgb.position)
     # Denoising in the buffer (§3.5); each cell's albedo multiplied back before the warp:
     # there is no full-resolution albedo to take it from.

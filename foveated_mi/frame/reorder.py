@@ -44,6 +44,7 @@ from typing import Callable
 import drjit as dr
 import mitsuba as mi
 
+from ..kernels import pixel_coords
 from ..validate import check_choice, check_int
 
 REORDER_MODES = ("none", "rows", "rows_blocks", "compact", "tiles")
@@ -295,8 +296,6 @@ def launch_of_pixels(pixels: mi.UInt32, on: mi.Bool, width: int, height: int,
     film-sized gather; the film-order map is then a lazy gather, evaluated only where it is
     read. Other modes: :func:`reorder` of the map."""
     check_choice("reorder", mode, REORDER_MODES)
-    y = pixels // width
-    x = pixels - y * width
     if mode != "tiles":
         smap = dr.zeros(mi.Bool, width * height)
         dr.scatter(smap, mi.Bool(True), pixels, on)
@@ -306,17 +305,13 @@ def launch_of_pixels(pixels: mi.UInt32, on: mi.Bool, width: int, height: int,
 
     def tile_index(x, y):
         return ((y // TILE) * tiles_x + x // TILE) * area + (y % TILE) * TILE + x % TILE
+    y = pixels // width
     tmap = dr.zeros(mi.Bool, tiles_x * tiles_y * area)
-    dr.scatter(tmap, mi.Bool(True), tile_index(x, y), on)
+    dr.scatter(tmap, mi.Bool(True), tile_index(pixels - y * width, y), on)
     at = dr.compress(tmap)
     t, r = at // area, at % area
     wavefront = ((t // tiles_x) * TILE + r // TILE) * width + (t % tiles_x) * TILE + r % TILE
-    _, fx, fy = _pixel_xy(width, height)
+    _, fx, fy = pixel_coords(width, height)
     smap = dr.gather(mi.Bool, tmap, tile_index(fx, fy))
     return Reordered(wavefront, None, None, mode), smap
 
-
-def _pixel_xy(width: int, height: int) -> tuple[mi.UInt32, mi.UInt32, mi.UInt32]:
-    idx = dr.arange(mi.UInt32, width * height)
-    y = idx // width
-    return idx, idx - y * width, y

@@ -171,7 +171,7 @@ def reprojection_map(position: mi.Point3f, hit: mi.Bool, history: History | None
     agree = inside & (same_surface | same_background)
     hits = agree & (prev_count > 0)
     if mode == "exclusive":
-        hits &= _nearest_claim(uv, px, py, prev, hits, n)
+        hits &= nearest_claim(uv, mi.Point2f(px + 0.5, py + 0.5), prev, hits, n)
     return ReprojectionMap(uv, hits, prev, agree)
 
 
@@ -205,18 +205,19 @@ def _any_within(values, x: mi.Int32, y: mi.Int32, width: int, height: int, reach
     return found
 
 
-def _nearest_claim(uv: mi.Point2f, px: mi.Float, py: mi.Float, prev: mi.UInt32,
-                   claims: mi.Bool, n: int) -> mi.Bool:
-    """Which of the ``claims`` win their previous pixel ``prev``: the one landing nearest its
-    centre, ties to the lowest pixel index (an order-free minimum: the same on every run)."""
+def nearest_claim(uv: mi.Point2f, centre: mi.Point2f, target: mi.UInt32, claims: mi.Bool,
+                  targets: int) -> mi.Bool:
+    """Which of the ``claims`` win their ``target`` (one of ``targets`` previous pixels or
+    samples, whose pixel's centre is ``centre``): the one landing nearest that centre, ties
+    to the lowest claimant index (an order-free minimum: the same on every run)."""
     # A non-negative float's bits order like the float: the exact distance, no quantisation;
-    # the pixel index below it breaks ties, so one 64-bit minimum decides.
-    d2 = dr.reinterpret_array(mi.UInt32, dr.square(uv.x - (px + 0.5)) +
-                              dr.square(uv.y - (py + 0.5)))
-    key = (mi.UInt64(d2) << 32) | mi.UInt64(dr.arange(mi.UInt32, n))
-    best = dr.full(mi.UInt64, 0xFFFFFFFFFFFFFFFF, n)
-    dr.scatter_reduce(dr.ReduceOp.Min, best, key, prev, claims)
-    return claims & (dr.gather(mi.UInt64, best, prev, claims) == key)
+    # the claimant's index below it breaks ties, so one 64-bit minimum decides.
+    d2 = dr.reinterpret_array(mi.UInt32, dr.square(uv.x - centre.x) +
+                              dr.square(uv.y - centre.y))
+    key = (mi.UInt64(d2) << 32) | mi.UInt64(dr.arange(mi.UInt32, dr.width(claims)))
+    best = dr.full(mi.UInt64, 0xFFFFFFFFFFFFFFFF, targets)
+    dr.scatter_reduce(dr.ReduceOp.Min, best, key, target, claims)
+    return claims & (dr.gather(mi.UInt64, best, target, claims) == key)
 
 
 def unless_cut(reproj: ReprojectionMap, fraction: float) -> tuple[ReprojectionMap, mi.Bool]:
