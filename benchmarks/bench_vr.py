@@ -260,6 +260,8 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", nargs="+", default=None,
                     help="scenes by name (voxel-city, staircase)")
     ap.add_argument("--out", default=os.path.join("out", "vr"))
+    ap.add_argument("--study", default=STUDY, help="the study file (default: "
+                    "configs/studies/vr.toml)")
     ap.add_argument("--results", default=RESULTS, help="where the tables and pictures go")
     ap.add_argument("--variant", default=None, help="Mitsuba variant (default: as the package "
                     "chooses)")
@@ -274,7 +276,7 @@ def main(argv=None) -> int:
     from foveated_mi.study import parse_study, run_study
 
     t0 = time.perf_counter()
-    data = overridden(read_toml("study", STUDY)[0], a)
+    data = overridden(read_toml("study", a.study)[0], a)
     conditions = dict(CONDITIONS) if perceptual.available() else {"headset": "psnr_fovea"}
     os.makedirs(a.results, exist_ok=True)
     report = {"machine": {"processor": platform.processor() or platform.machine(),
@@ -285,7 +287,8 @@ def main(argv=None) -> int:
     cmd = "python benchmarks/bench_vr.py" + "".join(
         f" --{k} {' '.join(map(str, v)) if isinstance(v, list) else v}"
         for k, v in (("size", a.size), ("frames", a.frames), ("seeds", a.seeds),
-                     ("scenes", a.scenes)) if v)
+                     ("scenes", a.scenes),
+                     ("study", None if a.study == STUDY else os.path.relpath(a.study))) if v)
     lines = [f"# The VR study ({data['size'][0]}x{data['size'][1]}, {mi.variant()})", "",
              f"Command: `{cmd}`  ",
              f"Machine: {report['machine']['processor']}, {os.cpu_count()} cores, "
@@ -298,7 +301,8 @@ def main(argv=None) -> int:
              + ", ".join(f"`{c}` ({k})" for k, c in conditions.items())
              + ("" if perceptual.available() else
                 " (no FovVideoVDP here: the perceptual extra is not installed)") + ".", ""]
-    spec = parse_study(data, base_dir=os.path.dirname(STUDY), source=STUDY, name="vr")
+    spec = parse_study(data, base_dir=os.path.dirname(os.path.abspath(a.study)), source=a.study,
+                       name="vr")
     res = run_study(spec, out=a.out, progress=not a.no_progress, variant=a.variant)
     for cond, column in conditions.items():
         sps = speedups(res.rows, column)

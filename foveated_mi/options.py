@@ -327,6 +327,14 @@ _SCHEMA: tuple[Option, ...] = (
            "(:mod:`foveated_mi.frame.buffer_space`); ``film`` keeps a full-resolution "
            "G-buffer and the history on the film's pixels (needed by ``foveal_upsampling = "
            "'joint'`` and ``emission_edges``)"),
+    Option("foveal_disc", "resolved", "string", "what the foveal formation shows in its "
+           "full-resolution disc: its pixels as resolved with the history, or denoised too",
+           choices=("resolved", "denoised"),
+           doc="What ``formation = 'foveal'`` shows in the disc around the gaze, where every "
+           "pixel is traced: ``resolved``, each pixel's own value blended with its history; "
+           "``denoised``, the same values through the frame's denoiser on the disc's square "
+           "patch of pixels (a plain image, so a network gets what it was trained on), as the "
+           "buffer's cells are"),
     Option("reconstruction", "sibson", "string", "interpolation of the sparse shading buffer "
            "(§3.4)", choices=lambda: reconstructions(),
            doc="Interpolation of the sparse shading buffer (§3.4); ``guided`` and "

@@ -45,6 +45,8 @@ TRANSPOSE_ONLY = [
     ("vr_demodulate", {"preset": "vr", "demodulate": True}),
     ("vr_joint", {"preset": "vr", "foveal_space": "film", "foveal_upsampling": "joint"}),
     ("vr_film", {"preset": "vr", "foveal_space": "film"}),
+    ("vr_disc", {"preset": "vr", "foveal_disc": "denoised"}),
+    ("vr_film_disc", {"preset": "vr", "foveal_space": "film", "foveal_disc": "denoised"}),
 ]
 
 BALL_CENTRE = (0.3, -0.6, 0.3)

@@ -217,3 +217,71 @@ def test_the_joint_warp_is_bilinear_on_one_surface_and_stops_at_an_edge():
                          gaze, W, H))[0] > 0
     # Four weighted terms, their sum and a division, in float32 (values below 1).
     np.testing.assert_allclose(mixed[:, near], only[:, near], rtol=0, atol=tolerances.gamma(8))
+
+
+def _disc_masks(integ, W, H, margin):
+    """Film pixels well inside the disc (the seam's blend excluded) and well outside it."""
+    from foveated_mi.frame.foveal import SEAM
+    from foveated_mi.frame.buffer_space import layout
+    r0 = layout(W, H, integ.options).grid.fovea
+    yy, xx = np.mgrid[0:H, 0:W]
+    r = np.hypot(xx + 0.5 - W / 2, yy + 0.5 - H / 2)
+    return r <= r0 - SEAM, r > r0 + margin
+
+
+@pytest.mark.parametrize("space", ["buffer", "film"])
+def test_a_denoised_disc_changes_the_disc_only_and_brings_it_nearer_the_reference(space):
+    W, H = 64, 48
+    scene = _scene((W, H), spp=1)
+    ref = np.array(mi.render(scene, integrator=scene.integrator(), spp=1024, seed=99))
+    images, err = {}, {}
+    for disc in ("resolved", "denoised"):
+        integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", history=False,
+                                   foveal_space=space, foveal_disc=disc)
+        frames = [np.array(mi.render(scene, integrator=integ, spp=1, seed=s)) for s in range(4)]
+        inner, outer = _disc_masks(integ, W, H, 1.0)
+        images[disc] = frames
+        err[disc] = np.mean([np.mean((f[inner] - ref[inner]) ** 2) for f in frames])
+    assert inner.sum() > 20 and outer.sum() > 1000
+    # Outside the disc nothing changes: the same rays, the same cells, the same warp.
+    for a, b in zip(images["resolved"], images["denoised"]):
+        np.testing.assert_array_equal(a[outer], b[outer])
+    # Inside it, SVGF on the disc's 1-spp pixels: the 1-spp noise (about all of the
+    # resolved disc's error) falls by far more than the filter's bias adds.
+    assert err["denoised"] < 0.7 * err["resolved"], err
+
+
+@pytest.mark.parametrize("space", ["buffer", "film"])
+def test_a_disc_without_a_denoiser_shows_its_resolved_pixels(space):
+    W, H = 64, 48
+    scene = _scene((W, H), spp=2)
+    out = []
+    for disc in ("resolved", "denoised"):
+        integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", denoiser="none",
+                                   foveal_space=space, foveal_disc=disc)
+        out.append([np.array(mi.render(scene, integrator=integ, seed=s)) for s in range(2)])
+    for a, b in zip(*out):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_oidn_denoises_the_disc_as_a_plain_image():
+    from foveated_mi.denoise import oidn_available
+    if not oidn_available():
+        pytest.skip("pyoidn not installed")
+    W, H = 96, 64
+    scene = _scene((W, H), spp=1)
+    images = {}
+    for disc in ("resolved", "denoised"):
+        integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", denoiser="oidn",
+                                   history=False, foveal_disc=disc)
+        images[disc] = np.array(mi.render(scene, integrator=integ, seed=3))
+    inner, outer = _disc_masks(integ, W, H, 1.0)
+    assert np.isfinite(images["denoised"]).all()
+    np.testing.assert_array_equal(images["resolved"][outer], images["denoised"][outer])
+    assert not np.allclose(images["resolved"][inner], images["denoised"][inner])
+
+
+def test_a_bad_foveal_disc_gets_one_line():
+    with pytest.raises(ParameterError, match=r"foveal_disc = 'blurred' is invalid") as e:
+        FoveatedIntegrator(preset="vr", foveal_disc="blurred")
+    assert "\n" not in str(e.value)

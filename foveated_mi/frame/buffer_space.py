@@ -100,24 +100,41 @@ def sample_pixels(lay: SampleLayout, gaze: mi.Point2f, width: int, height: int
     idx = dr.arange(mi.UInt32, lay.size)
     is_cell = idx < nc
     p = grid.film_position(dr.select(is_cell, idx, 0), gaze)
-    k = mi.Int32(dr.select(is_cell, 0, idx - nc))
+    kx, ky = _patch_xy(lay, mi.Int32(dr.select(is_cell, 0, idx - nc)), gaze)
+    px = dr.select(is_cell, mi.Int32(dr.floor(p.x)), kx)
+    py = dr.select(is_cell, mi.Int32(dr.floor(p.y)), ky)
+    on = (px >= 0) & (px < width) & (py >= 0) & (py < height)
+    on &= is_cell | _in_disc(lay, px, py, gaze)
+    return mi.UInt32(dr.select(on, py * width + px, 0)), on
+
+
+def _patch_xy(lay: SampleLayout, k: mi.Int32, gaze: mi.Point2f) -> tuple[mi.Int32, mi.Int32]:
+    """The film pixel of the patch's ``k``-th pixel (row by row)."""
     x0, y0 = _patch_origin(lay, gaze)
     row = k // lay.side
-    px = dr.select(is_cell, mi.Int32(dr.floor(p.x)), x0 + (k - row * lay.side))
-    py = dr.select(is_cell, mi.Int32(dr.floor(p.y)), y0 + row)
-    on = (px >= 0) & (px < width) & (py >= 0) & (py < height)
+    return x0 + (k - row * lay.side), y0 + row
+
+
+def _in_disc(lay: SampleLayout, x: mi.Int32, y: mi.Int32, gaze: mi.Point2f) -> mi.Bool:
+    """Whether pixel ``(x, y)``'s centre lies within :math:`r_0` of the gaze."""
     r0 = lay.grid.fovea
-    d2 = dr.square(mi.Float(px) + 0.5 - gaze.x) + dr.square(mi.Float(py) + 0.5 - gaze.y)
-    on &= is_cell | (d2 <= r0 * r0)
+    return dr.square(mi.Float(x) + 0.5 - gaze.x) + dr.square(mi.Float(y) + 0.5 - gaze.y) \
+        <= r0 * r0
+
+
+def patch_pixels(lay: SampleLayout, gaze: mi.Point2f, width: int, height: int
+                 ) -> tuple[mi.UInt32, mi.Bool]:
+    """The film pixel (flat index) of each pixel of the disc's square patch, row by row, and
+    whether it is the disc's: on the film, its centre within :math:`r_0` of the gaze."""
+    px, py = _patch_xy(lay, dr.arange(mi.Int32, lay.side * lay.side), gaze)
+    on = (px >= 0) & (px < width) & (py >= 0) & (py < height) & _in_disc(lay, px, py, gaze)
     return mi.UInt32(dr.select(on, py * width + px, 0)), on
 
 
 def disc_sample(lay: SampleLayout, x: mi.Int32, y: mi.Int32, gaze: mi.Point2f
                 ) -> tuple[mi.UInt32, mi.Bool]:
     """The patch sample of pixel ``(x, y)``, and whether its centre lies in the disc."""
-    r0 = lay.grid.fovea
-    d2 = dr.square(mi.Float(x) + 0.5 - gaze.x) + dr.square(mi.Float(y) + 0.5 - gaze.y)
-    inside = d2 <= r0 * r0
+    inside = _in_disc(lay, x, y, gaze)
     x0, y0 = _patch_origin(lay, gaze)
     k = (y - y0) * lay.side + (x - x0)
     inside &= (k >= 0) & (k < lay.side * lay.side)

@@ -62,7 +62,7 @@ SEAM = 2.0
 
 #: Options the formation reads besides its denoiser's.
 READS = ("max_history", "ray_budget", "theta", "denoiser", "clamp", "demodulate",
-         "foveal_upsampling", "foveal_space")
+         "foveal_upsampling", "foveal_space", "foveal_disc")
 
 #: The buffers it returns on the film's grid (the others are on the buffer's).
 ON_FILM = ("traced", "shading", "shading_mask", "history_count", "resampled", "image")
@@ -105,7 +105,7 @@ def _gather(bundle, index: mi.UInt32, active: mi.Bool | bool = True):
                           for v in bundle))
 
 
-def _denoise(res: Resolved, cgb: GBuffer, grid: PolarGrid, o: dict[str, Any],
+def _denoise(res: Resolved, cgb: GBuffer, grid: Grid, o: dict[str, Any],
              grad_pass: bool) -> Denoised:
     """The registered denoiser on the buffer's working values (irradiance with
     ``demodulate``), in the domain it declares; returns working values."""
@@ -115,7 +115,7 @@ def _denoise(res: Resolved, cgb: GBuffer, grid: PolarGrid, o: dict[str, Any],
         return Denoised(res.shading)
     ctx = DenoiseInput(res.shading, cgb, res, dr.arange(mi.UInt32, grid.size), grid.width,
                        grid.height, {k: o[k] for k in entry.reads}, grad_pass, None, grid)
-    call = entry.fn if entry.grid_aware else _padded(entry.fn, grid)
+    call = entry.fn if entry.grid_aware or not grid.wrap_x else _padded(entry.fn, grid)
     if entry.domain == "irradiance":
         return as_denoised(call(ctx))
     radiance = domain.to_radiance(res.shading, cgb, o)
@@ -151,6 +151,22 @@ def _padded(fn, grid: PolarGrid):
             height=padded.height, samples=pad(ctx.samples), grid=padded)
         return _gather(as_denoised(fn(wide)), back)
     return call
+
+
+def _disc_patch(resolved: Resolved, gb: GBuffer, index: mi.UInt32, on: mi.Bool, side: int,
+                o: dict[str, Any], grad_pass: bool) -> mi.Color3f:
+    """``foveal_disc = "denoised"``: the disc's square patch of ``side`` x ``side`` pixels
+    (``index`` into ``resolved`` and ``gb``; ``on`` where the pixel's centre lies in the
+    disc) through the frame's denoiser, as the cells are; radiance, in patch order. The
+    patch is a plain image of full-resolution pixels: no seam, no padding."""
+    pr = _gather(resolved, index, on)
+    has = on & pr.mask
+    pgb = _gather(gb, index, on)
+    pgb = pgb._replace(hit=pgb.hit & has)
+    value = dr.select(has, domain.to_irradiance(pr.shading, pgb, o), dr.nan)
+    res = Resolved(value, has, pr.count, dr.zeros(mi.Bool, side * side), pr.moment2)
+    out = _denoise(res, pgb, Grid(side, side), o, grad_pass)
+    return domain.to_radiance(out.image, pgb, o, clamp=True)
 
 
 def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, width: int,
@@ -235,7 +251,17 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any],
     r = dr.norm(p - inp.gaze)
     t = dr.clip((grid.fovea - r) / SEAM, 0.0, 1.0)
     own = resolved.mask & (t > 0.0)
-    image = dr.select(own, dr.lerp(warped, resolved.shading, t), warped)
+    mine = resolved.shading
+    if o["foveal_disc"] == "denoised":
+        # The disc's pixels through the denoiser, on their square patch of the film.
+        lay = _buffer_space.layout(width, height, o)
+        pixels, on = _buffer_space.patch_pixels(lay, inp.gaze, width, height)
+        disc = _disc_patch(resolved, gb, pixels, on, lay.side, o, grad_pass)
+        _, x, y = film.cells()
+        k, in_disc = _buffer_space.disc_sample(lay, mi.Int32(x), mi.Int32(y), inp.gaze)
+        own &= in_disc
+        mine = dr.gather(mi.Color3f, disc, k - lay.cells, own)
+    image = dr.select(own, dr.lerp(warped, mine, t), warped)
     timer.mark("post", image)
     buffers = {"traced": shading.mask, "shading": resolved.shading,
                "shading_mask": resolved.mask, "history_count": resolved.count,
@@ -285,7 +311,14 @@ def _form_on_samples(shading: ShadingBuffer, inp: FormationInput, o: dict[str, A
     k, in_disc = _buffer_space.disc_sample(lay, mi.Int32(x), mi.Int32(y), inp.gaze)
     own = in_disc & (t > 0.0)
     own &= dr.gather(mi.Bool, resolved.mask, k, own)
-    mine = dr.gather(mi.Color3f, resolved.shading, k, own)
+    if o["foveal_disc"] == "denoised":
+        # The disc's samples through the denoiser, on their square patch.
+        patch = nc + dr.arange(mi.UInt32, lay.side * lay.side)
+        disc = _disc_patch(resolved, gb, patch, dr.gather(mi.Bool, on, patch), lay.side, o,
+                           grad_pass)
+        mine = dr.gather(mi.Color3f, disc, k - nc, own)
+    else:
+        mine = dr.gather(mi.Color3f, resolved.shading, k, own)
     image = dr.select(own, dr.lerp(warped, mine, t), warped)
     timer.mark("post", image)
     buffers = {"traced": shading.mask, "shading": resolved.shading,
