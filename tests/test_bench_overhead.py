@@ -28,6 +28,9 @@ def test_tiny_run_reports_stages_kernels_and_speedup(bench, tmp_path, capsys):
     # The kernels' own run time, and the longest launches, longest first.
     longest = [k["ms"] for k in r["longest_kernels"]]
     assert 0 < longest[0] <= r["kernel_ms"] and longest == sorted(longest, reverse=True)
+    # With one frame its median longest launch is that frame's, over the full frame's time.
+    assert r["longest_kernel_ms"] == longest[0]
+    assert r["longest_kernel_x_full"] == pytest.approx(longest[0] / r["full_ms"])
     assert r["image_to_host"] is False and r["freeze"] is True
     assert "voxel-static" in capsys.readouterr().out
 
