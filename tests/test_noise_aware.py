@@ -131,6 +131,52 @@ def test_sample_variance_from_moments_and_spatial_fallback():
     assert est[~top].std() < own[~top].std() / 2           # and far steadier than 2 samples
 
 
+def test_the_spatial_fallback_runs_where_a_pixel_has_few_samples_and_nowhere_else():
+    """Counts interleaved so that every SIMD packet mixes pixels with their own moments,
+    pixels that need the pooled 5x5 estimate and pixels without a value: each gets its own
+    rule (the fallback runs in a branch that whole packets may skip), and a pixel without a
+    value gets 0."""
+    w, h = 24, 20
+    n = w * h
+    rng = np.random.default_rng(3)
+    count = np.array([[8, 2, 1, 8, 3, 0][i % 6] for i in range(n)], np.float32)
+    mask = count > 0
+    mu = np.where(mask, rng.uniform(0.5, 2.0, n), 0.0).astype(np.float32)
+    m2 = (mu.astype(np.float64) ** 2 + rng.uniform(0.0, 0.2, n)).astype(np.float32)
+    _, guide = two_planes(w, h, split=w)              # one plane
+    gray = c3(np.repeat(mu[:, None], 3, 1))
+    est = sample_variance(gray, mi.Float(m2), mi.Float(count), mi.Bool(mask), guide.normal,
+                          guide.hit, w, h).numpy()
+    assert np.all(est[~mask] == 0.0)
+    mu64, m264 = mu.astype(np.float64), m2.astype(np.float64)
+    own = (m264 - mu64 ** 2) * count / np.maximum(count - 1, 1)
+    many = count >= 4
+    bessel = count / np.maximum(count - 1, 1)
+    tolerances.assert_within(est[many], own[many],
+                             tolerances.chain_bound((mu64 ** 2 + m264) * bessel, 13)[many],
+                             "own moments")
+    # The pooled estimate over the 5x5 window (clamped at the film's edge), in float64.
+    nn = np.where(mask, count, 0.0).reshape(h, w)
+    s = [np.zeros((h, w)) for _ in range(3)]
+    for dy in range(-2, 3):
+        for dx in range(-2, 3):
+            ys, xs = np.mgrid[0:h, 0:w]
+            qy, qx = ys + dy, xs + dx
+            ok = (qy >= 0) & (qy < h) & (qx >= 0) & (qx < w)
+            qy, qx = np.clip(qy, 0, h - 1), np.clip(qx, 0, w - 1)
+            k = nn[qy, qx] * ok
+            s[0] += k
+            s[1] += k * mu64.reshape(h, w)[qy, qx]
+            s[2] += k * m264.reshape(h, w)[qy, qx]
+    s0, s1, s2 = (v.ravel() for v in s)
+    pooled = (s2 / s0 - (s1 / s0) ** 2) * s0 / (s0 - 1)
+    few = mask & ~many
+    # 25 terms summed per moment in float32, then the cancelling difference: its roundings
+    # count on both of its terms.
+    bound = tolerances.chain_bound((s2 / s0 + (s1 / s0) ** 2) * s0 / (s0 - 1), 25 + 8)
+    tolerances.assert_within(est[few], pooled[few], bound[few], "pooled moments")
+
+
 def test_estimate_variance_divides_by_samples_and_albedo():
     w, h = 8, 6
     n = w * h

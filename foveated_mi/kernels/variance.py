@@ -46,26 +46,32 @@ def sample_variance(mean: mi.Color3f, moment2: mi.Float, count: mi.Float, mask: 
     bessel = dr.select(n > 1.0, n / dr.maximum(n - 1.0, 1.0), 1.0)
     own = raw * bessel
 
-    # Spatial estimate: pooled moments of the samples of a 5x5 window on the same surface.
+    # Spatial estimate: pooled moments of the samples of a 5x5 window on the same surface,
+    # run only where a pixel holds a value with fewer samples than that (a symbolic branch:
+    # a SIMD packet whose pixels all have their own moments skips the 25 taps).
     surface = Surface.of(normal, dr.zeros(mi.Vector3f, width * height), hit)
     m2 = dr.select(mask, dr.detach(moment2), 0.0)
     moments = packet(n, mu, m2, dr.zeros(mi.Float, width * height))
     dr.schedule(moments)
+    grid = grid_of(width, height, grid)
 
-    def visit(tap, s0, s1, s2):
-        nq_, _, hq = surface.at(tap.q, tap.inside)
-        same = tap.inside & (hq == surface.hit)
-        same &= ~surface.hit | (dr.dot(surface.normal, nq_) > 0.9)
-        v = gather4(moments, tap.q, same)
-        return s0 + v.x, dr.fma(v.x, v.y, s1), dr.fma(v.x, v.z, s2)
+    def spatial(own):
+        def visit(tap, s0, s1, s2):
+            nq_, _, hq = surface.at(tap.q, tap.inside)
+            same = tap.inside & (hq == surface.hit)
+            same &= ~surface.hit | (dr.dot(surface.normal, nq_) > 0.9)
+            v = gather4(moments, tap.q, same)
+            return s0 + v.x, dr.fma(v.x, v.y, s1), dr.fma(v.x, v.z, s2)
 
-    zero = dr.zeros(mi.Float, width * height)
-    s0, s1, s2 = for_each_tap(grid_of(width, height, grid), 1, visit, (zero, zero, zero),
-                              "spatial_variance")
-    inv = dr.rcp(dr.maximum(s0, 1.0))
-    pooled = dr.maximum(s2 * inv - dr.square(s1 * inv), 0.0)
-    spatial = pooled * dr.select(s0 > 1.0, s0 / dr.maximum(s0 - 1.0, 1.0), 1.0)
-    return dr.select(n >= MIN_TEMPORAL_SAMPLES, own, spatial)
+        zero = dr.zeros(mi.Float, width * height)
+        s0, s1, s2 = for_each_tap(grid, 1, visit, (zero, zero, zero), "spatial_variance")
+        inv = dr.rcp(dr.maximum(s0, 1.0))
+        pooled = dr.maximum(s2 * inv - dr.square(s1 * inv), 0.0)
+        return pooled * dr.select(s0 > 1.0, s0 / dr.maximum(s0 - 1.0, 1.0), 1.0)
+
+    few = mask & (n < MIN_TEMPORAL_SAMPLES)
+    return dr.if_stmt(args=(own,), cond=few, true_fn=spatial, false_fn=lambda own: own,
+                      label="spatial_variance_fallback")
 
 
 def estimate_variance(per_sample: mi.Float, count: mi.Float, mask: mi.Bool, nearest: mi.UInt32,
