@@ -71,6 +71,9 @@ class Formed(NamedTuple):
     buffers: dict[str, Any]               #: named buffers (flat arrays or None) on its grid
     history: dict[str, Any] | None        #: ``mean``, ``count``, ``moment2`` per film pixel
     #: (or per sample, where the plan is on samples)
+    #: the image interleaved (RGB per pixel, as the frame returns it), where a replay wrote
+    #: it so; ``image`` is then a lazy view of it
+    flat: mi.Float | None = None
 
 
 class Formation(NamedTuple):
@@ -151,7 +154,11 @@ def _record(arrays: dict, key: dict) -> dict:
                          None if arrays["samples"] is None else tuple(arrays["samples"]))
     fn = FORMATIONS[key["formation"]].fn
     formed = fn(ShadingBuffer(**arrays["shading"]), inp, key["options"], StageTimer(False))
-    return dict(formed._asdict())
+    # The image leaves the recording interleaved, as the frame returns it: the last pass
+    # writes it so, with no copy after the replay (its planes are read lazily, if at all).
+    # (The frame's outputs name the image "image" themselves.)
+    buffers = {k: v for k, v in formed.buffers.items() if k != "image"}
+    return {"buffers": buffers, "history": formed.history, "flat": dr.ravel(formed.image)}
 
 
 @contextmanager
@@ -206,4 +213,5 @@ class FrozenFormation:
                "spp": inp.spp, "options": entry.view(inp.width, inp.height, o)}
         with _no_collection():          # a collection inside a recording aborts (above)
             out = self._frozen(arrays, key)
-        return Formed(**out)
+        image = dr.unravel(mi.Color3f, out["flat"])
+        return Formed(image, {**out["buffers"], "image": image}, out["history"], out["flat"])

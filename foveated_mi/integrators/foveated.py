@@ -172,7 +172,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._planner.commit(plan, formed.history if o["history"] else None)
         self._outputs = frame_outputs(plan, samples, formed, o, timer, self._planner.index - 1)
         self._primal = _gradient.PrimalFrame(plan, shading, id(scene), recorded)
-        return mi.TensorXf(dr.ravel(formed.image), shape=(plan.height, plan.width, 3))
+        flat = dr.ravel(formed.image) if formed.flat is None else formed.flat
+        return mi.TensorXf(flat, shape=(plan.height, plan.width, 3))
 
     def _trace(self, scene: mi.Scene, plan: FramePlan) -> TracedSamples:
         """Sparse shading: the nested integrator traces the launch (rays x spp lanes)."""
