@@ -31,6 +31,10 @@ frames after the first, on this machine, comparable within one run only.
 
     python benchmarks/bench_vr.py [--size 1152 648] [--frames 54] [--seeds 0 1 2]
                                   [--scenes voxel-city staircase] [--out out/vr]
+                                  [--study configs/studies/vr_10ppd.toml]
+
+``--study`` runs another study file of the same shape (``configs/studies/vr_10ppd.toml``: the
+study's own 1152x648 trimmed to what a 2-core CPU renders in about an hour).
 
 The study resumes: a second run only renders what ``out/vr/results.csv`` lacks.
 """
