@@ -115,7 +115,7 @@ def _denoise(res: Resolved, cgb: GBuffer, grid: Grid, o: dict[str, Any],
         return Denoised(res.shading)
     ctx = DenoiseInput(res.shading, cgb, res, dr.arange(mi.UInt32, grid.size), grid.width,
                        grid.height, {k: o[k] for k in entry.reads}, grad_pass, None, grid)
-    call = entry.fn if entry.grid_aware or not grid.wrap_x else _padded(entry.fn, grid)
+    call = entry.fn if entry.grid_aware else _padded(entry.fn, grid)
     if entry.domain == "irradiance":
         return as_denoised(call(ctx))
     radiance = domain.to_radiance(res.shading, cgb, o)
@@ -134,10 +134,12 @@ def _denoise(res: Resolved, cgb: GBuffer, grid: Grid, o: dict[str, Any],
 PAD = 32
 
 
-def _padded(fn, grid: PolarGrid):
+def _padded(fn, grid: Grid):
     """``fn`` on the buffer padded across its wrapped angle axis, its result cropped back,
     for a denoiser that knows no neighbour rule: the seam at angle 0 is then no image edge
-    to it."""
+    to it. A grid that does not wrap (the disc's patch) is a plain image already: ``fn``."""
+    if not grid.wrap_x:
+        return fn
     padded, source, back = wrap_padding(grid, PAD)
 
     def pad(v):
