@@ -154,3 +154,55 @@ def test_held_level_reverse_is_the_transpose_of_forward(mode, grid):
         tolerances.assert_within(np.array(jdx), np.array(ydx),
                                  tolerances.chain_bound(np.array(scale), 2 * depth),
                                  "J dx vs A dx")
+
+
+@pytest.mark.parametrize("unroll", [True, False])
+def test_a_walk_over_some_cells_leaves_the_others_as_given(unroll):
+    # The fold of the order test, over the cells of a random mask only: those get the full
+    # walk's value bit for bit (a cell's walk reads nothing of its neighbours' state), the
+    # others keep the state they were given.
+    def visit(t, h):
+        return (h * 1.0009765625 + mi.Float(t.q) + dr.select(t.inside, 0.5, 0.0),)
+    active = mi.Bool(np.random.default_rng(3).random(N) < 0.4)
+    start = dr.arange(mi.Float, N) + 0.25
+    full, = for_each_tap(_grid("wrap_x"), 2, visit, (mi.Float(start),), "fold_all", unroll)
+    some, = for_each_tap(_grid("wrap_x"), 2, visit, (mi.Float(start),), "fold_some", unroll,
+                         active=active)
+    a = np.array(active)
+    assert 0 < a.sum() < N
+    np.testing.assert_array_equal(np.array(some)[a], np.array(full)[a])
+    np.testing.assert_array_equal(np.array(some)[~a], np.array(start)[~a])
+
+
+@pytest.mark.parametrize("mode", ["normalized", "plain"])
+def test_a_level_over_some_cells_is_the_full_level_there_and_its_transpose(mode):
+    # Cells outside the level's active set are not visited: a normalised level keeps their
+    # value, an unnormalised one gives 0; elsewhere the result is the full level's, and the
+    # reverse mode stays the exact transpose of the forward mode.
+    active = mi.Bool(np.random.default_rng(4).random(N) < 0.5)
+    full = _level(mode)
+    some = full._replace(active=active)
+    x0 = mi.Color3f(*_rand(7))
+    y_full, = held_filter(x0, full)
+    y_some, = held_filter(x0, some)
+    a = np.array(active)
+    np.testing.assert_array_equal(np.array(y_some)[:, a], np.array(y_full)[:, a])
+    kept = np.array(x0)[:, ~a] if mode == "normalized" else 0.0
+    np.testing.assert_array_equal(np.array(y_some)[:, ~a], np.zeros((3, (~a).sum())) + kept)
+    dx, g = mi.Color3f(*_rand(8)), mi.Color3f(*_rand(9))
+    x = mi.Color3f(x0)
+    dr.enable_grad(x)
+    y, = held_filter(x, some)
+    dr.set_grad(x, dx)
+    dr.forward_to(y)
+    jdx = dr.grad(y)
+    x = mi.Color3f(x0)
+    dr.enable_grad(x)
+    y, = held_filter(x, some)
+    dr.backward_from(y * dr.detach(g))
+    jtg = dr.grad(x)
+    lhs = tolerances.dot(np.array(jdx), np.array(g))
+    rhs = tolerances.dot(np.array(dx), np.array(jtg))
+    depth = {"plain": 25, "normalized": tolerances.FILTER_LEVEL}[mode]
+    assert abs(lhs - rhs) <= tolerances.transpose_bound(
+        np.array(jdx), np.array(g), np.array(dx), np.array(jtg), depth), (lhs, rhs)

@@ -285,3 +285,38 @@ def test_a_bad_foveal_disc_gets_one_line():
     with pytest.raises(ParameterError, match=r"foveal_disc = 'blurred' is invalid") as e:
         FoveatedIntegrator(preset="vr", foveal_disc="blurred")
     assert "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("space", ["buffer", "film"])
+@pytest.mark.parametrize("denoiser", ["svgf", "atrous"])
+def test_the_filter_skips_the_cells_off_the_film(space, denoiser, monkeypatch):
+    # A gaze near a corner leaves many cells off the film, which hold no value and which the
+    # warp never reads. The buffer's filter skips them: they keep no value, and the cells on
+    # the film are filtered as with every cell visited, except that a filter that fills a
+    # cell without a value from its neighbours (à-trous) no longer carries such a value from
+    # beyond the film's edge into the next level (as on the film, where edge taps are
+    # dropped). SVGF fills nothing, so its frames are the same bit for bit.
+    from foveated_mi.frame import foveal
+    scene = _scene((64, 48), spp=1)
+    real = foveal._denoise
+
+    def run():
+        integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", foveal_space=space,
+                                   denoiser=denoiser, gaze=(0.15, 0.2))
+        images = [np.array(mi.render(scene, integrator=integ, seed=s)) for s in range(3)]
+        return images, integ.buffer("filtered"), integ.buffer("cell_mask").astype(bool)
+
+    images, skipped, on = run()
+    monkeypatch.setattr(foveal, "_denoise",
+                        lambda res, cgb, grid, o, grad_pass, region=None:
+                        real(res, cgb, grid, o, grad_pass, None))
+    everywhere, filtered, _ = run()
+    assert 0 < on.sum() < on.size * 3 // 4
+    assert all(np.isfinite(a).all() for a in images)
+    assert not np.isfinite(skipped[~on]).any()
+    if denoiser == "svgf":
+        for a, b in zip(images, everywhere):
+            np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(skipped[on], filtered[on])
+    else:
+        assert np.isfinite(filtered[~on]).any()

@@ -24,7 +24,9 @@ Then, in either:
 2. **Denoising in the buffer** (§3.5): the registered denoiser on the buffer's grid, in the
    domain it declares (irradiance with ``demodulate``: :mod:`foveated_mi.frame.domain`);
    taps wrap around in angle, and a denoiser that sees a plain image (a network) gets the
-   buffer padded across the seam at angle 0 (:func:`_padded`).
+   buffer padded across the seam at angle 0 (:func:`_padded`). The cells off the film
+   (about a third of them with the gaze at the centre of a square film) are the denoiser's
+   ``region`` complement: a filter skips them, and they hold no value that a tap reads.
 3. **One warp to the film**: each pixel's continuous cell coordinates, bilinear over the
    cells that hold a value (wrapping in angle, clamping radially). In the fovea disc every
    pixel was traced: it shows its own resolved value, blended into the warp across the
@@ -106,21 +108,25 @@ def _gather(bundle, index: mi.UInt32, active: mi.Bool | bool = True):
 
 
 def _denoise(res: Resolved, cgb: GBuffer, grid: Grid, o: dict[str, Any],
-             grad_pass: bool) -> Denoised:
+             grad_pass: bool, region: mi.Bool | None = None) -> Denoised:
     """The registered denoiser on the buffer's working values (irradiance with
-    ``demodulate``), in the domain it declares; returns working values."""
+    ``demodulate``), in the domain it declares; returns working values. ``region``: the
+    cells on the film, the only ones the warp reads (a filter skips the others)."""
     entry = DENOISERS[o["denoiser"]]
     run = (entry.differentiable or not grad_pass) and (entry.active is None or entry.active(o))
     if not run:
         return Denoised(res.shading)
     ctx = DenoiseInput(res.shading, cgb, res, dr.arange(mi.UInt32, grid.size), grid.width,
-                       grid.height, {k: o[k] for k in entry.reads}, grad_pass, None, grid)
+                       grid.height, {k: o[k] for k in entry.reads}, grad_pass, None, grid,
+                       region)
     call = entry.fn if entry.grid_aware else _padded(entry.fn, grid)
     if entry.domain == "irradiance":
         return as_denoised(call(ctx))
     radiance = domain.to_radiance(res.shading, cgb, o)
     if entry.domain == "display":
-        tonemapped = domain.to_display(radiance, o)
+        # The tone curve maps a cell without a value (NaN) to a finite colour: it stays one
+        # without a value, which no filter tap reads.
+        tonemapped = dr.select(res.mask, domain.to_display(radiance, o), dr.nan)
         filtered = as_denoised(call(ctx._replace(image=tonemapped))).image
         return Denoised(domain.to_irradiance(domain.from_display(filtered, o), cgb, o),
                         filtered=filtered, tonemapped=tonemapped)
@@ -150,7 +156,8 @@ def _padded(fn, grid: Grid):
             image=pad(ctx.image), gbuffer=_gather(ctx.gbuffer, source),
             resolved=_gather(ctx.resolved, source),
             nearest=dr.arange(mi.UInt32, padded.size), width=padded.width,
-            height=padded.height, samples=pad(ctx.samples), grid=padded)
+            height=padded.height, samples=pad(ctx.samples), grid=padded,
+            region=pad(ctx.region))
         return _gather(as_denoised(fn(wide)), back)
     return call
 
@@ -167,7 +174,7 @@ def _disc_patch(resolved: Resolved, gb: GBuffer, index: mi.UInt32, on: mi.Bool, 
     pgb = pgb._replace(hit=pgb.hit & has)
     value = dr.select(has, domain.to_irradiance(pr.shading, pgb, o), dr.nan)
     res = Resolved(value, has, pr.count, dr.zeros(mi.Bool, side * side), pr.moment2)
-    out = _denoise(res, pgb, Grid(side, side), o, grad_pass)
+    out = _denoise(res, pgb, Grid(side, side), o, grad_pass, on)
     return domain.to_radiance(out.image, pgb, o, clamp=True)
 
 
@@ -240,7 +247,7 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any],
     res, cgb = _cells(domain.to_irradiance(resolved.shading, gb, o), resolved, gb, q, has)
     timer.mark("reconstruct", res.shading, res.count, cgb.normal, cgb.position)
     # Denoising in the buffer (§3.5), one warp to the film, the albedo multiplied back there.
-    out = _denoise(res, cgb, grid, o, grad_pass)
+    out = _denoise(res, cgb, grid, o, grad_pass, on)
     guide = None
     if o["foveal_upsampling"] == "joint":
         guide = (Surface.of(gb.normal, gb.position, gb.hit),
@@ -302,7 +309,7 @@ def _form_on_samples(shading: ShadingBuffer, inp: FormationInput, o: dict[str, A
     timer.mark("reconstruct", res.shading, res.count, cgb.normal, cgb.position)
     # Denoising in the buffer (§3.5); each cell's albedo multiplied back before the warp:
     # there is no full-resolution albedo to take it from.
-    out = _denoise(res, cgb, grid, o, grad_pass)
+    out = _denoise(res, cgb, grid, o, grad_pass, dr.gather(mi.Bool, on, c))
     radiance = domain.to_radiance(out.image, cgb, o, clamp=True)
     warped = warp(radiance, has, grid, inp.gaze, width, height)
     # The disc shows its own samples, blended into the warp across the seam.

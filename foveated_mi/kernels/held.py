@@ -46,6 +46,9 @@ class HeldLevel(NamedTuple):
     label: str = "held_taps"
     unroll: bool = True
     value: Callable[[tuple], mi.Color3f] | None = None
+    #: The cells whose result is read (None: all). The others are not visited: their sums
+    #: are 0, so a normalised level keeps their value and an unnormalised one gives 0.
+    active: mi.Bool | None = None
 
 
 def _finite(c: mi.Color3f) -> mi.Color3f:
@@ -90,7 +93,7 @@ def _apply(level: HeldLevel, x: mi.Color3f, norm=None, extras: bool = True,
     n_extra = len(level.extra(P, P, zero)) if with_extra else 0
     acc, wsum, *more = for_each_tap(level.grid, level.step, visit,
                                     (dr.zeros(mi.Color3f, n), zero, *([zero] * n_extra)),
-                                    level.label, level.unroll)
+                                    level.label, level.unroll, level.active)
     # Every output of the loop in one launch: a kernel reading only one of them would run
     # the 25-tap loop again.
     dr.schedule(acc, wsum, *more)
@@ -112,6 +115,8 @@ def _transpose(level: HeldLevel, g: mi.Color3f, norm) -> mi.Color3f:
     n = level.grid.size
     g = mi.Color3f(g)
     gs = g if norm is None else dr.select(norm[0], g / norm[1], 0.0)
+    if level.active is not None:
+        gs = dr.select(level.active, gs, 0.0)   # a cell not visited read no tap
     gpk = packet(gs.x, gs.y, gs.z, dr.zeros(mi.Float, n))
     dr.schedule(gpk)
     own = dr.arange(mi.UInt32, n)

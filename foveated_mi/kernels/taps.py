@@ -90,7 +90,7 @@ def _axis(q: mi.Int32, n: int, wraps: bool):
 
 
 def for_each_tap(grid: Grid, step, visit: Callable[..., tuple], state: tuple, label: str,
-                 unroll: bool = True) -> tuple:
+                 unroll: bool = True, active: mi.Bool | None = None) -> tuple:
     """``state = visit(tap, *state)`` for the 25 taps of every cell of ``grid``, spaced
     ``step`` cells.
 
@@ -101,9 +101,13 @@ def for_each_tap(grid: Grid, step, visit: Callable[..., tuple], state: tuple, la
     taps unrolled (faster for the à-trous and SVGF levels in ``benchmarks/bench_filters.py``;
     all 25 unrolled would take LLVM seconds to compile), else over the 25 taps (faster for
     the heavier guided level and the transposes). Both visit the taps in the same order.
-    Returns the final state."""
+    ``active``: the cells to visit taps for (None: all); the others keep ``state`` as given,
+    and a SIMD packet with none of them skips the loop. Returns the final state."""
     width, height = grid.width, grid.height
     px, py = pixel_xy(width, height)
+
+    def _go(more: mi.Bool) -> mi.Bool:
+        return more if active is None else more & active
 
     def tap(qx, qy, row_in, dx, dy):
         qx, col_in = _axis(qx, width, grid.wrap_x)
@@ -118,7 +122,7 @@ def for_each_tap(grid: Grid, step, visit: Callable[..., tuple], state: tuple, la
             dx, dy = mi.Int32(k - ty * 5) - 2, mi.Int32(ty) - 2
             qy, row_in = _axis(py + dy * step, height, grid.wrap_y)
             return (k + 1, *visit(tap(px + dx * step, qy, row_in, dx, dy), *s))
-        out = dr.while_loop(state=(mi.UInt32(0), *state), cond=lambda k, *_: k < 25,
+        out = dr.while_loop(state=(mi.UInt32(0), *state), cond=lambda k, *_: _go(k < 25),
                             body=body1, label=label, max_iterations=25)
         return tuple(out[1:])
 
@@ -129,6 +133,6 @@ def for_each_tap(grid: Grid, step, visit: Callable[..., tuple], state: tuple, la
             s = visit(tap(px + d * step, qy, row_in, mi.Int32(d), dy), *s)
         return (k + 1, *s)
 
-    out = dr.while_loop(state=(mi.UInt32(0), *state), cond=lambda k, *_: k < 5, body=body,
+    out = dr.while_loop(state=(mi.UInt32(0), *state), cond=lambda k, *_: _go(k < 5), body=body,
                         label=label, max_iterations=5)
     return tuple(out[1:])

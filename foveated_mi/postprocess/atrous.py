@@ -136,7 +136,7 @@ def _surface(normal, position, valid: mi.Bool | None) -> Surface:
 def atrous(color: mi.Color3f, normal: mi.Array3f, position: mi.Array3f, width: int, height: int,
            *, iterations: int = 5, sigma_color: float = 0.5, sigma_normal: float = 0.5,
            sigma_position: float = 0.5, valid: mi.Bool | None = None,
-           grid: Grid | None = None) -> mi.Color3f:
+           grid: Grid | None = None, active: mi.Bool | None = None) -> mi.Color3f:
     """Edge-avoiding à-trous filter of a colour buffer guided by a G-buffer.
 
     Args:
@@ -154,6 +154,8 @@ def atrous(color: mi.Color3f, normal: mi.Array3f, position: mi.Array3f, width: i
             non-zero finite normals.
         grid: the buffers' grid and its neighbour rule (default: the film of ``width`` x
             ``height``, clamped at its edges).
+        active: the pixels whose result is read, or None for all; the others keep their
+            colour and cost no taps.
 
     Returns:
         The filtered colour (``color`` itself for ``iterations = 0``).
@@ -167,6 +169,8 @@ def atrous(color: mi.Color3f, normal: mi.Array3f, position: mi.Array3f, width: i
     sigma_position = check_sigma("sigma_position", sigma_position)
     color = as_color3f("color", color)
     _check_buffers(color, normal, position, valid, width * height)
+    if active is not None:
+        _check_buffer("active", active, width * height, "an mi.Bool")
     if iterations == 0:
         return color
     surface = _surface(normal, position, valid)
@@ -185,12 +189,13 @@ def atrous(color: mi.Color3f, normal: mi.Array3f, position: mi.Array3f, width: i
             step=dr.opaque(mi.Int32, step),
             inv_c=dr.opaque(mi.Float, inv_c0 * 4.0 ** level),        # sigma_rt_i = 2^-i sigma
             inv_n=dr.opaque(mi.Float, inv_n0 / float(step * step)),  # |dN|^2 / s^2 (listing)
-            inv_x=inv_x)
+            inv_x=inv_x, active=active)
     return c
 
 
 def _atrous_level(c: mi.Color3f, surface: Surface, grid: Grid, *, step: mi.Int32,
-                  inv_c: mi.Float, inv_n: mi.Float, inv_x: mi.Float) -> mi.Color3f:
+                  inv_c: mi.Float, inv_n: mi.Float, inv_x: mi.Float,
+                  active: mi.Bool | None = None) -> mi.Color3f:
     """One à-trous level: one kernel walking the 25 taps (5 loop iterations of 5 unrolled
     taps: 25 unrolled copies need seconds of LLVM compile), with its weights held
     (:func:`~foveated_mi.kernels.held.held_filter`). A tap reads three packets: colour + finiteness,
@@ -219,7 +224,7 @@ def _atrous_level(c: mi.Color3f, surface: Surface, grid: Grid, *, step: mi.Int32
         return dr.select(use, tap.b3 * dr.exp(-(e_rt + e_geo)), 0.0)
 
     y, = held_filter(c, HeldLevel(grid, step, at, weight, label="atrous_taps",
-                                  value=lambda Q: Q[0]))
+                                  value=lambda Q: Q[0], active=active))
     return y
 
 
@@ -231,7 +236,7 @@ def atrous_stage(ctx: DenoiseInput) -> mi.Color3f:
     return atrous(ctx.image, gb.normal, gb.position, ctx.width, ctx.height,
                   iterations=o["atrous_iterations"], sigma_color=o["sigma_color"],
                   sigma_normal=o["sigma_normal"], sigma_position=o["sigma_position"],
-                  valid=gb.hit, grid=ctx.grid)
+                  valid=gb.hit, grid=ctx.grid, active=ctx.region)
 
 
 register_denoiser("atrous", atrous_stage, differentiable=True, domain="display",

@@ -40,6 +40,9 @@ class DenoiseInput(NamedTuple):
     samples: mi.Float | None = None
     #: the buffers' grid and its neighbour rule (None: the film of ``width`` x ``height``)
     grid: Grid | None = None
+    #: the cells whose result the formation reads (None: all); a denoiser may leave the
+    #: others as they are (the foveal buffer's cells off the film)
+    region: mi.Bool | None = None
 
 
 class Denoised(NamedTuple):

@@ -70,9 +70,11 @@ def _prefilter(var: mi.Float, grid: Grid) -> mi.Float:
 def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: mi.Vector3f,
          hit: mi.Bool, width: int, height: int, *, iterations: int = 5,
          sigma_luminance: float = 4.0, sigma_normal: float = 0.3,
-         sigma_plane: float = 0.1, grid: Grid | None = None) -> mi.Color3f:
+         sigma_plane: float = 0.1, grid: Grid | None = None,
+         active: mi.Bool | None = None) -> mi.Color3f:
     """Variance-guided à-trous filter of ``color`` (see the module docstring); ``grid``: the
-    buffers' grid (default: the film of ``width`` x ``height``).
+    buffers' grid (default: the film of ``width`` x ``height``); ``active``: the pixels whose
+    result is read (None: all), the others keep their value and cost no taps.
 
     ``variance`` is the noise variance of each pixel's value (e.g. from
     :func:`foveated_mi.kernels.variance.estimate_variance`); 0 leaves a pixel's differences intact.
@@ -85,7 +87,8 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
     inv_n = 1.0 / check_range("sigma_normal", sigma_normal, 0.0, None, lo_open=True) ** 2
     inv_x = 1.0 / check_range("sigma_plane", sigma_plane, 0.0, None, lo_open=True) ** 2
     for name, value in (("color", color), ("variance", variance), ("normal", normal),
-                        ("position", position), ("hit", hit)):
+                        ("position", position), ("hit", hit)) + \
+            ((("active", active),) if active is not None else ()):
         if not (dr.is_array_v(value) and dr.width(value) == n):
             raise ParameterError(name, f"{type(value).__name__} of width {dr.width(value)}",
                                  f"a buffer with width*height = {n} entries")
@@ -98,12 +101,13 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
         c, var = _level(c, var, surface, grid,
                         step=dr.opaque(mi.Int32, 1 << level),
                         sl=None if math.isinf(sl) else dr.opaque(mi.Float, sl),
-                        inv_n=dr.opaque(mi.Float, inv_n), inv_x=dr.opaque(mi.Float, inv_x))
+                        inv_n=dr.opaque(mi.Float, inv_n), inv_x=dr.opaque(mi.Float, inv_x),
+                        active=active)
     return c
 
 
 def _level(c: mi.Color3f, var: mi.Float, surface: Surface, grid: Grid, *, step,
-           sl, inv_n, inv_x) -> tuple[mi.Color3f, mi.Float]:
+           sl, inv_n, inv_x, active=None) -> tuple[mi.Color3f, mi.Float]:
     """One level, its weights held (:func:`~foveated_mi.kernels.held.held_filter`), the variance
     filtered alongside with the squared weights."""
     n = grid.size
@@ -137,7 +141,8 @@ def _level(c: mi.Color3f, var: mi.Float, surface: Surface, grid: Grid, *, step,
 
     y, v_acc, w_acc = held_filter(c, HeldLevel(
         grid, step, at, weight, residual=True,
-        extra=lambda P, Q, w: (w * w * Q[2], w), label="svgf_taps", value=lambda Q: Q[0]))
+        extra=lambda P, Q, w: (w * w * Q[2], w), label="svgf_taps", value=lambda Q: Q[0],
+        active=active))
     has = w_acc > 0
     inv = dr.rcp(dr.select(has, w_acc, 1.0))
     return y, dr.select(has, v_acc * inv * inv, var)
@@ -158,7 +163,8 @@ def svgf_stage(ctx: DenoiseInput) -> Denoised:
         samples=ctx.samples,
         albedo=gb.albedo if o["demodulate"] else None)
     filtered = svgf(ctx.image, variance, gb.normal, gb.position, gb.hit, width, height,
-                    iterations=levels, sigma_luminance=o["sigma_luminance"], grid=ctx.grid)
+                    iterations=levels, sigma_luminance=o["sigma_luminance"], grid=ctx.grid,
+                    active=ctx.region)
     return Denoised(filtered, filtered=filtered, variance=variance)
 
 
