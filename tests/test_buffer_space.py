@@ -93,7 +93,7 @@ def test_a_gaze_move_reads_the_disc_pixels_both_discs_hold():
                                theta=0.3, ray_budget=0.3)
     integ.gaze = (0.45, 0.5)
     mi.render(scene, integrator=integ, seed=0)
-    before = set(np.flatnonzero(integ.buffer("traced").ravel()).tolist())
+    before = set(np.flatnonzero(integ.buffer("sampling_map").ravel()).tolist())
     integ.gaze = (0.55, 0.45)
     mi.render(scene, integrator=integ, seed=1)
     lay = buffer_space.layout(W, H, integ.options)
@@ -128,6 +128,30 @@ def test_a_still_view_projects_nothing_and_a_gaze_move_does(monkeypatch):
     integ.gaze = (0.3, 0.4)
     mi.render(scene, integrator=integ, seed=9)
     assert len(calls) == 2
+
+
+def test_a_still_view_builds_its_launch_once_and_a_gaze_or_layout_change_again(monkeypatch):
+    from foveated_mi.frame import plan as _plan
+    scene = _scene()
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
+    calls = []
+    real = _plan._reorder.launch_of_pixels
+    monkeypatch.setattr(_plan._reorder, "launch_of_pixels",
+                        lambda *a, **k: calls.append(a[4]) or real(*a, **k))
+    images = [np.array(mi.render(scene, integrator=integ, seed=k)) for k in range(3)]
+    assert calls == ["tiles"]
+    integ.gaze = (0.3, 0.4)
+    mi.render(scene, integrator=integ, seed=3)
+    integ.reorder = "compact"
+    mi.render(scene, integrator=integ, seed=4)
+    assert calls == ["tiles", "tiles", "compact"]
+    # The reused launch traces what a fresh one does: the same frames, bit for bit.
+    monkeypatch.setattr(_plan._reorder, "launch_of_pixels", real)
+    fresh = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
+    for k, image in enumerate(images):
+        fresh._planner._samples_cache = None
+        np.testing.assert_array_equal(np.array(mi.render(scene, integrator=fresh, seed=k)),
+                                      image)
 
 
 def _look(origin):
@@ -320,3 +344,34 @@ def test_the_launch_of_a_set_of_pixels_is_the_launch_of_its_map(mode, size):
     ref = reorder(mi.Bool(expected), W, H, mode)
     np.testing.assert_array_equal(np.array(ro.wavefront), np.array(ref.wavefront))
     assert (ro.active is None) == (ref.active is None)
+
+
+@pytest.mark.parametrize("mode", ["tiles", "compact", "rows_blocks", "none"])
+@pytest.mark.parametrize("pixel_filter,spp", [("splat", 2), ("importance", 1), ("importance", 3)])
+def test_the_shading_buffer_on_the_samples_is_the_films_read_at_their_pixels(
+        mode, pixel_filter, spp):
+    """Developed straight onto the samples (nothing film-sized on the way), each sample holds
+    bit for bit what the film-sized buffer holds at its pixel, in every launch layout
+    (including those with idle lanes); a sample off the film holds nothing."""
+    from foveated_mi.frame.pixel_filter import FilterSampler
+    from foveated_mi.frame.reorder import launch_of_pixels
+    from foveated_mi.frame.shading import develop, trace_wavefront
+    W, H = 61, 37
+    scene = _scene((W, H))
+    sensor = scene.sensors()[0]
+    lay = _layout(W, H, ray_budget=0.2)
+    pixels, on = buffer_space.sample_pixels(lay, gaze_pixels((0.3, 0.6), W, H), W, H)
+    ro, _ = launch_of_pixels(pixels, on, W, H, mode)
+    rays = buffer_space.sample_rays(pixels, on, ro.wavefront, ro.active, W * H)
+    fs = FilterSampler(sensor.film(), importance=pixel_filter == "importance")
+    traced = trace_wavefront(scene, sensor, scene.integrator(), ro.wavefront, W, H, spp=spp,
+                             seed=5, active=ro.active, filter_sampler=fs)
+    film = develop(traced, ro.wavefront, spp, sensor.film(), pixel_filter)
+    mine = develop(traced, ro.wavefront, spp, sensor.film(), pixel_filter, at=(rays, on))
+    p, o = np.array(pixels), np.array(on)
+    assert 0 < o.sum() < o.size
+    for a, b in zip(mine, film):
+        a, b = np.array(a), np.array(b)
+        np.testing.assert_array_equal(a[..., o], b[..., p[o]])
+        assert not a[..., ~o].any()
+    assert np.array(mine.mask)[o].all()

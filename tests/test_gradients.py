@@ -162,8 +162,9 @@ def test_image_formation_adjoint_is_its_transpose(name, options):
     n = dr.width(s0)
     rng = np.random.default_rng(1)
     x = mi.Color3f(rng.standard_normal((3, n)).astype(np.float32)) * mi.Color3f(mask)
-    y = mi.Color3f(rng.standard_normal((3, n)).astype(np.float32))
     jx = _adjoint.image_forward(form, s0, x)
+    # On the film's pixels (the traced values may be on the foveal buffer's samples).
+    y = mi.Color3f(rng.standard_normal((3, dr.width(jx))).astype(np.float32))
     jty = _adjoint.image_backward(form, s0, y)
     # Both sides in float64 (exact products, no float32 reduction order); what separates them
     # is the float32 evaluation of J and J^T, bounded by their roundings (_formation_depth).

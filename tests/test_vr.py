@@ -130,10 +130,14 @@ def test_the_buffer_and_its_grid_are_exported(space):
     assert cells.shape[:2] == (lay.grid.height, lay.grid.width)
     assert integ.buffer("shading").shape == (1, lay.size, 3)
     pixel, on = integ.buffer("sample_pixel")[0], integ.buffer("sample_on")[0].astype(bool)
-    traced = integ.buffer("traced").astype(bool).ravel()
-    # Every sample on the film was traced, and every traced pixel is a sample.
-    assert traced[pixel[on]].all()
-    assert set(np.flatnonzero(traced)) == set(pixel[on].tolist())
+    # The shading buffer is on the samples too: every sample on the film holds its traced
+    # value, and no sample off it does.
+    traced = integ.buffer("traced")[0].astype(bool)
+    assert traced.shape == (lay.size,) and (traced == on).all()
+    # The launch traced exactly the samples' pixels.
+    launched = integ.buffer("sampling_map").astype(bool).ravel()
+    assert launched.shape == (64 * 48,)
+    assert set(np.flatnonzero(launched)) == set(pixel[on].tolist())
 
 
 def _ref_at(ref, integ, space):

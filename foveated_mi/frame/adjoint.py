@@ -4,7 +4,10 @@ r"""Gradients of a foveated frame: the seam, the image formation's adjoint, the 
 (:class:`foveated_mi.frame.shading.ShadingBuffer`: one radiance estimate :math:`S(p)` per traced
 pixel :math:`p`) and :math:`F` everything after it (history resolve, Jump Flooding,
 interpolation, tone mapping, à-trous, inverse tone mapping: the registered formation,
-:func:`foveated_mi.frame.formation.form`).
+:func:`foveated_mi.frame.formation.form`). Where the frame's plan is on the foveal buffer's
+samples, :math:`S` holds one entry per sample, each its pixel's estimate read again; the
+gradient pass sums the samples' :math:`\delta S` onto their pixels, the transpose of that
+read (:mod:`foveated_mi.frame.gradient`), and the nested adjoint works on pixels as always.
 The gradient pass holds every decision of the primal frame: sampling map, sites, interpolation
 windows, filter weights and history. Every weight inside :math:`F` is computed from detached
 values, so with them held :math:`F` is linear in :math:`S` except for the tone map and its

@@ -12,9 +12,11 @@ moving too. Its *samples* are, in this order:
 
 These are the pixels the polar sampling law traces (cells inside the disc share its
 pixels). The plan casts the G-buffer at the samples only
-(:func:`~foveated_mi.frame.gbuffer.gbuffer_at`), the history lives on them, and it is
-reprojected sample to sample (:func:`reprojection_map`), so neither the geometry nor the
-history costs a film-sized pass.
+(:func:`~foveated_mi.frame.gbuffer.gbuffer_at`), launches each of their pixels once and
+notes each sample's ray (:func:`sample_rays`), so that the traced values are developed
+straight onto the samples; the history lives on them, and it is reprojected sample to
+sample (:func:`reprojection_map`). Neither the geometry, the traced values nor the history
+costs a film-sized pass.
 
 **Reprojection in the buffer.** A sample's primary hit :math:`x` (its direction on a miss)
 is projected with the previous camera to film position :math:`p'`. The previous sample that
@@ -106,6 +108,19 @@ def sample_pixels(lay: SampleLayout, gaze: mi.Point2f, width: int, height: int
     on = (px >= 0) & (px < width) & (py >= 0) & (py < height)
     on &= is_cell | _in_disc(lay, px, py, gaze)
     return mi.UInt32(dr.select(on, py * width + px, 0)), on
+
+
+def sample_rays(pixels: mi.UInt32, on: mi.Bool, wavefront: mi.UInt32, active: mi.Bool | None,
+                n_pixels: int) -> mi.UInt32:
+    """Each sample's lane in a launch of their pixels (``wavefront``: each lane's pixel,
+    ``active``: the lanes that trace, None for all; every pixel of a sample that is on is
+    traced by one lane); 0 where off."""
+    # Read only at traced pixels, so never filled: nothing film-sized is written but the
+    # rays' own entries.
+    ray_of = dr.empty(mi.UInt32, n_pixels)
+    dr.scatter(ray_of, dr.arange(mi.UInt32, dr.width(wavefront)), wavefront,
+               True if active is None else active)
+    return dr.gather(mi.UInt32, ray_of, pixels, on)
 
 
 def _patch_xy(lay: SampleLayout, k: mi.Int32, gaze: mi.Point2f) -> tuple[mi.Int32, mi.Int32]:

@@ -59,9 +59,9 @@ class FormationInput(NamedTuple):
     fill_seed: Any                        #: the stochastic fill's seed (int or mi.UInt32)
     emission_edges: mi.Bool | None = None
     gaze: mi.Point2f | None = None        #: the gaze's film position in pixels (opaque)
-    #: ``(pixels, on)`` of the foveal buffer's samples when it keeps nothing on the film
-    #: (:mod:`foveated_mi.frame.buffer_space`); the G-buffer, reprojection and history are
-    #: then on the samples
+    #: ``(pixels, on, rays)`` of the foveal buffer's samples when it keeps nothing on the
+    #: film (:mod:`foveated_mi.frame.buffer_space`); the shading buffer, G-buffer,
+    #: reprojection and history are then on the samples
     samples: tuple | None = None
 
 

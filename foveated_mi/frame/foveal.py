@@ -9,8 +9,9 @@ of its full-resolution disc. Where the frame keeps its geometry and history is
 ``buffer`` (the ``vr`` preset)
     On the buffer's *samples*: its cells outside the disc, then the disc's pixels
     (:mod:`foveated_mi.frame.buffer_space`). The plan casts the G-buffer at the samples
-    only and reprojects the history sample to sample; nothing is film-sized but the traced
-    values and the image.
+    only, develops the traced values straight onto the samples
+    (:func:`foveated_mi.frame.shading.on_samples`) and reprojects the history sample to
+    sample; nothing is film-sized but the image.
 ``film``
     On the film's pixels: a full-resolution G-buffer, the history resolved on the traced
     pixels as the ``film`` formation does (Fig. 4), the cells gathered from their pixels, and
@@ -70,8 +71,8 @@ READS = ("max_history", "ray_budget", "theta", "denoiser", "clamp", "demodulate"
 ON_FILM = ("traced", "shading", "shading_mask", "history_count", "resampled", "image")
 
 #: With ``foveal_space = "buffer"``: the buffers on the samples (cells, then the disc's patch).
-ON_SAMPLES = ("shading", "shading_mask", "history_count", "resampled", "sample_on", "sample_pixel",
-              "position", "normal", "depth", "hit", "reprojection_map")
+ON_SAMPLES = ("traced", "shading", "shading_mask", "history_count", "resampled", "sample_on",
+              "sample_pixel", "position", "normal", "depth", "hit", "reprojection_map")
 
 
 def foveal_view(width: int, height: int, o: dict[str, Any]) -> dict[str, Any]:
@@ -289,14 +290,11 @@ def _form_on_samples(shading: ShadingBuffer, inp: FormationInput, o: dict[str, A
     width, height = inp.width, inp.height
     lay = _buffer_space.layout(width, height, o)
     grid, nc = lay.grid, lay.cells
-    pixels, on = inp.samples
+    pixels, on = inp.samples[:2]
     gb = inp.gbuffer
-    # This frame's samples, read at their pixels, then blended with their own history.
-    traced = on & dr.gather(mi.Bool, shading.mask, pixels, on)
-    value = dr.gather(mi.Color3f, shading.value, pixels, traced)
-    m2 = dr.gather(mi.Float, shading.moment2, pixels, traced)
-    resolved = _reproject.resolve(value, traced, inp.spp, inp.reprojection, inp.history,
-                                  o["max_history"], m2)
+    # This frame's samples (the shading buffer is on them), blended with their own history.
+    resolved = _reproject.resolve(shading.value, shading.mask, inp.spp, inp.reprojection,
+                                  inp.history, o["max_history"], shading.moment2)
     timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
     # The cells: the first samples, in the working domain (irradiance with demodulate).
     c = dr.arange(mi.UInt32, nc)

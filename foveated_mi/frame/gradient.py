@@ -89,14 +89,43 @@ def _to_color(tensor, plan: FramePlan, name: str) -> mi.Color3f:
     return dr.unravel(mi.Color3f, tensor.array)
 
 
+def _traced_pixels(primal: PrimalFrame) -> mi.Bool:
+    """The film's pixels whose traced value the frame holds (the nested adjoint's seam)."""
+    plan, shading = primal.plan, primal.shading
+    if plan.samples is None:
+        return shading.mask
+    mask = dr.zeros(mi.Bool, plan.width * plan.height)
+    dr.scatter(mask, True, plan.samples[0], shading.mask)
+    return mask
+
+
+def _samples_to_pixels(primal: PrimalFrame, delta: mi.Color3f) -> mi.Color3f:
+    """A gradient on the foveal buffer's samples summed onto their traced pixels: the
+    transpose of the gather that reads each pixel's value at its samples."""
+    plan = primal.plan
+    if plan.samples is None:
+        return delta
+    out = dr.zeros(mi.Color3f, plan.width * plan.height)
+    dr.scatter_reduce(dr.ReduceOp.Add, out, delta, plan.samples[0], primal.shading.mask)
+    return out
+
+
+def _pixels_to_samples(primal: PrimalFrame, tangent: mi.Color3f) -> mi.Color3f:
+    """A tangent of the traced pixels read at the foveal buffer's samples."""
+    plan = primal.plan
+    if plan.samples is None:
+        return tangent
+    return dr.gather(mi.Color3f, tangent, plan.samples[0], primal.shading.mask)
+
+
 def backward(nested_adjoint: _adjoint.NestedAdjoint, integrator, scene, params,
              primal: PrimalFrame, grad_in, seed, spp, o: dict[str, Any]) -> None:
     """Reverse mode: ``grad_in`` (H, W, 3) through the formation to the traced pixels, then
     through the nested integrator's adjoint into the parameters' gradients."""
     grad = _to_color(grad_in, primal.plan, "grad_in")
     delta = _adjoint.recorded_backward(*_graph(primal, o), grad)
-    nested_adjoint.backward(integrator, scene, params, primal.plan, primal.shading.mask,
-                            delta, seed, spp, o)
+    nested_adjoint.backward(integrator, scene, params, primal.plan, _traced_pixels(primal),
+                            _samples_to_pixels(primal, delta), seed, spp, o)
 
 
 def forward(nested_adjoint: _adjoint.NestedAdjoint, integrator, scene, params,
@@ -104,7 +133,8 @@ def forward(nested_adjoint: _adjoint.NestedAdjoint, integrator, scene, params,
     """Forward mode: the traced pixels' tangent from the nested integrator, through the
     formation. Returns the image tangent (H, W, 3)."""
     plan = primal.plan
-    tangent = nested_adjoint.forward(integrator, scene, params, plan, primal.shading.mask,
+    tangent = nested_adjoint.forward(integrator, scene, params, plan, _traced_pixels(primal),
                                      seed, spp, o)
+    tangent = _pixels_to_samples(primal, tangent)
     image = _adjoint.recorded_forward(*_graph(primal, o), tangent)
     return mi.TensorXf(dr.ravel(image), shape=(plan.height, plan.width, 3))

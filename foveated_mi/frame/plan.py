@@ -67,8 +67,9 @@ class FramePlan:
     fill_seed: int = 0                         #: seed of the stochastic fill (the render's)
     emission_edges: mi.Bool | None = None      #: footprints across an emitter's edge
     gaze: mi.Point2f | None = None             #: the gaze's film position in pixels (opaque)
-    #: ``(pixels, on)`` of the foveal buffer's samples, where the plan is on them
-    #: (:func:`on_samples`): the G-buffer, reprojection map and history are then per sample
+    #: ``(pixels, on, rays)`` of the foveal buffer's samples (each one's film pixel, whether
+    #: it is on, and its ray in the launch), where the plan is on them (:func:`on_samples`):
+    #: the G-buffer, shading buffer, reprojection map and history are then per sample
     samples: tuple | None = None
     layout: Any = None                         #: their :class:`~.buffer_space.SampleLayout`
 
@@ -151,18 +152,20 @@ class Planner:
         gaze_key = tuple(float(v) for v in o["gaze"])
         materials = materials_needed(o)
         with dr.suspend_grad():
-            # A still camera and gaze over an unchanged scene reuse the samples' G-buffer.
-            key = (state.camera, state.scene, gaze_key, lay, materials, width, height)
+            # A still camera and gaze over an unchanged scene reuse the samples' G-buffer,
+            # and their launch.
+            key = (state.camera, state.scene, gaze_key, lay, materials, width, height,
+                   o["reorder"], o["block_height"])
             cached = self._samples_cache
             reused = cached is not None and cached[0] == key
             if reused:
-                pixels, on, gb = cached[1]
+                pixels, on, gb, launch = cached[1]
             else:
                 pixels, on = _buffer_space.sample_pixels(lay, gaze, width, height)
                 y = pixels // width
                 gb = _gbuffer.gbuffer_at(scene, sensor, pixels - y * width, y, width, height,
                                          on, materials=materials)
-                self._samples_cache = (key, (pixels, on, gb))
+                launch = None
             timer.mark("gbuffer", pixels, on, gb.position, gb.normal, gb.depth, gb.hit,
                        gb.direction, gb.albedo, gb.emission)
             history = self.history if o["history"] else None
@@ -182,17 +185,24 @@ class Planner:
             frame_seed = self._frame_seed(seed, cut, o["history"])
             map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
             timer.mark("sampling", reproj.hit, reproj.index)
-            # The launch of the samples' pixels, and the sampling map they make.
-            ro, smap = _reorder.launch_of_pixels(pixels, on, width, height, o["reorder"],
-                                                 o["block_height"])
+            # The launch of the samples' pixels, the sampling map they make, and each
+            # sample's ray in it.
+            if launch is None:
+                ro, smap = _reorder.launch_of_pixels(pixels, on, width, height, o["reorder"],
+                                                     o["block_height"])
+                rays = _buffer_space.sample_rays(pixels, on, ro.wavefront, ro.active,
+                                                 width * height)
+                launch = (ro, smap, rays)
+                self._samples_cache = (key, (pixels, on, gb, launch))
+            ro, smap, rays = launch
             prob = dr.select(smap, 1.0, 0.0)
-            timer.mark("reorder", ro.wavefront)
+            timer.mark("reorder", ro.wavefront, rays)
         return FramePlan(sensor=sensor, width=width, height=height, spp=spp, seed=frame_seed,
                          map_seed=map_seed, gbuffer=gb, edges=None, sampling_map=smap,
                          probability=prob, reprojection=reproj, reordered=ro, history=history,
                          filter_sampler=self._filter_sampler(sensor, o["pixel_filter"]),
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=None,
-                         gaze=gaze, samples=(pixels, on), layout=lay)
+                         gaze=gaze, samples=(pixels, on, rays), layout=lay)
 
     def commit(self, plan: FramePlan, history: dict[str, Any] | None) -> None:
         """After a primal frame: its history (``mean``, ``count``, ``moment2`` on the film,

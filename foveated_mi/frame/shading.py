@@ -56,7 +56,8 @@ _NO_RAY = 0xFFFFFFFF
 
 
 class ShadingBuffer(NamedTuple):
-    """The sparse shading buffer of §3.3 before the history: one entry per pixel.
+    """The sparse shading buffer of §3.3 before the history: one entry per film pixel, or
+    per sample of the foveal buffer where the frame's plan is on its samples.
 
     ``moment2`` and ``count`` describe the noise of ``value`` (for variance-guided filtering);
     like every weight of the image formation they carry no gradient."""
@@ -179,6 +180,11 @@ def develop_mean(samples: TracedSamples, pixels: mi.UInt32, spp: int, n_pixels: 
 
     Returns the sparse shading buffer (``n_pixels`` entries) and the mask of pixels that hold
     a value. Linear in ``samples.radiance`` (the mask and counts are fixed)."""
+    return on_film(_mean_per_ray(samples, spp), pixels, n_pixels)
+
+
+def _mean_per_ray(samples: TracedSamples, spp: int) -> ShadingBuffer:
+    """The ``importance`` estimate of each ray (one entry per traced pixel, launch order)."""
     ok = mi.Float(samples.ok)
     lum2 = dr.square(luminance(dr.detach(samples.radiance)))
     if spp > 1:
@@ -188,12 +194,7 @@ def develop_mean(samples: TracedSamples, pixels: mi.UInt32, spp: int, n_pixels: 
     else:
         total, accepted = samples.radiance, ok
     inv = dr.rcp(dr.maximum(dr.detach(accepted), 1.0))
-    value, mask = scatter_to_film(total * inv, accepted > 0, pixels, n_pixels)
-    m2 = dr.zeros(mi.Float, n_pixels)
-    count = dr.zeros(mi.Float, n_pixels)
-    dr.scatter(m2, lum2 * inv, pixels, accepted > 0)
-    dr.scatter(count, accepted, pixels, accepted > 0)
-    return ShadingBuffer(value, mask, m2, count)
+    return ShadingBuffer(total * inv, accepted > 0, lum2 * inv, accepted)
 
 
 def develop_splat(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.Film
@@ -208,7 +209,12 @@ def develop_splat(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.
     with any weight holds the ratio, every other pixel holds nothing. Linear in
     ``samples.radiance`` (the weights depend only on the sample positions)."""
     width, height = (int(v) for v in film.crop_size())
-    n = width * height
+    return on_film(_splat_per_ray(samples, pixels, spp, film), pixels, width * height)
+
+
+def _splat_per_ray(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.Film
+                   ) -> ShadingBuffer:
+    """The ``splat`` estimate of each ray's pixel (launch order)."""
     ray_of, pos, lum2, border = _splat_sources(samples, pixels, film)
     acc, m2, wsum = _splat_gather(samples, pixels, spp, film, ray_of, pos, lum2, border)
     if spp > 1:
@@ -217,12 +223,29 @@ def develop_splat(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.
     accepted = dr.block_sum(mi.Float(samples.ok), spp) if spp > 1 else mi.Float(samples.ok)
     holds = (accepted > 0) & (wsum > 0)
     inv = dr.rcp(dr.select(holds, wsum, 1.0))
-    value, mask = scatter_to_film(acc * inv, holds, pixels, n)
-    moment = dr.zeros(mi.Float, n)
-    count = dr.zeros(mi.Float, n)
-    dr.scatter(moment, m2 * inv, pixels, holds)
-    dr.scatter(count, accepted, pixels, holds)
-    return ShadingBuffer(value, mask, moment, count)
+    return ShadingBuffer(acc * inv, holds, m2 * inv, accepted)
+
+
+def on_film(per_ray: ShadingBuffer, pixels: mi.UInt32, n_pixels: int) -> ShadingBuffer:
+    """The rays' estimates at their pixels (``pixels``: each ray's, each pixel once): the
+    film-sized sparse shading buffer, nothing where no ray holds a value."""
+    holds = per_ray.mask
+    value, mask = scatter_to_film(per_ray.value, holds, pixels, n_pixels)
+    m2 = dr.zeros(mi.Float, n_pixels)
+    count = dr.zeros(mi.Float, n_pixels)
+    dr.scatter(m2, per_ray.moment2, pixels, holds)
+    dr.scatter(count, per_ray.count, pixels, holds)
+    return ShadingBuffer(value, mask, m2, count)
+
+
+def on_samples(per_ray: ShadingBuffer, rays: mi.UInt32, on: mi.Bool) -> ShadingBuffer:
+    """The rays' estimates at the foveal buffer's samples (``rays``: each sample's ray,
+    where ``on``): a buffer the size of the samples, with nothing film-sized on the way.
+    Samples on one pixel read its one ray. Linear in the rays' values (a gather)."""
+    has = on & dr.gather(mi.Bool, per_ray.mask, rays, on)
+    return ShadingBuffer(dr.gather(mi.Color3f, per_ray.value, rays, has), has,
+                         dr.gather(mi.Float, per_ray.moment2, rays, has),
+                         dr.gather(mi.Float, per_ray.count, rays, has))
 
 
 def _splat_sources(samples: TracedSamples, pixels: mi.UInt32, film: mi.Film):
@@ -289,12 +312,18 @@ def _splat_gather(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.
 
 
 def develop(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.Film,
-            mode: str) -> ShadingBuffer:
-    """The sparse shading buffer of a frame's samples (``mode`` in :data:`PIXEL_FILTERS`)."""
+            mode: str, at: tuple[mi.UInt32, mi.Bool] | None = None) -> ShadingBuffer:
+    """The sparse shading buffer of a frame's samples (``mode`` in :data:`PIXEL_FILTERS`):
+    on the film's pixels, or with ``at = (rays, on)`` on the foveal buffer's samples
+    (:func:`on_samples`)."""
     if mode == "splat" and not film.rfilter().is_box_filter():
-        return develop_splat(samples, pixels, spp, film)
+        per_ray = _splat_per_ray(samples, pixels, spp, film)
+    else:
+        per_ray = _mean_per_ray(samples, spp)
+    if at is not None:
+        return on_samples(per_ray, *at)
     width, height = (int(v) for v in film.crop_size())
-    return develop_mean(samples, pixels, spp, width * height)
+    return on_film(per_ray, pixels, width * height)
 
 
 def scatter_to_film(values: mi.Color3f, valid: mi.Bool, pixels: mi.UInt32,

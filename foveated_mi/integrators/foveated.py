@@ -183,12 +183,14 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                                clamp=self._options["clamp"], filter_sampler=plan.filter_sampler)
 
     def _develop(self, samples: TracedSamples, plan: FramePlan) -> ShadingBuffer:
-        """Per-sample tone mapping where asked, then the sparse shading buffer."""
+        """Per-sample tone mapping where asked, then the sparse shading buffer (on the
+        foveal buffer's samples where the plan is)."""
         o = self._options
         if o["tonemap_samples"]:
             samples = tonemap_samples(samples, o)
+        at = None if plan.samples is None else (plan.samples[2], plan.samples[1])
         return develop(samples, plan.reordered.wavefront, plan.spp, plan.sensor.film(),
-                       o["pixel_filter"])
+                       o["pixel_filter"], at)
 
     # -- differentiation ------------------------------------------------------------------
     def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
