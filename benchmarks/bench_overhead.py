@@ -130,6 +130,34 @@ def _kernel_profile(hist: list[dict], top: int = 5) -> dict:
                          "ops": int(hist[i].get("operation_count", 0))} for i in order]}
 
 
+def stage_kernels(render) -> dict:
+    """The kernels of one timed frame (``render()`` on an integrator with ``timing=True``),
+    stage by stage in launch order: each launch's run time (ms), width and operation count.
+    The stage boundaries are where the timer evaluates a stage's outputs."""
+    from foveated_mi import timing
+    real, out = timing.StageTimer.mark, {}
+
+    def mark(self, stage, *outputs):
+        real(self, stage, *outputs)
+        if self.enabled:
+            hist = dr.kernel_history([dr.KernelType.JIT])
+            out.setdefault(stage, []).extend(
+                {"ms": float(h.get("execution_time", 0.0)), "size": int(h.get("size", 0)),
+                 "ops": int(h.get("operation_count", 0))} for h in hist)
+    timing.StageTimer.mark = mark
+    try:
+        with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+            dr.kernel_history_clear()
+            _forced(render)
+            out.setdefault("after", []).extend(
+                {"ms": float(h.get("execution_time", 0.0)), "size": int(h.get("size", 0)),
+                 "ops": int(h.get("operation_count", 0))}
+                for h in dr.kernel_history([dr.KernelType.JIT]))
+    finally:
+        timing.StageTimer.mark = real
+    return out
+
+
 def _orbit(camera: dict, degrees: float) -> dict:
     """``camera`` turned by ``degrees`` about the vertical axis through its target."""
     o, t = np.array(camera["origin"], float), np.array(camera["target"], float)
@@ -140,7 +168,8 @@ def _orbit(camera: dict, degrees: float) -> dict:
 
 
 def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int,
-             to_host: bool = False, freeze: bool = True) -> dict | None:
+             to_host: bool = False, freeze: bool = True, kernels: bool = False
+             ) -> dict | None:
     from foveated_mi.integrators.foveated import FoveatedIntegrator
     from foveated_mi.options import validate_options
     from foveated_mi.scenes import apply_camera, camera_of, load_scene
@@ -201,6 +230,8 @@ def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int,
             profile = _kernel_profile(hist)
             kernel_ms.append(profile["kernel_ms"])
             longest.append(profile["longest"][0]["ms"] if profile["longest"] else 0.0)
+    by_stage = stage_kernels(lambda: mi.render(scene, integrator=timed, spp=spec["spp"],
+                                               seed=warmup + frames)) if kernels else None
     full_ms = median(full)
     st = {s: median([t[s] for t in stages]) for s in STAGES}
     overhead = sum(v for s, v in st.items() if s != "trace")
@@ -218,7 +249,9 @@ def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int,
             # nested integrator's kernel, without the develop and resolve its stage holds.
             "longest_kernel_ms": median(longest),
             "longest_kernel_x_full": median(longest) / full_ms,
-            "image_to_host": to_host, "freeze": freeze}
+            "image_to_host": to_host, "freeze": freeze,
+            # With --kernels: one more timed frame's launches, stage by stage.
+            "stage_kernels": by_stage}
 
 
 def parse_sets(items: list[str]) -> dict:
@@ -250,6 +283,9 @@ def main(argv=None):
     p.add_argument("--set", action="append", default=[], metavar="OPTION=VALUE",
                    help="an option of the foveated integrator for every case, over the "
                         "case's own (a Python literal, e.g. --set reorder='tiles'); repeatable")
+    p.add_argument("--kernels", action="store_true",
+                   help="also list one timed frame's kernels stage by stage (ms, width, "
+                        "operations)")
     p.add_argument("--variant")
     p.add_argument("--out", help="JSON results")
     a = p.parse_args(argv)
@@ -267,9 +303,14 @@ def main(argv=None):
         if overrides:
             spec = {**spec, "options": {**spec.get("options", {}), **overrides}}
         r = run_case(name, spec, scale=a.scale, frames=a.frames, warmup=a.warmup,
-                     to_host=a.to_host, freeze=not a.no_freeze)
+                     to_host=a.to_host, freeze=not a.no_freeze, kernels=a.kernels)
         if r is None:
             continue
+        if r["stage_kernels"] is not None:
+            print(f"{name}: one timed frame's kernels, stage by stage (ms, width, operations)")
+            for stage, ks in r["stage_kernels"].items():
+                listed = ", ".join(f"{k['ms']:.2f} ({k['size']}, {k['ops']})" for k in ks)
+                print(f"  {stage}: {sum(k['ms'] for k in ks):.2f} ms: {listed or '-'}")
         results.append(r)
         x = r["stages_x_full"]
         rows.append([name, "x".join(map(str, r["size"])), r["preset"],

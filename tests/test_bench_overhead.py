@@ -68,3 +68,25 @@ def test_set_overrides_every_case_and_is_recorded(bench, tmp_path):
     r = data["results"][0]
     assert r["options"] == {"ray_budget": 0.10, "reorder": "tiles"}
     assert r["size"] == [64, 64] and r["preset"] == "vr"
+
+
+def test_kernels_lists_one_timed_frame_stage_by_stage(bench, tmp_path, capsys):
+    out = tmp_path / "overhead.json"
+    assert bench.main(["--cases", "voxel-static-vr", "--scale", "0.03125", "--frames", "1",
+                       "--warmup", "3", "--kernels", "--out", str(out)]) == 0
+    r = json.loads(out.read_text())["results"][0]
+    ks = r["stage_kernels"]
+    # The trace stage holds the nested integrator's kernel, as wide as the frame's rays
+    # (its launch), and every launch has a time, a width and operations.
+    assert "trace" in ks and "post" in ks
+    assert all(k["ms"] >= 0 and k["size"] > 0 and k["ops"] > 0 for v in ks.values() for k in v)
+    longest = max((k for v in ks.values() for k in v), key=lambda k: k["ops"])
+    assert longest in ks["trace"]
+    # The warp writes every film pixel: a post kernel as wide as the film.
+    assert any(k["size"] == 32 * 32 for k in ks["post"])
+    text = capsys.readouterr().out
+    assert "stage by stage" in text and "  trace: " in text
+    # Without the flag nothing is listed.
+    assert bench.main(["--cases", "voxel-static-vr", "--scale", "0.03125", "--frames", "1",
+                       "--warmup", "1", "--out", str(out)]) == 0
+    assert json.loads(out.read_text())["results"][0]["stage_kernels"] is None
