@@ -406,13 +406,16 @@ _SCHEMA: tuple[Option, ...] = (
            "scaled down", lo=0.0, hi=3e38, lo_open=True),
     Option("timing", False, "bool", "synchronise at stage boundaries and report wall time per "
            "stage", cli=False),
-    Option("freeze", True, "bool", "replay the recorded kernels of the passes after the trace "
-           "instead of tracing them each frame",
-           doc="Record history resolve, reconstruction and post-processing once per "
-           "configuration with ``dr.freeze`` and replay the recorded kernels on later frames "
-           "(:mod:`foveated_mi.frame.formation`): the same image without Python tracing them "
-           "again. Frames that are differentiated, timed or denoised by OIDN are traced as "
-           "usual; false traces every frame."),
+    Option("freeze", True, "bool", "replay the recorded kernels of the trace and of the "
+           "passes after it instead of tracing them each frame",
+           doc="Record the nested integrator's trace (:mod:`foveated_mi.frame.trace`) and the "
+           "history resolve, reconstruction and post-processing "
+           "(:mod:`foveated_mi.frame.formation`) once per configuration with ``dr.freeze`` "
+           "and replay the recorded kernels on later frames: the same image without Python "
+           "and Mitsuba tracing them again (for the trace, a virtual call per BSDF and "
+           "emitter of the scene). Frames that are differentiated or timed are traced as "
+           "usual, and so is the formation of a frame denoised by OIDN; false traces every "
+           "frame."),
     Option("map_seed", -1, "int", "pin the sampling map to this seed (-1 follows the frame "
            "seed)", lo=-1, hi=0xFFFFFFFF),
 )

@@ -22,6 +22,9 @@ def test_tiny_run_reports_stages_kernels_and_speedup(bench, tmp_path, capsys):
     assert r["size"] == [32, 32] and r["preset"] == "paper"
     assert r["full_ms"] > 0 and r["frame_ms"] > 0
     assert r["speedup"] == pytest.approx(r["full_ms"] / r["frame_ms"])
+    # The full render replayed as the foveated frame replays its own kernels.
+    assert r["full_replayed_ms"] > 0
+    assert r["speedup_vs_replayed"] == pytest.approx(r["full_replayed_ms"] / r["frame_ms"])
     rest = sum(v for k, v in r["stages_x_full"].items() if k != "trace")
     assert r["overhead_x_full"] == pytest.approx(rest)
     assert r["kernels_per_frame"] > 0 and r["compiled_from_frame_3"] == 0

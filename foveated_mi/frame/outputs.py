@@ -19,7 +19,6 @@ from ..validate import ParameterError
 from .formation import FORMATIONS, Formed
 from .plan import FramePlan
 from .reorder import Reordered
-from .shading import TracedSamples
 
 
 class FrameOutputs:
@@ -83,9 +82,10 @@ class FrameOutputs:
         return arr.reshape(h, w)
 
 
-def frame_outputs(plan: FramePlan, samples: TracedSamples, formed: Formed,
+def frame_outputs(plan: FramePlan, samples, formed: Formed,
                   o: dict[str, Any], timer: StageTimer, index: int) -> FrameOutputs:
-    """The buffers and stats of primal frame number ``index`` (module docstring)."""
+    """The buffers and stats of primal frame number ``index`` (module docstring);
+    ``samples``: the trace pass's counters (``rejected``, ``clamped``)."""
     gb, ro, reproj = plan.gbuffer, plan.reordered, plan.reprojection
     entry = FORMATIONS[o["formation"]]
     film = Grid.film(plan.width, plan.height)

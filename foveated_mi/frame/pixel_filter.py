@@ -82,6 +82,19 @@ class FilterSampler:
         self._table = _tabulate(rfilter, self.radius) if self.importance else None
 
     @property
+    def table(self) -> "_Table | None":
+        """The tabulated filter it inverts (None for the box and uniform jitter)."""
+        return self._table
+
+    def with_table(self, table: "_Table | None") -> "FilterSampler":
+        """This sampler reading ``table``, the same values held elsewhere (a frozen
+        function's input: what it reads must come in as one)."""
+        import copy
+        out = copy.copy(self)
+        out._table = table
+        return out
+
+    @property
     def signed(self) -> bool:
         """Whether the filter has negative lobes (samples carry signed weights)."""
         return self._table is not None and self._table.signed
@@ -221,6 +234,19 @@ class SplatFootprint:
             (a0, s0), (a1, s1) = _host_cumulative(t, lo), _host_cumulative(t, hi)
             cells.append((d, a1 - a0, s1 - s0))
         self._cells = cells
+
+    @property
+    def table(self) -> "_Table | None":
+        """The tabulated filter it inverts (None for the box and uniform jitter)."""
+        return self._table
+
+    def with_table(self, table: "_Table | None") -> "FilterSampler":
+        """This sampler reading ``table``, the same values held elsewhere (a frozen
+        function's input: what it reads must come in as one)."""
+        import copy
+        out = copy.copy(self)
+        out._table = table
+        return out
 
     @property
     def signed(self) -> bool:

@@ -122,6 +122,18 @@ def camera_rays(sensor: mi.Sensor, sampler: mi.Sampler, pixels: mi.UInt32, width
     return ray, weight, fs
 
 
+def lanes_of(pixels: mi.UInt32, spp: int, active: mi.Bool | None = None
+             ) -> tuple[mi.UInt32, mi.Bool | None]:
+    """The pixel of each lane of a wavefront (``spp`` consecutive lanes per pixel of
+    ``pixels``, as ``SamplingIntegrator::render`` lays them out), and each lane's flag from
+    ``active`` (None: every lane traces)."""
+    if spp == 1:
+        return pixels, active
+    ray_id = dr.arange(mi.UInt32, dr.width(pixels) * spp) // spp
+    return (dr.gather(mi.UInt32, pixels, ray_id),
+            None if active is None else dr.gather(mi.Bool, active, ray_id))
+
+
 def trace_wavefront(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingIntegrator,
                     pixels: mi.UInt32, width: int, height: int, *, spp: int, seed,
                     active: mi.Bool | None = None, clamp: float = 1e4,
@@ -132,17 +144,24 @@ def trace_wavefront(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingI
     ``filter_sampler`` is built from the sensor's film when not given (build it once per
     film and pass it in: tabulating a filter costs a host round trip).
     """
-    n = dr.width(pixels)
-    lanes = n * spp
+    pix, lane_active = lanes_of(pixels, spp, active)
+    return trace_lanes(scene, sensor, integrator, pix, width, height, spp=spp, seed=seed,
+                       active=lane_active, clamp=clamp, filter_sampler=filter_sampler)
+
+
+def trace_lanes(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingIntegrator,
+                pix: mi.UInt32, width: int, height: int, *, spp: int, seed,
+                active: mi.Bool | None = None, clamp: float = 1e4,
+                filter_sampler: FilterSampler | None = None) -> TracedSamples:
+    """:func:`trace_wavefront` of lanes already laid out (:func:`lanes_of`): every array it
+    makes is as wide as ``pix``, so a frozen recording of it replays at any width."""
+    lanes = dr.width(pix)
     sampler = sensor.sampler().clone()
     sampler.set_sample_count(spp)
     sampler.set_samples_per_wavefront(spp)
     sampler.seed(seed, lanes)
 
-    lane = dr.arange(mi.UInt32, lanes)
-    ray_id = lane // spp if spp > 1 else lane
-    pix = dr.gather(mi.UInt32, pixels, ray_id)
-    lane_active = mi.Bool(True) if active is None else dr.gather(mi.Bool, active, ray_id)
+    lane_active = mi.Bool(True) if active is None else active
     if filter_sampler is None:
         filter_sampler = FilterSampler(sensor.film())
     ray, weight, fs = camera_rays(sensor, sampler, pix, width, filter_sampler, lane_active)

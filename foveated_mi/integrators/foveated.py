@@ -47,15 +47,25 @@ from ..frame.outputs import FrameOutputs, frame_outputs
 from ..frame.plan import FramePlan, Planner
 from ..frame.reproject import History
 from ..frame.scene_state import SceneState, scene_state
-from ..frame.domain import tonemap_samples
-from ..frame.shading import (ShadingBuffer, TracedSamples, develop, is_ad_integrator,
-                             trace_wavefront)
+from ..frame import trace as _trace
+from ..frame.shading import ShadingBuffer, TracedSamples, is_ad_integrator
 from ..options import (SCHEMA, from_properties, gradient_refusal, parameter_table,
                        pixel_filter_warning, validate_options)
 from ..timing import StageTimer
 from ..validate import ParameterError
 
 __doc__ += parameter_table()
+
+
+class _Hidden:
+    """A value out of reach of Dr.Jit's traversal of this plugin. The scene holds its
+    integrator, and a frozen function that takes the scene (the trace pass) traverses a
+    Python plugin's attributes, dataclasses included: the last frame's buffers would become
+    that function's inputs."""
+    __slots__ = ("value",)
+
+    def __init__(self, value=None):
+        self.value = value
 
 
 class FoveatedIntegrator(mi.SamplingIntegrator):
@@ -84,10 +94,19 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._warn_pixel_filter()
         self._planner = Planner()            # history, frame count, caches
         self._frozen = FrozenFormation()
+        self._frozen_trace = _trace.FrozenTrace()
         self._adjoint = NestedAdjoint()
         # The last primal frame, which render_backward / render_forward differentiate.
-        self._primal: _gradient.PrimalFrame | None = None
+        self._last = _Hidden()
         self._outputs = FrameOutputs({}, {}, {})
+
+    @property
+    def _primal(self) -> _gradient.PrimalFrame | None:
+        return self._last.value
+
+    @_primal.setter
+    def _primal(self, frame: _gradient.PrimalFrame | None) -> None:
+        self._last.value = frame
 
     # -- options --------------------------------------------------------------------------
     @property
@@ -161,36 +180,37 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         o, timer = self._options, StageTimer(self._options["timing"])
         # Decisions before tracing: G-buffer, reprojection, sampling map, launch.
         plan = self._planner.plan(scene, sensor, seed, spp, o, timer, state)
-        # Sparse shading (§3.3): the nested integrator traces the launch only.
-        samples = self._trace(scene, plan)
-        # The samples into the sparse shading buffer (the seam of the gradient pass).
-        shading = self._develop(samples, plan)
-        # The registered formation; its graph kept when mi.render will differentiate it.
+        # Sparse shading (§3.3): the nested integrator traces the launch only, and its
+        # samples become the sparse shading buffer (the seam of the gradient pass).
         record = state.differentiated and gradient_refusal(self._given, o) is None
+        shaded = self._shade(scene, plan, timer, record)
+        shading = shaded.shading
+        # The registered formation; its graph kept when mi.render will differentiate it.
         formed, recorded = _gradient.form_primal(plan, shading, o, timer, self._frozen, record)
         # The history, buffers and stats of this frame, and the frame a gradient pass reuses.
         self._planner.commit(plan, formed.history if o["history"] else None)
-        self._outputs = frame_outputs(plan, samples, formed, o, timer, self._planner.index - 1)
+        self._outputs = frame_outputs(plan, shaded, formed, o, timer, self._planner.index - 1)
         self._primal = _gradient.PrimalFrame(plan, shading, id(scene), recorded)
         flat = dr.ravel(formed.image) if formed.flat is None else formed.flat
         return mi.TensorXf(flat, shape=(plan.height, plan.width, 3))
 
+    def _shade(self, scene: mi.Scene, plan: FramePlan, timer: StageTimer,
+               record: bool) -> _trace.Shaded:
+        """The trace pass (:mod:`foveated_mi.frame.trace`): replayed where nothing needs it
+        traced (a frame that is not differentiated or timed, with ``freeze`` on)."""
+        o = self._options
+        if o["freeze"] and not timer.enabled and not record:
+            return self._frozen_trace(scene, self.nested, plan, o)
+        return _trace.shade(scene, self.nested, plan, o)
+
     def _trace(self, scene: mi.Scene, plan: FramePlan) -> TracedSamples:
         """Sparse shading: the nested integrator traces the launch (rays x spp lanes)."""
-        ro = plan.reordered
-        return trace_wavefront(scene, plan.sensor, self.nested, ro.wavefront, plan.width,
-                               plan.height, spp=plan.spp, seed=plan.seed, active=ro.active,
-                               clamp=self._options["clamp"], filter_sampler=plan.filter_sampler)
+        return _trace.trace(scene, self.nested, plan, self._options)
 
     def _develop(self, samples: TracedSamples, plan: FramePlan) -> ShadingBuffer:
         """Per-sample tone mapping where asked, then the sparse shading buffer (on the
         foveal buffer's samples where the plan is)."""
-        o = self._options
-        if o["tonemap_samples"]:
-            samples = tonemap_samples(samples, o)
-        at = None if plan.samples is None else (plan.samples[2], plan.samples[1])
-        return develop(samples, plan.reordered.wavefront, plan.spp, plan.sensor.film(),
-                       o["pixel_filter"], at)
+        return _trace.develop_plan(samples, plan, self._options)
 
     # -- differentiation ------------------------------------------------------------------
     def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):

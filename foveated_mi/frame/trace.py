@@ -1,0 +1,113 @@
+r"""The trace pass (§3.3): the nested integrator traces the frame's launch, and its samples
+become the sparse shading buffer (:mod:`foveated_mi.frame.shading`), traced or replayed.
+
+Python and Mitsuba trace the nested integrator's kernel again every frame: the path loop,
+and a virtual call for every BSDF, emitter and texture of the scene. That is host work the
+rays do not pay for, and it grows with the scene, not with the launch
+(``python benchmarks/bench_overhead.py --cases staircase-vr --kernels`` shows the trace
+stage's wall time beside its kernels). :class:`FrozenTrace` records the trace and the
+develop once per configuration with ``dr.freeze`` and afterwards launches the recorded
+kernels on the frame's launch, as :class:`~foveated_mi.frame.formation.FrozenFormation` does
+for the passes after it:
+
+- **Inputs** (read at each replay): the scene and the sensor, whose Dr.Jit variables
+  Mitsuba hands to the recording (a camera move, a new field of view or an edited
+  parameter is seen; a parameter whose type or size changes records again), the launch
+  (its width changes from frame to frame without a new recording), the frame's seed and
+  the samples the buffer is on.
+- **The key** (host values that decide the kernels): ``spp``, the film's size and crop,
+  the sensor's shutter, the clamp, the pixel filter, the tone map of samples, and which
+  inputs exist. A new key records again; the most recent :data:`RECORDINGS` are kept.
+
+It serves the same frames as the frozen formation: not differentiated, not timed, with
+``freeze`` on. The images are those of the traced pass, bit for bit.
+"""
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import drjit as dr
+import mitsuba as mi
+
+from .domain import tonemap_samples
+from .formation import RECORDINGS, _fields, _no_collection
+from .plan import FramePlan
+from .sampling import opaque_seed
+from .shading import ShadingBuffer, TracedSamples, develop, lanes_of, trace_lanes, trace_wavefront
+
+
+class Shaded(NamedTuple):
+    """What the trace pass leaves: the sparse shading buffer and the samples' counters."""
+    shading: ShadingBuffer
+    rejected: mi.UInt32     #: rejected (non-finite) samples, a 1-element array
+    clamped: mi.UInt32      #: clamped samples, a 1-element array
+
+
+def trace(scene: mi.Scene, integrator: mi.SamplingIntegrator, plan: FramePlan,
+          o: dict[str, Any]) -> TracedSamples:
+    """The nested integrator traces the plan's launch (rays x spp lanes)."""
+    ro = plan.reordered
+    return trace_wavefront(scene, plan.sensor, integrator, ro.wavefront, plan.width,
+                           plan.height, spp=plan.spp, seed=plan.seed, active=ro.active,
+                           clamp=o["clamp"], filter_sampler=plan.filter_sampler)
+
+
+def develop_plan(samples: TracedSamples, plan: FramePlan, o: dict[str, Any]) -> ShadingBuffer:
+    """Per-sample tone mapping where asked, then the sparse shading buffer (on the foveal
+    buffer's samples where the plan is)."""
+    if o["tonemap_samples"]:
+        samples = tonemap_samples(samples, o)
+    at = None if plan.samples is None else (plan.samples[2], plan.samples[1])
+    return develop(samples, plan.reordered.wavefront, plan.spp, plan.sensor.film(),
+                   o["pixel_filter"], at)
+
+
+def shade(scene: mi.Scene, integrator: mi.SamplingIntegrator, plan: FramePlan,
+          o: dict[str, Any]) -> Shaded:
+    """The trace pass, traced."""
+    samples = trace(scene, integrator, plan, o)
+    return Shaded(develop_plan(samples, plan, o), samples.rejected, samples.clamped)
+
+
+def _record(scene, sensor, integrator, filter_sampler, arrays: dict, key: dict) -> dict:
+    """The frozen body: the nested integrator's trace of one frame (the develop after it is
+    plain arithmetic, cheap to trace, and stays outside)."""
+    table = arrays["filter"]
+    samples = trace_lanes(
+        scene, sensor, integrator, arrays["lanes"], key["width"], key["height"],
+        spp=key["spp"], seed=arrays["seed"], active=arrays["active"], clamp=key["clamp"],
+        filter_sampler=filter_sampler.with_table(
+            None if table is None else type(filter_sampler.table)(**table)))
+    return dict(samples._asdict())
+
+
+class FrozenTrace:
+    """The trace pass recorded once per configuration and replayed (module docstring)."""
+
+    def __init__(self):
+        self._frozen = dr.freeze(_record, limit=RECORDINGS, warn_after=4 * RECORDINGS)
+
+    @property
+    def recordings(self) -> int:
+        """How many times the pass was traced and recorded so far."""
+        return self._frozen.n_recordings
+
+    def __call__(self, scene: mi.Scene, integrator: mi.SamplingIntegrator, plan: FramePlan,
+                 o: dict[str, Any]) -> Shaded:
+        ro, sensor = plan.reordered, plan.sensor
+        film = sensor.film()
+        # Laid out per lane here, so that every array of the recording is as wide as an
+        # input (a replay takes its widths from them).
+        pix, active = lanes_of(ro.wavefront, plan.spp, ro.active)
+        arrays = {"lanes": pix, "active": active,
+                  "seed": opaque_seed(plan.seed),
+                  # A named tuple is no input to a frozen function: its fields are.
+                  "filter": _fields(plan.filter_sampler.table)}
+        key = {"spp": plan.spp, "width": plan.width, "height": plan.height,
+               "crop": tuple(int(v) for v in film.crop_offset()),
+               "shutter": (float(sensor.shutter_open()), float(sensor.shutter_open_time())),
+               "clamp": float(o["clamp"]), "importance": plan.filter_sampler.importance}
+        with _no_collection():          # a collection inside a recording aborts
+            out = self._frozen(scene, sensor, integrator, plan.filter_sampler, arrays, key)
+        samples = TracedSamples(**out)
+        return Shaded(develop_plan(samples, plan, o), samples.rejected, samples.clamped)
