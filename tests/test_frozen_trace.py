@@ -97,3 +97,22 @@ def test_a_nested_ad_integrator_replays_and_a_differentiated_frame_is_traced():
     dr.backward(dr.mean(image.array))
     assert a._frozen_trace.recordings == before
     assert dr.all(dr.isfinite(dr.grad(params[key])))
+
+
+def test_a_parameter_held_on_the_host_records_again():
+    # The sensor's near clip is a Python float in the recorded kernel: changing it must not
+    # replay the old clip (the key holds every parameter held on the host).
+    scene = _scene()
+    a = FoveatedIntegrator(preset="vr", nested=scene.integrator(), history=False)
+    b = FoveatedIntegrator(preset="vr", nested=scene.integrator(), history=False, freeze=False)
+    images = []
+    for k, clip in enumerate((0.01, 0.01, 3.9, 3.9)):
+        params = mi.traverse(scene.sensors()[0])
+        params["near_clip"] = clip
+        params.update()
+        ia = np.array(mi.render(scene, integrator=a, seed=k))
+        np.testing.assert_array_equal(ia, np.array(mi.render(scene, integrator=b, seed=k)))
+        images.append(ia)
+    # The clip cut the box's front away: the frames differ, as they should.
+    assert not np.allclose(images[1], images[2])
+    assert a._frozen_trace.recordings >= 2

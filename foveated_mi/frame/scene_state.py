@@ -59,6 +59,13 @@ class SceneState:
     #: keeps a state to compare against keeps these too: no index it names can be reused.
     held: tuple = field(default=(), compare=False, repr=False)
 
+    def host_values(self) -> tuple:
+        """The parameters held on the host (Python scalars, scalar transforms), with their
+        values: what a recorded kernel would hold as constants."""
+        return tuple(p for p in self.scene[1:] + self.camera[1:]
+                     if isinstance(p, tuple) and len(p) == 2 and isinstance(p[0], str)
+                     and not isinstance(p[1], tuple))
+
 
 def scene_state(scene: mi.Scene, sensor: mi.Sensor) -> SceneState:
     """The :class:`SceneState` of ``scene`` seen through ``sensor`` (no device read)."""

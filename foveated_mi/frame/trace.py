@@ -5,22 +5,30 @@ Python and Mitsuba trace the nested integrator's kernel again every frame: the p
 and a virtual call for every BSDF, emitter and texture of the scene. That is host work the
 rays do not pay for, and it grows with the scene, not with the launch
 (``python benchmarks/bench_overhead.py --cases staircase-vr --kernels`` shows the trace
-stage's wall time beside its kernels). :class:`FrozenTrace` records the trace and the
-develop once per configuration with ``dr.freeze`` and afterwards launches the recorded
-kernels on the frame's launch, as :class:`~foveated_mi.frame.formation.FrozenFormation` does
-for the passes after it:
+stage's wall time beside its kernels). :class:`FrozenTrace` records the nested integrator's
+trace once per configuration with ``dr.freeze`` and afterwards launches the recorded kernels
+on the frame's launch, as :class:`~foveated_mi.frame.formation.FrozenFormation` does for the
+passes after it; the develop into the shading buffer, plain arithmetic that is cheap to
+trace, runs after it as in a traced frame.
 
 - **Inputs** (read at each replay): the scene and the sensor, whose Dr.Jit variables
   Mitsuba hands to the recording (a camera move, a new field of view or an edited
-  parameter is seen; a parameter whose type or size changes records again), the launch
-  (its width changes from frame to frame without a new recording), the frame's seed and
-  the samples the buffer is on.
+  parameter is seen; a parameter whose type or size changes records again), the launch laid
+  out per lane (:func:`~foveated_mi.frame.shading.lanes_of`, outside the recording, so that
+  every array in it is as wide as an input and a replay takes the frame's width: a gaze
+  move changes it every frame), the frame's seed and the film filter's table.
 - **The key** (host values that decide the kernels): ``spp``, the film's size and crop,
-  the sensor's shutter, the clamp, the pixel filter, the tone map of samples, and which
-  inputs exist. A new key records again; the most recent :data:`RECORDINGS` are kept.
+  the sensor's shutter, the clamp, the pixel filter and every scene parameter held on the
+  host (:meth:`~foveated_mi.frame.scene_state.SceneState.host_values`, which a recording
+  would hold as constants). A new key records again; the most
+  recent :data:`RECORDINGS` are kept. A new input layout (the first change of width) may
+  record once more.
 
 It serves the same frames as the frozen formation: not differentiated, not timed, with
-``freeze`` on. The images are those of the traced pass, bit for bit.
+``freeze`` on. The images are those of the traced pass, bit for bit
+(``tests/test_frozen_trace.py``). The scene holds its integrator, and Dr.Jit's traversal of
+the scene visits a Python plugin's attributes: the foveated integrator keeps its last frame
+out of that reach, or it would become an input of every recording.
 """
 from __future__ import annotations
 
@@ -33,7 +41,8 @@ from .domain import tonemap_samples
 from .formation import RECORDINGS, _fields, _no_collection
 from .plan import FramePlan
 from .sampling import opaque_seed
-from .shading import ShadingBuffer, TracedSamples, develop, lanes_of, trace_lanes, trace_wavefront
+from .shading import (ShadingBuffer, TracedSamples, develop, lanes_of, trace_lanes,
+                      trace_wavefront)
 
 
 class Shaded(NamedTuple):
@@ -93,7 +102,7 @@ class FrozenTrace:
         return self._frozen.n_recordings
 
     def __call__(self, scene: mi.Scene, integrator: mi.SamplingIntegrator, plan: FramePlan,
-                 o: dict[str, Any]) -> Shaded:
+                 o: dict[str, Any], host_values: tuple = ()) -> Shaded:
         ro, sensor = plan.reordered, plan.sensor
         film = sensor.film()
         # Laid out per lane here, so that every array of the recording is as wide as an
@@ -106,7 +115,8 @@ class FrozenTrace:
         key = {"spp": plan.spp, "width": plan.width, "height": plan.height,
                "crop": tuple(int(v) for v in film.crop_offset()),
                "shutter": (float(sensor.shutter_open()), float(sensor.shutter_open_time())),
-               "clamp": float(o["clamp"]), "importance": plan.filter_sampler.importance}
+               "clamp": float(o["clamp"]), "importance": plan.filter_sampler.importance,
+               "host": host_values}
         with _no_collection():          # a collection inside a recording aborts
             out = self._frozen(scene, sensor, integrator, plan.filter_sampler, arrays, key)
         samples = TracedSamples(**out)

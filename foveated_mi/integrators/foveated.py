@@ -183,7 +183,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         # Sparse shading (§3.3): the nested integrator traces the launch only, and its
         # samples become the sparse shading buffer (the seam of the gradient pass).
         record = state.differentiated and gradient_refusal(self._given, o) is None
-        shaded = self._shade(scene, plan, timer, record)
+        shaded = self._shade(scene, plan, timer, record, state)
         shading = shaded.shading
         # The registered formation; its graph kept when mi.render will differentiate it.
         formed, recorded = _gradient.form_primal(plan, shading, o, timer, self._frozen, record)
@@ -195,12 +195,12 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         return mi.TensorXf(flat, shape=(plan.height, plan.width, 3))
 
     def _shade(self, scene: mi.Scene, plan: FramePlan, timer: StageTimer,
-               record: bool) -> _trace.Shaded:
+               record: bool, state: SceneState) -> _trace.Shaded:
         """The trace pass (:mod:`foveated_mi.frame.trace`): replayed where nothing needs it
         traced (a frame that is not differentiated or timed, with ``freeze`` on)."""
         o = self._options
         if o["freeze"] and not timer.enabled and not record:
-            return self._frozen_trace(scene, self.nested, plan, o)
+            return self._frozen_trace(scene, self.nested, plan, o, state.host_values())
         return _trace.shade(scene, self.nested, plan, o)
 
     def _trace(self, scene: mi.Scene, plan: FramePlan) -> TracedSamples:
