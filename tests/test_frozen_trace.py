@@ -116,3 +116,33 @@ def test_a_parameter_held_on_the_host_records_again():
     # The clip cut the box's front away: the frames differ, as they should.
     assert not np.allclose(images[1], images[2])
     assert a._frozen_trace.recordings >= 2
+
+
+class _HostReading(mi.SamplingIntegrator):
+    """A nested integrator that reads a value on the host: its trace cannot be recorded."""
+
+    def __init__(self):
+        super().__init__(mi.Properties())
+
+    def sample(self, scene, sampler, ray, medium=None, active=True):
+        mean = float(dr.mean(ray.d.z)[0])                 # a read of the device
+        return mi.Color3f(0.25 + 0.0 * mean), mi.Bool(True), []
+
+
+def test_a_trace_that_cannot_be_recorded_is_traced_with_one_warning():
+    scene = _scene()
+    integ = FoveatedIntegrator(preset="vr", nested=_HostReading())
+    with pytest.warns(RuntimeWarning, match="could not be recorded") as caught:
+        first = np.array(mi.render(scene, integrator=integ, seed=0))
+    assert sum("could not be recorded" in str(w.message) for w in caught) == 1
+    assert integ._frozen_trace.failed
+    # Traced from then on, silently, with the frames of a traced integrator.
+    traced = FoveatedIntegrator(preset="vr", nested=_HostReading(), freeze=False)
+    np.testing.assert_array_equal(first, np.array(mi.render(scene, integrator=traced, seed=0)))
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for k in (1, 2):
+            np.testing.assert_array_equal(
+                np.array(mi.render(scene, integrator=integ, seed=k)),
+                np.array(mi.render(scene, integrator=traced, seed=k)))

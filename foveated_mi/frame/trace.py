@@ -25,13 +25,16 @@ trace, runs after it as in a traced frame.
   record once more.
 
 It serves the same frames as the frozen formation: not differentiated, not timed, with
-``freeze`` on. The images are those of the traced pass, bit for bit
+``freeze`` on. A nested integrator whose trace cannot be recorded (one that reads a value
+on the host, say) gets one warning and is traced every frame. The images are those of the
+traced pass, bit for bit
 (``tests/test_frozen_trace.py``). The scene holds its integrator, and Dr.Jit's traversal of
 the scene visits a Python plugin's attributes: the foveated integrator keeps its last frame
 out of that reach, or it would become an input of every recording.
 """
 from __future__ import annotations
 
+import warnings
 from typing import Any, NamedTuple
 
 import drjit as dr
@@ -95,6 +98,9 @@ class FrozenTrace:
 
     def __init__(self):
         self._frozen = dr.freeze(_record, limit=RECORDINGS, warn_after=4 * RECORDINGS)
+        #: Why the trace could not be recorded (the first line of the error), once it
+        #: could not: the frames are traced from then on.
+        self.failed: str | None = None
 
     @property
     def recordings(self) -> int:
@@ -102,7 +108,12 @@ class FrozenTrace:
         return self._frozen.n_recordings
 
     def __call__(self, scene: mi.Scene, integrator: mi.SamplingIntegrator, plan: FramePlan,
-                 o: dict[str, Any], host_values: tuple = ()) -> Shaded:
+                 o: dict[str, Any], host_values: tuple = ()) -> Shaded | None:
+        """The frame's trace pass, replayed; None when it cannot be recorded (a nested
+        integrator that reads a value on the host, say), with one warning: the caller
+        traces it, as it will every frame from then on."""
+        if self.failed is not None:
+            return None
         ro, sensor = plan.reordered, plan.sensor
         film = sensor.film()
         # Laid out per lane here, so that every array of the recording is as wide as an
@@ -117,7 +128,14 @@ class FrozenTrace:
                "shutter": (float(sensor.shutter_open()), float(sensor.shutter_open_time())),
                "clamp": float(o["clamp"]), "importance": plan.filter_sampler.importance,
                "host": host_values}
-        with _no_collection():          # a collection inside a recording aborts
-            out = self._frozen(scene, sensor, integrator, plan.filter_sampler, arrays, key)
+        try:
+            with _no_collection():          # a collection inside a recording aborts
+                out = self._frozen(scene, sensor, integrator, plan.filter_sampler, arrays, key)
+        except RuntimeError as e:
+            self.failed = (str(e).strip().splitlines() or [type(e).__name__])[0]
+            warnings.warn(f"freeze: the nested integrator's trace could not be recorded "
+                          f"({self.failed}); it is traced every frame", RuntimeWarning,
+                          stacklevel=4)
+            return None
         samples = TracedSamples(**out)
         return Shaded(develop_plan(samples, plan, o), samples.rejected, samples.clamped)

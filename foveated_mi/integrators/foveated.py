@@ -197,10 +197,14 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
     def _shade(self, scene: mi.Scene, plan: FramePlan, timer: StageTimer,
                record: bool, state: SceneState) -> _trace.Shaded:
         """The trace pass (:mod:`foveated_mi.frame.trace`): replayed where nothing needs it
-        traced (a frame that is not differentiated or timed, with ``freeze`` on)."""
+        traced (a frame that is not differentiated or timed, with ``freeze`` on; a scene
+        with a parameter that requires gradients is traced even where the configuration
+        refuses them, ``record`` false)."""
         o = self._options
-        if o["freeze"] and not timer.enabled and not record:
-            return self._frozen_trace(scene, self.nested, plan, o, state.host_values())
+        if o["freeze"] and not timer.enabled and not record and not state.differentiated:
+            shaded = self._frozen_trace(scene, self.nested, plan, o, state.host_values())
+            if shaded is not None:
+                return shaded
         return _trace.shade(scene, self.nested, plan, o)
 
     def _trace(self, scene: mi.Scene, plan: FramePlan) -> TracedSamples:
