@@ -114,13 +114,9 @@ def _level(mode, seed=1, grid="film"):
                      residual=mode == "residual")
 
 
-@pytest.mark.parametrize("mode,grid", [("normalized", "film"), ("residual", "film"),
-                                       ("plain", "film"), ("normalized", "wrap_x"),
-                                       ("residual", "wrap_xy")])
-def test_held_level_reverse_is_the_transpose_of_forward(mode, grid):
-    # On a wrapped grid too: p = q + s d and q = p - s d wrap alike, so the transpose that
-    # walks the taps from the other end stays exact.
-    level = _level(mode, grid=grid)
+def _assert_reverse_is_transpose(level, mode):
+    """<J dx, g> = <dx, J^T g> for the level at a random x (J from forward mode, J^T from
+    reverse mode), within the roundings of ``mode``'s level; returns ``(dx, J dx, depth)``."""
     x0 = mi.Color3f(*_rand(7))
     dx = mi.Color3f(*_rand(8))
     g = mi.Color3f(*_rand(9))
@@ -145,6 +141,17 @@ def test_held_level_reverse_is_the_transpose_of_forward(mode, grid):
              "residual": tolerances.SVGF_LEVEL}[mode]
     assert abs(lhs - rhs) <= tolerances.transpose_bound(
         np.array(jdx), np.array(g), np.array(dx), np.array(jtg), depth), (lhs, rhs)
+    return dx, jdx, depth
+
+
+@pytest.mark.parametrize("mode,grid", [("normalized", "film"), ("residual", "film"),
+                                       ("plain", "film"), ("normalized", "wrap_x"),
+                                       ("residual", "wrap_xy")])
+def test_held_level_reverse_is_the_transpose_of_forward(mode, grid):
+    # On a wrapped grid too: p = q + s d and q = p - s d wrap alike, so the transpose that
+    # walks the taps from the other end stays exact.
+    level = _level(mode, grid=grid)
+    dx, jdx, depth = _assert_reverse_is_transpose(level, mode)
     # The map is linear: its tangent is the primal applied to dx (non-residual levels), to
     # the roundings of both on the sums of absolute terms (the level applied to |dx|: its
     # weights are >= 0).
@@ -189,20 +196,4 @@ def test_a_level_over_some_cells_is_the_full_level_there_and_its_transpose(mode)
     np.testing.assert_array_equal(np.array(y_some)[:, a], np.array(y_full)[:, a])
     kept = np.array(x0)[:, ~a] if mode == "normalized" else 0.0
     np.testing.assert_array_equal(np.array(y_some)[:, ~a], np.zeros((3, (~a).sum())) + kept)
-    dx, g = mi.Color3f(*_rand(8)), mi.Color3f(*_rand(9))
-    x = mi.Color3f(x0)
-    dr.enable_grad(x)
-    y, = held_filter(x, some)
-    dr.set_grad(x, dx)
-    dr.forward_to(y)
-    jdx = dr.grad(y)
-    x = mi.Color3f(x0)
-    dr.enable_grad(x)
-    y, = held_filter(x, some)
-    dr.backward_from(y * dr.detach(g))
-    jtg = dr.grad(x)
-    lhs = tolerances.dot(np.array(jdx), np.array(g))
-    rhs = tolerances.dot(np.array(dx), np.array(jtg))
-    depth = {"plain": 25, "normalized": tolerances.FILTER_LEVEL}[mode]
-    assert abs(lhs - rhs) <= tolerances.transpose_bound(
-        np.array(jdx), np.array(g), np.array(dx), np.array(jtg), depth), (lhs, rhs)
+    _assert_reverse_is_transpose(some, mode)

@@ -236,19 +236,6 @@ class SplatFootprint:
         self._cells = cells
 
     @property
-    def table(self) -> "_Table | None":
-        """The tabulated filter it inverts (None for the box and uniform jitter)."""
-        return self._table
-
-    def with_table(self, table: "_Table | None") -> "FilterSampler":
-        """This sampler reading ``table``, the same values held elsewhere (a frozen
-        function's input: what it reads must come in as one)."""
-        import copy
-        out = copy.copy(self)
-        out._table = table
-        return out
-
-    @property
     def signed(self) -> bool:
         return self._table.signed
 
