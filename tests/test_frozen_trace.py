@@ -134,8 +134,12 @@ def test_a_trace_that_cannot_be_recorded_is_traced_with_one_warning():
     integ = FoveatedIntegrator(preset="vr", nested=_HostReading())
     with pytest.warns(RuntimeWarning, match="could not be recorded") as caught:
         first = np.array(mi.render(scene, integrator=integ, seed=0))
-    assert sum("could not be recorded" in str(w.message) for w in caught) == 1
+    [line] = [str(w.message) for w in caught if "could not be recorded" in str(w.message)]
+    # The line says why: the error Dr.Jit reported, not its "see above".
+    assert "reading from evaluated variables" in line and "see above" not in line
+    assert "\n" not in line
     assert integ._frozen_trace.failed
+    assert integ.stats["trace_mode"] == "partly replayed" and not integ.stats["trace_replayed"]
     # Traced from then on, silently, with the frames of a traced integrator.
     traced = FoveatedIntegrator(preset="vr", nested=_HostReading(), freeze=False)
     np.testing.assert_array_equal(first, np.array(mi.render(scene, integrator=traced, seed=0)))
@@ -146,3 +150,111 @@ def test_a_trace_that_cannot_be_recorded_is_traced_with_one_warning():
             np.testing.assert_array_equal(
                 np.array(mi.render(scene, integrator=integ, seed=k)),
                 np.array(mi.render(scene, integrator=traced, seed=k)))
+
+
+class _Constant(mi.SamplingIntegrator):
+    """A valid nested integrator whose outputs are literals of width 1 (Mitsuba broadcasts
+    them to the launch)."""
+
+    def __init__(self):
+        super().__init__(mi.Properties())
+
+    def sample(self, scene, sampler, ray, medium=None, active=True):
+        return mi.Spectrum(0.5), mi.Bool(True), []
+
+
+def test_a_nested_integrator_returning_constants_replays_at_every_launch_width():
+    # The launch's width changes with the seed; a recording that froze the broadcast at the
+    # first frame's width returned that width ever after (a scatter of mismatched sizes).
+    scene = mi.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 45,
+                   "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 3], target=[0, 0, 0],
+                                                             up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 64, "height": 64}},
+        "plane": {"type": "rectangle"}, "light": {"type": "constant"}})
+    opts = {"theta": 0.1, "sigma_p": 0.8}
+    a = FoveatedIntegrator(nested=_Constant(), **opts)
+    b = FoveatedIntegrator(nested=_Constant(), freeze=False, **opts)
+    rays = set()
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for seed in range(4):
+            ia = np.array(mi.render(scene, integrator=a, spp=2, seed=seed))
+            ib = np.array(mi.render(scene, integrator=b, spp=2, seed=seed))
+            np.testing.assert_array_equal(ia, ib)
+            assert a.stats["trace_replayed"] and a.stats["rays"] == b.stats["rays"]
+            rays.add(a.stats["rays"])
+    assert len(rays) > 1                 # the replays ran at other widths than the recording
+    assert a._frozen_trace.failed is None and a._frozen_trace.recordings >= 1
+
+
+def _room(spare: bool):
+    d = {"type": "scene", "integrator": {"type": "path", "max_depth": 3},
+         "sensor": {"type": "perspective", "fov": 60,
+                    "film": {"type": "hdrfilm", "width": 40, "height": 30}},
+         "sphere": {"type": "sphere", "bsdf": {"type": "diffuse"}},
+         "light": {"type": "constant"}}
+    if spare:       # a material no shape holds, as scene files often have
+        d["spare"] = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.2, 0.3, 0.4]}}
+    return mi.load_dict(d)
+
+
+def test_another_live_scene_with_an_unused_material_does_not_stop_the_recording():
+    # Dr.Jit records a BSDF call over every BSDF of every live scene; the other scene's
+    # spare material is held by no shape, so only its class's registry reaches it.
+    other = _room(spare=True)
+    np.array(mi.render(other))
+    scene = _room(spare=False)
+    a = FoveatedIntegrator(preset="vr", nested=scene.integrator())
+    b = FoveatedIntegrator(preset="vr", nested=scene.integrator(), freeze=False)
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for k in range(3):
+            a.set_options(gaze=(0.4 + 0.05 * k, 0.5))
+            b.set_options(gaze=(0.4 + 0.05 * k, 0.5))
+            np.testing.assert_array_equal(np.array(mi.render(scene, integrator=a, seed=k)),
+                                          np.array(mi.render(scene, integrator=b, seed=k)))
+            assert a.stats["trace_mode"] == "replayed" and b.stats["trace_mode"] == "traced"
+    assert a._frozen_trace.failed is None and a._frozen_trace.recordings >= 1
+    del other
+
+
+def test_a_replay_narrower_than_the_launch_is_traced_with_one_warning(monkeypatch):
+    scene = _scene()
+    a = FoveatedIntegrator(preset="vr", nested=scene.integrator())
+    b = FoveatedIntegrator(preset="vr", nested=scene.integrator(), freeze=False)
+    frozen = a._frozen_trace._frozen
+
+    def narrow(*args):                # a replay that returns one lane fewer than launched
+        out = frozen(*args)
+        return {k: (v if k in ("rejected", "clamped") else
+                    dr.gather(type(v), v, dr.arange(mi.UInt32, dr.width(v) - 1)))
+                for k, v in out.items()}
+    monkeypatch.setattr(a._frozen_trace, "_frozen", narrow)
+    with pytest.warns(RuntimeWarning, match="could not be replayed") as caught:
+        first = np.array(mi.render(scene, integrator=a, seed=0))
+    [line] = [str(w.message) for w in caught if "could not be replayed" in str(w.message)]
+    assert "samples for a launch of" in line
+    np.testing.assert_array_equal(first, np.array(mi.render(scene, integrator=b, seed=0)))
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        np.testing.assert_array_equal(np.array(mi.render(scene, integrator=a, seed=1)),
+                                      np.array(mi.render(scene, integrator=b, seed=1)))
+    assert not a.stats["trace_replayed"]
+
+
+def test_a_frame_says_how_its_passes_ran():
+    scene = _scene()
+    integ = FoveatedIntegrator(preset="vr", nested=scene.integrator())
+    mi.render(scene, integrator=integ, seed=0)
+    assert integ.stats["trace_mode"] == "replayed"
+    integ.set_options(timing=True)           # a frame timed stage by stage is traced
+    mi.render(scene, integrator=integ, seed=1)
+    assert integ.stats["trace_mode"] == "traced"
+    integ.set_options(timing=False, freeze=False)
+    mi.render(scene, integrator=integ, seed=2)
+    assert integ.stats["trace_mode"] == "traced"

@@ -48,20 +48,22 @@ def formation_input(plan: FramePlan) -> FormationInput:
 
 
 def form_primal(plan: FramePlan, shading: ShadingBuffer, o: dict[str, Any], timer: StageTimer,
-                frozen: FrozenFormation, record: bool) -> tuple[Formed, tuple | None]:
-    """A primal frame's image: ``(formed, recorded)``. With ``record`` (a gradient pass will
-    follow and its denoiser is differentiable) the derivative graph is kept; image and
-    buffers are detached either way (the history never carries a gradient into the next
-    frame). Otherwise the frozen replay forms it where nothing needs the passes traced."""
+                frozen: FrozenFormation, record: bool
+                ) -> tuple[Formed, tuple | None, bool]:
+    """A primal frame's image: ``(formed, recorded, replayed)``. With ``record`` (a gradient
+    pass will follow and its denoiser is differentiable) the derivative graph is kept; image
+    and buffers are detached either way (the history never carries a gradient into the next
+    frame). Otherwise the frozen replay forms it where nothing needs the passes traced
+    (``replayed``)."""
     inp = formation_input(plan)
     if not record:
         if replayable(o, timer):
-            return frozen(shading, inp, o), None
-        return form(shading, inp, o, timer), None
+            return frozen(shading, inp, o), None, True
+        return form(shading, inp, o, timer), None, False
     x, formed = _adjoint.record(
         lambda v: form(shading._replace(value=v), inp, o, timer, grad_pass=True),
         shading.value)
-    return _adjoint.detached(formed), (x, formed.image)
+    return _adjoint.detached(formed), (x, formed.image), False
 
 
 def formation_of(primal: PrimalFrame, o: dict[str, Any]) -> Callable[[mi.Color3f], mi.Color3f]:

@@ -82,10 +82,22 @@ class FrameOutputs:
         return arr.reshape(h, w)
 
 
+def trace_mode(trace_replayed: bool, formation_replayed: bool) -> str:
+    """How a frame's passes ran: ``replayed`` (the trace and the formation launched from
+    their ``dr.freeze`` recordings), ``traced`` (both traced by Python), or ``partly
+    replayed``. Frame times of different modes are not comparable: tracing costs host time
+    that the rays do not pay for."""
+    if trace_replayed and formation_replayed:
+        return "replayed"
+    return "partly replayed" if trace_replayed or formation_replayed else "traced"
+
+
 def frame_outputs(plan: FramePlan, samples, formed: Formed,
-                  o: dict[str, Any], timer: StageTimer, index: int) -> FrameOutputs:
+                  o: dict[str, Any], timer: StageTimer, index: int,
+                  replayed: tuple[bool, bool] = (False, False)) -> FrameOutputs:
     """The buffers and stats of primal frame number ``index`` (module docstring);
-    ``samples``: the trace pass's counters (``rejected``, ``clamped``)."""
+    ``samples``: the trace pass's counters (``rejected``, ``clamped``); ``replayed``: whether
+    the trace and the formation were replayed (:func:`trace_mode`)."""
     gb, ro, reproj = plan.gbuffer, plan.reordered, plan.reprojection
     entry = FORMATIONS[o["formation"]]
     film = Grid.film(plan.width, plan.height)
@@ -115,6 +127,8 @@ def frame_outputs(plan: FramePlan, samples, formed: Formed,
         "history_hits": dr.count(reproj.hit), **entry.stats(formed.buffers),
         "rejected_samples": samples.rejected, "clamped_samples": samples.clamped,
         "timings_ms": timer.finish(), "gbuffer_reused": plan.gbuffer_reused,
+        "trace_replayed": bool(replayed[0]), "formation_replayed": bool(replayed[1]),
+        "trace_mode": trace_mode(*replayed),
         "variant": mi.variant(),
         **{k: (list(v) if k == "gaze" else v) for k, v in o.items() if k != "timing"},
     }

@@ -32,7 +32,8 @@ For the ``box`` filter both are the plain per-pixel mean.
 ``sample(scene, sampler, ray, medium, active)``; a Python ``mi.ad.common.ADIntegrator``
 (``prb``, ``prb_basic``, ``direct_projective``, ``prb_projective``, ...) as
 ``sample(mode=Primal, scene, sampler, ray, depth, δL, δaovs, state_in, active)``. A result
-of width 1 (an integrator returning a constant) is broadcast to the wavefront.
+of width 1 (an integrator returning a constant) is broadcast to the wavefront, computed
+per lane so that a replayed trace (:mod:`foveated_mi.frame.trace`) returns the frame's width.
 
 Sample hygiene: a sample with a NaN or infinite component is rejected (weight 0); a finite
 sample whose largest component exceeds ``clamp`` is scaled down to that maximum (hue kept).
@@ -171,9 +172,12 @@ def trace_lanes(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingInteg
     L = mi.Color3f(L) * mi.Color3f(weight)
     if filter_sampler.signed:
         L *= fs.weight
-    if dr.width(L) != lanes:
-        # A constant-returning integrator gives a literal of width 1.
-        L = L + dr.zeros(mi.Color3f, lanes)
+    if dr.width(L) != lanes or any(c.state == dr.VarState.Literal for c in L):
+        # A nested integrator that returns constants gives a literal (of width 1, which
+        # Mitsuba broadcasts to the launch). Computed per lane from the launch's pixels
+        # (which no pixel index equals :data:`_NO_RAY`), it is as wide as the launch in a
+        # replay too: a recording keeps a literal output at the width it was recorded with.
+        L = dr.select(pix != _NO_RAY, L, 0.0)
 
     finite = dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z)
     ok = finite & lane_active

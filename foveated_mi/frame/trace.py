@@ -24,10 +24,19 @@ trace, runs after it as in a traced frame.
   recent :data:`RECORDINGS` are kept. A new input layout (the first change of width) may
   record once more.
 
+- **Every scene alive**: Dr.Jit records a virtual call (a BSDF's, an emitter's) over every
+  registered instance of its class, those of other scenes alive in the process included, and
+  takes their members as inputs only for the classes it met among the inputs. A BSDF that
+  no shape holds (a scene file's unused material) is met through no shape: the recording
+  would fail on it while that scene lives. The inputs therefore name every class
+  (:data:`REGISTRIES`), and the replay reads all their instances.
+
 It serves the same frames as the frozen formation: not differentiated, not timed, with
 ``freeze`` on. A nested integrator whose trace cannot be recorded (one that reads a value
-on the host, say) gets one warning and is traced every frame. The images are those of the
-traced pass, bit for bit
+on the host, say), or a replay whose outputs are not as wide as the launch, gets one
+warning that says why (the error Dr.Jit reported) and is traced every frame from then on
+(:attr:`FrozenTrace.failed`; a frame's stats say which way its trace ran). The images are
+those of the traced pass, bit for bit
 (``tests/test_frozen_trace.py``). The scene holds its integrator, and Dr.Jit's traversal of
 the scene visits a Python plugin's attributes: the foveated integrator keeps its last frame
 out of that reach, or it would become an input of every recording.
@@ -93,13 +102,34 @@ def _record(scene, sensor, integrator, filter_sampler, arrays: dict, key: dict) 
     return dict(samples._asdict())
 
 
+#: Mitsuba's class-pointer types, one per registry a nested integrator may call into: an
+#: empty array of each among the inputs makes Dr.Jit take every registered instance's
+#: members as inputs (module docstring, "every scene alive").
+REGISTRIES = ("BSDFPtr", "EmitterPtr", "MediumPtr", "PhaseFunctionPtr", "SensorPtr",
+              "ShapePtr", "TexturePtr")
+
+
+def _registries() -> tuple:
+    return tuple(dr.zeros(getattr(mi, name), 1) for name in REGISTRIES if hasattr(mi, name))
+
+
+def _reason(error: BaseException) -> str:
+    """The first sentence of the innermost error (Dr.Jit's outer one only says "see
+    above")."""
+    while error.__cause__ is not None:
+        error = error.__cause__
+    line = (str(error).strip().splitlines() or [type(error).__name__])[0]
+    end = line.find(". ")
+    return line if end < 0 else line[:end + 1]
+
+
 class FrozenTrace:
     """The trace pass recorded once per configuration and replayed (module docstring)."""
 
     def __init__(self):
         self._frozen = dr.freeze(_record, limit=RECORDINGS, warn_after=4 * RECORDINGS)
-        #: Why the trace could not be recorded (the first line of the error), once it
-        #: could not: the frames are traced from then on.
+        #: Why the trace could not be replayed (one line), once it could not: the frames
+        #: are traced from then on.
         self.failed: str | None = None
 
     @property
@@ -107,11 +137,16 @@ class FrozenTrace:
         """How many times the pass was traced and recorded so far."""
         return self._frozen.n_recordings
 
+    def _give_up(self, what: str, why: str) -> None:
+        self.failed = why
+        warnings.warn(f"freeze: the nested integrator's trace could not be {what} ({why}); "
+                      f"it is traced every frame", RuntimeWarning, stacklevel=5)
+
     def __call__(self, scene: mi.Scene, integrator: mi.SamplingIntegrator, plan: FramePlan,
                  o: dict[str, Any], host_values: tuple = ()) -> Shaded | None:
-        """The frame's trace pass, replayed; None when it cannot be recorded (a nested
-        integrator that reads a value on the host, say), with one warning: the caller
-        traces it, as it will every frame from then on."""
+        """The frame's trace pass, replayed; None when it cannot be (a nested integrator
+        that reads a value on the host, say), with one warning: the caller traces it, as
+        it will every frame from then on."""
         if self.failed is not None:
             return None
         ro, sensor = plan.reordered, plan.sensor
@@ -122,7 +157,8 @@ class FrozenTrace:
         arrays = {"lanes": pix, "active": active,
                   "seed": opaque_seed(plan.seed),
                   # A named tuple is no input to a frozen function: its fields are.
-                  "filter": _fields(plan.filter_sampler.table)}
+                  "filter": _fields(plan.filter_sampler.table),
+                  "registries": _registries()}
         key = {"spp": plan.spp, "width": plan.width, "height": plan.height,
                "crop": tuple(int(v) for v in film.crop_offset()),
                "shutter": (float(sensor.shutter_open()), float(sensor.shutter_open_time())),
@@ -132,10 +168,14 @@ class FrozenTrace:
             with _no_collection():          # a collection inside a recording aborts
                 out = self._frozen(scene, sensor, integrator, plan.filter_sampler, arrays, key)
         except RuntimeError as e:
-            self.failed = (str(e).strip().splitlines() or [type(e).__name__])[0]
-            warnings.warn(f"freeze: the nested integrator's trace could not be recorded "
-                          f"({self.failed}); it is traced every frame", RuntimeWarning,
-                          stacklevel=4)
+            self._give_up("recorded", _reason(e))
+            return None
+        lanes = dr.width(pix)
+        wrong = sorted({dr.width(v) for k, v in out.items()
+                        if k not in ("rejected", "clamped") and dr.width(v) != lanes})
+        if wrong:
+            self._give_up("replayed",
+                          f"the replay returned {wrong[0]} samples for a launch of {lanes}")
             return None
         samples = TracedSamples(**out)
         return Shaded(develop_plan(samples, plan, o), samples.rejected, samples.clamped)

@@ -183,29 +183,31 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         # Sparse shading (§3.3): the nested integrator traces the launch only, and its
         # samples become the sparse shading buffer (the seam of the gradient pass).
         record = state.differentiated and gradient_refusal(self._given, o) is None
-        shaded = self._shade(scene, plan, timer, record, state)
+        shaded, trace_replayed = self._shade(scene, plan, timer, record, state)
         shading = shaded.shading
         # The registered formation; its graph kept when mi.render will differentiate it.
-        formed, recorded = _gradient.form_primal(plan, shading, o, timer, self._frozen, record)
+        formed, recorded, formation_replayed = _gradient.form_primal(
+            plan, shading, o, timer, self._frozen, record)
         # The history, buffers and stats of this frame, and the frame a gradient pass reuses.
         self._planner.commit(plan, formed.history if o["history"] else None)
-        self._outputs = frame_outputs(plan, shaded, formed, o, timer, self._planner.index - 1)
+        self._outputs = frame_outputs(plan, shaded, formed, o, timer, self._planner.index - 1,
+                                      (trace_replayed, formation_replayed))
         self._primal = _gradient.PrimalFrame(plan, shading, id(scene), recorded)
         flat = dr.ravel(formed.image) if formed.flat is None else formed.flat
         return mi.TensorXf(flat, shape=(plan.height, plan.width, 3))
 
     def _shade(self, scene: mi.Scene, plan: FramePlan, timer: StageTimer,
-               record: bool, state: SceneState) -> _trace.Shaded:
-        """The trace pass (:mod:`foveated_mi.frame.trace`): replayed where nothing needs it
-        traced (a frame that is not differentiated or timed, with ``freeze`` on; a scene
-        with a parameter that requires gradients is traced even where the configuration
-        refuses them, ``record`` false)."""
+               record: bool, state: SceneState) -> tuple[_trace.Shaded, bool]:
+        """The trace pass (:mod:`foveated_mi.frame.trace`) and whether it was replayed:
+        replayed where nothing needs it traced (a frame that is not differentiated or
+        timed, with ``freeze`` on; a scene with a parameter that requires gradients is
+        traced even where the configuration refuses them, ``record`` false)."""
         o = self._options
         if o["freeze"] and not timer.enabled and not record and not state.differentiated:
             shaded = self._frozen_trace(scene, self.nested, plan, o, state.host_values())
             if shaded is not None:
-                return shaded
-        return _trace.shade(scene, self.nested, plan, o)
+                return shaded, True
+        return _trace.shade(scene, self.nested, plan, o), False
 
     def _trace(self, scene: mi.Scene, plan: FramePlan) -> TracedSamples:
         """Sparse shading: the nested integrator traces the launch (rays x spp lanes)."""
