@@ -130,6 +130,8 @@ def main(argv=None) -> int:
              *[line for v in verdicts for line in verdict_lines(v) + ["", verdict_sentence(v), ""]],
              "## Every row", "", *rows_table(rows), "",
              "![fovea](equal_time_pareto_fovea.png) ![full](equal_time_pareto_full.png)", ""]
+    if res.warnings:          # rows whose frames ran differently: their times not compared
+        lines += ["## Warnings", "", *[f"* {w}" for w in res.warnings], ""]
     if res.failed:
         lines += ["## Failed tasks", "", *[f"* {f}" for f in res.failed], ""]
     with open(os.path.join(a.results, "equal_time.md"), "w") as f:

@@ -316,6 +316,10 @@ def main(argv=None) -> int:
                   "seeds; ± the spread of the per-seed ratios; per seed in brackets):", "",
                   *speedup_table(sps), ""]
     lines += ["## Every cell", "", *cells_table(res.rows, list(conditions.values())), ""]
+    # Rows whose frames ran differently (replayed, traced): their ratios were refused above.
+    report["warnings"] = res.warnings
+    if res.warnings:
+        lines += ["## Warnings", "", *[f"* {w}" for w in res.warnings], ""]
     failed = res.failed
     if not a.no_pictures:
         report["pictures"] = pictures(spec, a.out, a.results, mi.variant())

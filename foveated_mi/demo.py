@@ -186,7 +186,9 @@ def headset_sentence(cells: list[dict], column: str) -> str:
     c, s = best
     base = f"uniform + the same history + {family.split('+')[2].upper()}"
     paid = s.ratio >= 1.0
-    if s.tie:
+    if s.refused:
+        verdict = "its frames ran otherwise than the baseline's, replayed against traced: no verdict"
+    elif s.tie:
         verdict = "a tie within the spread over seeds"
     elif s.relation == "=" or (s.relation == ">") == paid:
         verdict = "foveation paid" if paid else "foveation did not pay at equal quality here"

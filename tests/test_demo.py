@@ -203,3 +203,48 @@ def test_the_headset_sentence_names_a_tie_within_the_spread():
     rows += [_hist(s, 16, t, 0.0, seed=seed, jod=q) for seed in range(3)
              for s, t, q in ((1, 100.0, 8.0), (2, 200.0, 9.0), (4, 400.0, 9.5))]
     assert "a tie within the spread over seeds" in headset_sentence(aggregate(rows), "jod")
+
+
+def test_times_of_rows_whose_frames_ran_differently_are_not_compared():
+    """A row replayed against a family traced (or the other way) gets no speed-up, seed by
+    seed, and no equal-time verdict; rows that ran alike, or rows written before the
+    column existed, are compared as before."""
+    from foveated_mi.demo import headset_sentence
+    from foveated_mi.study.aggregate import aggregate
+    from foveated_mi.study.equal_time import (comparable, modes_warning, speedup,
+                                              speedup_over_seeds)
+    fam = [_hist(s, 16, t, 0.0, jod=j) for s, t, j in ((1, 100.0, 8.0), (2, 200.0, 9.0),
+                                                        (4, 400.0, 9.5))]
+    cell = {"frame": 16.0, "time_ms": 80.0, "jod": 8.5}
+    traced = [{**r, "trace_mode": "traced"} for r in fam]
+    assert speedup(cell, traced, "jod")[1] == "="                    # no column on the cell
+    assert speedup({**cell, "trace_mode": "traced"}, traced, "jod")[1] == "="
+    ratio, rel = speedup({**cell, "trace_mode": "replayed"}, traced, "jod")
+    assert math.isnan(ratio) and rel == "≠"
+    assert not comparable([{**cell, "trace_mode": "replayed"}, *traced])
+    rows = []
+    for seed in range(3):
+        rows.append({**_vr(1, 80.0, 8.5, seed), "trace_mode": "replayed"})
+        rows += [{**_hist(s, 16, t, 0.0, seed=seed, jod=q), "trace_mode": "traced"}
+                 for s, t, q in ((1, 100.0, 8.0), (2, 200.0, 9.0), (4, 400.0, 9.5))]
+    cells = aggregate(rows)
+    vr = next(c for c in cells if c["method"] == "foveated")
+    s = speedup_over_seeds(vr, [c for c in cells if c is not vr], "jod")
+    assert s.refused and all(r == "≠" for _, r in s.per_seed) and "refused" in s.text()
+    assert "replayed against traced: no verdict" in headset_sentence(cells, "jod")
+    line = modes_warning(rows, "scene cbox")
+    assert line is not None and "3 replayed, 9 traced" in line and "\n" not in line
+    assert modes_warning([r for r in rows if r["trace_mode"] == "traced"], "x") is None
+
+
+def test_an_equal_time_verdict_refuses_a_candidate_that_ran_otherwise():
+    rows = [{**r, "trace_mode": "traced"} for r in BASE + [
+        _row("foveated", 1, 1, 60.0, 28.0, 31.0, "oidn"),
+        _row("foveated", 1, 16, 60.0, 29.0, 34.5, "oidn")]]
+    (v,) = equal_time_verdicts(rows, "oidn")
+    assert v.chosen is not None and not v.refused
+    replayed = [{**r, "trace_mode": "replayed"} if r["method"] == "foveated" else r
+                for r in rows]
+    (v,) = equal_time_verdicts(replayed, "oidn")
+    assert v.chosen is None and v.refused
+    assert any("Not compared" in line for line in verdict_lines(v))

@@ -29,7 +29,8 @@ from typing import Any
 from .aggregate import Margin, aggregate, margin
 
 __all__ = ["Verdict", "equal_time_verdicts", "verdict_lines", "verdict_sentence", "speedup",
-           "speedup_over_seeds", "Speedup", "TARGETS"]
+           "speedup_over_seeds", "Speedup", "TARGETS", "comparable", "trace_modes",
+           "modes_warning"]
 
 #: (name, frame, column, needed margin, against): "uniform" is the baseline without history
 #: (frame 1: it does not change with the frame), "history" the uniform frame with the same
@@ -53,6 +54,8 @@ class Verdict:
     uniform: dict[str, Any] | None = None           # no history, 1 spp (a cell)
     history: dict[int, dict] = field(default_factory=dict)      # frame -> cell, 1 spp
     families: dict[str, list[dict]] = field(default_factory=dict)  # method -> cells (spp)
+    #: spp of candidates not compared: their frames and the baseline's ran differently
+    refused: list[float] = field(default_factory=list)
 
     @property
     def chosen(self) -> dict[int, dict] | None:
@@ -125,12 +128,43 @@ def equal_time_verdicts(rows: list[dict[str, Any]], preset: str) -> list[Verdict
         v = Verdict(scene, base, preset, cands, uniform=uni[0] if uni else None,
                     history=history, families=families)
         t = base["time_ms"]
-        ok = [s for s, f in cands.items() if 1 in f and 16 in f
+        # Times are compared only between rows whose frames ran alike (replayed or traced).
+        v.refused = [s for s, f in cands.items() if 1 in f and 16 in f
+                     and not comparable([f[1], f[16], base])]
+        ok = [s for s, f in cands.items() if 1 in f and 16 in f and s not in v.refused
               and f[1]["time_ms"] <= t and f[16]["time_ms"] <= t]
         if ok:
             v.chosen_spp = max(ok, key=lambda s: cands[s][1]["psnr_fovea"])
         out.append(v)
     return out
+
+
+def trace_modes(rows: list[dict]) -> dict[str, int]:
+    """How many of ``rows`` (or of aggregated cells' rows) ran each ``trace_mode``
+    (:mod:`.tasks`); rows written before the column existed count for nothing."""
+    out: dict[str, int] = {}
+    for r in rows:
+        for x in r.get("rows") or [r]:
+            m = x.get("trace_mode")
+            if isinstance(m, str) and m:
+                out[m] = out.get(m, 0) + 1
+    return out
+
+
+def comparable(rows: list[dict]) -> bool:
+    """Whether the times of ``rows`` may be compared: their frames all ran one way (all
+    replayed, or all traced). A replayed frame skips host work that a traced one pays."""
+    return len(trace_modes(rows)) <= 1
+
+
+def modes_warning(rows: list[dict], table: str) -> str | None:
+    """One line when the rows of one table ran their frames in different ways, else None."""
+    modes = trace_modes(rows)
+    if len(modes) <= 1:
+        return None
+    counts = ", ".join(f"{n} {m}" for m, n in sorted(modes.items()))
+    return (f"warning: the rows of {table} did not run their frames alike ({counts}); "
+            "their times are not compared")
 
 
 def speedup(cell: dict, family: list[dict], column: str) -> tuple[float, str]:
@@ -139,7 +173,10 @@ def speedup(cell: dict, family: list[dict], column: str) -> tuple[float, str]:
     frame 1 for a family without history): ``(ratio, relation)``. The family's quality is
     interpolated linearly in log time along its best-so-far curve; ``relation`` is ``"="``,
     ``">"`` (the family never reaches it: at least the ratio at its slowest cell) or ``"<"``
-    (its fastest cell already does). NaN without data."""
+    (its fastest cell already does). NaN without data, and NaN with ``relation`` ``"≠"``
+    where the cell's frames and the family's ran differently (:func:`comparable`)."""
+    if not comparable([cell, *family]):
+        return math.nan, "≠"
     q = cell.get(column, math.nan)
     frame = int(cell["frame"])
     pts = [r for r in family if int(r["frame"]) == frame] or \
@@ -183,10 +220,17 @@ class Speedup:
         return self.exact and math.isfinite(self.sd) and abs(self.mean - 1.0) < self.sd
 
     @property
+    def refused(self) -> bool:
+        """The cell's frames and the family's ran differently (:func:`comparable`)."""
+        return self.relation == "≠"
+
+    @property
     def exact(self) -> bool:
         return all(r == "=" for _, r in self.per_seed)
 
     def text(self) -> str:
+        if self.relation == "≠":
+            return "refused: frames replayed against traced"
         if not math.isfinite(self.ratio):
             return "-"
         rel = {"=": "", ">": "≥", "<": "≤"}[self.relation]
@@ -241,6 +285,10 @@ def verdict_lines(v: Verdict) -> list[str]:
                      f"{_pm(b, 'psnr_fovea')} dB"
                      + (f", JOD {_pm(b, 'jod')}" if "jod" in b else "") + ".")
     lines[0] += seeds
+    if v.refused:
+        lines.append(f"  Not compared, their frames replayed against the baseline's traced (or "
+                     f"the other way): `{v.preset}` at "
+                     + ", ".join(f"{s:.0f}" for s in sorted(v.refused)) + " spp.")
     c = v.chosen
     if c is None:
         times = ", ".join(f"{s:.0f} spp: {f[1]['time_ms']:.0f} ms" for s, f in

@@ -30,7 +30,7 @@ _HEAD = ("task_id", "scene", "method", "seed", "theta", "sigma_p", "reconstructi
          "frame",
          "rays", "ray_fraction", "samples", "time_ms")
 _TAIL = ("aov_ms", "denoise_ms", *COMPARE_KEYS, "history_hit_rate", "width", "height",
-         "repeats", "variant", "config")
+         "repeats", "variant", "trace_mode", "config")
 
 
 def stage_columns() -> list[str]:

@@ -39,6 +39,8 @@ class StudyResult:
     references_rendered: int = 0
     failed: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    #: one line per table whose rows ran their frames differently (replayed, traced)
+    warnings: list[str] = field(default_factory=list)
     png: str | None = None
     svg: str | None = None
     front: dict[str, list[dict]] = field(default_factory=dict)
@@ -258,6 +260,13 @@ def _report(result: StudyResult, tasks, say) -> None:
         if metric not in ("flip", "flip_fovea", "flip_periphery") else
         f"Pareto front ({metric}, lower is better; time per frame):")
     say(result.front_text)
+    # Times of rows whose frames ran differently (replayed, traced) are not comparable.
+    from .equal_time import modes_warning
+    for scene in dict.fromkeys(r["scene"] for r in result.rows):
+        line = modes_warning([r for r in result.rows if r["scene"] == scene], f"scene {scene}")
+        if line is not None:
+            result.warnings.append(line)
+            say(line)
     for line in result.failed:
         say(line)
 

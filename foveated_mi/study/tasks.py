@@ -18,6 +18,11 @@ the median over the repeats of that stage at that frame (so stage medians need n
 the median total). Quality comes from the first repeat (every repeat renders the same images).
 A uniform task is timed the same way around :func:`foveated_mi.baselines.render_uniform`; a
 uniform task with history is a foveated task (the integrator at ``sigma_p = 1``).
+Column ``trace_mode`` says how the timed frames ran (``replayed``, ``traced``, ``partly
+replayed``; ``mixed`` when they differ; :func:`foveated_mi.frame.outputs.trace_mode`): a
+frame timed stage by stage is traced, and so is a uniform render, so a study's rows are
+traced alike unless a recording fails or a row is timed otherwise. Times of rows whose
+modes differ are not compared (:func:`foveated_mi.study.equal_time.speedup`).
 
 Quality columns: :func:`foveated_mi.metrics.compare` against the reference, plus ``jod``
 (:mod:`foveated_mi.perceptual`) when the study asks for it and the extra is installed.
@@ -297,6 +302,8 @@ def _sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = False):
     render, integ = _sequence_renderer(scene, task, gazes[0])
     times, rays, shown, quality = _sequence_frames(scene, task, refs, render)
     row = _sequence_summary(task, n, times, rays)
+    modes = getattr(render, "modes", None)      # the row's time: the frames after the first
+    row["trace_mode"] = _mode(modes[1:] or modes) if modes else UNIFORM_MODE
     if integ is not None:
         row.update(theta=task["options"]["theta"], sigma_p=task["options"]["sigma_p"],
                    reconstruction=task["options"]["reconstruction"],
@@ -335,7 +342,9 @@ def _sequence_renderer(scene, task: dict, gaze):
             image = np.array(mi.render(scene, integrator=integ, spp=spp, seed=seed),
                              dtype=np.float32)
             stats = integ.stats
+            render_foveated.modes.append(stats["trace_mode"])
             return image, stats["timings_ms"]["total"], stats["ray_fraction"]
+        render_foveated.modes = []          # each frame's trace_mode
         return render_foveated, integ
     from ..baselines import render_uniform
     den = bool(task["options"]["denoise"])
@@ -380,6 +389,17 @@ def _sequence_summary(task: dict, n: int, times: list, rays: list) -> dict:
             "time_ms": _median(times[1:])}
 
 
+#: How a uniform row's frames run: ``mi.render`` of the nested integrator, traced by Python
+#: and Mitsuba every frame (:func:`foveated_mi.frame.outputs.trace_mode`).
+UNIFORM_MODE = "traced"
+
+
+def _mode(modes) -> str:
+    """A row's ``trace_mode``: its timed frames' common mode, or ``mixed``."""
+    modes = set(modes)
+    return modes.pop() if len(modes) == 1 else "mixed"
+
+
 def _foveated_frames(scene, task: dict, record: list[int]):
     import drjit as dr
     import mitsuba as mi
@@ -400,7 +420,7 @@ def _foveated_frames(scene, task: dict, record: list[int]):
             if k in timings:
                 dr.eval(img)
                 stats = integ.stats
-                timings[k].append(stats["timings_ms"])
+                timings[k].append({**stats["timings_ms"], "mode": stats["trace_mode"]})
                 if r == 0:
                     first[k] = (np.array(img, dtype=np.float32), stats)
     return timings, first
@@ -433,7 +453,8 @@ def run_task(task: dict, reference: np.ndarray) -> list[dict]:
                        reconstruction=task["options"]["reconstruction"], rays=stats["rays"],
                        ray_fraction=stats["ray_fraction"], samples=stats["rays"] * task["spp"],
                        history_hit_rate=stats.get("history_hit_rate"),
-                       time_ms=_median([t.get("total") for t in timings[k]]))
+                       time_ms=_median([t.get("total") for t in timings[k]]),
+                       trace_mode=_mode(t["mode"] for t in timings[k]))
             for col in stage_columns():
                 row[col] = _median([t.get(col[:-3]) for t in timings[k]])
             row.update(_quality(ref_d, image, task, viewing))
@@ -448,7 +469,7 @@ def run_task(task: dict, reference: np.ndarray) -> list[dict]:
     image = runs[0][0]
     pixels = w * h
     row = dict(common, frame=1, rays=pixels, ray_fraction=1.0, samples=pixels * task["spp"],
-               time_ms=_median([s["time_ms"] for _, s in runs]))
+               time_ms=_median([s["time_ms"] for _, s in runs]), trace_mode=UNIFORM_MODE)
     if "trace_ms" in stage_columns():         # the whole uniform render is its trace stage
         row["trace_ms"] = _median([s["render_ms"] for _, s in runs])
     if den:
