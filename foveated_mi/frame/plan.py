@@ -168,19 +168,8 @@ class Planner:
                 launch = None
             timer.mark("gbuffer", pixels, on, gb.position, gb.normal, gb.depth, gb.hit,
                        gb.direction, gb.albedo, gb.emission)
-            history = self.history if o["history"] else None
-            if history is not None and history.layout != lay:
-                history = None        # kept on the film, or on another buffer's samples
-            if history is not None and reused and not self._camera_moved \
-                    and self._gaze == gaze_key:
-                reproj, cut = _buffer_space.still_map(history, lay.size), None
-            else:
-                reproj = _buffer_space.reprojection_map(
-                    gb, on, history, lay, width, height, tolerance=o["reprojection_tolerance"],
-                    mode=o["reprojection"])
-                cut = None
-                if history is not None and self._camera_moved:
-                    reproj, cut = _reproject.unless_cut(reproj, CUT_HIT_FRACTION)
+            history, reproj, cut = self._samples_history(gb, on, lay, reused, gaze_key,
+                                                         width, height, o)
             self._gaze = gaze_key
             frame_seed = self._frame_seed(seed, cut, o["history"])
             map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
@@ -203,6 +192,25 @@ class Planner:
                          filter_sampler=self._filter_sampler(sensor, o["pixel_filter"]),
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=None,
                          gaze=gaze, samples=(pixels, on, rays), layout=lay)
+
+    def _samples_history(self, gb, on, lay, reused: bool, gaze_key: tuple, width: int,
+                         height: int, o: dict[str, Any]):
+        """``(history, reprojection, cut)`` of the buffer's samples: the history they read
+        (none when it is kept on the film or on another buffer's samples), its map (the
+        still map while the samples, camera and gaze hold) and the camera cut, if any."""
+        history = self.history if o["history"] else None
+        if history is not None and history.layout != lay:
+            history = None
+        if history is not None and reused and not self._camera_moved \
+                and self._gaze == gaze_key:
+            return history, _buffer_space.still_map(history, lay.size), None
+        reproj = _buffer_space.reprojection_map(
+            gb, on, history, lay, width, height, tolerance=o["reprojection_tolerance"],
+            mode=o["reprojection"])
+        cut = None
+        if history is not None and self._camera_moved:
+            reproj, cut = _reproject.unless_cut(reproj, CUT_HIT_FRACTION)
+        return history, reproj, cut
 
     def commit(self, plan: FramePlan, history: dict[str, Any] | None) -> None:
         """After a primal frame: its history (``mean``, ``count``, ``moment2`` on the film,
