@@ -46,7 +46,7 @@ from typing import Any
 
 from .paths import (CameraPath, FixedGaze, GazeCSV, GazeKeyframes, GazePath,
                     Saccades)
-from .options import SCHEMA
+from .options import OPTIONS_HELP, SCHEMA, validate_options
 from .validate import ParameterError, TableContext
 
 if sys.version_info >= (3, 11):
@@ -202,22 +202,17 @@ def _foveated(ctx: TableContext, table: Any) -> dict:
     table = dict(ctx.table("foveated", table))
     if "gaze" in table:
         raise ctx.error("foveated.gaze", table["gaze"], "no gaze here: set it in the [gaze] table")
-    ctx.known("foveated", table, list(FOVEATED_KEYS))
+    ctx.known("foveated", table, list(FOVEATED_KEYS), see=OPTIONS_HELP)
     for key, value in table.items():
         types = FOVEATED_KEYS[key]
         if isinstance(value, bool) and bool not in types or not isinstance(value, types):
             names = {int: "an integer", float: "a number", str: "a string", bool: "true or false"}
             allowed = " or ".join(dict.fromkeys(names[t] for t in types))
             raise ctx.error(f"foveated.{key}", value, allowed)
-    try:   # the integrator's own range checks, when its module is importable
-        from .options import validate_options
-    except Exception:  # pragma: no cover - integrator under construction
-        validate_options = None
-    if validate_options is not None:
-        try:
-            validate_options(dict(table))
-        except ParameterError as e:
-            raise ctx.rename(e, "foveated") from None
+    try:   # the integrator's own checks: ranges, choices, one option against another
+        validate_options(dict(table))
+    except ParameterError as e:
+        raise ctx.rename(e, "foveated") from None
     return table
 
 

@@ -61,7 +61,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Iterable
 
 from .validate import (ParameterError, check_bool, check_choice, check_int, check_point2,
-                       check_range, check_sigma)
+                       check_range, check_sigma, unknown_name)
 
 # -- the option schema -----------------------------------------------------------------------
 
@@ -237,6 +237,11 @@ def _check_max_history(name: str, value) -> float:
     return v
 
 
+def _choice(name: str, choices: tuple[str, ...], help: str, doc: str | None = None) -> Option:
+    """A ``string`` option among the fixed ``choices``, the first of them its default."""
+    return Option(name, choices[0], "string", help, choices=choices, doc=doc)
+
+
 _SCHEMA: tuple[Option, ...] = (
     Option("preset", "auto", "string", "a tuned group of defaults (auto: oidn when pyoidn is "
            "installed, else guided); options given explicitly win",
@@ -311,30 +316,27 @@ _SCHEMA: tuple[Option, ...] = (
            "pixels (§3.4-3.5); ``foveal`` denoises in the log-polar buffer of "
            "``sampling_law = 'polar'`` and warps it once to the film "
            "(:mod:`foveated_mi.frame.foveal`)"),
-    Option("foveal_upsampling", "bilinear", "string", "the warp of the foveal formation's "
-           "buffer to the film: bilinear, or joint (weighted by the full-resolution G-buffer)",
-           choices=("bilinear", "joint"),
-           doc="How ``formation = 'foveal'`` warps its buffer to the film: ``bilinear`` over "
-           "the four cells around a pixel, or ``joint``, a joint bilateral upsampling whose "
-           "weights also stop at the film G-buffer's surface edges "
-           "(:func:`foveated_mi.frame.foveal.warp`)"),
-    Option("foveal_space", "buffer", "string", "where the foveal formation keeps its "
-           "G-buffer and history: on the buffer's samples, or on the film's pixels",
-           choices=("buffer", "film"),
-           doc="Where ``formation = 'foveal'`` keeps its geometry and history: ``buffer`` "
-           "casts the G-buffer at the buffer's samples only and reprojects the history "
-           "sample to sample, so that nothing but the warp runs on every film pixel "
-           "(:mod:`foveated_mi.frame.buffer_space`); ``film`` keeps a full-resolution "
-           "G-buffer and the history on the film's pixels (needed by ``foveal_upsampling = "
-           "'joint'`` and ``emission_edges``)"),
-    Option("foveal_disc", "resolved", "string", "what the foveal formation shows in its "
-           "full-resolution disc: its pixels as resolved with the history, or denoised too",
-           choices=("resolved", "denoised"),
-           doc="What ``formation = 'foveal'`` shows in the disc around the gaze, where every "
-           "pixel is traced: ``resolved``, each pixel's own value blended with its history; "
-           "``denoised``, the same values through the frame's denoiser on the disc's square "
-           "patch of pixels (a plain image, so a network gets what it was trained on), as the "
-           "buffer's cells are"),
+    _choice("foveal_upsampling", ("bilinear", "joint"), "the warp of the foveal formation's "
+            "buffer to the film: bilinear, or joint (weighted by the full-resolution G-buffer)",
+            doc="How ``formation = 'foveal'`` warps its buffer to the film: ``bilinear`` over "
+            "the four cells around a pixel, or ``joint``, a joint bilateral upsampling whose "
+            "weights also stop at the film G-buffer's surface edges "
+            "(:func:`foveated_mi.frame.foveal.warp`)"),
+    _choice("foveal_space", ("buffer", "film"), "where the foveal formation keeps its "
+            "G-buffer and history: on the buffer's samples, or on the film's pixels",
+            doc="Where ``formation = 'foveal'`` keeps its geometry and history: ``buffer`` "
+            "casts the G-buffer at the buffer's samples only and reprojects the history "
+            "sample to sample, so that nothing but the warp runs on every film pixel "
+            "(:mod:`foveated_mi.frame.buffer_space`); ``film`` keeps a full-resolution "
+            "G-buffer and the history on the film's pixels (needed by ``foveal_upsampling = "
+            "'joint'`` and ``emission_edges``)"),
+    _choice("foveal_disc", ("resolved", "denoised"), "what the foveal formation shows in its "
+            "full-resolution disc: its pixels as resolved with the history, or denoised too",
+            doc="What ``formation = 'foveal'`` shows in the disc around the gaze, where every "
+            "pixel is traced: ``resolved``, each pixel's own value blended with its history; "
+            "``denoised``, the same values through the frame's denoiser on the disc's square "
+            "patch of pixels (a plain image, so a network gets what it was trained on), as the "
+            "buffer's cells are"),
     Option("reconstruction", "sibson", "string", "interpolation of the sparse shading buffer "
            "(§3.4)", choices=lambda: reconstructions(),
            doc="Interpolation of the sparse shading buffer (§3.4); ``guided`` and "
@@ -365,8 +367,7 @@ _SCHEMA: tuple[Option, ...] = (
     Option("sigma_normal", 0.1, "sigma", "à-trous normal sigma"),
     Option("sigma_position", 0.5, "sigma", "à-trous position sigma"),
     Option("sigma_luminance", 4.0, "sigma", "SVGF colour sigma, in noise standard deviations"),
-    Option("oidn_quality", "high", "string", "OIDN's quality setting",
-           choices=("high", "balanced", "fast")),
+    _choice("oidn_quality", ("high", "balanced", "fast"), "OIDN's quality setting"),
     Option("tonemap", "reinhard", "string", "tone-mapping operator (filter domain and PNG "
            "output)", choices=lambda: tonemappers()),
     Option("exposure", 0.0, "float", "exposure in stops", lo=-64.0, hi=64.0),
@@ -385,12 +386,11 @@ _SCHEMA: tuple[Option, ...] = (
     Option("sibson_inclusive", True, "bool", "sibson's in-circle test: <= (or the text's <)",
            doc="In-circle test of ``sibson``: ``d(q, p) <= r`` (true, the authors' shader) "
            "or ``d(q, p) < r`` (false; the paper's text, ``paper``)"),
-    Option("edge_detector", "relative", "string", "the depth-edge test that forces rays",
-           choices=("relative", "sobel"),
-           doc="``relative``: relative depth jump to a 4-neighbour above ``edge_threshold``. "
-           "``sobel``: the test in the authors' code (which does not call it), "
-           "``|Gx| + |Gy|`` of the 3x3 Sobel filter on depth above the threshold (the "
-           "authors use 0.99, in scene units)"),
+    _choice("edge_detector", ("relative", "sobel"), "the depth-edge test that forces rays",
+            doc="``relative``: relative depth jump to a 4-neighbour above ``edge_threshold``. "
+            "``sobel``: the test in the authors' code (which does not call it), "
+            "``|Gx| + |Gy|`` of the 3x3 Sobel filter on depth above the threshold (the "
+            "authors use 0.99, in scene units)"),
     Option("reprojection_tolerance", 0.02, "float", "relative depth tolerance of the "
            "reprojection test", lo=0.0, hi=1.0),
     Option("reprojection", "exclusive", "string", "how a pixel reads the history: each "
@@ -425,6 +425,17 @@ SCHEMA: dict[str, Option] = {o.name: o for o in _SCHEMA}
 
 #: The paper's pipeline; every option of the integrator, with its default.
 DEFAULTS: dict[str, Any] = {o.name: o.default for o in _SCHEMA}
+
+#: Where every option is listed, for an unknown option that is close to none of them.
+OPTIONS_HELP = "`foveated-mi render --help`"
+
+
+def unknown_option(name: str, value: Any,
+                   what: str = "an option of the foveated integrator") -> ParameterError:
+    """The one-line error of an option :data:`SCHEMA` does not hold: the closest option's
+    name, or where the options are listed when none is close."""
+    return ParameterError(name, value, unknown_name(name, SCHEMA, what, see=OPTIONS_HELP))
+
 
 #: Preset name -> the defaults it replaces (see the module docstring).
 PRESETS: dict[str, dict[str, Any]] = {
@@ -477,7 +488,7 @@ def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[s
     unknown = set(options) - set(SCHEMA)
     if unknown:
         name = sorted(unknown)[0]
-        raise ParameterError(name, options[name], "one of " + ", ".join(sorted(SCHEMA)))
+        raise unknown_option(name, options[name])
     preset = resolve_preset(options.get("preset", DEFAULTS["preset"]), gradients)
     defaults = {name: opt.default for name, opt in SCHEMA.items()}
     merged = {**defaults, **PRESETS[preset], "preset": preset, **options}
@@ -591,8 +602,7 @@ def from_properties(props) -> tuple[dict[str, Any], Any]:
                 v = (float(v[0]), float(v[1]))
             options[name] = v
         else:
-            raise ParameterError(name, props.get(name), "a parameter of the foveated "
-                                 "integrator: " + ", ".join(sorted(SCHEMA)))
+            raise unknown_option(name, props.get(name), "a known parameter")
     return options, nested
 
 

@@ -6,6 +6,7 @@ Every failure is one line naming the input, its value and what is allowed, e.g.:
 """
 from __future__ import annotations
 
+import difflib
 import math
 from typing import Any, Iterable
 
@@ -82,6 +83,19 @@ def check_choice(name: str, value: Any, choices: Iterable[str]) -> str:
     return value
 
 
+def unknown_name(name: Any, names: Iterable[str], what: str, see: str | None = None) -> str:
+    """What is allowed in place of the unknown ``name``, short enough for one line: ``what``
+    and the closest of ``names`` (:func:`difflib.get_close_matches`); when none is close,
+    where the names are listed (``see``), else the names themselves."""
+    names = list(names)
+    close = difflib.get_close_matches(str(name), names, n=1)
+    if close:
+        return f"{what} (did you mean {close[0]!r}?)"
+    if see is not None:
+        return f"{what} (none is close; see {see})"
+    return f"{what} (allowed here: {', '.join(names)})"
+
+
 def check_point2(name: str, value: Any, bound: float = 1e6) -> tuple[float, float]:
     """Two finite numbers of magnitude <= ``bound`` (a gaze may lie outside [0, 1]^2: the
     viewer looks off-screen; the bound keeps ``gaze * width`` finite in float32)."""
@@ -138,12 +152,14 @@ class TableContext:
             raise self.error(key, value, "a table")
         return value
 
-    def known(self, key: str, table: dict, allowed: tuple[str, ...] | list[str]) -> None:
+    def known(self, key: str, table: dict, allowed: tuple[str, ...] | list[str],
+              see: str | None = None) -> None:
+        """Every key of ``table`` is one of ``allowed``; an unknown one names the closest
+        allowed key, else ``see`` (where they are listed), else all of them."""
         for k, v in table.items():
             if k not in allowed:
                 name = f"{key}.{k}" if key else k
-                raise self.error(name, v, "a known key (unknown key; allowed here: "
-                                 + ", ".join(allowed) + ")")
+                raise self.error(name, v, unknown_name(k, allowed, "a known key", see))
 
     def integer(self, key: str, value: Any, lo: int, hi: int | None = None) -> int:
         allowed = f"an integer >= {lo}" + (f" and <= {hi}" if hi is not None else "")

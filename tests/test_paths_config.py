@@ -270,6 +270,19 @@ def test_config_errors_name_the_dotted_key(tmp_path, text, key, value):
     assert e.value.key == key
 
 
+@pytest.mark.parametrize("text, tail", [
+    (BASE + "[foveated]\nthetta = 0.1\n", "(did you mean 'theta'?)"),
+    (BASE + "[foveated]\nzzzz = 0.1\n", "(none is close; see `foveated-mi render --help`)"),
+    (BASE + "sise = [8, 8]\n", "(did you mean 'size'?)"),
+])
+def test_an_unknown_key_names_the_closest_one(tmp_path, text, tail):
+    path = _write(tmp_path, "bad.toml", text)
+    with pytest.raises(ParameterError) as e:
+        load_config(path)
+    msg = str(e.value)[len(path):]
+    assert msg.endswith(tail) and "\n" not in msg and len(msg) < 120, msg
+
+
 def test_config_values_and_defaults(tmp_path):
     csv = _write(tmp_path, "g.csv", "t,x,y\n0,0.1,0.2\n1,0.3,0.4\n")
     path = _write(tmp_path, "seq.toml", f"""

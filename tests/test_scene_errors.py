@@ -25,7 +25,7 @@ BAD = {
     "range": ('<float name="theta" value="-1"/>',
               "theta = -1.0 is invalid: expected a finite number > 0"),
     "unknown": ('<float name="thetta" value="0.2"/>',
-                "thetta = 0.2 is invalid: expected a parameter of the foveated integrator: "),
+                "thetta = 0.2 is invalid: expected a known parameter (did you mean 'theta'?)"),
     "preset": ('<string name="preset" value="hmd"/>',
                "preset = 'hmd' is invalid: expected one of 'auto', 'paper'"),
 }
@@ -81,6 +81,31 @@ def test_study_reports_the_same_line(kind, tmp_path):
     first = one_line(result.failed[0])
     assert first.startswith("reference of bad failed: ParameterError: " + expected(path, kind))
     assert one_line(result.failed[1]).endswith("not run: its reference failed")
+
+
+@pytest.mark.parametrize("name, close", [("thetta", "theta"), ("sigmap", "sigma_p"),
+                                         ("zzzz", None)])
+def test_an_unknown_option_names_the_closest_one_in_a_short_line(name, close, tmp_path):
+    """Not the list of every option: the closest one, or where they are listed."""
+    from foveated_mi.integrators.foveated import FoveatedIntegrator
+    with pytest.raises(ParameterError) as info:
+        FoveatedIntegrator(**{name: 0.1})
+    python = one_line(str(info.value))
+    assert python.startswith(f"{name} = 0.1 is invalid: expected an option of the foveated "
+                             "integrator"), python
+    path = scene_file(tmp_path, f'<float name="{name}" value="0.1"/>')
+    with pytest.raises(ParameterError) as info:
+        load_scene(path)
+    where = f"{path}, line 4: "
+    xml = one_line(str(info.value))
+    assert xml.startswith(where + f"foveated integrator: {name} = 0.1 is invalid: "), xml
+    for msg in (python, xml[len(where):]):
+        assert len(msg) < 120, msg
+        if close is None:
+            assert "did you mean" not in msg and msg.endswith(
+                "(none is close; see `foveated-mi render --help`)"), msg
+        else:
+            assert msg.endswith(f"(did you mean {close!r}?)"), msg
 
 
 @pytest.mark.parametrize("integrator", [None, {"type": "path"}])

@@ -410,3 +410,15 @@ def test_pareto_legend_names_every_family_of_every_panel():
         warnings.simplefilter("error")
         empty = pareto_figure([row("a", "foveated", float("nan"), float("nan"), "oidn")], "psnr")
     assert empty.axes[0].get_legend() is None
+
+
+def test_a_misspelt_option_in_a_study_names_the_closest_one(tmp_path, capsys):
+    path = write(tmp_path, BASE.replace("theta = [0.1, 0.2]", "thetta = [0.1, 0.2]"))
+    assert cli.main(["study", path, "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "foveated.grid.thetta" in err, err
+    assert "did you mean 'theta'?" in err and len(err.split("s.toml: ", 1)[1]) < 120, err
+    path = write(tmp_path, BASE.replace("theta = [0.1, 0.2]", "zzzz = 1"))
+    assert cli.main(["study", path, "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "none is close" in err and "sigma_p" not in err, err

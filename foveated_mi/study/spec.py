@@ -537,8 +537,10 @@ def _check_keys(ctx: TableContext, key: str, table: dict) -> None:
         if k in _FORBIDDEN:
             raise ctx.error(f"{key}.{k}", v, _FORBIDDEN[k])
         if k not in names:
-            raise ctx.error(f"{key}.{k}", v, "a known key (unknown option; allowed: "
-                            + ", ".join(sorted(names)) + ")")
+            from ..options import OPTIONS_HELP
+            from ..validate import unknown_name
+            raise ctx.error(f"{key}.{k}", v, unknown_name(k, sorted(names), "a known key",
+                                                          OPTIONS_HELP))
 
 
 def _check_options(ctx: TableContext, key: str, options: dict, where: dict[str, str]) -> dict:
