@@ -9,14 +9,20 @@
    - reorder: :mod:`.reorder` (§3.2, Strategies 1 and 2)
    - or, for a foveal buffer that keeps nothing on the film, :mod:`.buffer_space` (the
      G-buffer at its samples and their reprojection) in place of the first two
-2. sparse shading: :mod:`.shading`, with :mod:`.pixel_filter` (§3.3, the shading buffer)
+2. trace: :mod:`.trace` (traced, or replayed from its recording) runs the sparse shading of
+   :mod:`.shading`, with :mod:`.pixel_filter` (§3.3, the shading buffer on the film's pixels
+   or on the foveal buffer's samples)
 3. formation: :mod:`.formation` (the registry and the frozen replay) calls the registered
-   formation; :mod:`.film`, the paper's, runs on the film's pixels:
+   formation. :mod:`.film`, the paper's, runs on the film's pixels:
 
    - history resolve: :mod:`.reproject` (Fig. 4)
-   - reconstruction: :mod:`.reconstruction` (§3.4, Jump Flooding and Sibson)
+   - reconstruction: :mod:`.reconstruction` (§3.4, Jump Flooding and the interpolation)
    - post-processing: :mod:`.post` (§3.5, the denoiser)
-4. outputs: :mod:`.outputs` (the frame's buffers on their grids, and its stats)
+
+   :mod:`.foveal` (``formation = 'foveal'``) resolves the history and denoises in the
+   log-polar buffer around the gaze, then warps it once to the film
+4. outputs: :mod:`.outputs` (the frame's buffers on their grids, and its stats); the plan
+   keeps the formation's history for the next frame
 
 The gradient pass, :mod:`.gradient` (the glue) with :mod:`.adjoint` (the maths) and
 :mod:`.traced_sensor`, sits at the shading seam. The value domains (radiance, irradiance,

@@ -193,7 +193,7 @@ def _host_cumulative(t: _Table, x: float) -> tuple[float, float]:
 class SplatFootprint:
     r"""Samples the kernel that the ``splat`` estimator applies at a traced pixel.
 
-    :func:`foveated_mi.frame.shading.develop_splat` gives traced pixel :math:`p` the value
+    :func:`foveated_mi.frame.shading.develop` (``splat``) gives traced pixel :math:`p` the value
     :math:`\sum_s f(p_c - s) L(s) / \sum_s f(p_c - s)` over the samples :math:`s` of every
     traced pixel :math:`q` within the filter's reach, each drawn uniformly in its pixel.
     Its expectation (for many samples) is

@@ -45,6 +45,18 @@ the pixel under the gaze (clamped to the film), so a frame never has an empty wa
     :math:`P_{\min}` = ``acuity_floor``. :math:`k` is solved on the device (a few sums over
     the film, no read back to the host), so a moving gaze or camera compiles and waits for
     nothing.
+``polar`` (the ``vr`` preset; the pixels the ``foveal`` formation forms its image from)
+    No draw: for a given gaze the map is the same every frame, :math:`P` = 1 where traced and
+    0 elsewhere (:func:`polar_map`). It traces every pixel of a full-resolution disc of radius
+    ``theta`` around the gaze (in units of half the film diagonal, as in ``kwon``;
+    ``theta_deg`` plays no part: :func:`fovea_radius`) and, outside it, the pixel under the
+    centre of each cell of a log-polar buffer (:mod:`foveated_mi.kernels.polar`), whose
+    cells grow linearly with the distance to the gaze. :func:`foveal_grid` sizes the cells
+    (bisection on their size at the disc's edge) so that the traced pixels number
+    ``ray_budget`` of the film with the gaze at its centre; a disc that alone needs more
+    than the budget is traced whole, with the coarsest cells around it, and a warning says
+    so. Edge rays are forced as for the other laws. The grid does not depend on the gaze,
+    which enters as an opaque value, so a moving gaze compiles nothing.
 """
 from __future__ import annotations
 

@@ -10,14 +10,14 @@ numbers are those of a plain ``mi.render`` of the nested integrator.
 shading buffer in one of two ways, both converging to the image the nested integrator renders
 on the same film (Mitsuba's default filter is ``gaussian``), never to a box-filtered one:
 
-``splat`` (:func:`develop_splat`; what ``auto`` picks unless the denoiser needs independent noise)
+``splat`` (:func:`develop`; what ``auto`` picks unless the denoiser needs independent noise)
     Mitsuba's own estimator: uniformly jittered samples are splatted with the film's filter
     into an ``mi.ImageBlock`` and a traced pixel holds :math:`\sum f L / \sum f` over the
     samples that reach it. Neighbouring traced pixels share samples, as in ``mi.render``, so
     with every pixel traced the frame *is* the nested integrator's render, noise included.
     A traced pixel without traced neighbours sees only its own samples: its footprint is
     the filter clipped to its neighbourhood (a slightly sharper kernel).
-``importance`` (:func:`develop_mean`)
+``importance`` (:func:`develop`, :func:`develop_mean`)
     Filter importance sampling (:mod:`foveated_mi.frame.pixel_filter`): each sample's offset is
     drawn from the filter and a traced pixel holds the (signed-)weighted mean of its own
     samples. Every pixel is an unbiased estimate of the filtered image and independent of
@@ -220,24 +220,18 @@ def _mean_per_ray(samples: TracedSamples, spp: int) -> ShadingBuffer:
     return ShadingBuffer(total * inv, accepted > 0, lum2 * inv, accepted)
 
 
-def develop_splat(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.Film
-                  ) -> ShadingBuffer:
-    """``splat`` mode: Mitsuba's film estimator :math:`\\sum f L / \\sum f` at the traced pixels.
+def _splat_per_ray(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.Film
+                   ) -> ShadingBuffer:
+    """The ``splat`` estimate of each ray's pixel (launch order): Mitsuba's film estimator
+    :math:`\\sum f L / \\sum f`.
 
     The estimator of an ``mi.ImageBlock`` of the film's crop (the block ``hdrfilm`` would
     create), written as a gather: each traced pixel visits the traced pixels within the
     filter's reach, in a fixed order, and sums the filter-weighted samples that reach it.
     Splatting with atomic adds sums in the order threads happen to run, which changes the
-    last bits from run to run; this sum is the same for a seed on every run. A traced pixel
-    with any weight holds the ratio, every other pixel holds nothing. Linear in
-    ``samples.radiance`` (the weights depend only on the sample positions)."""
-    width, height = (int(v) for v in film.crop_size())
-    return on_film(_splat_per_ray(samples, pixels, spp, film), pixels, width * height)
-
-
-def _splat_per_ray(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.Film
-                   ) -> ShadingBuffer:
-    """The ``splat`` estimate of each ray's pixel (launch order)."""
+    last bits from run to run; this sum is the same for a seed on every run. A ray's pixel
+    with any weight holds the ratio, no value otherwise. Linear in ``samples.radiance``
+    (the weights depend only on the sample positions)."""
     ray_of, pos, lum2, border = _splat_sources(samples, pixels, film)
     acc, m2, wsum = _splat_gather(samples, pixels, spp, film, ray_of, pos, lum2, border)
     if spp > 1:

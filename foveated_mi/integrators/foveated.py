@@ -3,15 +3,25 @@ r"""The ``foveated`` integrator: Kwon et al. 2019's pipeline around any sampling
 Per frame (Fig. 1 of the paper), each stage a pass of its own module in
 :mod:`foveated_mi.frame`, which this class only runs in order:
 
-1. **Plan** (:mod:`foveated_mi.frame.plan`): the G-buffer, the sampling map of §3.1 with its
-   forced edge rays, the reprojection map into the history and the reordered launch (§3.2).
-2. **Trace** (:mod:`foveated_mi.frame.shading`, §3.3): the nested integrator traces the
-   launch only; with ``tonemap_samples`` each sample is tone-mapped, then developed into the
-   sparse shading buffer.
-3. **Form** (:mod:`foveated_mi.frame.formation`): the registered formation (``formation``;
-   ``film``: history resolve, Jump Flooding and interpolation (§3.4), the registered
-   denoiser (§3.5), the albedo multiplied back).
-4. **Keep** (:mod:`foveated_mi.frame.outputs`): the history, the buffers and the stats.
+1. **Plan** (:mod:`foveated_mi.frame.plan`): the G-buffer (reused while the camera and the
+   scene stand still), the reprojection map into the history, the sampling map of §3.1 with
+   its forced edge rays and the reordered launch (§3.2). With ``formation = 'foveal'`` and
+   ``foveal_space = 'buffer'`` the G-buffer and the reprojection are on the foveal buffer's
+   samples instead (:mod:`foveated_mi.frame.buffer_space`).
+2. **Trace** (:mod:`foveated_mi.frame.trace`, §3.3): the nested integrator traces the
+   launch only (:mod:`foveated_mi.frame.shading`), or a recording of that trace replays
+   (``freeze``, for a frame neither timed nor differentiated); with ``tonemap_samples`` each
+   sample is tone-mapped, then the samples are developed into the sparse shading buffer, on
+   the film's pixels or on the foveal buffer's samples.
+3. **Form** (:mod:`foveated_mi.frame.formation`): the registered formation (``formation``):
+   ``film`` (:mod:`foveated_mi.frame.film`): history resolve, Jump Flooding and
+   interpolation (§3.4), the registered denoiser (§3.5), the albedo multiplied back;
+   ``foveal`` (:mod:`foveated_mi.frame.foveal`): history resolve and the denoiser in the
+   log-polar buffer, then one warp to the film. A recording replays it as for the trace;
+   a frame that ``mi.render`` will differentiate keeps its graph for the gradient pass.
+4. **Keep**: the formation's history becomes the next frame's (the planner's), the buffers
+   and the stats go to :mod:`foveated_mi.frame.outputs`, and the frame is kept for a
+   gradient pass.
 
 ``mi.render(scene)`` returns linear radiance (H, W, 3) like any Mitsuba integrator. After a
 render, :attr:`buffers` holds the intermediate buffers, :meth:`buffer` exports one and
