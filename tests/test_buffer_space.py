@@ -149,7 +149,7 @@ def test_a_still_view_builds_its_launch_once_and_a_gaze_or_layout_change_again(m
     monkeypatch.setattr(_plan._reorder, "launch_of_pixels", real)
     fresh = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
     for k, image in enumerate(images):
-        fresh._planner._samples_cache = None
+        fresh.views[0].planner._samples_cache = None
         np.testing.assert_array_equal(np.array(mi.render(scene, integrator=fresh, seed=k)),
                                       image)
 

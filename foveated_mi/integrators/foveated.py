@@ -25,7 +25,8 @@ Per frame (Fig. 1 of the paper), each stage a pass of its own module in
 
 ``mi.render(scene)`` returns linear radiance (H, W, 3) like any Mitsuba integrator. After a
 render, :attr:`buffers` holds the intermediate buffers, :meth:`buffer` exports one and
-:attr:`stats` holds the frame's stats. Seeds, history resets and camera cuts are those of
+:attr:`stats` holds the frame's stats. Each sensor of the scene is a view of its own, with
+its gaze, history and last frame (:attr:`views`, :mod:`foveated_mi.frame.view`). Seeds, history resets and camera cuts are those of
 :mod:`foveated_mi.frame.plan`.
 
 **Gradients** (:mod:`foveated_mi.frame.gradient`, :mod:`foveated_mi.frame.adjoint`).
@@ -53,10 +54,11 @@ import mitsuba as mi
 from ..frame import gradient as _gradient
 from ..frame.adjoint import NestedAdjoint
 from ..frame.formation import FrozenFormation
-from ..frame.outputs import FrameOutputs, frame_outputs
-from ..frame.plan import FramePlan, Planner
+from ..frame.outputs import frame_outputs
+from ..frame.plan import FramePlan
 from ..frame.reproject import History
 from ..frame.scene_state import SceneState, scene_state
+from ..frame.view import Views
 from ..frame import trace as _trace
 from ..frame.shading import ShadingBuffer, TracedSamples, is_ad_integrator
 from ..options import (SCHEMA, from_properties, gradient_refusal, parameter_table,
@@ -65,17 +67,6 @@ from ..timing import StageTimer
 from ..validate import ParameterError
 
 __doc__ += parameter_table()
-
-
-class _Hidden:
-    """A value out of reach of Dr.Jit's traversal of this plugin. The scene holds its
-    integrator, and a frozen function that takes the scene (the trace pass) traverses a
-    Python plugin's attributes, dataclasses included: the last frame's buffers would become
-    that function's inputs."""
-    __slots__ = ("value",)
-
-    def __init__(self, value=None):
-        self.value = value
 
 
 class FoveatedIntegrator(mi.SamplingIntegrator):
@@ -102,21 +93,23 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._options = validate_options(self._given, self._gradients)
         self._pixel_filter_warned: str | None = None
         self._warn_pixel_filter()
-        self._planner = Planner()            # history, frame count, caches
+        # Per view (a sensor of the scene): gaze, history, caches, last frame.
+        self._views = Views()
+        self._view = self._views[0]          # the view rendered last
         self._frozen = FrozenFormation()
         self._frozen_trace = _trace.FrozenTrace()
         self._adjoint = NestedAdjoint()
-        # The last primal frame, which render_backward / render_forward differentiate.
-        self._last = _Hidden()
-        self._outputs = FrameOutputs({}, {}, {})
+
+    @property
+    def views(self) -> Views:
+        """The views (:mod:`foveated_mi.frame.view`): ``views[i]`` renders the scene's
+        ``i``-th sensor, with its own gaze, history and last frame."""
+        return self._views
 
     @property
     def _primal(self) -> _gradient.PrimalFrame | None:
-        return self._last.value
-
-    @_primal.setter
-    def _primal(self, frame: _gradient.PrimalFrame | None) -> None:
-        self._last.value = frame
+        """The last primal frame of the view rendered last."""
+        return self._view.primal
 
     # -- options --------------------------------------------------------------------------
     @property
@@ -162,18 +155,20 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
 
     # -- history --------------------------------------------------------------------------
     def reset(self) -> None:
-        """Forget the history (next frame starts fresh, as frame 0)."""
-        self._planner.reset()
+        """Forget the history of every view (each one's next frame starts fresh, as frame 0)."""
+        for view in self._views:
+            view.reset()
 
     @property
     def frame(self) -> int:
-        """Number of frames rendered since the last reset."""
-        return self._planner.index
+        """Frames rendered since the last reset, in the view rendered last."""
+        return self._view.frame
 
     @property
     def history(self) -> History | None:
-        """The history the next frame reads (None before the first frame or after a reset)."""
-        return self._planner.history
+        """The history the next frame of the view rendered last reads (None before the first
+        frame or after a reset)."""
+        return self._view.history
 
     # -- the frame ------------------------------------------------------------------------
     def render(self, scene: mi.Scene, sensor: int | mi.Sensor = 0, seed: int = 0,
@@ -182,37 +177,37 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             raise ParameterError("develop", develop, "True (the foveated integrator develops "
                                  "its own image)")
         sensor = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
+        view = self._view = self._views.of(scene, sensor)
         state = scene_state(scene, sensor)
         if state.differentiated:
             # mi.render(scene, params) with parameters that need gradients: 'auto' becomes
             # the exact preset before this primal frame, which the gradient pass reuses.
             self._prepare_gradients()
-        o, timer = self._options, StageTimer(self._options["timing"])
+        o, timer = view.options(self._options), StageTimer(self._options["timing"])
         # Decisions before tracing: G-buffer, reprojection, sampling map, launch.
-        plan = self._planner.plan(scene, sensor, seed, spp, o, timer, state)
+        plan = view.planner.plan(scene, sensor, seed, spp, o, timer, state)
         # Sparse shading (§3.3): the nested integrator traces the launch only, and its
         # samples become the sparse shading buffer (the seam of the gradient pass).
         record = state.differentiated and gradient_refusal(self._given, o) is None
-        shaded, trace_replayed = self._shade(scene, plan, timer, record, state)
+        shaded, trace_replayed = self._shade(scene, plan, o, timer, record, state)
         shading = shaded.shading
         # The registered formation; its graph kept when mi.render will differentiate it.
         formed, recorded, formation_replayed = _gradient.form_primal(
             plan, shading, o, timer, self._frozen, record)
         # The history, buffers and stats of this frame, and the frame a gradient pass reuses.
-        self._planner.commit(plan, formed.history if o["history"] else None)
-        self._outputs = frame_outputs(plan, shaded, formed, o, timer, self._planner.index - 1,
-                                      (trace_replayed, formation_replayed))
-        self._primal = _gradient.PrimalFrame(plan, shading, id(scene), recorded)
+        view.planner.commit(plan, formed.history if o["history"] else None)
+        view.outputs = frame_outputs(plan, shaded, formed, o, timer, view.frame - 1,
+                                     (trace_replayed, formation_replayed))
+        view.primal = _gradient.PrimalFrame(plan, shading, id(scene), recorded)
         flat = dr.ravel(formed.image) if formed.flat is None else formed.flat
         return mi.TensorXf(flat, shape=(plan.height, plan.width, 3))
 
-    def _shade(self, scene: mi.Scene, plan: FramePlan, timer: StageTimer,
+    def _shade(self, scene: mi.Scene, plan: FramePlan, o: dict[str, Any], timer: StageTimer,
                record: bool, state: SceneState) -> tuple[_trace.Shaded, bool]:
         """The trace pass (:mod:`foveated_mi.frame.trace`) and whether it was replayed:
         replayed where nothing needs it traced (a frame that is not differentiated or
         timed, with ``freeze`` on; a scene with a parameter that requires gradients is
         traced even where the configuration refuses them, ``record`` false)."""
-        o = self._options
         if o["freeze"] and not timer.enabled and not record and not state.differentiated:
             shaded = self._frozen_trace(scene, self.nested, plan, o, state.host_values())
             if shaded is not None:
@@ -270,12 +265,13 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         if refusal is not None:
             raise refusal
         sensor = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
-        p = self._primal
+        view = self._views.of(scene, sensor)
+        p = view.primal
         if p is not None and p.scene_id == id(scene) and p.plan.sensor is sensor:
             return p
         with dr.suspend_grad():
-            plan = self._planner.plan(scene, sensor, seed, spp, self._options,
-                                      StageTimer(False))
+            plan = view.planner.plan(scene, sensor, seed, spp, view.options(self._options),
+                                     StageTimer(False))
             shading = self._develop(self._trace(scene, plan), plan)
         return _gradient.PrimalFrame(plan, shading, id(scene))
 
@@ -283,17 +279,17 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
     @property
     def buffers(self) -> dict[str, Any]:
         """The last frame's named buffers (flat Dr.Jit arrays; :meth:`buffer` exports one)."""
-        return self._outputs.buffers
+        return self._view.buffers
 
     @property
     def stats(self) -> dict[str, Any]:
         """Stats of the last frame as plain Python values (reading them synchronises)."""
-        return self._outputs.stats
+        return self._view.stats
 
     def buffer(self, name: str):
         """A buffer of the last frame as a NumPy array (H, W, C) (or (H, W) for scalars),
         on its grid. ``nearest`` comes back as the (x, y) coordinates of each cell's site (-1
         where there is none); ``reprojection_map`` as (x, y, hit)."""
-        return self._outputs.export(name)
+        return self._view.buffer(name)
 
 
