@@ -21,7 +21,8 @@ from foveated_mi.validate import ParameterError
 
 
 def _layout(width, height, **options):
-    return buffer_space.layout(width, height, validate_options({"preset": "vr", **options}))
+    o = validate_options({"preset": "vr", **options})
+    return buffer_space.layout(width, height, o["theta"], o["ray_budget"])
 
 
 @pytest.mark.parametrize("size,budget", [((96, 64), 0.1), ((160, 90), 0.25), ((40, 90), 0.1)])
@@ -96,7 +97,7 @@ def test_a_gaze_move_reads_the_disc_pixels_both_discs_hold():
     before = set(np.flatnonzero(integ.buffer("sampling_map").ravel()).tolist())
     integ.gaze = (0.55, 0.45)
     mi.render(scene, integrator=integ, seed=1)
-    lay = buffer_space.layout(W, H, integ.options)
+    lay = buffer_space.layout(W, H, integ.options["theta"], integ.options["ray_budget"])
     pixel = integ.buffer("sample_pixel")[0]
     on = integ.buffer("sample_on")[0].astype(bool)
     count = integ.buffer("history_count")[0]

@@ -126,7 +126,7 @@ def test_the_buffer_and_its_grid_are_exported(space):
         return
     # On the samples: the cells, then the disc's square patch, each at its film pixel.
     from foveated_mi.frame.buffer_space import layout
-    lay = layout(64, 48, integ.options)
+    lay = layout(64, 48, integ.options["theta"], integ.options["ray_budget"])
     assert cells.shape[:2] == (lay.grid.height, lay.grid.width)
     assert integ.buffer("shading").shape == (1, lay.size, 3)
     pixel, on = integ.buffer("sample_pixel")[0], integ.buffer("sample_on")[0].astype(bool)
@@ -227,7 +227,7 @@ def _disc_masks(integ, W, H, margin):
     """Film pixels well inside the disc (the seam's blend excluded) and well outside it."""
     from foveated_mi.frame.foveal import SEAM
     from foveated_mi.frame.buffer_space import layout
-    r0 = layout(W, H, integ.options).grid.fovea
+    r0 = layout(W, H, integ.options["theta"], integ.options["ray_budget"]).grid.fovea
     yy, xx = np.mgrid[0:H, 0:W]
     r = np.hypot(xx + 0.5 - W / 2, yy + 0.5 - H / 2)
     return r <= r0 - SEAM, r > r0 + margin

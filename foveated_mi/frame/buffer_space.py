@@ -78,11 +78,12 @@ class SampleLayout:
         return Grid(self.size, 1)
 
 
-def layout(width: int, height: int, o: dict) -> SampleLayout:
-    """The samples of a ``width`` x ``height`` film for the options' budget and disc."""
-    r0 = fovea_radius(width, height, o["theta"])
+def layout(width: int, height: int, theta: float, ray_budget: float) -> SampleLayout:
+    """The samples of a ``width`` x ``height`` film for a disc of radius ``theta`` (units of
+    half the film's diagonal) and a budget of ``ray_budget`` of its pixels."""
+    r0 = fovea_radius(width, height, theta)
     # The disc's pixels are samples themselves: the grid's rings inside it would be copies.
-    grid = foveal_grid(width, height, float(o["ray_budget"]), r0).outside_fovea()
+    grid = foveal_grid(width, height, float(ray_budget), r0).outside_fovea()
     # Pixel centres within r0 of any gaze span at most floor(2 r0) + 1 columns.
     return SampleLayout(grid, int(math.floor(2.0 * grid.fovea)) + 2)
 

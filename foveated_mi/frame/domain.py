@@ -30,11 +30,11 @@ from ..postprocess.inverse import inverse_tonemap
 from ..postprocess.registry import DOMAINS  # noqa: F401  (the domains a denoiser declares)
 from .shading import TracedSamples
 
-def tonemap_samples(samples: TracedSamples, o: dict[str, Any]) -> TracedSamples:
-    """Each sample tone-mapped before it is developed (``tonemap_samples``); rejected samples
-    stay 0."""
+def tonemap_samples(samples: TracedSamples, operator: str, exposure: float) -> TracedSamples:
+    """Each sample tone-mapped (``operator`` at ``exposure`` stops) before it is developed
+    (``tonemap_samples``); rejected samples stay 0."""
     return samples._replace(radiance=dr.select(
-        samples.ok, tonemap(samples.radiance, o["tonemap"], o["exposure"]), 0.0))
+        samples.ok, tonemap(samples.radiance, operator, exposure), 0.0))
 
 
 def to_irradiance(radiance: mi.Color3f, gb: GBuffer, o: dict[str, Any]) -> mi.Color3f:

@@ -86,7 +86,7 @@ def foveal_buffer_grid(width: int, height: int, o: dict[str, Any]) -> PolarGrid:
     """The buffer's grid for a film and the options' ray budget (without the rings inside
     the disc where the disc's pixels are samples themselves: ``foveal_space = "buffer"``)."""
     if o["foveal_space"] == "buffer":
-        return _buffer_space.layout(width, height, o).grid
+        return _buffer_space.layout(width, height, o["theta"], o["ray_budget"]).grid
     return foveal_grid(width, height, float(o["ray_budget"]),
                        fovea_radius(width, height, o["theta"]))
 
@@ -264,7 +264,7 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any],
     mine = resolved.shading
     if o["foveal_disc"] == "denoised":
         # The disc's pixels through the denoiser, on their square patch of the film.
-        lay = _buffer_space.layout(width, height, o)
+        lay = _buffer_space.layout(width, height, o["theta"], o["ray_budget"])
         pixels, on = _buffer_space.patch_pixels(lay, inp.gaze, width, height)
         disc = _disc_patch(resolved, gb, pixels, on, lay.side, o, grad_pass)
         _, x, y = film.cells()
@@ -288,7 +288,7 @@ def _form_on_samples(shading: ShadingBuffer, inp: FormationInput, o: dict[str, A
     samples (:mod:`foveated_mi.frame.buffer_space`). Only the warp and the disc's blend run
     on the film's pixels."""
     width, height = inp.width, inp.height
-    lay = _buffer_space.layout(width, height, o)
+    lay = _buffer_space.layout(width, height, o["theta"], o["ray_budget"])
     grid, nc = lay.grid, lay.cells
     pixels, on = inp.samples[:2]
     gb = inp.gbuffer
@@ -342,7 +342,7 @@ def foveal_grids(width: int, height: int, o: dict[str, Any]) -> dict[str, Grid]:
     """The buffers that live on the samples (``foveal_space = "buffer"``), and their grid."""
     if o["foveal_space"] != "buffer":
         return {}
-    samples = _buffer_space.layout(width, height, o).samples_grid
+    samples = _buffer_space.layout(width, height, o["theta"], o["ray_budget"]).samples_grid
     return {name: samples for name in ON_SAMPLES}
 
 

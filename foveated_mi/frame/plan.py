@@ -25,7 +25,6 @@ from typing import Any
 import drjit as dr
 import mitsuba as mi
 
-from ..postprocess import DENOISERS
 from ..timing import StageTimer
 from ..validate import check_int
 from . import buffer_space as _buffer_space
@@ -38,6 +37,7 @@ from .pixel_filter import FilterSampler
 from .reorder import Reordered
 from .reproject import History, ReprojectionMap
 from .scene_state import GeometryCache, SceneState, scene_state
+from .settings import HistorySettings, PlanSettings
 
 #: A camera move after which fewer pixels than this fraction see the surface they saw in the
 #: previous frame is a cut: no pixel of the frame reads the history.
@@ -99,63 +99,81 @@ class Planner:
         self._emission_cache = None
         self._samples_cache = None
 
-    def plan(self, scene: mi.Scene, sensor: mi.Sensor, seed, spp: int, o: dict[str, Any],
-             timer: StageTimer, state: SceneState | None = None) -> FramePlan:
+    def plan(self, scene: mi.Scene, sensor: mi.Sensor, seed, spp: int, settings: PlanSettings,
+             gaze: tuple[float, float], timer: StageTimer,
+             state: SceneState | None = None) -> FramePlan:
         """Geometry, reprojection, sampling and reorder passes: everything a frame decides
-        before it traces. None of it is differentiable (visibility and random choices)."""
+        before it traces. None of it is differentiable (visibility and random choices).
+
+        Parameters
+        ----------
+        scene, sensor : the frame's scene and the sensor that sees it.
+        seed : the render's seed; spp : samples per traced pixel (0: the sensor's).
+        settings : the plan's settings (:class:`~.settings.PlanSettings`).
+        gaze : the frame's gaze, a normalised film position (an input, never a setting).
+        timer : closes the ``gbuffer``, ``sampling`` and ``reorder`` stages.
+        state : the scene's state, when the caller has it.
+
+        Returns
+        -------
+        FramePlan
+        """
         width, height = _gbuffer.film_size(sensor)
         spp = check_int("spp", spp if spp else sensor.sampler().sample_count(), 1)
         state = state if state is not None else scene_state(scene, sensor)
         self._check_reset(scene, state, width, height)
         seed = (int(seed) if not dr.is_array_v(seed) else int(dr.slice(seed))) & 0xFFFFFFFF
-        if on_samples(o):
-            return self._plan_samples(scene, sensor, seed, spp, o, timer, state, width, height)
+        if settings.on_samples:
+            return self._plan_samples(scene, sensor, seed, spp, settings, gaze, timer, state,
+                                      width, height)
+        hs, ss, ls = settings.history, settings.sampling, settings.launch
         with dr.suspend_grad():
             # A still camera over an unchanged scene reuses the last G-buffer.
             gb, reused = self._geometry.gbuffer(
-                scene, sensor, materials=materials_needed(o), state=state)
+                scene, sensor, materials=settings.materials, state=state)
             # Everything the G-buffer holds is evaluated with the pass: a lazy albedo would
             # re-run the BSDF dispatch in every later kernel, and would point into the scene
             # after the scene is gone (a gradient pass can outlive it).
             timer.mark("gbuffer", gb.position, gb.normal, gb.depth, gb.hit, gb.direction,
                        gb.albedo, gb.emission)
-            history = self.history if o["history"] else None
+            history = self.history if hs.keep else None
             if history is not None and history.layout is not None:
                 history = None        # kept on a foveal buffer's samples: not the film's
-            reproj, cut = self._reprojection(gb, history, sensor, width, height, o, reused)
-            frame_seed = self._frame_seed(seed, cut, o["history"])
-            map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
+            reproj, cut = self._reprojection(gb, history, sensor, width, height, hs, reused)
+            frame_seed = self._frame_seed(seed, cut, hs.keep)
+            map_seed = ss.map_seed if ss.map_seed >= 0 else frame_seed
             # Traced every frame, like a depth edge: their sparse estimate converges only
             # where every pixel within the filter's reach is traced too.
             emitting = self._emission_edges(gb, sensor, width, height) \
-                if o["emission_edges"] else None
-            edges, smap, prob = _sampling.sampling_pass(gb, width, height, o, map_seed, emitting,
-                                                        sensor=sensor)
+                if ss.emission_edges else None
+            edges, smap, prob = _sampling.sampling_pass(gb, width, height, ss, gaze, map_seed,
+                                                        emitting, sensor=sensor)
             timer.mark("sampling", smap, prob, reproj.hit, reproj.index, edges)
-            ro = _reorder.reorder(smap, width, height, o["reorder"], o["block_height"])
+            ro = _reorder.reorder(smap, width, height, ls.reorder, ls.block_height)
             timer.mark("reorder", ro.wavefront)
         return FramePlan(sensor=sensor, width=width, height=height, spp=spp, seed=frame_seed,
                          map_seed=map_seed, gbuffer=gb, edges=edges, sampling_map=smap,
                          probability=prob, reprojection=reproj, reordered=ro, history=history,
-                         filter_sampler=self._filter_sampler(sensor, o["pixel_filter"]),
+                         filter_sampler=self._filter_sampler(sensor, settings.pixel_filter),
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=emitting,
-                         gaze=_sampling.gaze_pixels(o["gaze"], width, height))
+                         gaze=_sampling.gaze_pixels(gaze, width, height))
 
-    def _plan_samples(self, scene, sensor, seed: int, spp: int, o: dict[str, Any],
-                      timer: StageTimer, state: SceneState, width: int, height: int
-                      ) -> FramePlan:
+    def _plan_samples(self, scene, sensor, seed: int, spp: int, settings: PlanSettings,
+                      gaze_at: tuple[float, float], timer: StageTimer, state: SceneState,
+                      width: int, height: int) -> FramePlan:
         """The plan of a foveal buffer that keeps nothing on the film
         (:mod:`foveated_mi.frame.buffer_space`): the G-buffer at its samples only, the
         history reprojected sample to sample, the polar map and its launch."""
-        lay = _buffer_space.layout(width, height, o)
-        gaze = _sampling.gaze_pixels(o["gaze"], width, height)
-        gaze_key = tuple(float(v) for v in o["gaze"])
-        materials = materials_needed(o)
+        ss, ls = settings.sampling, settings.launch
+        lay = _buffer_space.layout(width, height, ss.theta, ss.ray_budget)
+        gaze = _sampling.gaze_pixels(gaze_at, width, height)
+        gaze_key = tuple(float(v) for v in gaze_at)
+        materials = settings.materials
         with dr.suspend_grad():
             # A still camera and gaze over an unchanged scene reuse the samples' G-buffer,
             # and their launch.
             key = (state.camera, state.scene, gaze_key, lay, materials, width, height,
-                   o["reorder"], o["block_height"])
+                   ls.reorder, ls.block_height)
             cached = self._samples_cache
             reused = cached is not None and cached[0] == key
             if reused:
@@ -169,16 +187,16 @@ class Planner:
             timer.mark("gbuffer", pixels, on, gb.position, gb.normal, gb.depth, gb.hit,
                        gb.direction, gb.albedo, gb.emission)
             history, reproj, cut = self._samples_history(gb, on, lay, reused, gaze_key,
-                                                         width, height, o)
+                                                         width, height, settings.history)
             self._gaze = gaze_key
-            frame_seed = self._frame_seed(seed, cut, o["history"])
-            map_seed = o["map_seed"] if o["map_seed"] >= 0 else frame_seed
+            frame_seed = self._frame_seed(seed, cut, settings.history.keep)
+            map_seed = ss.map_seed if ss.map_seed >= 0 else frame_seed
             timer.mark("sampling", reproj.hit, reproj.index)
             # The launch of the samples' pixels, the sampling map they make, and each
             # sample's ray in it.
             if launch is None:
-                ro, smap = _reorder.launch_of_pixels(pixels, on, width, height, o["reorder"],
-                                                     o["block_height"])
+                ro, smap = _reorder.launch_of_pixels(pixels, on, width, height, ls.reorder,
+                                                     ls.block_height)
                 rays = _buffer_space.sample_rays(pixels, on, ro.wavefront, ro.active,
                                                  width * height)
                 launch = (ro, smap, rays)
@@ -189,24 +207,23 @@ class Planner:
         return FramePlan(sensor=sensor, width=width, height=height, spp=spp, seed=frame_seed,
                          map_seed=map_seed, gbuffer=gb, edges=None, sampling_map=smap,
                          probability=prob, reprojection=reproj, reordered=ro, history=history,
-                         filter_sampler=self._filter_sampler(sensor, o["pixel_filter"]),
+                         filter_sampler=self._filter_sampler(sensor, settings.pixel_filter),
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=None,
                          gaze=gaze, samples=(pixels, on, rays), layout=lay)
 
     def _samples_history(self, gb, on, lay, reused: bool, gaze_key: tuple, width: int,
-                         height: int, o: dict[str, Any]):
+                         height: int, hs: HistorySettings):
         """``(history, reprojection, cut)`` of the buffer's samples: the history they read
         (none when it is kept on the film or on another buffer's samples), its map (the
         still map while the samples, camera and gaze hold) and the camera cut, if any."""
-        history = self.history if o["history"] else None
+        history = self.history if hs.keep else None
         if history is not None and history.layout != lay:
             history = None
         if history is not None and reused and not self._camera_moved \
                 and self._gaze == gaze_key:
             return history, _buffer_space.still_map(history, lay.size), None
         reproj = _buffer_space.reprojection_map(
-            gb, on, history, lay, width, height, tolerance=o["reprojection_tolerance"],
-            mode=o["reprojection"])
+            gb, on, history, lay, width, height, tolerance=hs.tolerance, mode=hs.reprojection)
         cut = None
         if history is not None and self._camera_moved:
             reproj, cut = _reproject.unless_cut(reproj, CUT_HIT_FRACTION)
@@ -242,15 +259,15 @@ class Planner:
         self._held = state.held
 
     def _reprojection(self, gb: GBuffer, history: History | None, sensor: mi.Sensor,
-                      width: int, height: int, o: dict[str, Any], still: bool = False):
+                      width: int, height: int, hs: HistorySettings, still: bool = False):
         """The reprojection map, and the cut verdict after a camera move (else None). A still
         camera over an unchanged scene (``still``: the G-buffer reused) maps every pixel onto
         itself, without projecting it."""
         if history is not None and still and not self._camera_moved:
             return _reproject.still_map(history, width, height), None
         reproj = _reproject.reprojection_map(gb.position, gb.hit, history, width, height,
-                                             tolerance=o["reprojection_tolerance"],
-                                             direction=gb.direction, mode=o["reprojection"],
+                                             tolerance=hs.tolerance,
+                                             direction=gb.direction, mode=hs.reprojection,
                                              reach=_gbuffer.filter_reach(sensor.film()))
         if history is not None and self._camera_moved:
             return _reproject.unless_cut(reproj, CUT_HIT_FRACTION)
@@ -291,13 +308,3 @@ class Planner:
             fs = self._filter_samplers[key] = FilterSampler(film, importance=mode == "importance")
         return fs
 
-
-def on_samples(o: dict[str, Any]) -> bool:
-    """Whether the frame's plan is on the foveal buffer's samples, not the film's pixels
-    (``formation = "foveal"`` with ``foveal_space = "buffer"``)."""
-    return o["formation"] == "foveal" and o["foveal_space"] == "buffer"
-
-
-def materials_needed(o: dict[str, Any]) -> bool:
-    """Whether the G-buffer must hold albedo and emission for these options."""
-    return bool(o["demodulate"] or o["emission_edges"] or DENOISERS[o["denoiser"]].materials)

@@ -72,6 +72,7 @@ import numpy as np
 from ..kernels import pixel_coords
 from ..kernels.polar import PolarGrid, centres_at_film_centre, polar_grid_of
 from ..validate import check_range
+from .settings import SamplingSettings
 
 #: Minimum angle of resolution at the fovea, degrees (Guenter et al. 2012, §3).
 ACUITY_OMEGA0 = 1.0 / 48.0
@@ -295,13 +296,15 @@ def acuity_probability(ecc: mi.Float, ray_budget: float, floor: float) -> mi.Flo
     return dr.clip(k * g, lo, 1.0)
 
 
-def probability_in_degrees(directions: mi.Vector3f, sensor: mi.Sensor, o: dict) -> mi.Float:
-    """P per pixel of the options' law in degrees (``theta_deg`` or ``acuity``)."""
+def probability_in_degrees(directions: mi.Vector3f, sensor: mi.Sensor, law: SamplingSettings,
+                           gaze: tuple[float, float]) -> mi.Float:
+    """P per pixel of a law in degrees (``theta_deg`` or ``acuity``) around ``gaze`` (a
+    normalised film position)."""
     from ..viewer import eccentricity
-    ecc = eccentricity(directions, sensor, o["gaze"])
-    if o["sampling_law"] == "acuity":
-        return acuity_probability(ecc, o["ray_budget"], o["acuity_floor"])
-    return kwon_in_degrees(ecc, o["theta_deg"], o["sigma_p"])
+    ecc = eccentricity(directions, sensor, gaze)
+    if law.law == "acuity":
+        return acuity_probability(ecc, law.ray_budget, law.acuity_floor)
+    return kwon_in_degrees(ecc, law.theta_deg, law.sigma_p)
 
 
 def _traced_pixels(grid: PolarGrid | None, width: int, height: int,
@@ -390,33 +393,42 @@ def polar_map(width: int, height: int, gaze, budget: float, theta: float,
     return smap, dr.select(smap, 1.0, 0.0)
 
 
-def in_degrees(o: dict) -> bool:
-    """Whether the options' sampling law works in degrees (needs the sensor's projection)."""
-    return o["sampling_law"] == "acuity" or o["theta_deg"] > 0
-
-
-def sampling_pass(gb, width: int, height: int, o: dict, seed, emitting: mi.Bool | None = None,
+def sampling_pass(gb, width: int, height: int, law: SamplingSettings,
+                  gaze: tuple[float, float], seed, emitting: mi.Bool | None = None,
                   sensor: mi.Sensor | None = None):
-    """The sampling pass of a frame: depth edges (none when ``edge_threshold = 0``), plus the
-    emission edges ``emitting`` when given, and the sampling map of the options ``o`` drawn
-    with ``seed`` (a law in degrees needs the ``sensor``).
-    Returns ``(edges, sampling_map, probability)``."""
+    """The sampling pass of a frame.
+
+    Parameters
+    ----------
+    gb : the frame's G-buffer (film-sized).
+    width, height : the film's size.
+    law : the sampling law's settings.
+    gaze : the frame's gaze, a normalised film position.
+    seed : the map's seed (a Python int or a device value).
+    emitting : the emission edges, forced like depth edges (None: none).
+    sensor : the frame's sensor (needed by a law in degrees).
+
+    Returns
+    -------
+    (edges, sampling_map, probability) : the forced rays (None when ``edge_threshold = 0``
+    and no ``emitting``), the map, and P per pixel.
+    """
     prob = None
-    if in_degrees(o):
+    if law.in_degrees:
         if sensor is None:
             from ..validate import ParameterError
             raise ParameterError("sensor", None, "the frame's sensor for a sampling law in "
                                  "degrees (theta_deg or sampling_law = 'acuity')")
-        prob = probability_in_degrees(gb.direction, sensor, o)
+        prob = probability_in_degrees(gb.direction, sensor, law, gaze)
     edges = None
-    if o["edge_threshold"] > 0:
-        edges = depth_edges(gb.depth, gb.hit, width, height, o["edge_threshold"],
-                            detector=o["edge_detector"])
+    if law.edge_threshold > 0:
+        edges = depth_edges(gb.depth, gb.hit, width, height, law.edge_threshold,
+                            detector=law.edge_detector)
     if emitting is not None:
         edges = emitting if edges is None else edges | emitting
-    if o["sampling_law"] == "polar":
-        smap, prob = polar_map(width, height, o["gaze"], o["ray_budget"], o["theta"], edges)
+    if law.law == "polar":
+        smap, prob = polar_map(width, height, gaze, law.ray_budget, law.theta, edges)
         return edges, smap, prob
-    smap, prob = sampling_map(width, height, gaze=o["gaze"], theta=o["theta"],
-                              sigma_p=o["sigma_p"], seed=seed, edges=edges, probability=prob)
+    smap, prob = sampling_map(width, height, gaze=gaze, theta=law.theta, sigma_p=law.sigma_p,
+                              seed=seed, edges=edges, probability=prob)
     return edges, smap, prob

@@ -44,7 +44,7 @@ out of that reach, or it would become an input of every recording.
 from __future__ import annotations
 
 import warnings
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
@@ -53,6 +53,7 @@ from .domain import tonemap_samples
 from .formation import RECORDINGS, _fields, _no_collection
 from .plan import FramePlan
 from .sampling import opaque_seed
+from .settings import TraceSettings
 from .shading import (ShadingBuffer, TracedSamples, develop, lanes_of, trace_lanes,
                       trace_wavefront)
 
@@ -65,29 +66,30 @@ class Shaded(NamedTuple):
 
 
 def trace(scene: mi.Scene, integrator: mi.SamplingIntegrator, plan: FramePlan,
-          o: dict[str, Any]) -> TracedSamples:
+          settings: TraceSettings) -> TracedSamples:
     """The nested integrator traces the plan's launch (rays x spp lanes)."""
     ro = plan.reordered
     return trace_wavefront(scene, plan.sensor, integrator, ro.wavefront, plan.width,
                            plan.height, spp=plan.spp, seed=plan.seed, active=ro.active,
-                           clamp=o["clamp"], filter_sampler=plan.filter_sampler)
+                           clamp=settings.clamp, filter_sampler=plan.filter_sampler)
 
 
-def develop_plan(samples: TracedSamples, plan: FramePlan, o: dict[str, Any]) -> ShadingBuffer:
+def develop_plan(samples: TracedSamples, plan: FramePlan,
+                 settings: TraceSettings) -> ShadingBuffer:
     """Per-sample tone mapping where asked, then the sparse shading buffer (on the foveal
     buffer's samples where the plan is)."""
-    if o["tonemap_samples"]:
-        samples = tonemap_samples(samples, o)
+    if settings.tonemap_samples:
+        samples = tonemap_samples(samples, settings.tonemap, settings.exposure)
     at = None if plan.samples is None else (plan.samples[2], plan.samples[1])
     return develop(samples, plan.reordered.wavefront, plan.spp, plan.sensor.film(),
-                   o["pixel_filter"], at)
+                   settings.pixel_filter, at)
 
 
 def shade(scene: mi.Scene, integrator: mi.SamplingIntegrator, plan: FramePlan,
-          o: dict[str, Any]) -> Shaded:
+          settings: TraceSettings) -> Shaded:
     """The trace pass, traced."""
-    samples = trace(scene, integrator, plan, o)
-    return Shaded(develop_plan(samples, plan, o), samples.rejected, samples.clamped)
+    samples = trace(scene, integrator, plan, settings)
+    return Shaded(develop_plan(samples, plan, settings), samples.rejected, samples.clamped)
 
 
 def _record(scene, sensor, integrator, filter_sampler, arrays: dict, key: dict) -> dict:
@@ -143,7 +145,7 @@ class FrozenTrace:
                       f"it is traced every frame", RuntimeWarning, stacklevel=5)
 
     def __call__(self, scene: mi.Scene, integrator: mi.SamplingIntegrator, plan: FramePlan,
-                 o: dict[str, Any], host_values: tuple = ()) -> Shaded | None:
+                 settings: TraceSettings, host_values: tuple = ()) -> Shaded | None:
         """The frame's trace pass, replayed; None when it cannot be (a nested integrator
         that reads a value on the host, say), with one warning: the caller traces it, as
         it will every frame from then on."""
@@ -162,7 +164,7 @@ class FrozenTrace:
         key = {"spp": plan.spp, "width": plan.width, "height": plan.height,
                "crop": tuple(int(v) for v in film.crop_offset()),
                "shutter": (float(sensor.shutter_open()), float(sensor.shutter_open_time())),
-               "clamp": float(o["clamp"]), "importance": plan.filter_sampler.importance,
+               "clamp": settings.clamp, "importance": plan.filter_sampler.importance,
                "host": host_values}
         try:
             with _no_collection():          # a collection inside a recording aborts
@@ -178,4 +180,4 @@ class FrozenTrace:
                           f"the replay returned {wrong[0]} samples for a launch of {lanes}")
             return None
         samples = TracedSamples(**out)
-        return Shaded(develop_plan(samples, plan, o), samples.rejected, samples.clamped)
+        return Shaded(develop_plan(samples, plan, settings), samples.rejected, samples.clamped)

@@ -58,9 +58,10 @@ from ..frame.outputs import frame_outputs
 from ..frame.plan import FramePlan
 from ..frame.reproject import History
 from ..frame.scene_state import SceneState, scene_state
+from ..frame.settings import frame_settings
 from ..frame.view import Views
 from ..frame import trace as _trace
-from ..frame.shading import ShadingBuffer, TracedSamples, is_ad_integrator
+from ..frame.shading import is_ad_integrator
 from ..options import (SCHEMA, from_properties, gradient_refusal, parameter_table,
                        pixel_filter_warning, validate_options)
 from ..timing import StageTimer
@@ -91,6 +92,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         # 'auto' preset then resolves to one whose gradient is exact.
         self._gradients = is_ad_integrator(self.nested)
         self._options = validate_options(self._given, self._gradients)
+        self._settings = frame_settings(self._options)   # each pass's, read once
         self._pixel_filter_warned: str | None = None
         self._warn_pixel_filter()
         # Per view (a sensor of the scene): gaze, history, caches, last frame.
@@ -127,6 +129,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         if new["history"] != old["history"] or any(new[k] != old[k] for k in domain):
             self.reset()   # a stale history, or one held in another domain
         self._given, self._options = given, new
+        self._settings = frame_settings(new)
         self._warn_pixel_filter()
 
     def _warn_pixel_filter(self) -> None:
@@ -185,11 +188,12 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             self._prepare_gradients()
         o, timer = view.options(self._options), StageTimer(self._options["timing"])
         # Decisions before tracing: G-buffer, reprojection, sampling map, launch.
-        plan = view.planner.plan(scene, sensor, seed, spp, o, timer, state)
+        plan = view.planner.plan(scene, sensor, seed, spp, self._settings.plan, o["gaze"],
+                                 timer, state)
         # Sparse shading (§3.3): the nested integrator traces the launch only, and its
         # samples become the sparse shading buffer (the seam of the gradient pass).
         record = state.differentiated and gradient_refusal(self._given, o) is None
-        shaded, trace_replayed = self._shade(scene, plan, o, timer, record, state)
+        shaded, trace_replayed = self._shade(scene, plan, timer, record, state)
         shading = shaded.shading
         # The registered formation; its graph kept when mi.render will differentiate it.
         formed, recorded, formation_replayed = _gradient.form_primal(
@@ -202,26 +206,19 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         flat = dr.ravel(formed.image) if formed.flat is None else formed.flat
         return mi.TensorXf(flat, shape=(plan.height, plan.width, 3))
 
-    def _shade(self, scene: mi.Scene, plan: FramePlan, o: dict[str, Any], timer: StageTimer,
+    def _shade(self, scene: mi.Scene, plan: FramePlan, timer: StageTimer,
                record: bool, state: SceneState) -> tuple[_trace.Shaded, bool]:
         """The trace pass (:mod:`foveated_mi.frame.trace`) and whether it was replayed:
         replayed where nothing needs it traced (a frame that is not differentiated or
         timed, with ``freeze`` on; a scene with a parameter that requires gradients is
         traced even where the configuration refuses them, ``record`` false)."""
-        if o["freeze"] and not timer.enabled and not record and not state.differentiated:
-            shaded = self._frozen_trace(scene, self.nested, plan, o, state.host_values())
+        ts = self._settings.trace
+        if self._options["freeze"] and not timer.enabled and not record \
+                and not state.differentiated:
+            shaded = self._frozen_trace(scene, self.nested, plan, ts, state.host_values())
             if shaded is not None:
                 return shaded, True
-        return _trace.shade(scene, self.nested, plan, o), False
-
-    def _trace(self, scene: mi.Scene, plan: FramePlan) -> TracedSamples:
-        """Sparse shading: the nested integrator traces the launch (rays x spp lanes)."""
-        return _trace.trace(scene, self.nested, plan, self._options)
-
-    def _develop(self, samples: TracedSamples, plan: FramePlan) -> ShadingBuffer:
-        """Per-sample tone mapping where asked, then the sparse shading buffer (on the
-        foveal buffer's samples where the plan is)."""
-        return _trace.develop_plan(samples, plan, self._options)
+        return _trace.shade(scene, self.nested, plan, ts), False
 
     # -- differentiation ------------------------------------------------------------------
     def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
@@ -247,6 +244,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         if not self._gradients:
             self._gradients = True
             self._options = validate_options(self._given, True)
+            self._settings = frame_settings(self._options)
 
     def formation(self):
         """The last primal frame's image as a function of its traced pixels' values, with
@@ -270,9 +268,9 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         if p is not None and p.scene_id == id(scene) and p.plan.sensor is sensor:
             return p
         with dr.suspend_grad():
-            plan = view.planner.plan(scene, sensor, seed, spp, view.options(self._options),
-                                     StageTimer(False))
-            shading = self._develop(self._trace(scene, plan), plan)
+            plan = view.planner.plan(scene, sensor, seed, spp, self._settings.plan,
+                                     view.options(self._options)["gaze"], StageTimer(False))
+            shading = _trace.shade(scene, self.nested, plan, self._settings.trace).shading
         return _gradient.PrimalFrame(plan, shading, id(scene))
 
     # -- results --------------------------------------------------------------------------

@@ -1,0 +1,105 @@
+"""The frame's settings: the validated options read once into typed values, a set per pass.
+
+As a Mitsuba plugin reads its properties once into typed attributes, the integrator reads its
+validated options (:func:`foveated_mi.options.validate_options`) once per change into
+:class:`FrameSettings`: frozen, hashable dataclasses, one per pass, each holding only what
+its pass reads. A pass takes its own settings, never the options. What changes from frame to
+frame (the gaze, the seed, the frame's index, the camera) is an input of the frame and never
+part of the settings: a moving gaze changes no settings, so it records and compiles nothing.
+
+The passes before the trace read :class:`PlanSettings` (:mod:`.plan`): the sampling law's
+(:class:`SamplingSettings`), the launch's (:class:`LaunchSettings`) and the history's
+(:class:`HistorySettings`). The trace pass reads :class:`TraceSettings` (:mod:`.trace`). The
+formations read the options as their registration's ``view`` declares them
+(:mod:`.formation`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from ..postprocess import DENOISERS
+
+
+@dataclass(frozen=True)
+class SamplingSettings:
+    """The sampling law (:mod:`.sampling`) and the rays it forces."""
+    law: str                   #: ``kwon``, ``acuity`` or ``polar``
+    theta: float               #: fovea, in units of half the film's diagonal
+    theta_deg: float           #: fovea in degrees of eccentricity (0: ``theta`` instead)
+    sigma_p: float             #: P at ``theta``
+    ray_budget: float          #: rays per frame over pixels (``acuity``, ``polar``)
+    acuity_floor: float        #: the ``acuity`` law's smallest P
+    edge_threshold: float      #: the depth-edge test's threshold (0: no edge rays)
+    edge_detector: str         #: ``relative`` or ``sobel``
+    emission_edges: bool       #: rays forced where a footprint crosses an emitter's edge
+    map_seed: int              #: the map's own seed (-1: the frame's)
+
+    @property
+    def in_degrees(self) -> bool:
+        """Whether the law works in degrees of eccentricity (needs the sensor's projection)."""
+        return self.law == "acuity" or self.theta_deg > 0
+
+
+@dataclass(frozen=True)
+class LaunchSettings:
+    """The reordered launch (:mod:`.reorder`, §3.2)."""
+    reorder: str               #: one of :data:`~.reorder.REORDER_MODES`
+    block_height: int          #: rows per block of Strategy 2
+
+
+@dataclass(frozen=True)
+class HistorySettings:
+    """Whether the frame reads a history, and how it reprojects it (:mod:`.reproject`)."""
+    keep: bool                 #: the option ``history``
+    reprojection: str          #: ``exclusive`` or ``shared`` reads
+    tolerance: float           #: relative depth (or plane) tolerance of the reprojection test
+
+
+@dataclass(frozen=True)
+class PlanSettings:
+    """What the passes before the trace read (:class:`~.plan.Planner`)."""
+    sampling: SamplingSettings
+    launch: LaunchSettings
+    history: HistorySettings
+    on_samples: bool           #: the plan is on the foveal buffer's samples, not the film's
+    materials: bool            #: the G-buffer holds albedo and emission
+    pixel_filter: str          #: ``splat`` or ``importance`` (the film filter's sampler)
+
+
+@dataclass(frozen=True)
+class TraceSettings:
+    """What the trace pass reads (:mod:`.trace`, :mod:`.shading`)."""
+    clamp: float               #: largest accepted sample component
+    pixel_filter: str          #: how samples become the shading buffer
+    tonemap_samples: bool      #: each sample tone-mapped before it is developed
+    tonemap: str               #: ... with this operator
+    exposure: float            #: ... at this exposure (stops)
+
+
+@dataclass(frozen=True)
+class FrameSettings:
+    """Every pass's settings (module docstring)."""
+    plan: PlanSettings
+    trace: TraceSettings
+
+
+def frame_settings(o: dict[str, Any]) -> FrameSettings:
+    """The settings of validated options ``o`` (read once per change of the options)."""
+    sampling = SamplingSettings(
+        law=o["sampling_law"], theta=float(o["theta"]), theta_deg=float(o["theta_deg"]),
+        sigma_p=float(o["sigma_p"]), ray_budget=float(o["ray_budget"]),
+        acuity_floor=float(o["acuity_floor"]), edge_threshold=float(o["edge_threshold"]),
+        edge_detector=o["edge_detector"], emission_edges=bool(o["emission_edges"]),
+        map_seed=int(o["map_seed"]))
+    plan = PlanSettings(
+        sampling, LaunchSettings(o["reorder"], int(o["block_height"])),
+        HistorySettings(bool(o["history"]), o["reprojection"],
+                        float(o["reprojection_tolerance"])),
+        on_samples=o["formation"] == "foveal" and o["foveal_space"] == "buffer",
+        materials=bool(o["demodulate"] or o["emission_edges"]
+                       or DENOISERS[o["denoiser"]].materials),
+        pixel_filter=o["pixel_filter"])
+    trace = TraceSettings(float(o["clamp"]), o["pixel_filter"], bool(o["tonemap_samples"]),
+                          o["tonemap"], float(o["exposure"]))
+    return FrameSettings(plan, trace)
