@@ -117,23 +117,30 @@ def test_frames_that_need_tracing_are_traced():
 
 
 def test_the_replay_key_is_what_the_passes_declare():
-    from foveated_mi.frame.film import film_view
-    from foveated_mi.options import SCHEMA, validate_options
+    import dataclasses
+    from foveated_mi.frame.film import film_settings
+    from foveated_mi.options import validate_options
     from foveated_mi.postprocess import DENOISERS
     from foveated_mi.reconstruct import RECONSTRUCTIONS
     for preset in ("paper", "guided"):
         o = validate_options({"preset": preset})
-        view = film_view(64, 48, o)
-        assert set(view) - {"jfa_bound"} <= set(SCHEMA)
+        key = film_settings(64, 48, o)
+        hash(key)                         # a recording's key: frozen and hashable
         # What only the sampling and the launch read is not in it: a moving gaze under the
         # same Jump Flooding bound replays the same recording.
-        assert not {"gaze", "theta", "timing", "reorder", "freeze", "map_seed"} & set(view)
-        moved = film_view(64, 48, {**o, "gaze": (0.3, 0.6), "map_seed": 4})
-        assert moved == view
-        # Each method's declared options are in it, and so is the denoiser's.
+        moved = film_settings(64, 48, {**o, "gaze": (0.3, 0.6), "map_seed": 4,
+                                       "reorder": "none", "timing": True, "freeze": False})
+        assert moved == key
+        # Each method's declared options are in it, and so are the denoiser's.
         method = RECONSTRUCTIONS[o["reconstruction"]]
-        assert set(method.options.values()) <= set(view)
-        assert set(DENOISERS[o["denoiser"]].reads) <= set(view)
+        assert dict(key.reconstruction.params) == {kw: o[name]
+                                                   for kw, name in method.options.items()}
+        assert key.denoise.options == {k: o[k] for k in DENOISERS[o["denoiser"]].reads}
+        # ... and a change of what it reads is another key.
+        assert film_settings(64, 48, {**o, "max_history": 7.0}) != key
+        # The sampling law enters only through the Jump Flooding bound.
+        wide = film_settings(64, 48, {**o, "theta": 0.01})
+        assert wide == dataclasses.replace(key, jfa_bound=wide.jfa_bound)
 
 
 def test_a_denoiser_sees_only_the_options_it_declares():

@@ -105,6 +105,7 @@ def _frame(denoiser, **options):
 @pytest.mark.parametrize("domain", ["radiance", "irradiance", "display"])
 def test_a_denoiser_gets_the_values_of_the_domain_it_declares(domain):
     from foveated_mi.frame.domain import to_display
+    from foveated_mi.frame.settings import domain_settings
     seen = []
 
     def keep(ctx):
@@ -122,7 +123,7 @@ def test_a_denoiser_gets_the_values_of_the_domain_it_declares(domain):
         expect = np.minimum(radiance, o["clamp"])
     elif domain == "display":
         expect = np.array(to_display(mi.Color3f(np.minimum(radiance, o["clamp"]).reshape(-1, 3).T),
-                                     o)).T.reshape(image.shape)
+                                     domain_settings(o))).T.reshape(image.shape)
     else:
         # Irradiance: neither the albedo nor the clamp applied yet.
         assert not np.allclose(got, np.minimum(radiance, o["clamp"]))

@@ -89,6 +89,7 @@ import mitsuba as mi
 from .plan import FramePlan
 from . import shading as _shading
 from .pixel_filter import FilterSampler, SplatFootprint
+from .settings import TraceSettings
 from .traced_sensor import TracedSensors
 from ..validate import ParameterError
 
@@ -279,19 +280,19 @@ class NestedAdjoint:
 
     # -- reverse mode
     def backward(self, integrator, scene: mi.Scene, params, frame: FramePlan, mask: mi.Bool,
-                 grad: mi.Color3f, seed, spp: int, options: dict[str, Any]) -> None:
+                 grad: mi.Color3f, seed, spp: int, settings: TraceSettings) -> None:
         r"""Accumulate :math:`\sum_p \delta S(p)^{\mathsf T}\partial S(p)/\partial\pi` into the
         gradients of the scene parameters (``grad`` = :math:`\delta S`, one entry per pixel,
         used where ``mask``)."""
         kind = integrator_kind(integrator)
         if kind == "plain":
             with dr.resume_grad(), dr.scoped_set_flag(dr.JitFlag.SymbolicLoops, False):
-                value = self._plain_value(integrator, scene, frame, seed, spp, options)
+                value = self._plain_value(integrator, scene, frame, seed, spp, settings)
                 dr.set_grad(value, dr.select(mask, grad, 0.0))
                 dr.enqueue(dr.ADMode.Backward, value)
                 dr.traverse(dr.ADMode.Backward)
             return
-        pixels, sensor, layout = self._flat(frame, mask, options["pixel_filter"])
+        pixels, sensor, layout = self._flat(frame, mask, settings.pixel_filter)
         if pixels is None:
             return
         film = sensor.film()
@@ -311,18 +312,18 @@ class NestedAdjoint:
 
     # -- forward mode
     def forward(self, integrator, scene: mi.Scene, params, frame: FramePlan, mask: mi.Bool, seed,
-                spp: int, options: dict[str, Any]) -> mi.Color3f:
+                spp: int, settings: TraceSettings) -> mi.Color3f:
         r""":math:`\partial S(p)/\partial\pi\cdot\delta\pi` at the traced pixels (``mask``),
         zero elsewhere, for the tangents set on the scene parameters."""
         n = frame.width * frame.height
         kind = integrator_kind(integrator)
         if kind == "plain":
             with dr.resume_grad(), dr.scoped_set_flag(dr.JitFlag.SymbolicLoops, False):
-                value = self._plain_value(integrator, scene, frame, seed, spp, options)
+                value = self._plain_value(integrator, scene, frame, seed, spp, settings)
                 dr.forward_to(value)
                 return dr.select(mask, mi.Color3f(dr.grad(value)), 0.0)
         out = dr.zeros(mi.Color3f, n)
-        pixels, sensor, _ = self._flat(frame, mask, options["pixel_filter"])
+        pixels, sensor, _ = self._flat(frame, mask, settings.pixel_filter)
         if pixels is None:
             return out
         count = dr.width(pixels)
@@ -340,14 +341,15 @@ class NestedAdjoint:
         return out
 
     @staticmethod
-    def _plain_value(integrator, scene, frame: FramePlan, seed, spp: int, options) -> mi.Color3f:
+    def _plain_value(integrator, scene, frame: FramePlan, seed, spp: int,
+                     settings: TraceSettings) -> mi.Color3f:
         """The frame's shading buffer traced again (gradients on): same wavefront, same
         camera-ray sampling and estimator, the gradient pass's seed and spp."""
         ro = frame.reordered
         spp = spp if spp else int(frame.sensor.sampler().sample_count())
         samples = _shading.trace_wavefront(
             scene, frame.sensor, integrator, ro.wavefront, frame.width, frame.height, spp=spp,
-            seed=seed, active=ro.active, clamp=options["clamp"],
+            seed=seed, active=ro.active, clamp=settings.clamp,
             filter_sampler=frame.filter_sampler)
         return _shading.develop(samples, ro.wavefront, spp, frame.sensor.film(),
-                                options["pixel_filter"]).value
+                                settings.pixel_filter).value

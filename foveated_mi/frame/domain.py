@@ -18,8 +18,6 @@ else to change domain. Each is a fixed function of its input, so gradients flow 
 """
 from __future__ import annotations
 
-from typing import Any
-
 import drjit as dr
 import mitsuba as mi
 
@@ -28,6 +26,7 @@ from ..kernels.buffers import GBuffer
 from ..postprocess import tonemap
 from ..postprocess.inverse import inverse_tonemap
 from ..postprocess.registry import DOMAINS  # noqa: F401  (the domains a denoiser declares)
+from .settings import DomainSettings
 from .shading import TracedSamples
 
 def tonemap_samples(samples: TracedSamples, operator: str, exposure: float) -> TracedSamples:
@@ -37,35 +36,35 @@ def tonemap_samples(samples: TracedSamples, operator: str, exposure: float) -> T
         samples.ok, tonemap(samples.radiance, operator, exposure), 0.0))
 
 
-def to_irradiance(radiance: mi.Color3f, gb: GBuffer, o: dict[str, Any]) -> mi.Color3f:
+def to_irradiance(radiance: mi.Color3f, gb: GBuffer, d: DomainSettings) -> mi.Color3f:
     """The reconstruction's working values: irradiance with ``demodulate``, else as given."""
-    return demodulate(radiance, gb.albedo, gb.emission) if o["demodulate"] else radiance
+    return demodulate(radiance, gb.albedo, gb.emission) if d.demodulate else radiance
 
 
-def from_display_samples(values: mi.Color3f, o: dict[str, Any]) -> mi.Color3f:
+def from_display_samples(values: mi.Color3f, d: DomainSettings) -> mi.Color3f:
     """A reconstruction of tone-mapped samples back to linear values (``tonemap_samples``;
     the identity without it). The round trip is the identity below the operator's cap."""
-    if not o["tonemap_samples"]:
+    if not d.tonemap_samples:
         return values
-    return inverse_tonemap(values, o["tonemap"], o["exposure"])
+    return inverse_tonemap(values, d.tonemap, d.exposure)
 
 
-def to_radiance(values: mi.Color3f, gb: GBuffer, o: dict[str, Any],
+def to_radiance(values: mi.Color3f, gb: GBuffer, d: DomainSettings,
                 clamp: bool = False) -> mi.Color3f:
     """Working values back to radiance: the albedo multiplied back with ``demodulate``.
-    ``clamp``: nothing above ``clamp`` reaches the image (spreading irradiance from a dark
+    ``clamp``: nothing above ``d.clamp`` reaches the image (spreading irradiance from a dark
     site to a brighter albedo scales it by their ratio)."""
-    if not o["demodulate"]:
+    if not d.demodulate:
         return values
     radiance = remodulate(values, gb.albedo, gb.emission)
-    return dr.minimum(radiance, dr.opaque(mi.Float, o["clamp"])) if clamp else radiance
+    return dr.minimum(radiance, dr.opaque(mi.Float, d.clamp)) if clamp else radiance
 
 
-def to_display(radiance: mi.Color3f, o: dict[str, Any]) -> mi.Color3f:
+def to_display(radiance: mi.Color3f, d: DomainSettings) -> mi.Color3f:
     """Radiance to display values, for a denoiser that works on them."""
-    return tonemap(radiance, o["tonemap"], o["exposure"])
+    return tonemap(radiance, d.tonemap, d.exposure)
 
 
-def from_display(display: mi.Color3f, o: dict[str, Any]) -> mi.Color3f:
+def from_display(display: mi.Color3f, d: DomainSettings) -> mi.Color3f:
     """A display-domain denoiser's output back to radiance."""
-    return inverse_tonemap(display, o["tonemap"], o["exposure"])
+    return inverse_tonemap(display, d.tonemap, d.exposure)

@@ -8,43 +8,53 @@ traced values (:mod:`foveated_mi.frame.adjoint`).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import drjit as dr
-import mitsuba as mi
 
 from ..timing import StageTimer
 from . import reproject as _reproject
 from . import sampling as _sampling
 from .formation import FormationInput, Formed, register_formation
 from . import domain
-from . import post as _post
-from . import reconstruction as _reconstruction
 from .post import post_pass
 from .reconstruction import reconstruction_pass
+from .settings import (DenoiseSettings, DomainSettings, ReconstructionSettings,
+                       SamplingSettings, denoise_settings, domain_settings,
+                       reconstruction_settings, sampling_settings)
 from .shading import ShadingBuffer
 
-#: Options the film formation reads itself (its passes declare theirs).
-READS = ("max_history", "demodulate", "tonemap_samples", "tonemap", "exposure")
+@dataclass(frozen=True)
+class FilmSettings:
+    """What the film formation reads: its own settings and its passes'. Hashable: the key of
+    its recording (:class:`~.formation.FrozenFormation`)."""
+    max_history: float
+    domain: DomainSettings
+    reconstruction: ReconstructionSettings
+    denoise: DenoiseSettings
+    #: the longest Jump Flooding step the frame's sampling law needs (:func:`jfa_bound`)
+    jfa_bound: int | None
 
 
-def jfa_bound(width: int, height: int, o: dict[str, Any]) -> int | None:
+def jfa_bound(width: int, height: int, law: SamplingSettings,
+              gaze: tuple[float, float]) -> int | None:
     """The longest Jump Flooding step a frame needs: the sampling law's largest gap between
     sites, rounded up to a power of two (what :func:`~foveated_mi.reconstruct.jump_flood`
     does with it anyway); None where the law bounds nothing."""
-    if o["sampling_law"] == "acuity":
-        gap = _sampling.gap_bound(width, height, o["acuity_floor"])
-    elif o["sampling_law"] == "polar":
+    if law.law == "acuity":
+        gap = _sampling.gap_bound(width, height, law.acuity_floor)
+    elif law.law == "polar":
         # The widest cell, at the rings' reach: its pixel is at most a cell diagonal from
         # any pixel it covers.
-        grid = _sampling.foveal_grid(width, height, float(o["ray_budget"]),
-                                     _sampling.fovea_radius(width, height, o["theta"]))
+        grid = _sampling.foveal_grid(width, height, law.ray_budget,
+                                     _sampling.fovea_radius(width, height, law.theta))
         gap = 2.0 * float(grid.cell_size(grid.reach))
-    elif o["theta_deg"] > 0:
+    elif law.theta_deg > 0:
         gap = None        # the law's smallest P needs the sensor's projection: no bound
     else:
-        gap = _sampling.largest_gap(width, height, gaze=o["gaze"], theta=o["theta"],
-                                    sigma_p=o["sigma_p"])
+        gap = _sampling.largest_gap(width, height, gaze=gaze, theta=law.theta,
+                                    sigma_p=law.sigma_p)
     if gap is None:
         return None
     b = 1
@@ -53,41 +63,39 @@ def jfa_bound(width: int, height: int, o: dict[str, Any]) -> int | None:
     return b
 
 
-def film_view(width: int, height: int, o: dict[str, Any]) -> dict[str, Any]:
-    """The options as the film formation reads them: its own, and those its reconstruction
-    and post-processing passes declare (with the methods ``o`` names). The sampling law
-    enters only through the Jump Flooding bound (host scalars, no sync), so a moving gaze
-    rarely changes the view."""
-    names = READS + _reconstruction.reads(o) + _post.reads(o)
-    view = {k: o[k] for k in dict.fromkeys(names)}
-    view["jfa_bound"] = jfa_bound(width, height, o)
-    return view
+def film_settings(width: int, height: int, o: dict[str, Any]) -> FilmSettings:
+    """The film formation's settings, compiled from validated options ``o``. The sampling
+    law enters only through the Jump Flooding bound (host scalars, no sync), so a moving
+    gaze rarely changes them."""
+    return FilmSettings(float(o["max_history"]), domain_settings(o), reconstruction_settings(o),
+                        denoise_settings(o),
+                        jfa_bound(width, height, sampling_settings(o), o["gaze"]))
 
 
-def form_film(shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any],
+def form_film(shading: ShadingBuffer, inp: FormationInput, s: FilmSettings,
               timer: StageTimer, grad_pass: bool = False) -> Formed:
-    """History resolve, reconstruction and post-processing of one frame (module docstring);
-    ``o``: the options through :func:`film_view`."""
-    gb, width, height = inp.gbuffer, inp.width, inp.height
-    if o["demodulate"] and inp.emission_edges is not None:
+    """History resolve, reconstruction and post-processing of one frame (module
+    docstring)."""
+    gb, width, height, d = inp.gbuffer, inp.width, inp.height, s.domain
+    if d.demodulate and inp.emission_edges is not None:
         # At an emitter's edge the emission seen at the pixel's centre is not its footprint's
         # (a partial cover of the light): subtracting it could leave negative irradiance,
         # which the reconstruction would spread. Such pixels are divided by the albedo only.
         gb = gb._replace(emission=dr.select(inp.emission_edges, 0.0, gb.emission))
     # History resolve (Fig. 4): this frame's samples blended with the reprojected history.
     resolved = _reproject.resolve(shading.value, shading.mask, inp.spp, inp.reprojection,
-                                  inp.history, o["max_history"], shading.moment2)
+                                  inp.history, s.max_history, shading.moment2)
     timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
     # Reconstruction (§3.4): nearest sites, Voronoi fill and interpolation, on irradiance
     # with demodulate; a reconstruction of tone-mapped samples back to linear values.
-    recon = reconstruction_pass(domain.to_irradiance(resolved.shading, gb, o), resolved, gb,
-                                width, height, o, seed=inp.fill_seed,
-                                emission_edges=inp.emission_edges, max_gap=o["jfa_bound"])
-    recon = recon._replace(filled=domain.from_display_samples(recon.filled, o),
-                           interpolated=domain.from_display_samples(recon.interpolated, o))
+    recon = reconstruction_pass(domain.to_irradiance(resolved.shading, gb, d), resolved, gb,
+                                width, height, s.reconstruction, seed=inp.fill_seed,
+                                emission_edges=inp.emission_edges, max_gap=s.jfa_bound)
+    recon = recon._replace(filled=domain.from_display_samples(recon.filled, d),
+                           interpolated=domain.from_display_samples(recon.interpolated, d))
     timer.mark("reconstruct", recon.nearest, recon.filled, recon.interpolated)
     # Post-processing (§3.5): the registered denoiser, the albedo multiplied back.
-    post = post_pass(recon, resolved, gb, width, height, o, grad_pass)
+    post = post_pass(recon, resolved, gb, width, height, d, s.denoise, grad_pass)
     timer.mark("post", post.image)
     buffers = {"traced": shading.mask, "shading": resolved.shading,
                "shading_mask": resolved.mask, "history_count": resolved.count,
@@ -105,5 +113,5 @@ def film_stats(buffers: dict[str, Any]) -> dict[str, Any]:
             "holes": dr.count(~buffers["shading_mask"])}
 
 
-register_formation("film", form_film, view=film_view, stats=film_stats,
+register_formation("film", form_film, settings=film_settings, stats=film_stats,
                    counted=("resampled", "shading_mask"))

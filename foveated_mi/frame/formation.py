@@ -3,10 +3,11 @@
 A *formation* turns a frame's sparse shading buffer into its image. It registers beside its
 code, as ``mi.register_integrator`` does::
 
-    register_formation("film", form_film)
+    register_formation("film", form_film, settings=film_settings)
 
-and is chosen by the option ``formation``. It is called as ``fn(shading, inp, o, timer,
-grad_pass)`` (``inp``: :class:`FormationInput`, ``o``: the options) and returns a
+and is chosen by the option ``formation``. It is called as ``fn(shading, inp, settings,
+timer, grad_pass)`` (``inp``: :class:`FormationInput`; ``settings``: its own, which its
+registration compiles from the options, :class:`FormationSettings`) and returns a
 :class:`Formed`: the image on the film, its named buffers on the formation's own grid
 (:class:`~foveated_mi.kernels.grid.Grid`, declared at registration), and the history the next
 frame reads. The integrator, the gradient pass (:mod:`foveated_mi.frame.adjoint`), the
@@ -20,7 +21,7 @@ tracing costs more than the kernels run (``benchmarks/bench_overhead.py`` report
 :class:`FrozenFormation` records a formation once per configuration with ``dr.freeze`` and
 afterwards launches the recorded kernels on the frame's buffers without tracing them. A
 recording is keyed on what decides the kernels: the formation, the film size, ``spp``, the
-options as the formation reads them (its ``view``), and which buffers exist; the buffers, the history
+formation's settings, and which buffers exist; the buffers, the history
 and the fill's seed are inputs. A key not seen before records again (the most recent
 ``RECORDINGS`` are kept). The replay serves frames that are not differentiated, with stage
 timing off (timing synchronises between passes) and a denoiser registered as ``replayable``
@@ -30,6 +31,7 @@ from __future__ import annotations
 
 import gc
 from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import Any, Callable, NamedTuple
 
 import drjit as dr
@@ -79,12 +81,32 @@ class Formed(NamedTuple):
 class Formation(NamedTuple):
     """A registered formation (see :func:`register_formation`)."""
     fn: Callable[..., Formed]
-    grid: Callable[[int, int, dict], Grid]
-    view: Callable[[int, int, dict], dict]
+    grid: Callable[[int, int, Any], Grid]
+    settings: Callable[[int, int, dict], Any]
     stats: Callable[[dict], dict]
     counted: tuple[str, ...]
     on_film: tuple[str, ...]
-    grids: Callable[[int, int, dict], dict]
+    grids: Callable[[int, int, Any], dict]
+
+
+@dataclass(frozen=True)
+class FormationSettings:
+    """The formation a frame runs and its own settings (hashable: its recording's key)."""
+    name: str
+    settings: Any
+
+    @property
+    def entry(self) -> Formation:
+        return FORMATIONS[self.name]
+
+
+@dataclass(frozen=True)
+class OptionValues:
+    """The settings of a formation that declares none: every option, read by name."""
+    items: tuple
+
+    def __getitem__(self, name: str) -> Any:
+        return dict(self.items)[name]
 
 
 #: Formation name -> :class:`Formation`, in registration order.
@@ -92,29 +114,40 @@ FORMATIONS: dict[str, Formation] = {}
 
 
 def register_formation(name: str, fn: Callable[..., Formed], *,
-                       grid: Callable[[int, int, dict], Grid] | None = None,
-                       view: Callable[[int, int, dict], dict] | None = None,
+                       grid: Callable[[int, int, Any], Grid] | None = None,
+                       settings: Callable[[int, int, dict], Any] | None = None,
                        stats: Callable[[dict], dict] | None = None,
                        counted: tuple[str, ...] = (), on_film: tuple[str, ...] = (),
-                       grids: Callable[[int, int, dict], dict] | None = None) -> None:
+                       grids: Callable[[int, int, Any], dict] | None = None) -> None:
     """Make ``fn`` the formation ``name`` (the option value ``formation = name``).
 
-    ``grid(width, height, o)``: the grid of its buffers (default: the film's).
-    ``view(width, height, o)``: the options as the formation reads them, host values only
-    (default: all of them). It is all that ``fn`` receives as ``o``, and the frozen replay's
-    key, so it holds exactly what decides the formation's kernels: a value left out of it
-    cannot be read, and a value in it that changes every frame (the gaze) records again.
-    ``stats(buffers)``: counters of the frame read from its buffers (device arrays, read
-    when the stats are read); ``counted``: the buffers they count, evaluated together with
-    the frame's other counted buffers (one launch). ``on_film``: the buffers it returns on
-    the film's grid when its own grid is another (the image always is). ``grids(width,
-    height, o)``: buffer name -> grid for those on a third grid, the plan's included (a
-    formation whose plan keeps its G-buffer on its own samples)."""
+    Parameters
+    ----------
+    name : the option value that chooses it.
+    fn : ``fn(shading, inp, settings, timer, grad_pass) -> Formed``.
+    grid : ``grid(width, height, settings)``, the grid of its buffers (default: the film's).
+    settings : ``settings(width, height, o)``, its settings compiled from the validated
+        options ``o`` (and the frame's gaze, ``o["gaze"]``): a frozen, hashable value, all
+        that ``fn`` receives of the options and its recording's key, so it holds exactly
+        what decides its kernels (a value in it that changes every frame records again).
+        Default: every option (:class:`OptionValues`).
+    stats : ``stats(buffers)``, counters read from its buffers (device arrays, read when the
+        stats are read).
+    counted : the buffers its stats count, evaluated with the frame's other counted buffers
+        (one launch).
+    on_film : the buffers it returns on the film's grid when its own grid is another (the
+        image always is).
+    grids : ``grids(width, height, settings)``, buffer name -> grid for those on a third
+        grid, the plan's included (a formation whose plan keeps its G-buffer on its own
+        samples).
+    """
     FORMATIONS[name] = Formation(
-        fn, grid if grid is not None else (lambda width, height, o: Grid.film(width, height)),
-        view if view is not None else (lambda width, height, o: dict(o)),
+        fn, grid if grid is not None else (lambda width, height, s: Grid.film(width, height)),
+        settings if settings is not None else
+        (lambda width, height, o: OptionValues(tuple(sorted(
+            (k, tuple(v) if isinstance(v, list) else v) for k, v in o.items())))),
         stats if stats is not None else (lambda buffers: {}), tuple(counted), tuple(on_film),
-        grids if grids is not None else (lambda width, height, o: {}))
+        grids if grids is not None else (lambda width, height, s: {}))
 
 
 def unregister_formation(name: str) -> None:
@@ -122,19 +155,24 @@ def unregister_formation(name: str) -> None:
     FORMATIONS.pop(name, None)
 
 
-def form(shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any], timer: StageTimer,
-         grad_pass: bool = False) -> Formed:
-    """The image of one frame by the formation of ``o["formation"]``, which sees the options
-    through its ``view``."""
+def formation_settings(o: dict[str, Any], width: int, height: int) -> FormationSettings:
+    """The settings of the formation of validated options ``o`` on a ``width`` x ``height``
+    film (compiled by its registration's ``settings``)."""
     check_choice("formation", o["formation"], FORMATIONS)
     entry = FORMATIONS[o["formation"]]
-    return entry.fn(shading, inp, entry.view(inp.width, inp.height, o), timer, grad_pass)
+    return FormationSettings(o["formation"], entry.settings(width, height, o))
 
 
-def replayable(o: dict[str, Any], timer: StageTimer) -> bool:
+def form(shading: ShadingBuffer, inp: FormationInput, fs: FormationSettings, timer: StageTimer,
+         grad_pass: bool = False) -> Formed:
+    """The image of one frame by the formation ``fs`` names, with its settings."""
+    return fs.entry.fn(shading, inp, fs.settings, timer, grad_pass)
+
+
+def replayable(freeze: bool, denoiser: str, timer: StageTimer) -> bool:
     """Whether :class:`FrozenFormation` may form a frame that is not differentiated (module
-    docstring)."""
-    return bool(o["freeze"]) and not timer.enabled and DENOISERS[o["denoiser"]].replayable
+    docstring): ``freeze`` on, no stage timing, and a denoiser registered ``replayable``."""
+    return bool(freeze) and not timer.enabled and DENOISERS[denoiser].replayable
 
 
 def _fields(t) -> dict | None:
@@ -153,7 +191,7 @@ def _record(arrays: dict, key: dict) -> dict:
                          arrays["emission_edges"], arrays["gaze"],
                          None if arrays["samples"] is None else tuple(arrays["samples"]))
     fn = FORMATIONS[key["formation"]].fn
-    formed = fn(ShadingBuffer(**arrays["shading"]), inp, key["options"], StageTimer(False))
+    formed = fn(ShadingBuffer(**arrays["shading"]), inp, key["settings"], StageTimer(False))
     # The image leaves the recording interleaved, as the frame returns it: the last pass
     # writes it so, with no copy after the replay (its planes are read lazily, if at all).
     # (The frame's outputs name the image "image" themselves.)
@@ -196,7 +234,7 @@ class FrozenFormation:
         """How many times the passes were traced and recorded so far."""
         return self._frozen.n_recordings
 
-    def __call__(self, shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any]
+    def __call__(self, shading: ShadingBuffer, inp: FormationInput, fs: FormationSettings
                  ) -> Formed:
         h = inp.history
         arrays = {
@@ -208,9 +246,8 @@ class FrozenFormation:
             "emission_edges": inp.emission_edges, "gaze": inp.gaze,
             "samples": None if inp.samples is None else list(inp.samples),
         }
-        entry = FORMATIONS[o["formation"]]
-        key = {"formation": o["formation"], "width": inp.width, "height": inp.height,
-               "spp": inp.spp, "options": entry.view(inp.width, inp.height, o)}
+        key = {"formation": fs.name, "width": inp.width, "height": inp.height,
+               "spp": inp.spp, "settings": fs.settings}
         with _no_collection():          # a collection inside a recording aborts (above)
             out = self._frozen(arrays, key)
         image = dr.unravel(mi.Color3f, out["flat"])

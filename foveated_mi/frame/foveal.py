@@ -40,6 +40,7 @@ and held filter levels).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import drjit as dr
@@ -57,15 +58,13 @@ from . import domain
 from . import reproject as _reproject
 from .film import film_stats
 from .formation import FormationInput, Formed, register_formation
+from .post import runs
+from .settings import DenoiseSettings, DomainSettings, denoise_settings, domain_settings
 from .sampling import foveal_grid, fovea_radius, snapped_pixels
 from .shading import ShadingBuffer
 
 #: Pixels over which the fovea's own values blend into the warped buffer at the disc's edge.
 SEAM = 2.0
-
-#: Options the formation reads besides its denoiser's.
-READS = ("max_history", "ray_budget", "theta", "denoiser", "clamp", "demodulate",
-         "foveal_upsampling", "foveal_space", "foveal_disc")
 
 #: The buffers it returns on the film's grid (the others are on the buffer's).
 ON_FILM = ("traced", "shading", "shading_mask", "history_count", "resampled", "image")
@@ -75,20 +74,35 @@ ON_SAMPLES = ("traced", "shading", "shading_mask", "history_count", "resampled",
               "sample_pixel", "position", "normal", "depth", "hit", "reprojection_map")
 
 
-def foveal_view(width: int, height: int, o: dict[str, Any]) -> dict[str, Any]:
-    """The options as the formation reads them (the gaze enters as an input array)."""
-    entry = DENOISERS[o["denoiser"]]
-    names = READS + (("tonemap", "exposure") if entry.domain == "display" else ()) + entry.reads
-    return {k: o[k] for k in dict.fromkeys(names)}
+@dataclass(frozen=True)
+class FovealSettings:
+    """What the foveal formation reads, with the buffer it derives once per film (the gaze
+    enters as an input array). Hashable: the key of its recording."""
+    max_history: float
+    domain: DomainSettings
+    denoise: DenoiseSettings
+    upsampling: str            #: ``foveal_upsampling``
+    space: str                 #: ``foveal_space``
+    disc: str                  #: ``foveal_disc``
+    #: the samples (cells outside the disc, then the disc's patch) of the film and budget
+    layout: _buffer_space.SampleLayout
+    #: the buffer's grid (without the rings inside the disc in ``buffer`` space)
+    grid: PolarGrid
 
 
-def foveal_buffer_grid(width: int, height: int, o: dict[str, Any]) -> PolarGrid:
-    """The buffer's grid for a film and the options' ray budget (without the rings inside
-    the disc where the disc's pixels are samples themselves: ``foveal_space = "buffer"``)."""
-    if o["foveal_space"] == "buffer":
-        return _buffer_space.layout(width, height, o["theta"], o["ray_budget"]).grid
-    return foveal_grid(width, height, float(o["ray_budget"]),
-                       fovea_radius(width, height, o["theta"]))
+def foveal_settings(width: int, height: int, o: dict[str, Any]) -> FovealSettings:
+    """The foveal formation's settings, compiled from validated options ``o``."""
+    lay = _buffer_space.layout(width, height, o["theta"], o["ray_budget"])
+    grid = lay.grid if o["foveal_space"] == "buffer" else foveal_grid(
+        width, height, float(o["ray_budget"]), fovea_radius(width, height, o["theta"]))
+    return FovealSettings(float(o["max_history"]), domain_settings(o), denoise_settings(o),
+                          o["foveal_upsampling"], o["foveal_space"], o["foveal_disc"], lay,
+                          grid)
+
+
+def foveal_buffer_grid(width: int, height: int, s: FovealSettings) -> PolarGrid:
+    """The buffer's grid."""
+    return s.grid
 
 
 def _cells(values: mi.Color3f, resolved: Resolved, gb: GBuffer, q: mi.UInt32, has: mi.Bool):
@@ -108,32 +122,30 @@ def _gather(bundle, index: mi.UInt32, active: mi.Bool | bool = True):
                           for v in bundle))
 
 
-def _denoise(res: Resolved, cgb: GBuffer, grid: Grid, o: dict[str, Any],
+def _denoise(res: Resolved, cgb: GBuffer, grid: Grid, s: FovealSettings,
              grad_pass: bool, region: mi.Bool | None = None) -> Denoised:
     """The registered denoiser on the buffer's working values (irradiance with
     ``demodulate``), in the domain it declares; returns working values. ``region``: the
     cells on the film, the only ones the warp reads (a filter skips the others)."""
-    entry = DENOISERS[o["denoiser"]]
-    run = (entry.differentiable or not grad_pass) and (entry.active is None or entry.active(o))
-    if not run:
+    entry, d = DENOISERS[s.denoise.name], s.domain
+    if not runs(s.denoise, grad_pass):
         return Denoised(res.shading)
     ctx = DenoiseInput(res.shading, cgb, res, dr.arange(mi.UInt32, grid.size), grid.width,
-                       grid.height, {k: o[k] for k in entry.reads}, grad_pass, None, grid,
-                       region)
+                       grid.height, s.denoise.options, grad_pass, None, grid, region)
     call = entry.fn if entry.grid_aware else _padded(entry.fn, grid)
     if entry.domain == "irradiance":
         return as_denoised(call(ctx))
-    radiance = domain.to_radiance(res.shading, cgb, o)
+    radiance = domain.to_radiance(res.shading, cgb, d)
     if entry.domain == "display":
         # The tone curve maps a cell without a value (NaN) to a finite colour: it stays one
         # without a value, which no filter tap reads.
-        tonemapped = dr.select(res.mask, domain.to_display(radiance, o), dr.nan)
+        tonemapped = dr.select(res.mask, domain.to_display(radiance, d), dr.nan)
         filtered = as_denoised(call(ctx._replace(image=tonemapped))).image
-        return Denoised(domain.to_irradiance(domain.from_display(filtered, o), cgb, o),
+        return Denoised(domain.to_irradiance(domain.from_display(filtered, d), cgb, d),
                         filtered=filtered, tonemapped=tonemapped)
     # A network sees no non-finite value: the empty cells are black (the warp skips them).
     out = as_denoised(call(ctx._replace(image=dr.select(res.mask, radiance, 0.0))))
-    return out._replace(image=domain.to_irradiance(out.image, cgb, o))
+    return out._replace(image=domain.to_irradiance(out.image, cgb, d))
 
 
 #: Columns of the other side added on each side of the buffer's angle axis for a denoiser
@@ -164,7 +176,7 @@ def _padded(fn, grid: Grid):
 
 
 def _disc_patch(resolved: Resolved, gb: GBuffer, index: mi.UInt32, on: mi.Bool, side: int,
-                o: dict[str, Any], grad_pass: bool) -> mi.Color3f:
+                s: FovealSettings, grad_pass: bool) -> mi.Color3f:
     """``foveal_disc = "denoised"``: the disc's square patch of ``side`` x ``side`` pixels
     (``index`` into ``resolved`` and ``gb``; ``on`` where the pixel's centre lies in the
     disc) through the frame's denoiser, as the cells are; radiance, in patch order. The
@@ -173,10 +185,10 @@ def _disc_patch(resolved: Resolved, gb: GBuffer, index: mi.UInt32, on: mi.Bool, 
     has = on & pr.mask
     pgb = _gather(gb, index, on)
     pgb = pgb._replace(hit=pgb.hit & has)
-    value = dr.select(has, domain.to_irradiance(pr.shading, pgb, o), dr.nan)
+    value = dr.select(has, domain.to_irradiance(pr.shading, pgb, s.domain), dr.nan)
     res = Resolved(value, has, pr.count, dr.zeros(mi.Bool, side * side), pr.moment2)
-    out = _denoise(res, pgb, Grid(side, side), o, grad_pass, on)
-    return domain.to_radiance(out.image, pgb, o, clamp=True)
+    out = _denoise(res, pgb, Grid(side, side), s, grad_pass, on)
+    return domain.to_radiance(out.image, pgb, s.domain, clamp=True)
 
 
 def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, width: int,
@@ -225,36 +237,36 @@ def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, w
     return dr.select(wsum > 0.0, acc / dr.select(wsum > 0.0, wsum, 1.0), 0.0)
 
 
-def form_foveal(shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any],
+def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
                 timer: StageTimer, grad_pass: bool = False) -> Formed:
     """History resolve, denoising in the buffer, one warp (module docstring)."""
     if inp.samples is not None:
-        return _form_on_samples(shading, inp, o, timer, grad_pass)
+        return _form_on_samples(shading, inp, s, timer, grad_pass)
     width, height = inp.width, inp.height
-    grid = foveal_buffer_grid(width, height, o)
+    grid, d = s.grid, s.domain
     # History resolve (Fig. 4): this frame's samples blended with the reprojected history.
     resolved = _reproject.resolve(shading.value, shading.mask, inp.spp, inp.reprojection,
-                                  inp.history, o["max_history"], shading.moment2)
+                                  inp.history, s.max_history, shading.moment2)
     timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
     # The buffer: each cell from the pixel under its centre.
     q, on = snapped_pixels(grid, inp.gaze, width, height)
     has = on & dr.gather(mi.Bool, resolved.mask, q, on)
     gb = inp.gbuffer
-    if o["demodulate"] and inp.emission_edges is not None:
+    if d.demodulate and inp.emission_edges is not None:
         # As in the film formation: an emitter's edge is divided by the albedo only.
         gb = gb._replace(emission=dr.select(inp.emission_edges, 0.0, gb.emission))
     # The working values: irradiance with demodulate, so that the albedo's detail comes
     # back at the film's resolution after the warp.
-    res, cgb = _cells(domain.to_irradiance(resolved.shading, gb, o), resolved, gb, q, has)
+    res, cgb = _cells(domain.to_irradiance(resolved.shading, gb, d), resolved, gb, q, has)
     timer.mark("reconstruct", res.shading, res.count, cgb.normal, cgb.position)
     # Denoising in the buffer (§3.5), one warp to the film, the albedo multiplied back there.
-    out = _denoise(res, cgb, grid, o, grad_pass, on)
+    out = _denoise(res, cgb, grid, s, grad_pass, on)
     guide = None
-    if o["foveal_upsampling"] == "joint":
+    if s.upsampling == "joint":
         guide = (Surface.of(gb.normal, gb.position, gb.hit),
                  Surface.of(cgb.normal, cgb.position, cgb.hit))
     warped = domain.to_radiance(warp(out.image, has, grid, inp.gaze, width, height, guide), gb,
-                                o, clamp=True)
+                                d, clamp=True)
     # The fovea disc shows its own pixels, blended into the warp across the seam.
     film = Grid.film(width, height)
     p = film.film_position(film.cells()[0])
@@ -262,11 +274,11 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any],
     t = dr.clip((grid.fovea - r) / SEAM, 0.0, 1.0)
     own = resolved.mask & (t > 0.0)
     mine = resolved.shading
-    if o["foveal_disc"] == "denoised":
+    if s.disc == "denoised":
         # The disc's pixels through the denoiser, on their square patch of the film.
-        lay = _buffer_space.layout(width, height, o["theta"], o["ray_budget"])
+        lay = s.layout
         pixels, on = _buffer_space.patch_pixels(lay, inp.gaze, width, height)
-        disc = _disc_patch(resolved, gb, pixels, on, lay.side, o, grad_pass)
+        disc = _disc_patch(resolved, gb, pixels, on, lay.side, s, grad_pass)
         _, x, y = film.cells()
         k, in_disc = _buffer_space.disc_sample(lay, mi.Int32(x), mi.Int32(y), inp.gaze)
         own &= in_disc
@@ -281,20 +293,20 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any],
     return Formed(image, buffers, history)
 
 
-def _form_on_samples(shading: ShadingBuffer, inp: FormationInput, o: dict[str, Any],
+def _form_on_samples(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
                      timer: StageTimer, grad_pass: bool) -> Formed:
     """``foveal_space = "buffer"``: the history resolve on the buffer's samples, denoising
     in the buffer, the albedo multiplied back on its cells, one warp; the disc shows its own
     samples (:mod:`foveated_mi.frame.buffer_space`). Only the warp and the disc's blend run
     on the film's pixels."""
     width, height = inp.width, inp.height
-    lay = _buffer_space.layout(width, height, o["theta"], o["ray_budget"])
+    lay, d = s.layout, s.domain
     grid, nc = lay.grid, lay.cells
     pixels, on = inp.samples[:2]
     gb = inp.gbuffer
     # This frame's samples (the shading buffer is on them), blended with their own history.
     resolved = _reproject.resolve(shading.value, shading.mask, inp.spp, inp.reprojection,
-                                  inp.history, o["max_history"], shading.moment2)
+                                  inp.history, s.max_history, shading.moment2)
     timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
     # The cells: the first samples, in the working domain (irradiance with demodulate).
     c = dr.arange(mi.UInt32, nc)
@@ -302,13 +314,13 @@ def _form_on_samples(shading: ShadingBuffer, inp: FormationInput, o: dict[str, A
     has = cr.mask
     cgb = _gather(gb, c)
     cgb = cgb._replace(hit=cgb.hit & has)
-    cells = dr.select(has, domain.to_irradiance(cr.shading, cgb, o), dr.nan)
+    cells = dr.select(has, domain.to_irradiance(cr.shading, cgb, d), dr.nan)
     res = Resolved(cells, has, cr.count, dr.zeros(mi.Bool, nc), cr.moment2)
     timer.mark("reconstruct", res.shading, res.count, cgb.normal, cgb.position)
     # Denoising in the buffer (§3.5); each cell's albedo multiplied back before the warp:
     # there is no full-resolution albedo to take it from.
-    out = _denoise(res, cgb, grid, o, grad_pass, dr.gather(mi.Bool, on, c))
-    radiance = domain.to_radiance(out.image, cgb, o, clamp=True)
+    out = _denoise(res, cgb, grid, s, grad_pass, dr.gather(mi.Bool, on, c))
+    radiance = domain.to_radiance(out.image, cgb, d, clamp=True)
     warped = warp(radiance, has, grid, inp.gaze, width, height)
     # The disc shows its own samples, blended into the warp across the seam.
     film = Grid.film(width, height)
@@ -318,10 +330,10 @@ def _form_on_samples(shading: ShadingBuffer, inp: FormationInput, o: dict[str, A
     k, in_disc = _buffer_space.disc_sample(lay, mi.Int32(x), mi.Int32(y), inp.gaze)
     own = in_disc & (t > 0.0)
     own &= dr.gather(mi.Bool, resolved.mask, k, own)
-    if o["foveal_disc"] == "denoised":
+    if s.disc == "denoised":
         # The disc's samples through the denoiser, on their square patch.
         patch = nc + dr.arange(mi.UInt32, lay.side * lay.side)
-        disc = _disc_patch(resolved, gb, patch, dr.gather(mi.Bool, on, patch), lay.side, o,
+        disc = _disc_patch(resolved, gb, patch, dr.gather(mi.Bool, on, patch), lay.side, s,
                            grad_pass)
         mine = dr.gather(mi.Color3f, disc, k - nc, own)
     else:
@@ -338,11 +350,11 @@ def _form_on_samples(shading: ShadingBuffer, inp: FormationInput, o: dict[str, A
     return Formed(image, buffers, history)
 
 
-def foveal_grids(width: int, height: int, o: dict[str, Any]) -> dict[str, Grid]:
+def foveal_grids(width: int, height: int, s: FovealSettings) -> dict[str, Grid]:
     """The buffers that live on the samples (``foveal_space = "buffer"``), and their grid."""
-    if o["foveal_space"] != "buffer":
+    if s.space != "buffer":
         return {}
-    samples = _buffer_space.layout(width, height, o["theta"], o["ray_budget"]).samples_grid
+    samples = s.layout.samples_grid
     return {name: samples for name in ON_SAMPLES}
 
 
@@ -356,6 +368,6 @@ def foveal_stats(buffers: dict[str, Any]) -> dict[str, Any]:
             "holes": dr.count(on & ~buffers["shading_mask"])}
 
 
-register_formation("foveal", form_foveal, grid=foveal_buffer_grid, view=foveal_view,
+register_formation("foveal", form_foveal, grid=foveal_buffer_grid, settings=foveal_settings,
                    stats=foveal_stats, counted=("resampled", "shading_mask"), on_film=ON_FILM,
                    grids=foveal_grids)

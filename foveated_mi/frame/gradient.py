@@ -12,7 +12,7 @@ again. The traced pixels' gradient then goes to the nested integrator's own adjo
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Callable
 
 import drjit as dr
 import mitsuba as mi
@@ -20,8 +20,9 @@ import mitsuba as mi
 from ..timing import StageTimer
 from ..validate import ParameterError
 from . import adjoint as _adjoint
-from .formation import Formed, FrozenFormation, FormationInput, form, replayable
+from .formation import Formed, FormationInput, FormationSettings, FrozenFormation, form
 from .plan import FramePlan
+from .settings import TraceSettings
 from .shading import ShadingBuffer
 
 
@@ -31,6 +32,7 @@ class PrimalFrame:
     plan: FramePlan
     shading: ShadingBuffer            #: traced pixels' values (the primal's, detached)
     scene_id: int
+    formation: FormationSettings      #: the formation that formed it, with its settings
     #: ``(x, image)``: the image formation's derivative graph from the traced values ``x``,
     #: kept by a primal frame rendered for gradients; the first gradient pass consumes it.
     recorded: tuple[mi.Color3f, mi.Color3f] | None = None
@@ -47,39 +49,39 @@ def formation_input(plan: FramePlan) -> FormationInput:
                           plan.samples)
 
 
-def form_primal(plan: FramePlan, shading: ShadingBuffer, o: dict[str, Any], timer: StageTimer,
-                frozen: FrozenFormation, record: bool
+def form_primal(plan: FramePlan, shading: ShadingBuffer, fs: FormationSettings,
+                timer: StageTimer, frozen: FrozenFormation | None, record: bool
                 ) -> tuple[Formed, tuple | None, bool]:
     """A primal frame's image: ``(formed, recorded, replayed)``. With ``record`` (a gradient
     pass will follow and its denoiser is differentiable) the derivative graph is kept; image
     and buffers are detached either way (the history never carries a gradient into the next
-    frame). Otherwise the frozen replay forms it where nothing needs the passes traced
-    (``replayed``)."""
+    frame). Otherwise ``frozen``, where given (a frame that may replay its passes:
+    :func:`~.formation.replayable`), forms it from its recording (``replayed``)."""
     inp = formation_input(plan)
     if not record:
-        if replayable(o, timer):
-            return frozen(shading, inp, o), None, True
-        return form(shading, inp, o, timer), None, False
+        if frozen is not None:
+            return frozen(shading, inp, fs), None, True
+        return form(shading, inp, fs, timer), None, False
     x, formed = _adjoint.record(
-        lambda v: form(shading._replace(value=v), inp, o, timer, grad_pass=True),
+        lambda v: form(shading._replace(value=v), inp, fs, timer, grad_pass=True),
         shading.value)
     return _adjoint.detached(formed), (x, formed.image), False
 
 
-def formation_of(primal: PrimalFrame, o: dict[str, Any]) -> Callable[[mi.Color3f], mi.Color3f]:
+def formation_of(primal: PrimalFrame) -> Callable[[mi.Color3f], mi.Color3f]:
     """The primal frame's image as a function of its traced values, every weight held."""
     inp = formation_input(primal.plan)
 
     def image(value):
         shading = primal.shading._replace(value=value)
-        return form(shading, inp, o, StageTimer(False), grad_pass=True).image
+        return form(shading, inp, primal.formation, StageTimer(False), grad_pass=True).image
     return image
 
 
-def _graph(primal: PrimalFrame, o: dict[str, Any]) -> tuple[mi.Color3f, mi.Color3f]:
+def _graph(primal: PrimalFrame) -> tuple[mi.Color3f, mi.Color3f]:
     """``(x, image)``: the graph the primal frame kept (consumed), else formed again."""
     rec = primal.take_recorded()
-    return rec if rec is not None else _adjoint.record(formation_of(primal, o),
+    return rec if rec is not None else _adjoint.record(formation_of(primal),
                                                        primal.shading.value)
 
 
@@ -121,22 +123,22 @@ def _pixels_to_samples(primal: PrimalFrame, tangent: mi.Color3f) -> mi.Color3f:
 
 
 def backward(nested_adjoint: _adjoint.NestedAdjoint, integrator, scene, params,
-             primal: PrimalFrame, grad_in, seed, spp, o: dict[str, Any]) -> None:
+             primal: PrimalFrame, grad_in, seed, spp, settings: TraceSettings) -> None:
     """Reverse mode: ``grad_in`` (H, W, 3) through the formation to the traced pixels, then
     through the nested integrator's adjoint into the parameters' gradients."""
     grad = _to_color(grad_in, primal.plan, "grad_in")
-    delta = _adjoint.recorded_backward(*_graph(primal, o), grad)
+    delta = _adjoint.recorded_backward(*_graph(primal), grad)
     nested_adjoint.backward(integrator, scene, params, primal.plan, _traced_pixels(primal),
-                            _samples_to_pixels(primal, delta), seed, spp, o)
+                            _samples_to_pixels(primal, delta), seed, spp, settings)
 
 
 def forward(nested_adjoint: _adjoint.NestedAdjoint, integrator, scene, params,
-            primal: PrimalFrame, seed, spp, o: dict[str, Any]) -> mi.TensorXf:
+            primal: PrimalFrame, seed, spp, settings: TraceSettings) -> mi.TensorXf:
     """Forward mode: the traced pixels' tangent from the nested integrator, through the
     formation. Returns the image tangent (H, W, 3)."""
     plan = primal.plan
     tangent = nested_adjoint.forward(integrator, scene, params, plan, _traced_pixels(primal),
-                                     seed, spp, o)
+                                     seed, spp, settings)
     tangent = _pixels_to_samples(primal, tangent)
-    image = _adjoint.recorded_forward(*_graph(primal, o), tangent)
+    image = _adjoint.recorded_forward(*_graph(primal), tangent)
     return mi.TensorXf(dr.ravel(image), shape=(plan.height, plan.width, 3))

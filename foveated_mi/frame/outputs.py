@@ -16,7 +16,7 @@ from ..kernels import NO_SITE
 from ..kernels.grid import Grid
 from ..timing import StageTimer
 from ..validate import ParameterError
-from .formation import FORMATIONS, Formed
+from .formation import FormationSettings, Formed
 from .plan import FramePlan
 from .reorder import Reordered
 
@@ -92,16 +92,29 @@ def trace_mode(trace_replayed: bool, formation_replayed: bool) -> str:
     return "partly replayed" if trace_replayed or formation_replayed else "traced"
 
 
-def frame_outputs(plan: FramePlan, samples, formed: Formed,
-                  o: dict[str, Any], timer: StageTimer, index: int,
-                  replayed: tuple[bool, bool] = (False, False)) -> FrameOutputs:
-    """The buffers and stats of primal frame number ``index`` (module docstring);
-    ``samples``: the trace pass's counters (``rejected``, ``clamped``); ``replayed``: whether
-    the trace and the formation were replayed (:func:`trace_mode`)."""
+def frame_outputs(plan: FramePlan, samples, formed: Formed, fs: FormationSettings,
+                  timer: StageTimer, index: int, replayed: tuple[bool, bool] = (False, False),
+                  record: dict[str, Any] | None = None) -> FrameOutputs:
+    """The buffers and stats of primal frame number ``index`` (module docstring).
+
+    Parameters
+    ----------
+    plan, formed : the frame's plan and what its formation returned.
+    samples : the trace pass's counters (``rejected``, ``clamped``).
+    fs : the formation that formed it, with its settings (its grids and stats).
+    timer : the frame's stage timer (its times go to the stats).
+    index : the frame's number since the view's last reset.
+    replayed : whether the trace and the formation were replayed (:func:`trace_mode`).
+    record : values the stats carry as they are (the integrator's options).
+
+    Returns
+    -------
+    FrameOutputs
+    """
     gb, ro, reproj = plan.gbuffer, plan.reordered, plan.reprojection
-    entry = FORMATIONS[o["formation"]]
+    entry = fs.entry
     film = Grid.film(plan.width, plan.height)
-    grid = entry.grid(plan.width, plan.height, o)
+    grid = entry.grid(plan.width, plan.height, fs.settings)
     planned = {
         "position": gb.position, "normal": gb.normal, "depth": gb.depth, "hit": gb.hit,
         "probability": plan.probability, "edges": plan.edges,
@@ -110,7 +123,7 @@ def frame_outputs(plan: FramePlan, samples, formed: Formed,
         "wavefront": ro.wavefront, "reordered_map": ro, "row_counts": ro.row_counts,
     }
     buffers = {**planned, **formed.buffers, "image": formed.image}
-    other = entry.grids(plan.width, plan.height, o)
+    other = entry.grids(plan.width, plan.height, fs.settings)
     grids = {**{k: other.get(k, film) for k in planned},
              **{k: other.get(k, film if k in entry.on_film else grid) for k in formed.buffers},
              "image": film}
@@ -129,7 +142,6 @@ def frame_outputs(plan: FramePlan, samples, formed: Formed,
         "timings_ms": timer.finish(), "gbuffer_reused": plan.gbuffer_reused,
         "trace_replayed": bool(replayed[0]), "formation_replayed": bool(replayed[1]),
         "trace_mode": trace_mode(*replayed),
-        "variant": mi.variant(),
-        **{k: (list(v) if k == "gaze" else v) for k, v in o.items() if k != "timing"},
+        "variant": mi.variant(), **(record or {}),
     }
     return FrameOutputs(buffers, grids, stats)

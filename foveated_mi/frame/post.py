@@ -12,9 +12,8 @@ raises before it gets here).
 """
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
-import drjit as dr
 import mitsuba as mi
 
 from ..postprocess import DENOISERS, DenoiseInput, Denoised
@@ -22,18 +21,7 @@ from ..postprocess.registry import as_denoised
 from ..kernels.buffers import GBuffer, Resolved
 from . import domain
 from .reconstruction import Reconstruction
-
-
-#: Options the post-processing pass reads besides those its denoiser declares.
-READS = ("denoiser", "demodulate", "clamp")
-#: ... and those of the tone map, for a denoiser in the display domain.
-DISPLAY = ("tonemap", "exposure")
-
-
-def reads(o: dict[str, Any]) -> tuple[str, ...]:
-    """The options the post-processing pass reads with the denoiser of ``o``."""
-    entry = DENOISERS[o["denoiser"]]
-    return READS + (DISPLAY if entry.domain == "display" else ()) + entry.reads
+from .settings import DenoiseSettings, DomainSettings
 
 
 class PostProcessed(NamedTuple):
@@ -45,27 +33,33 @@ class PostProcessed(NamedTuple):
     variance: mi.Float | None
 
 
+def runs(n: DenoiseSettings, grad_pass: bool) -> bool:
+    """Whether the denoiser runs: active for its options, and differentiable in a gradient
+    pass (which skips it otherwise)."""
+    return n.active and (DENOISERS[n.name].differentiable or not grad_pass)
+
+
 def post_pass(recon: Reconstruction, resolved: Resolved, gb: GBuffer, width: int, height: int,
-              o: dict[str, Any], grad_pass: bool = False) -> PostProcessed:
-    """The denoiser of ``o["denoiser"]`` in its domain, and remodulation (module docstring)."""
-    entry = DENOISERS[o["denoiser"]]
-    run = (entry.differentiable or not grad_pass) and (entry.active is None or entry.active(o))
+              d: DomainSettings, n: DenoiseSettings, grad_pass: bool = False) -> PostProcessed:
+    """The denoiser ``n`` in its domain, and remodulation (module docstring)."""
+    entry = DENOISERS[n.name]
+    run = runs(n, grad_pass)
     ctx = DenoiseInput(recon.interpolated, gb, resolved, recon.nearest, width, height,
-                       {k: o[k] for k in entry.reads}, grad_pass, recon.samples)
+                       n.options, grad_pass, recon.samples)
     out = Denoised(recon.interpolated)
     if entry.domain == "irradiance" and run:
         out = as_denoised(entry.fn(ctx))
-    filled = domain.to_radiance(recon.filled, gb, o)
-    interpolated = domain.to_radiance(recon.interpolated, gb, o)
-    if o["demodulate"]:
-        image = domain.to_radiance(out.image, gb, o, clamp=True)
+    filled = domain.to_radiance(recon.filled, gb, d)
+    interpolated = domain.to_radiance(recon.interpolated, gb, d)
+    if d.demodulate:
+        image = domain.to_radiance(out.image, gb, d, clamp=True)
         out = out._replace(image=image, filtered=None if out.filtered is None else image)
     if entry.domain == "radiance" and run:
         out = as_denoised(entry.fn(ctx._replace(image=out.image)))
     elif entry.domain == "display" and run:
-        tonemapped = domain.to_display(out.image, o)
+        tonemapped = domain.to_display(out.image, d)
         filtered = as_denoised(entry.fn(ctx._replace(image=tonemapped))).image
-        out = Denoised(domain.from_display(filtered, o), filtered=filtered,
+        out = Denoised(domain.from_display(filtered, d), filtered=filtered,
                        tonemapped=tonemapped)
     return PostProcessed(out.image, filled, interpolated, out.tonemapped, out.filtered,
                          out.variance)

@@ -12,7 +12,7 @@ is a fixed function of the shading values (:mod:`foveated_mi.frame.adjoint`).
 """
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
@@ -20,10 +20,7 @@ import mitsuba as mi
 from .. import reconstruct as rec
 from . import sampling as _sampling
 from ..kernels.buffers import GBuffer, Resolved
-
-
-#: Options the reconstruction pass reads besides those its method declares.
-READS = ("reconstruction", "sigma_p", "jfa", "max_radius")
+from .settings import ReconstructionSettings
 
 
 class Reconstruction(NamedTuple):
@@ -34,31 +31,35 @@ class Reconstruction(NamedTuple):
     samples: mi.Float | None = None
 
 
-def reads(o: dict[str, Any]) -> tuple[str, ...]:
-    """The options the reconstruction pass reads with the method of ``o``."""
-    method = rec.RECONSTRUCTIONS[o["reconstruction"]]
-    return READS + tuple(method.options.values()) + \
-        ((method.averages,) if method.averages else ())
-
-
 def reconstruction_pass(values: mi.Color3f, resolved: Resolved, gb: GBuffer, width: int,
-                        height: int, o: dict[str, Any], *, seed,
+                        height: int, r: ReconstructionSettings, *, seed,
                         emission_edges: mi.Bool | None = None,
                         max_gap: float | None) -> Reconstruction:
     """``nearest``, ``filled`` and ``interpolated`` of a frame's working ``values`` (module
-    docstring); ``o``: the options it reads; ``seed``: the stochastic fill's (the render's seed, not the
-    frame's: over a still view the fill keeps its choices, so the frame changes only where
-    new samples arrive); ``emission_edges``: pixels that lend values only to each other in
-    the guided methods; ``max_gap``: the Jump Flooding bound (None: none; see
-    :func:`foveated_mi.frame.film.jfa_bound`)."""
+    docstring).
+
+    Parameters
+    ----------
+    values, resolved, gb : the working values, the resolved shading buffer, the G-buffer.
+    width, height : the film's size.
+    r : the pass's settings and its method's parameters.
+    seed : the stochastic fill's (the render's seed, not the frame's: over a still view the
+        fill keeps its choices, so the frame changes only where new samples arrive).
+    emission_edges : pixels that lend values only to each other in the guided methods.
+    max_gap : the Jump Flooding bound (None: none; :func:`foveated_mi.frame.film.jfa_bound`).
+
+    Returns
+    -------
+    Reconstruction
+    """
     radiance = values
-    method = rec.RECONSTRUCTIONS[o["reconstruction"]]
+    method = rec.RECONSTRUCTIONS[r.method]
     guided = method.guided
     # sigma_p = 1 traces every pixel: a paper interpolation is then the identity (a pixel
     # whose samples were all rejected stays 0, or keeps its history); a guided
     # reconstruction still averages noisy samples.
-    every_pixel = o["sigma_p"] >= 1.0 and not guided
-    nearest = _nearest_sites(resolved.mask, width, height, o, every_pixel, max_gap)
+    every_pixel = r.sigma_p >= 1.0 and not guided
+    nearest = _nearest_sites(resolved.mask, width, height, r.jfa, every_pixel, max_gap)
     if every_pixel:
         filled = interpolated = radiance
     else:
@@ -66,30 +67,30 @@ def reconstruction_pass(values: mi.Color3f, resolved: Resolved, gb: GBuffer, wid
         guide = rec.Guide(normal=gb.normal, position=gb.position, hit=gb.hit,
                           weight=resolved.count, emission_edge=emission_edges) \
             if guided else None
-        interpolated = filled if o["reconstruction"] == "voronoi" else _interpolate(
-            method, radiance, resolved.mask, nearest, guide, seed, width, height, o)
-    samples = None if method.averages is None else \
-        dr.opaque(mi.Float, o[method.averages]) + dr.zeros(mi.Float, width * height)
+        interpolated = filled if r.method == "voronoi" else _interpolate(
+            method, radiance, resolved.mask, nearest, guide, seed, width, height, r)
+    samples = None if r.averages is None else \
+        dr.opaque(mi.Float, r.averages) + dr.zeros(mi.Float, width * height)
     return Reconstruction(nearest, filled, interpolated, samples)
 
 
-def _nearest_sites(mask: mi.Bool, width: int, height: int, o: dict[str, Any],
+def _nearest_sites(mask: mi.Bool, width: int, height: int, jfa: str,
                    every_pixel: bool, max_gap: float | None) -> mi.UInt32:
     """Each pixel's nearest site by Jump Flooding (each pixel its own site when every pixel
     is traced)."""
     with dr.suspend_grad():
         if every_pixel:
             return dr.arange(mi.UInt32, width * height)
-        return rec.jump_flood(mask, width, height, variant=o["jfa"], max_gap=max_gap)
+        return rec.jump_flood(mask, width, height, variant=jfa, max_gap=max_gap)
 
 
 def _interpolate(method: rec.Method, values: mi.Color3f, mask: mi.Bool, nearest: mi.UInt32,
-                 guide, seed, width: int, height: int, o: dict[str, Any]) -> mi.Color3f:
+                 guide, seed, width: int, height: int, r: ReconstructionSettings) -> mi.Color3f:
     """The reconstruction method's image, with the parameters it declares (``guide``: for
     guided methods)."""
-    params = {kw: o[name] for kw, name in method.options.items()}
+    params = dict(r.params)
     if method.guided:
         params["guide"] = guide
     if method.seeded:
         params["seed"] = _sampling.opaque_seed(seed) ^ 0x6A09E667
-    return method.fn(values, mask, nearest, width, height, max_radius=o["max_radius"], **params)
+    return method.fn(values, mask, nearest, width, height, max_radius=r.max_radius, **params)

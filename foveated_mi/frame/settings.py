@@ -84,14 +84,19 @@ class FrameSettings:
     trace: TraceSettings
 
 
-def frame_settings(o: dict[str, Any]) -> FrameSettings:
-    """The settings of validated options ``o`` (read once per change of the options)."""
-    sampling = SamplingSettings(
+def sampling_settings(o: dict[str, Any]) -> SamplingSettings:
+    """The sampling law's settings of validated options ``o``."""
+    return SamplingSettings(
         law=o["sampling_law"], theta=float(o["theta"]), theta_deg=float(o["theta_deg"]),
         sigma_p=float(o["sigma_p"]), ray_budget=float(o["ray_budget"]),
         acuity_floor=float(o["acuity_floor"]), edge_threshold=float(o["edge_threshold"]),
         edge_detector=o["edge_detector"], emission_edges=bool(o["emission_edges"]),
         map_seed=int(o["map_seed"]))
+
+
+def frame_settings(o: dict[str, Any]) -> FrameSettings:
+    """The settings of validated options ``o`` (read once per change of the options)."""
+    sampling = sampling_settings(o)
     plan = PlanSettings(
         sampling, LaunchSettings(o["reorder"], int(o["block_height"])),
         HistorySettings(bool(o["history"]), o["reprojection"],
@@ -103,3 +108,72 @@ def frame_settings(o: dict[str, Any]) -> FrameSettings:
     trace = TraceSettings(float(o["clamp"]), o["pixel_filter"], bool(o["tonemap_samples"]),
                           o["tonemap"], float(o["exposure"]))
     return FrameSettings(plan, trace)
+
+
+# -- the passes after the trace ----------------------------------------------------------------
+# A formation reads its own settings, which its registration compiles from the options
+# (:func:`~.formation.register_formation`'s ``settings``); these are the parts they share.
+
+@dataclass(frozen=True)
+class DomainSettings:
+    """The value domains and the conversions between them (:mod:`.domain`)."""
+    demodulate: bool           #: work on irradiance (albedo multiplied back after)
+    tonemap_samples: bool      #: samples were tone-mapped before they were developed
+    tonemap: str               #: the tone-mapping operator
+    exposure: float            #: its exposure (stops)
+    clamp: float               #: nothing brighter reaches the image after remodulation
+
+
+@dataclass(frozen=True)
+class DenoiseSettings:
+    """The registered denoiser (:data:`~foveated_mi.postprocess.DENOISERS`) and the options
+    its registration declares it reads, with their values."""
+    name: str
+    params: tuple[tuple[str, Any], ...]
+    active: bool               #: its registration says it changes a frame with these
+
+    @property
+    def options(self) -> dict[str, Any]:
+        """The options it reads, as its ``DenoiseInput.options``."""
+        return dict(self.params)
+
+
+@dataclass(frozen=True)
+class ReconstructionSettings:
+    """The reconstruction pass (:mod:`.reconstruction`, §3.4) and its method's parameters."""
+    method: str                #: one of :data:`~foveated_mi.reconstruct.RECONSTRUCTIONS`
+    sigma_p: float             #: 1 traces every pixel: the paper's methods are the identity
+    jfa: str                   #: the Jump Flooding variant
+    max_radius: int            #: the interpolation's largest radius
+    #: the method's keyword parameters, each from the option its registration names
+    params: tuple[tuple[str, Any], ...]
+    averages: float | None     #: samples it averages per pixel, where it declares a number
+
+
+def _frozen(v: Any) -> Any:
+    return tuple(v) if isinstance(v, list) else v
+
+
+def domain_settings(o: dict[str, Any]) -> DomainSettings:
+    """The domain settings of validated options ``o``."""
+    return DomainSettings(bool(o["demodulate"]), bool(o["tonemap_samples"]), o["tonemap"],
+                          float(o["exposure"]), float(o["clamp"]))
+
+
+def denoise_settings(o: dict[str, Any]) -> DenoiseSettings:
+    """The denoiser of validated options ``o``, with the options it reads."""
+    entry = DENOISERS[o["denoiser"]]
+    params = {k: o[k] for k in entry.reads}
+    active = entry.active is None or bool(entry.active(params))
+    return DenoiseSettings(o["denoiser"], tuple((k, _frozen(v)) for k, v in params.items()),
+                           active)
+
+
+def reconstruction_settings(o: dict[str, Any]) -> ReconstructionSettings:
+    """The reconstruction method of validated options ``o``, with its parameters."""
+    from ..reconstruct import RECONSTRUCTIONS
+    method = RECONSTRUCTIONS[o["reconstruction"]]
+    params = tuple((kw, _frozen(o[name])) for kw, name in method.options.items())
+    return ReconstructionSettings(o["reconstruction"], float(o["sigma_p"]), o["jfa"],
+                                  int(o["max_radius"]), params,
+                                  None if method.averages is None else o[method.averages])

@@ -48,20 +48,19 @@ from __future__ import annotations
 import warnings
 from typing import Any
 
-import drjit as dr
 import mitsuba as mi
 
 from ..frame import gradient as _gradient
-from ..frame.adjoint import NestedAdjoint
-from ..frame.formation import FrozenFormation
-from ..frame.outputs import frame_outputs
-from ..frame.plan import FramePlan
-from ..frame.reproject import History
-from ..frame.scene_state import SceneState, scene_state
-from ..frame.settings import frame_settings
-from ..frame.view import Views
+from ..frame import pipeline as _pipeline
 from ..frame import trace as _trace
+from ..frame.adjoint import NestedAdjoint
+from ..frame.formation import FrozenFormation, formation_settings, replayable
+from ..frame.gbuffer import film_size
+from ..frame.reproject import History
+from ..frame.scene_state import scene_state
+from ..frame.settings import frame_settings
 from ..frame.shading import is_ad_integrator
+from ..frame.view import Views
 from ..options import (SCHEMA, from_properties, gradient_refusal, parameter_table,
                        pixel_filter_warning, validate_options)
 from ..timing import StageTimer
@@ -187,38 +186,25 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             # the exact preset before this primal frame, which the gradient pass reuses.
             self._prepare_gradients()
         o, timer = view.options(self._options), StageTimer(self._options["timing"])
-        # Decisions before tracing: G-buffer, reprojection, sampling map, launch.
-        plan = view.planner.plan(scene, sensor, seed, spp, self._settings.plan, o["gaze"],
-                                 timer, state)
-        # Sparse shading (§3.3): the nested integrator traces the launch only, and its
-        # samples become the sparse shading buffer (the seam of the gradient pass).
+        # The graph is kept when mi.render will differentiate the frame.
         record = state.differentiated and gradient_refusal(self._given, o) is None
-        shaded, trace_replayed = self._shade(scene, plan, timer, record, state)
-        shading = shaded.shading
-        # The registered formation; its graph kept when mi.render will differentiate it.
-        formed, recorded, formation_replayed = _gradient.form_primal(
-            plan, shading, o, timer, self._frozen, record)
-        # The history, buffers and stats of this frame, and the frame a gradient pass reuses.
-        view.planner.commit(plan, formed.history if o["history"] else None)
-        view.outputs = frame_outputs(plan, shaded, formed, o, timer, view.frame - 1,
-                                     (trace_replayed, formation_replayed))
-        view.primal = _gradient.PrimalFrame(plan, shading, id(scene), recorded)
-        flat = dr.ravel(formed.image) if formed.flat is None else formed.flat
-        return mi.TensorXf(flat, shape=(plan.height, plan.width, 3))
+        frame = self._frame(scene, sensor, seed, spp, state, o, record, timer)
+        stats = {k: (list(v) if k == "gaze" else v) for k, v in o.items() if k != "timing"}
+        # Plan, trace, form, commit (foveated_mi.frame.pipeline).
+        return _pipeline.primal_frame(view, self._passes(), frame, self._settings, timer, stats)
 
-    def _shade(self, scene: mi.Scene, plan: FramePlan, timer: StageTimer,
-               record: bool, state: SceneState) -> tuple[_trace.Shaded, bool]:
-        """The trace pass (:mod:`foveated_mi.frame.trace`) and whether it was replayed:
-        replayed where nothing needs it traced (a frame that is not differentiated or
-        timed, with ``freeze`` on; a scene with a parameter that requires gradients is
-        traced even where the configuration refuses them, ``record`` false)."""
-        ts = self._settings.trace
-        if self._options["freeze"] and not timer.enabled and not record \
-                and not state.differentiated:
-            shaded = self._frozen_trace(scene, self.nested, plan, ts, state.host_values())
-            if shaded is not None:
-                return shaded, True
-        return _trace.shade(scene, self.nested, plan, ts), False
+    def _passes(self) -> _pipeline.Passes:
+        return _pipeline.Passes(self.nested, self._frozen_trace, self._frozen)
+
+    def _frame(self, scene, sensor, seed, spp, state, o: dict[str, Any], record: bool,
+               timer: StageTimer) -> _pipeline.Frame:
+        """A frame's request: its inputs and its formation's settings (compiled from the
+        view's options and gaze)."""
+        fs = formation_settings(o, *film_size(sensor))
+        return _pipeline.Frame(scene, sensor, seed, spp, state, o["gaze"], fs,
+                               freeze=o["freeze"],
+                               replay_formation=replayable(o["freeze"], o["denoiser"], timer),
+                               record=record)
 
     # -- differentiation ------------------------------------------------------------------
     def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
@@ -228,14 +214,14 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         gradient pass's (``mi.render``'s ``seed_grad``/``spp_grad``)."""
         primal = self._primal_frame(scene, sensor, seed, spp)
         _gradient.backward(self._adjoint, self.nested, scene, params, primal, grad_in, seed,
-                           spp, self._options)
+                           spp, self._settings.trace)
 
     def render_forward(self, scene, params, sensor=0, seed=0, spp=0):
         """Forward mode: the tangent of the traced pixels from the nested integrator, pushed
         through the image formation. Returns the image tangent (H, W, 3)."""
         primal = self._primal_frame(scene, sensor, seed, spp)
         return _gradient.forward(self._adjoint, self.nested, scene, params, primal, seed, spp,
-                                 self._options)
+                                 self._settings.trace)
 
     def _prepare_gradients(self) -> None:
         """Called by a primal frame that ``mi.render`` will differentiate: from now on the
@@ -252,7 +238,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         image (a ``mi.Color3f`` per pixel). For analysis and tests of the gradient pass."""
         if self._primal is None:
             raise ParameterError("formation", None, "a primal frame rendered first")
-        return _gradient.formation_of(self._primal, self._options), self._primal.shading
+        return _gradient.formation_of(self._primal), self._primal.shading
 
     def _primal_frame(self, scene, sensor, seed, spp) -> _gradient.PrimalFrame:
         """The last primal frame of ``scene`` seen through ``sensor``; without one (a direct
@@ -267,11 +253,9 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         p = view.primal
         if p is not None and p.scene_id == id(scene) and p.plan.sensor is sensor:
             return p
-        with dr.suspend_grad():
-            plan = view.planner.plan(scene, sensor, seed, spp, self._settings.plan,
-                                     view.options(self._options)["gaze"], StageTimer(False))
-            shading = _trace.shade(scene, self.nested, plan, self._settings.trace).shading
-        return _gradient.PrimalFrame(plan, shading, id(scene))
+        frame = self._frame(scene, sensor, seed, spp, scene_state(scene, sensor),
+                            view.options(self._options), False, StageTimer(False))
+        return _pipeline.uncommitted_frame(view, self._passes(), frame, self._settings)
 
     # -- results --------------------------------------------------------------------------
     @property

@@ -96,8 +96,8 @@ def register_denoiser(name: str, fn: Callable[[DenoiseInput], Any], *, different
     each pixel's noise independent of its neighbours' (a network trained on such noise), so
     ``pixel_filter = "auto"`` gives it filter importance sampling instead of splatting.
     ``reads``: the options it reads (``ctx.options`` holds exactly these). ``active(options)``:
-    whether it changes a frame with these options (else it is not called, and costs nothing:
-    no tone-mapping round trip either). ``grid_aware``: it reads neighbours through
+    whether it changes a frame with these options, the ones it reads (else it is not called,
+    and costs nothing: no tone-mapping round trip either). ``grid_aware``: it reads neighbours through
     ``ctx.grid``'s neighbour rule (a wrapped axis wraps); a formation in a buffer with a
     wrapped axis hands any other denoiser a plain image padded with the columns of the other
     side, and crops the result (:func:`foveated_mi.kernels.grid.wrap_padding`)."""
