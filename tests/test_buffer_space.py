@@ -11,7 +11,7 @@ import pytest
 from kernel_counts import compiled_by
 
 from foveated_mi.frame import buffer_space
-from foveated_mi.frame.sampling import foveal_grid, fovea_radius, gaze_pixels
+from foveated_mi.frame.sampling import foveal_grid, fovea_radius, gaze_position
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.metrics import psnr
 from foveated_mi.options import validate_options
@@ -49,7 +49,7 @@ def test_the_grid_without_inner_rings_keeps_every_ring_outside_the_disc(size, bu
 def test_every_sample_finds_itself_at_its_own_film_position(gaze):
     W, H = 96, 64
     lay = _layout(W, H)
-    g = gaze_pixels(gaze, W, H)
+    g = gaze_position(gaze, W, H)
     pixels, on = buffer_space.sample_pixels(lay, g, W, H)
     idx = dr.arange(mi.UInt32, lay.size)
     is_cell = idx < lay.cells
@@ -243,7 +243,7 @@ def test_a_sample_reads_its_history_only_on_the_surface_it_saw(z, normal, hits):
                                                           up=[0, 1, 0]),
                            "film": {"type": "hdrfilm", "width": W, "height": H}})
     lay = _layout(W, H)
-    gaze = gaze_pixels((0.5, 0.5), W, H)
+    gaze = gaze_position((0.5, 0.5), W, H)
     seen, on = _plane_samples(sensor, lay, gaze, W, H, 0.0, (0, 0, 1))
     n = lay.size
     history = History(mean=dr.zeros(mi.Color3f, n), count=dr.full(mi.Float, 1.0, n),
@@ -361,7 +361,7 @@ def test_the_shading_buffer_on_the_samples_is_the_films_read_at_their_pixels(
     scene = _scene((W, H))
     sensor = scene.sensors()[0]
     lay = _layout(W, H, ray_budget=0.2)
-    pixels, on = buffer_space.sample_pixels(lay, gaze_pixels((0.3, 0.6), W, H), W, H)
+    pixels, on = buffer_space.sample_pixels(lay, gaze_position((0.3, 0.6), W, H), W, H)
     ro, _ = launch_of_pixels(pixels, on, W, H, mode)
     rays = buffer_space.sample_rays(pixels, on, ro.wavefront, ro.active, W * H)
     fs = FilterSampler(sensor.film(), importance=pixel_filter == "importance")

@@ -45,6 +45,7 @@ from . import reproject as _reproject
 from . import sampling as _sampling
 from ..kernels.buffers import GBuffer
 from .shading import ShadingBuffer
+from .space import SPACES, space_of
 
 #: Recorded configurations kept by a :class:`FrozenFormation` (least recently used dropped).
 RECORDINGS = 8
@@ -61,10 +62,9 @@ class FormationInput(NamedTuple):
     fill_seed: Any                        #: the stochastic fill's seed (int or mi.UInt32)
     emission_edges: mi.Bool | None = None
     gaze: mi.Point2f | None = None        #: the gaze's film position in pixels (opaque)
-    #: ``(pixels, on, rays)`` of the foveal buffer's samples when it keeps nothing on the
-    #: film (:mod:`foveated_mi.frame.buffer_space`); the shading buffer, G-buffer,
-    #: reprojection and history are then on the samples
-    samples: tuple | None = None
+    #: where the shading buffer, G-buffer, reprojection and history live: the film's pixels,
+    #: or the foveal buffer's samples (:mod:`foveated_mi.frame.space`)
+    space: Any = None
 
 
 class Formed(NamedTuple):
@@ -87,6 +87,7 @@ class Formation(NamedTuple):
     counted: tuple[str, ...]
     on_film: tuple[str, ...]
     grids: Callable[[int, int, Any], dict]
+    space: Callable[[dict], str]
 
 
 @dataclass(frozen=True)
@@ -118,7 +119,8 @@ def register_formation(name: str, fn: Callable[..., Formed], *,
                        settings: Callable[[int, int, dict], Any] | None = None,
                        stats: Callable[[dict], dict] | None = None,
                        counted: tuple[str, ...] = (), on_film: tuple[str, ...] = (),
-                       grids: Callable[[int, int, Any], dict] | None = None) -> None:
+                       grids: Callable[[int, int, Any], dict] | None = None,
+                       space: Callable[[dict], str] | None = None) -> None:
     """Make ``fn`` the formation ``name`` (the option value ``formation = name``).
 
     Parameters
@@ -140,6 +142,9 @@ def register_formation(name: str, fn: Callable[..., Formed], *,
     grids : ``grids(width, height, settings)``, buffer name -> grid for those on a third
         grid, the plan's included (a formation whose plan keeps its G-buffer on its own
         samples).
+    space : ``space(o)``, the sample space it forms from (:data:`~.space.SPACES`): ``"film"``
+        (the default), or ``"buffer"``, the foveal buffer's samples, which the plan then
+        makes instead of the film's pixels (:mod:`.space`).
     """
     FORMATIONS[name] = Formation(
         fn, grid if grid is not None else (lambda width, height, s: Grid.film(width, height)),
@@ -147,7 +152,8 @@ def register_formation(name: str, fn: Callable[..., Formed], *,
         (lambda width, height, o: OptionValues(tuple(sorted(
             (k, tuple(v) if isinstance(v, list) else v) for k, v in o.items())))),
         stats if stats is not None else (lambda buffers: {}), tuple(counted), tuple(on_film),
-        grids if grids is not None else (lambda width, height, s: {}))
+        grids if grids is not None else (lambda width, height, s: {}),
+        space if space is not None else (lambda o: "film"))
 
 
 def unregister_formation(name: str) -> None:
@@ -161,6 +167,13 @@ def formation_settings(o: dict[str, Any], width: int, height: int) -> FormationS
     check_choice("formation", o["formation"], FORMATIONS)
     entry = FORMATIONS[o["formation"]]
     return FormationSettings(o["formation"], entry.settings(width, height, o))
+
+
+def formation_space(o: dict[str, Any]) -> str:
+    """The sample space the formation of validated options ``o`` forms from."""
+    check_choice("formation", o["formation"], FORMATIONS)
+    space = FORMATIONS[o["formation"]].space(o)
+    return check_choice("formation space", space, SPACES)
 
 
 def form(shading: ShadingBuffer, inp: FormationInput, fs: FormationSettings, timer: StageTimer,
@@ -179,7 +192,7 @@ def _fields(t) -> dict | None:
     return None if t is None else dict(t._asdict())
 
 
-def _record(arrays: dict, key: dict) -> dict:
+def _form_frame(arrays: dict, key: dict) -> dict:
     """The frozen body: rebuilds the frame's named buffers and forms the image."""
     h = arrays["history"]
     history = None if h is None else _reproject.History(
@@ -189,7 +202,7 @@ def _record(arrays: dict, key: dict) -> dict:
                          _reproject.ReprojectionMap(**arrays["reprojection"]), history,
                          key["width"], key["height"], key["spp"], arrays["fill_seed"],
                          arrays["emission_edges"], arrays["gaze"],
-                         None if arrays["samples"] is None else tuple(arrays["samples"]))
+                         space_of(key["space"], arrays["space"]))
     fn = FORMATIONS[key["formation"]].fn
     formed = fn(ShadingBuffer(**arrays["shading"]), inp, key["settings"], StageTimer(False))
     # The image leaves the recording interleaved, as the frame returns it: the last pass
@@ -226,7 +239,7 @@ class FrozenFormation:
         # Every input opaque, so that no recording depends on an input's value: with
         # auto_opaque, Dr.Jit folds a literal input (a buffer of zeros) into the recording
         # and records again when that literal changes.
-        self._frozen = dr.freeze(_record, limit=RECORDINGS, warn_after=4 * RECORDINGS,
+        self._frozen = dr.freeze(_form_frame, limit=RECORDINGS, warn_after=4 * RECORDINGS,
                                  auto_opaque=False)
 
     @property
@@ -244,10 +257,10 @@ class FrozenFormation:
                                                "moment2": h.moment2},
             "fill_seed": _sampling.opaque_seed(inp.fill_seed),
             "emission_edges": inp.emission_edges, "gaze": inp.gaze,
-            "samples": None if inp.samples is None else list(inp.samples),
+            "space": inp.space.arrays(),
         }
         key = {"formation": fs.name, "width": inp.width, "height": inp.height,
-               "spp": inp.spp, "settings": fs.settings}
+               "spp": inp.spp, "settings": fs.settings, "space": inp.space.key()}
         with _no_collection():          # a collection inside a recording aborts (above)
             out = self._frozen(arrays, key)
         image = dr.unravel(mi.Color3f, out["flat"])

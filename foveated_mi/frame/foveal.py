@@ -240,7 +240,7 @@ def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, w
 def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
                 timer: StageTimer, grad_pass: bool = False) -> Formed:
     """History resolve, denoising in the buffer, one warp (module docstring)."""
-    if inp.samples is not None:
+    if inp.space.kind == "buffer":
         return _form_on_samples(shading, inp, s, timer, grad_pass)
     width, height = inp.width, inp.height
     grid, d = s.grid, s.domain
@@ -302,7 +302,7 @@ def _form_on_samples(shading: ShadingBuffer, inp: FormationInput, s: FovealSetti
     width, height = inp.width, inp.height
     lay, d = s.layout, s.domain
     grid, nc = lay.grid, lay.cells
-    pixels, on = inp.samples[:2]
+    pixels, on = inp.space.pixels, inp.space.on
     gb = inp.gbuffer
     # This frame's samples (the shading buffer is on them), blended with their own history.
     resolved = _reproject.resolve(shading.value, shading.mask, inp.spp, inp.reprojection,
@@ -370,4 +370,4 @@ def foveal_stats(buffers: dict[str, Any]) -> dict[str, Any]:
 
 register_formation("foveal", form_foveal, grid=foveal_buffer_grid, settings=foveal_settings,
                    stats=foveal_stats, counted=("resampled", "shading_mask"), on_film=ON_FILM,
-                   grids=foveal_grids)
+                   grids=foveal_grids, space=lambda o: o["foveal_space"])

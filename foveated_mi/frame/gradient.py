@@ -46,7 +46,7 @@ def formation_input(plan: FramePlan) -> FormationInput:
     """The buffers of ``plan`` that a formation reads."""
     return FormationInput(plan.gbuffer, plan.reprojection, plan.history, plan.width,
                           plan.height, plan.spp, plan.fill_seed, plan.emission_edges, plan.gaze,
-                          plan.samples)
+                          plan.space)
 
 
 def form_primal(plan: FramePlan, shading: ShadingBuffer, fs: FormationSettings,
@@ -95,31 +95,17 @@ def _to_color(tensor, plan: FramePlan, name: str) -> mi.Color3f:
 
 def _traced_pixels(primal: PrimalFrame) -> mi.Bool:
     """The film's pixels whose traced value the frame holds (the nested adjoint's seam)."""
-    plan, shading = primal.plan, primal.shading
-    if plan.samples is None:
-        return shading.mask
-    mask = dr.zeros(mi.Bool, plan.width * plan.height)
-    dr.scatter(mask, True, plan.samples[0], shading.mask)
-    return mask
+    return primal.plan.space.traced_pixels(primal.shading.mask)
 
 
 def _samples_to_pixels(primal: PrimalFrame, delta: mi.Color3f) -> mi.Color3f:
-    """A gradient on the foveal buffer's samples summed onto their traced pixels: the
-    transpose of the gather that reads each pixel's value at its samples."""
-    plan = primal.plan
-    if plan.samples is None:
-        return delta
-    out = dr.zeros(mi.Color3f, plan.width * plan.height)
-    dr.scatter_reduce(dr.ReduceOp.Add, out, delta, plan.samples[0], primal.shading.mask)
-    return out
+    """A gradient on the frame's samples summed onto their traced pixels."""
+    return primal.plan.space.to_pixels(delta, primal.shading.mask)
 
 
 def _pixels_to_samples(primal: PrimalFrame, tangent: mi.Color3f) -> mi.Color3f:
-    """A tangent of the traced pixels read at the foveal buffer's samples."""
-    plan = primal.plan
-    if plan.samples is None:
-        return tangent
-    return dr.gather(mi.Color3f, tangent, plan.samples[0], primal.shading.mask)
+    """A tangent of the traced pixels read at the frame's samples."""
+    return primal.plan.space.from_pixels(tangent, primal.shading.mask)
 
 
 def backward(nested_adjoint: _adjoint.NestedAdjoint, integrator, scene, params,

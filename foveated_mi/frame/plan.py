@@ -19,6 +19,7 @@ device (:func:`~foveated_mi.frame.reproject.unless_cut`), so the frame never wai
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -38,6 +39,7 @@ from .reorder import Reordered
 from .reproject import History, ReprojectionMap
 from .scene_state import GeometryCache, SceneState, scene_state
 from .settings import HistorySettings, PlanSettings
+from .space import BufferSpace, FilmSpace
 
 #: A camera move after which fewer pixels than this fraction see the surface they saw in the
 #: previous frame is a cut: no pixel of the frame reads the history.
@@ -67,11 +69,9 @@ class FramePlan:
     fill_seed: int = 0                         #: seed of the stochastic fill (the render's)
     emission_edges: mi.Bool | None = None      #: footprints across an emitter's edge
     gaze: mi.Point2f | None = None             #: the gaze's film position in pixels (opaque)
-    #: ``(pixels, on, rays)`` of the foveal buffer's samples (each one's film pixel, whether
-    #: it is on, and its ray in the launch), where the plan is on them (:func:`on_samples`):
-    #: the G-buffer, shading buffer, reprojection map and history are then per sample
-    samples: tuple | None = None
-    layout: Any = None                         #: their :class:`~.buffer_space.SampleLayout`
+    #: where the G-buffer, shading buffer, reprojection map and history live: the film's
+    #: pixels, or the foveal buffer's samples (:mod:`.space`)
+    space: FilmSpace | BufferSpace | None = None
 
 
 class Planner:
@@ -123,7 +123,7 @@ class Planner:
         state = state if state is not None else scene_state(scene, sensor)
         self._check_reset(scene, state, width, height)
         seed = (int(seed) if not dr.is_array_v(seed) else int(dr.slice(seed))) & 0xFFFFFFFF
-        if settings.on_samples:
+        if settings.space == "buffer":
             return self._plan_samples(scene, sensor, seed, spp, settings, gaze, timer, state,
                                       width, height)
         hs, ss, ls = settings.history, settings.sampling, settings.launch
@@ -139,7 +139,8 @@ class Planner:
             history = self.history if hs.keep else None
             if history is not None and history.layout is not None:
                 history = None        # kept on a foveal buffer's samples: not the film's
-            reproj, cut = self._reprojection(gb, history, sensor, width, height, hs, reused)
+            space = FilmSpace(width, height)
+            reproj, cut = self._reprojection(gb, history, space, sensor, hs, reused)
             frame_seed = self._frame_seed(seed, cut, hs.keep)
             map_seed = ss.map_seed if ss.map_seed >= 0 else frame_seed
             # Traced every frame, like a depth edge: their sparse estimate converges only
@@ -156,7 +157,7 @@ class Planner:
                          probability=prob, reprojection=reproj, reordered=ro, history=history,
                          filter_sampler=self._filter_sampler(sensor, settings.pixel_filter),
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=emitting,
-                         gaze=_sampling.gaze_pixels(gaze, width, height))
+                         gaze=_sampling.gaze_position(gaze, width, height), space=space)
 
     def _plan_samples(self, scene, sensor, seed: int, spp: int, settings: PlanSettings,
                       gaze_at: tuple[float, float], timer: StageTimer, state: SceneState,
@@ -166,7 +167,7 @@ class Planner:
         history reprojected sample to sample, the polar map and its launch."""
         ss, ls = settings.sampling, settings.launch
         lay = _buffer_space.layout(width, height, ss.theta, ss.ray_budget)
-        gaze = _sampling.gaze_pixels(gaze_at, width, height)
+        gaze = _sampling.gaze_position(gaze_at, width, height)
         gaze_key = tuple(float(v) for v in gaze_at)
         materials = settings.materials
         with dr.suspend_grad():
@@ -186,8 +187,13 @@ class Planner:
                 launch = None
             timer.mark("gbuffer", pixels, on, gb.position, gb.normal, gb.depth, gb.hit,
                        gb.direction, gb.albedo, gb.emission)
-            history, reproj, cut = self._samples_history(gb, on, lay, reused, gaze_key,
-                                                         width, height, settings.history)
+            space = BufferSpace(width, height, lay, pixels, on, None)
+            history = self.history if settings.history.keep else None
+            if history is not None and history.layout != lay:
+                history = None        # kept on the film, or on another buffer's samples
+            # Still while the samples, the camera and the gaze hold.
+            reproj, cut = self._reprojection(gb, history, space, sensor, settings.history,
+                                             reused and self._gaze == gaze_key)
             self._gaze = gaze_key
             frame_seed = self._frame_seed(seed, cut, settings.history.keep)
             map_seed = ss.map_seed if ss.map_seed >= 0 else frame_seed
@@ -209,35 +215,18 @@ class Planner:
                          probability=prob, reprojection=reproj, reordered=ro, history=history,
                          filter_sampler=self._filter_sampler(sensor, settings.pixel_filter),
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=None,
-                         gaze=gaze, samples=(pixels, on, rays), layout=lay)
-
-    def _samples_history(self, gb, on, lay, reused: bool, gaze_key: tuple, width: int,
-                         height: int, hs: HistorySettings):
-        """``(history, reprojection, cut)`` of the buffer's samples: the history they read
-        (none when it is kept on the film or on another buffer's samples), its map (the
-        still map while the samples, camera and gaze hold) and the camera cut, if any."""
-        history = self.history if hs.keep else None
-        if history is not None and history.layout != lay:
-            history = None
-        if history is not None and reused and not self._camera_moved \
-                and self._gaze == gaze_key:
-            return history, _buffer_space.still_map(history, lay.size), None
-        reproj = _buffer_space.reprojection_map(
-            gb, on, history, lay, width, height, tolerance=hs.tolerance, mode=hs.reprojection)
-        cut = None
-        if history is not None and self._camera_moved:
-            reproj, cut = _reproject.unless_cut(reproj, CUT_HIT_FRACTION)
-        return history, reproj, cut
+                         gaze=gaze, space=dataclasses.replace(space, rays=rays))
 
     def commit(self, plan: FramePlan, history: dict[str, Any] | None) -> None:
         """After a primal frame: its history (``mean``, ``count``, ``moment2`` on the film,
         None without history) becomes the next frame's, and the frame is counted."""
         if history is not None:
             gb = plan.gbuffer
-            on_samples = plan.layout is not None
+            on_samples = plan.space.kind == "buffer"
             self.history = History(**history, depth=gb.depth,
                                    camera=_reproject.camera_state(plan.sensor),
-                                   width=plan.width, height=plan.height, layout=plan.layout,
+                                   width=plan.width, height=plan.height,
+                                   layout=plan.space.layout,
                                    position=gb.position if on_samples else None,
                                    normal=gb.normal if on_samples else None,
                                    gaze=plan.gaze if on_samples else None)
@@ -258,17 +247,16 @@ class Planner:
         self._scene_state, self._camera_state = state.scene, state.camera
         self._held = state.held
 
-    def _reprojection(self, gb: GBuffer, history: History | None, sensor: mi.Sensor,
-                      width: int, height: int, hs: HistorySettings, still: bool = False):
-        """The reprojection map, and the cut verdict after a camera move (else None). A still
-        camera over an unchanged scene (``still``: the G-buffer reused) maps every pixel onto
-        itself, without projecting it."""
+    def _reprojection(self, gb: GBuffer, history: History | None, space, sensor: mi.Sensor,
+                      hs: HistorySettings, still: bool = False):
+        """The reprojection map of ``space``'s samples, and the cut verdict after a camera
+        move (else None). A still camera over an unchanged scene (``still``: the G-buffer
+        reused) maps every sample onto itself, without projecting it."""
         if history is not None and still and not self._camera_moved:
-            return _reproject.still_map(history, width, height), None
-        reproj = _reproject.reprojection_map(gb.position, gb.hit, history, width, height,
-                                             tolerance=hs.tolerance,
-                                             direction=gb.direction, mode=hs.reprojection,
-                                             reach=_gbuffer.filter_reach(sensor.film()))
+            return space.still_map(history), None
+        reproj = space.reprojection_map(gb, history, tolerance=hs.tolerance,
+                                        mode=hs.reprojection,
+                                        reach=_gbuffer.filter_reach(sensor.film()))
         if history is not None and self._camera_moved:
             return _reproject.unless_cut(reproj, CUT_HIT_FRACTION)
         return reproj, None

@@ -183,7 +183,7 @@ def opaque_seed(seed) -> mi.UInt32:
     return seed if dr.is_array_v(seed) else dr.opaque(mi.UInt32, int(seed) & 0xFFFFFFFF)
 
 
-def gaze_pixel(gaze: mi.Point2f, width: int, height: int) -> mi.UInt32:
+def gaze_pixel_index(gaze: mi.Point2f, width: int, height: int) -> mi.UInt32:
     """Index of the pixel under the gaze, clamped to the film (off-screen gaze -> border)."""
     gx = mi.Int32(dr.floor(dr.clip(gaze.x * width, 0.0, width - 1.0)))
     gy = mi.Int32(dr.floor(dr.clip(gaze.y * height, 0.0, height - 1.0)))
@@ -211,7 +211,7 @@ def sampling_map(width: int, height: int, *, gaze: tuple[float, float], theta: f
     smap = u < prob
     if edges is not None:
         smap |= edges
-    smap |= idx == gaze_pixel(g, width, height)
+    smap |= idx == gaze_pixel_index(g, width, height)
     return smap, prob
 
 
@@ -358,7 +358,7 @@ def foveal_grid(width: int, height: int, budget: float, fovea: float) -> PolarGr
     return polar_grid_of(width, height, fovea, hi)
 
 
-def gaze_pixels(gaze, width: int, height: int) -> mi.Point2f:
+def gaze_position(gaze, width: int, height: int) -> mi.Point2f:
     """The gaze's film position in pixels, opaque: a new gaze reuses every kernel."""
     return mi.Point2f(dr.opaque(mi.Float, float(gaze[0]) * width),
                       dr.opaque(mi.Float, float(gaze[1]) * height))
@@ -381,7 +381,7 @@ def polar_map(width: int, height: int, gaze, budget: float, theta: float,
     (:func:`foveal_grid`: the rest of ``budget``), so that each cell has a traced pixel.
     Returns ``(sampling_map, probability)`` (1 where traced: the map is deterministic)."""
     grid = foveal_grid(width, height, float(budget), fovea_radius(width, height, theta))
-    g = gaze_pixels(gaze, width, height)
+    g = gaze_position(gaze, width, height)
     q, on = snapped_pixels(grid, g, width, height)
     smap = dr.zeros(mi.Bool, width * height)
     dr.scatter(smap, mi.Bool(True), q, on)

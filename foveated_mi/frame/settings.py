@@ -62,7 +62,7 @@ class PlanSettings:
     sampling: SamplingSettings
     launch: LaunchSettings
     history: HistorySettings
-    on_samples: bool           #: the plan is on the foveal buffer's samples, not the film's
+    space: str                 #: where the plan puts its samples: ``film`` or ``buffer``
     materials: bool            #: the G-buffer holds albedo and emission
     pixel_filter: str          #: ``splat`` or ``importance`` (the film filter's sampler)
 
@@ -94,14 +94,16 @@ def sampling_settings(o: dict[str, Any]) -> SamplingSettings:
         map_seed=int(o["map_seed"]))
 
 
-def frame_settings(o: dict[str, Any]) -> FrameSettings:
-    """The settings of validated options ``o`` (read once per change of the options)."""
+def frame_settings(o: dict[str, Any], space: str = "film") -> FrameSettings:
+    """The settings of validated options ``o`` (read once per change of the options);
+    ``space``: the sample space its formation declares
+    (:func:`~.formation.formation_space`)."""
     sampling = sampling_settings(o)
     plan = PlanSettings(
         sampling, LaunchSettings(o["reorder"], int(o["block_height"])),
         HistorySettings(bool(o["history"]), o["reprojection"],
                         float(o["reprojection_tolerance"])),
-        on_samples=o["formation"] == "foveal" and o["foveal_space"] == "buffer",
+        space=space,
         materials=bool(o["demodulate"] or o["emission_edges"]
                        or DENOISERS[o["denoiser"]].materials),
         pixel_filter=o["pixel_filter"])

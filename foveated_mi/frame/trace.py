@@ -80,9 +80,8 @@ def develop_plan(samples: TracedSamples, plan: FramePlan,
     buffer's samples where the plan is)."""
     if settings.tonemap_samples:
         samples = tonemap_samples(samples, settings.tonemap, settings.exposure)
-    at = None if plan.samples is None else (plan.samples[2], plan.samples[1])
     return develop(samples, plan.reordered.wavefront, plan.spp, plan.sensor.film(),
-                   settings.pixel_filter, at)
+                   settings.pixel_filter, plan.space.develop_at())
 
 
 def shade(scene: mi.Scene, integrator: mi.SamplingIntegrator, plan: FramePlan,
@@ -92,7 +91,7 @@ def shade(scene: mi.Scene, integrator: mi.SamplingIntegrator, plan: FramePlan,
     return Shaded(develop_plan(samples, plan, settings), samples.rejected, samples.clamped)
 
 
-def _record(scene, sensor, integrator, filter_sampler, arrays: dict, key: dict) -> dict:
+def _trace_frame(scene, sensor, integrator, filter_sampler, arrays: dict, key: dict) -> dict:
     """The frozen body: the nested integrator's trace of one frame (the develop after it is
     plain arithmetic, cheap to trace, and stays outside)."""
     table = arrays["filter"]
@@ -129,7 +128,7 @@ class FrozenTrace:
     """The trace pass recorded once per configuration and replayed (module docstring)."""
 
     def __init__(self):
-        self._frozen = dr.freeze(_record, limit=RECORDINGS, warn_after=4 * RECORDINGS)
+        self._frozen = dr.freeze(_trace_frame, limit=RECORDINGS, warn_after=4 * RECORDINGS)
         #: Why the trace could not be replayed (one line), once it could not: the frames
         #: are traced from then on.
         self.failed: str | None = None

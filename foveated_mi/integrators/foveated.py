@@ -54,11 +54,12 @@ from ..frame import gradient as _gradient
 from ..frame import pipeline as _pipeline
 from ..frame import trace as _trace
 from ..frame.adjoint import NestedAdjoint
-from ..frame.formation import FrozenFormation, formation_settings, replayable
+from ..frame.formation import (FrozenFormation, formation_settings, formation_space,
+                               replayable)
 from ..frame.gbuffer import film_size
 from ..frame.reproject import History
 from ..frame.scene_state import scene_state
-from ..frame.settings import frame_settings
+from ..frame.settings import FrameSettings, frame_settings
 from ..frame.shading import is_ad_integrator
 from ..frame.view import Views
 from ..options import (SCHEMA, from_properties, gradient_refusal, parameter_table,
@@ -91,7 +92,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         # 'auto' preset then resolves to one whose gradient is exact.
         self._gradients = is_ad_integrator(self.nested)
         self._options = validate_options(self._given, self._gradients)
-        self._settings = frame_settings(self._options)   # each pass's, read once
+        self._settings = self._compile(self._options)   # each pass's, read once
         self._pixel_filter_warned: str | None = None
         self._warn_pixel_filter()
         # Per view (a sensor of the scene): gaze, history, caches, last frame.
@@ -128,7 +129,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         if new["history"] != old["history"] or any(new[k] != old[k] for k in domain):
             self.reset()   # a stale history, or one held in another domain
         self._given, self._options = given, new
-        self._settings = frame_settings(new)
+        self._settings = self._compile(new)
         self._warn_pixel_filter()
 
     def _warn_pixel_filter(self) -> None:
@@ -193,6 +194,11 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         # Plan, trace, form, commit (foveated_mi.frame.pipeline).
         return _pipeline.primal_frame(view, self._passes(), frame, self._settings, timer, stats)
 
+    @staticmethod
+    def _compile(o: dict[str, Any]) -> FrameSettings:
+        """Each pass's settings, read once per change of the options."""
+        return frame_settings(o, formation_space(o))
+
     def _passes(self) -> _pipeline.Passes:
         return _pipeline.Passes(self.nested, self._frozen_trace, self._frozen)
 
@@ -230,7 +236,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         if not self._gradients:
             self._gradients = True
             self._options = validate_options(self._given, True)
-            self._settings = frame_settings(self._options)
+            self._settings = self._compile(self._options)
 
     def formation(self):
         """The last primal frame's image as a function of its traced pixels' values, with

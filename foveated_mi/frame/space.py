@@ -1,0 +1,153 @@
+"""Sample spaces: where a frame keeps its traced values, its geometry and its history.
+
+A frame's shading buffer, G-buffer, reprojection map and history live either on the film's
+pixels (:class:`FilmSpace`) or on the foveal buffer's samples (:class:`BufferSpace`: the
+log-polar cells and the disc's pixels, :mod:`.buffer_space`). A formation declares which
+space it forms from (:func:`~.formation.register_formation`'s ``space``); the plan makes that
+space and every pass after it asks the space, never which formation or law ran:
+
+- :meth:`~FilmSpace.develop_at`: where the trace pass develops the rays' estimates
+  (:func:`~.shading.develop`);
+- :meth:`~FilmSpace.traced_pixels`, :meth:`~FilmSpace.to_pixels`,
+  :meth:`~FilmSpace.from_pixels`: the film's traced pixels, and a gradient summed onto them
+  from the samples or a tangent read back at the samples (the gradient pass's seam);
+- :meth:`~FilmSpace.still_map`, :meth:`~FilmSpace.reprojection_map`: the history's map;
+- :attr:`~FilmSpace.layout`: what the history records of the space's layout.
+
+A space's device arrays (:meth:`~BufferSpace.arrays`) are a frozen recording's inputs and its
+host values (:meth:`~BufferSpace.key`) its key: :meth:`BufferSpace.of` rebuilds it inside.
+Sample positions may change from frame to frame (the gaze moves the buffer's samples), and a
+history may be kept on another space than the frame's (the plan then reads none).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+
+from ..kernels.buffers import GBuffer
+from . import buffer_space as _buffer_space
+from . import reproject as _reproject
+from .reproject import History, ReprojectionMap
+
+#: The sample spaces a formation may declare.
+SPACES = ("film", "buffer")
+
+
+@dataclass(frozen=True)
+class FilmSpace:
+    """The film's pixels, one sample each."""
+    width: int
+    height: int
+    kind = "film"
+    layout = None
+
+    @property
+    def size(self) -> int:
+        return self.width * self.height
+
+    def develop_at(self):
+        """Where the trace pass develops the rays' estimates: the film (None)."""
+        return None
+
+    def traced_pixels(self, traced: mi.Bool) -> mi.Bool:
+        """The film's pixels that hold a traced value (``traced``: per sample)."""
+        return traced
+
+    def to_pixels(self, delta: mi.Color3f, traced: mi.Bool) -> mi.Color3f:
+        """A gradient on the samples summed onto their pixels."""
+        return delta
+
+    def from_pixels(self, tangent: mi.Color3f, traced: mi.Bool) -> mi.Color3f:
+        """A tangent of the traced pixels read at the samples."""
+        return tangent
+
+    def still_map(self, history: History) -> ReprojectionMap:
+        """Every sample onto itself (a still camera over an unchanged scene)."""
+        return _reproject.still_map(history, self.width, self.height)
+
+    def reprojection_map(self, gb: GBuffer, history: History | None, *, tolerance: float,
+                         mode: str, reach: int = 0) -> ReprojectionMap:
+        """The pixels reprojected into the history's pixels (:mod:`.reproject`; ``reach``:
+        the film filter's, in pixels)."""
+        return _reproject.reprojection_map(gb.position, gb.hit, history, self.width,
+                                           self.height, tolerance=tolerance,
+                                           direction=gb.direction, mode=mode, reach=reach)
+
+    def arrays(self) -> None:
+        return None
+
+    def key(self) -> tuple:
+        return (self.kind, self.width, self.height)
+
+
+@dataclass(frozen=True, eq=False)
+class BufferSpace:
+    """The foveal buffer's samples (:mod:`.buffer_space`): each one's film ``pixel``, whether
+    it is ``on`` (on the film; a patch pixel inside the disc), and its ``ray`` in the launch."""
+    width: int
+    height: int
+    layout: _buffer_space.SampleLayout
+    pixels: mi.UInt32
+    on: mi.Bool
+    rays: mi.UInt32
+    kind = "buffer"
+
+    @property
+    def size(self) -> int:
+        return self.layout.size
+
+    def develop_at(self) -> tuple[mi.UInt32, mi.Bool]:
+        """Where the trace pass develops the rays' estimates: each sample's ray, where on."""
+        return self.rays, self.on
+
+    def traced_pixels(self, traced: mi.Bool) -> mi.Bool:
+        """The film's pixels whose traced value some sample holds."""
+        mask = dr.zeros(mi.Bool, self.width * self.height)
+        dr.scatter(mask, True, self.pixels, traced)
+        return mask
+
+    def to_pixels(self, delta: mi.Color3f, traced: mi.Bool) -> mi.Color3f:
+        """A gradient on the samples summed onto their traced pixels: the transpose of the
+        gather that reads each pixel's value at its samples."""
+        out = dr.zeros(mi.Color3f, self.width * self.height)
+        dr.scatter_reduce(dr.ReduceOp.Add, out, delta, self.pixels, traced)
+        return out
+
+    def from_pixels(self, tangent: mi.Color3f, traced: mi.Bool) -> mi.Color3f:
+        """A tangent of the traced pixels read at the samples."""
+        return dr.gather(mi.Color3f, tangent, self.pixels, traced)
+
+    def still_map(self, history: History) -> ReprojectionMap:
+        """Every sample onto itself (a still camera and gaze over an unchanged scene)."""
+        return _buffer_space.still_map(history, self.layout.size)
+
+    def reprojection_map(self, gb: GBuffer, history: History | None, *, tolerance: float,
+                         mode: str, reach: int = 0) -> ReprojectionMap:
+        """The samples reprojected into the history's samples (:mod:`.buffer_space`; a
+        sample's footprint is its own: ``reach`` plays no part)."""
+        return _buffer_space.reprojection_map(gb, self.on, history, self.layout, self.width,
+                                              self.height, tolerance=tolerance, mode=mode)
+
+    def arrays(self) -> dict:
+        """Its device arrays (a recording's inputs)."""
+        return {"pixels": self.pixels, "on": self.on, "rays": self.rays}
+
+    def key(self) -> tuple:
+        """Its host values (a recording's key)."""
+        return (self.kind, self.width, self.height, self.layout)
+
+    @staticmethod
+    def of(key: tuple, arrays: dict) -> BufferSpace:
+        """The space of :meth:`key` and :meth:`arrays` (inside a recording)."""
+        _, width, height, layout = key
+        return BufferSpace(width, height, layout, arrays["pixels"], arrays["on"],
+                           arrays["rays"])
+
+
+def space_of(key: tuple, arrays: dict | None):
+    """A space rebuilt from its key and arrays."""
+    if key[0] == "film":
+        return FilmSpace(key[1], key[2])
+    return BufferSpace.of(key, arrays)
