@@ -20,10 +20,16 @@ Then it writes, to ``--results`` (default ``docs/results/``):
   configuration's time; ``>`` where the family never reaches it, ``<`` where its fastest
   cell already does. Per seed, then mean ± standard deviation over seeds;
 * ``vr.json``: the same, machine-readable;
-* ``vr_eccentricity.png``: PSNR against eccentricity in degrees (5-degree rings, all frames
-  of seed 0 under the headset) per configuration;
+* ``vr_eccentricity.png``: per configuration, PSNR (left) and temporal instability (right)
+  against eccentricity in degrees (5-degree rings, all frames of seed 0 under the headset);
 * ``vr_side_by_side.mp4`` and ``vr_side_by_side.png`` (its middle frame): reference, the
   ``vr`` preset and uniform + history + OIDN at 1 spp, side by side, the gaze marked.
+
+Every cell also carries its periphery's temporal instability (flicker, display values): the
+root mean square of the change of its error from frame to frame, against a reference per frame
+so that the head's own motion cancels (:func:`foveated_mi.metrics.temporal_instability`),
+outside the fovea and per ring of eccentricity (0-5, 5-10, 10-20, 20-35, 35+ degrees from each
+frame's gaze ray; lower is steadier).
 
 Without the perceptual extra (``pip install -e '.[perceptual]'``) there is no JOD: the tables
 fall back to fovea PSNR (one condition) and say so. Times are medians of each sequence's
@@ -129,13 +135,37 @@ def cells_table(rows: list[dict], columns: list[str]) -> list[str]:
     from foveated_mi.study.aggregate import aggregate
     cells = aggregate(rows)
     cols = [c for c in dict.fromkeys(columns) if c != "psnr_fovea"]
-    out = ["| scene | configuration | seeds | time ms | rays | PSNR | fovea | periphery | "
-           + " | ".join(cols) + " |", "|---|---|---|---|---|---|---|---|" + "---|" * len(cols)]
+    names = ["scene", "configuration", "seeds", "time ms", "rays", "PSNR", "fovea", "periphery",
+             "flicker, periphery", *cols]
+    out = ["| " + " | ".join(names) + " |", "|" + "---|" * len(names)]
     for r in sorted(cells, key=lambda r: (r["scene"], r["method"] != "foveated", label(r))):
-        out.append(f"| {r['scene']} | {label(r)} | {r['seeds']} | {_pm(r, 'time_ms', '.0f')} "
-                   f"| {r['ray_fraction']:.0%} | {_pm(r, 'psnr')} | {_pm(r, 'psnr_fovea')} "
-                   f"| {_pm(r, 'psnr_periphery')} | "
-                   + " | ".join(_pm(r, c) for c in cols) + " |")
+        out.append("| " + " | ".join([
+            r["scene"], label(r), str(r["seeds"]), _pm(r, "time_ms", ".0f"),
+            f"{r['ray_fraction']:.0%}", _pm(r, "psnr"), _pm(r, "psnr_fovea"),
+            _pm(r, "psnr_periphery"), _pm(r, "flicker_periphery", ".4f"),
+            *(_pm(r, c) for c in cols)]) + " |")
+    return out
+
+
+def ring_name(lo: float, hi: float) -> str:
+    return f"{lo:g}+°" if hi >= 180.0 else f"{lo:g}-{hi:g}°"
+
+
+def flicker_table(rows: list[dict]) -> list[str]:
+    """Each cell's temporal instability (display values, mean ± standard deviation over
+    seeds): the whole frame, the periphery and each ring of
+    :data:`foveated_mi.metrics.FLICKER_RINGS_DEG` ("-": a ring the film never reaches)."""
+    from foveated_mi.metrics import FLICKER_RINGS_DEG, flicker_ring_columns
+    from foveated_mi.study.aggregate import aggregate
+    rings = list(zip(FLICKER_RINGS_DEG, FLICKER_RINGS_DEG[1:]))
+    cols = ["flicker", "flicker_periphery", *flicker_ring_columns()]
+    out = ["| scene | configuration | seeds | frame | periphery | "
+           + " | ".join(ring_name(lo, hi) for lo, hi in rings) + " |",
+           "|---|---|---|---|---|" + "---|" * len(rings)]
+    for r in sorted(aggregate(rows), key=lambda r: (r["scene"], r["method"] != "foveated",
+                                                    label(r))):
+        out.append(f"| {r['scene']} | {label(r)} | {r['seeds']} | "
+                   + " | ".join(_pm(r, c, ".4f") for c in cols) + " |")
     return out
 
 
@@ -165,13 +195,6 @@ def picture_tasks(spec, variant: str) -> list[dict]:
             and (t["method"] == "foveated" or (t["spp"] == 1 and t["method"] in FAMILIES))]
 
 
-def reference_of(spec, out: str, variant: str) -> np.ndarray:
-    from foveated_mi.study.tasks import reference_key
-    scene = spec.scenes[0]
-    return np.load(os.path.join(out, "references",
-                                f"{scene.label}-{reference_key(scene, variant)}.npy"))
-
-
 def eccentricity_psnr(shown: list, eccs: list, edges: np.ndarray) -> np.ndarray:
     """PSNR (data range 1) of all frames' pixels in each eccentricity ring ``edges``."""
     se = np.zeros(len(edges) - 1)
@@ -185,48 +208,49 @@ def eccentricity_psnr(shown: list, eccs: list, edges: np.ndarray) -> np.ndarray:
     return 10.0 * np.log10(1.0 / np.maximum(mse, 1e-12))
 
 
-def mark_gaze(img: np.ndarray, gaze, radius: int) -> np.ndarray:
-    """``img`` (display values) with a ring of ``radius`` pixels around the gaze point."""
-    h, w = img.shape[:2]
-    out = img.copy()
-    yy, xx = np.mgrid[0:h, 0:w]
-    d = np.hypot(xx + 0.5 - gaze[0] * w, yy + 0.5 - gaze[1] * h)
-    ring = np.abs(d - radius) < 1.2
-    out[ring] = (1.0, 0.2, 0.1)
-    return out
-
-
 def pictures(spec, out: str, results: str, variant: str) -> dict:
     """The eccentricity plot and the side-by-side video (module docstring)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from foveated_mi import viewer
+    from foveated_mi.metrics import temporal_instability
     from foveated_mi.sequence import write_video
+    from foveated_mi.study.pictures import cached_reference, ring_radius, side_by_side
     from foveated_mi.study.tasks import get_scene, run_sequence_task
-    reference = reference_of(spec, out, variant)
+    reference = cached_reference(spec, out, variant)
     tasks = picture_tasks(spec, variant)
     scene = get_scene(tasks[0]["scene"], variant)
     sensor = scene.sensors()[0]
     gazes = tasks[0]["motion"]["gazes"]
+    fovea_deg = spec.metrics.get("fovea_deg", RING_DEG)
     eccs = [viewer.eccentricity_map(sensor, g) for g in gazes]
     edges = np.arange(0.0, max(float(e.max()) for e in eccs) + RING_DEG, RING_DEG)
-    curves, frames = {}, {}
+    curves, flicker, frames = {}, {}, {}
     for t in tasks:
         row, shown = run_sequence_task(t, reference)
         name = label(row)
         curves[name] = eccentricity_psnr(shown, eccs, edges)
+        flicker[name] = temporal_instability([x for _, x in shown], [r for r, _ in shown],
+                                             eccs, edges, fovea_deg=fovea_deg).rings
         frames[name] = shown
-    fig, ax = plt.subplots(figsize=(7, 4.2))
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12, 4.2))
     mid = 0.5 * (edges[1:] + edges[:-1])
-    for name, psnr in curves.items():
-        ax.plot(mid, psnr, marker="o" if name.startswith(("vr", "oidn", "guided", "paper"))
-                else "s", linestyle="-" if not name.startswith("uniform") else "--", label=name)
-    ax.set_xlabel("eccentricity (degrees from the gaze ray)")
+    for name in curves:
+        style = {"marker": "o" if name.startswith(("vr", "oidn", "guided", "paper")) else "s",
+                 "linestyle": "-" if not name.startswith("uniform") else "--", "label": name}
+        ax.plot(mid, curves[name], **style)
+        ax2.plot(mid, flicker[name], **style)
+    for a in (ax, ax2):
+        a.set_xlabel("eccentricity (degrees from the gaze ray)")
+        a.axvline(fovea_deg, color="0.6", linewidth=0.8)
+        a.grid(alpha=0.3)
     ax.set_ylabel("PSNR (display-referred), all frames")
     ax.set_title(f"{spec.scenes[0].label}, headset, seed {spec.seeds[0]}: error against "
                  "eccentricity", fontsize=10)
-    ax.grid(alpha=0.3)
+    ax2.set_ylabel("flicker: RMS of the error's change per frame")
+    ax2.set_title("flicker against eccentricity (lower is steadier; the head's motion "
+                  "cancels)", fontsize=10)
     ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     png = os.path.join(results, "vr_eccentricity.png")
@@ -236,22 +260,20 @@ def pictures(spec, out: str, results: str, variant: str) -> dict:
     fov_name = next(n for n in frames if n.startswith("vr 1"))
     uni_name = next((n for n in frames if n.startswith("uniform+history+oidn")),
                     next(n for n in frames if n.startswith("uniform")))
-    ppd = viewer.pixels_per_degree(sensor, (0.5, 0.5))
-    radius = max(3, int(round(5.0 * ppd)))
-    strip = []
-    for k, g in enumerate(gazes):
-        ref = frames[fov_name][k][0]
-        panels = [ref, frames[fov_name][k][1], frames[uni_name][k][1]]
-        strip.append((np.clip(np.concatenate([mark_gaze(p, g, radius) for p in panels], 1),
-                              0, 1) * 255 + 0.5).astype(np.uint8))
+    radius = ring_radius(sensor, RING_DEG)
+    strip = [side_by_side([frames[fov_name][k][0], frames[fov_name][k][1],
+                           frames[uni_name][k][1]], g, radius) for k, g in enumerate(gazes)]
     mp4 = os.path.join(results, "vr_side_by_side.mp4")
     write_video(mp4, strip, spec.scenes[0].motion["fps"])
     import imageio.v3 as iio
     still = os.path.join(results, "vr_side_by_side.png")
     iio.imwrite(still, strip[len(strip) // 2])
+
+    def finite(v):
+        return [None if not math.isfinite(x) else float(x) for x in v]
     return {"eccentricity_edges_deg": edges.tolist(),
-            "eccentricity_psnr": {k: [None if not math.isfinite(x) else float(x) for x in v]
-                                  for k, v in curves.items()},
+            "eccentricity_psnr": {k: finite(v) for k, v in curves.items()},
+            "eccentricity_flicker": {k: finite(v) for k, v in flicker.items()},
             "video": os.path.basename(mp4), "panels": ["reference", fov_name, uni_name]}
 
 
@@ -315,7 +337,12 @@ def main(argv=None) -> int:
                   "Speed-up at equal " + column + " against each uniform family (mean over "
                   "seeds; ± the spread of the per-seed ratios; per seed in brackets):", "",
                   *speedup_table(sps), ""]
-    lines += ["## Every cell", "", *cells_table(res.rows, list(conditions.values())), ""]
+    lines += ["## Every cell", "", *cells_table(res.rows, list(conditions.values())), "",
+              "## Temporal instability", "",
+              "Flicker of each cell (display values; the root mean square over frames and "
+              "pixels of the change of its error from frame to frame, against a reference "
+              "per frame), over the whole frame, outside the fovea and per ring of "
+              "eccentricity from each frame's gaze:", "", *flicker_table(res.rows), ""]
     # Rows whose frames ran differently (replayed, traced): their ratios were refused above.
     report["warnings"] = res.warnings
     if res.warnings:
@@ -323,7 +350,8 @@ def main(argv=None) -> int:
     failed = res.failed
     if not a.no_pictures:
         report["pictures"] = pictures(spec, a.out, a.results, mi.variant())
-        lines += ["## Pictures", "", "![error against eccentricity](vr_eccentricity.png)", "",
+        lines += ["## Pictures", "", "![error and flicker against eccentricity]"
+                  "(vr_eccentricity.png)", "",
                   f"![side by side]({'vr_side_by_side.png'}) — reference, "
                   f"{report['pictures']['panels'][1]}, {report['pictures']['panels'][2]} "
                   "(seed 0, headset; the ring is 5° around the gaze); video: "

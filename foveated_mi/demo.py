@@ -20,8 +20,12 @@ Then the same comparison **in a headset** (:data:`HEADSET`): the camera spans 10
 the film spans the camera's field of view (FovVideoVDP's ``standard_hmd``), the fovea columns
 within 5 degrees of the gaze ray. The ``vr`` preset (denoising in a log-polar buffer, one warp)
 and the default preset run against the same uniform baselines, and the demo reports the
-speed-up at equal JOD (fovea PSNR without the perceptual extra) at frame 16 against uniform
-rendering with the same history and denoiser, seed by seed.
+speed-up at equal JOD (full-frame PSNR without the perceptual extra, the fovea's PSNR beside
+it) at frame 16 against uniform rendering with the same history and denoiser, seed by seed.
+It writes what that sentence compares as a picture, ``headset/side_by_side.png``: the
+converged reference, the ``vr`` frame and the baseline's cheapest frame at frame 16 (the
+first seed), side by side, the fovea ringed around the gaze
+(:mod:`foveated_mi.study.pictures`).
 
 Times are on this machine; they are comparable within the run only.
 """
@@ -110,14 +114,16 @@ def run_demo(out: str = os.path.join("out", "demo"), *, size: tuple[int, int] | 
         print("\n".join(line.replace("**", "") for line in verdict_lines(v)))
         print()
         print(verdict_sentence(v))
-    head = _run_headset(out, size, preset, progress)
-    print(f"\nResults: {res.results_path}, {head.results_path}; plots: {res.png}, {head.png}; "
-          f"{time.perf_counter() - t0:.0f} s.")
+    head, picture = _run_headset(out, size, preset, progress)
+    print(f"\nResults: {res.results_path}, {head.results_path}; plots: {res.png}, {head.png}"
+          + (f"; picture: {picture}" if picture else "")
+          + f"; {time.perf_counter() - t0:.0f} s.")
     return 1 if res.failed or head.failed or not verdicts else 0
 
 
 def _run_headset(out: str, size, preset: str, progress: bool):
-    """The headset part (module docstring): its table, speed-ups and sentence."""
+    """The headset part (module docstring): its table, speed-ups, sentence and picture:
+    ``(result, the picture's path or None)``."""
     import mitsuba as mi
     from . import perceptual, viewer
     from .study import parse_study, run_study
@@ -132,7 +138,7 @@ def _run_headset(out: str, size, preset: str, progress: bool):
                     echo=None)
     sensor = get_scene(res.spec.scenes[0].load_spec(), mi.variant()).sensors()[0]
     w, h = res.spec.scenes[0].size
-    column = "jod" if perceptual.available() and spec.perceptual["jod"] else "psnr_fovea"
+    column = "jod" if perceptual.available() and spec.perceptual["jod"] else "psnr"
     print()
     print(f"In a headset: voxel-city {w}x{h} through a {viewer.horizontal_fov(sensor):.0f}° "
           f"camera, the film spanning it ({spec.perceptual['display']}, "
@@ -150,7 +156,48 @@ def _run_headset(out: str, size, preset: str, progress: bool):
     print(f"(mean ± {SPREAD} over {len(spec.seeds)} seeds)")
     print()
     print(headset_sentence(cells, column))
-    return res
+    picture = _headset_picture(res, cells, column)
+    if picture is not None:
+        path, names = picture
+        print(f"Side by side ({' | '.join(names)}; frame 16, seed {res.spec.seeds[0]}, the "
+              f"ring {spec.metrics['fovea_deg']:g}° around the gaze): {path}")
+    return res, picture and picture[0]
+
+
+def _headset_picture(res, cells: list[dict], column: str):
+    """What :func:`headset_sentence` compares, as a picture under the study's folder:
+    ``(path, panel names)``, None where the sentence compares nothing. The reference, the
+    chosen ``vr`` cell and the cheapest cell of the baseline family at frame 16, rendered
+    again for the first seed (:func:`foveated_mi.study.tasks.task_frame`), side by side."""
+    import mitsuba as mi
+    from .render import to_display
+    from .study.pictures import cached_reference, ring_radius, write_side_by_side
+    from .study.tasks import expand_tasks, get_scene, task_frame
+    choice = headset_choice(cells, column)
+    if choice is None:
+        return None
+    vr, _, family = choice
+    base = min((f for f in family if int(f["frame"]) == int(vr["frame"])),
+               key=lambda f: f["time_ms"], default=None)
+    if base is None:
+        return None
+    spec, variant, seed = res.spec, mi.variant(), res.spec.seeds[0]
+    tasks = {t["task_id"]: t for t in expand_tasks(spec, variant)}
+
+    def frame_of(cell):
+        row = next(r for r in cell.get("rows") or [cell] if r.get("seed") == seed)
+        return to_display(task_frame(tasks[row["task_id"]], int(cell["frame"])),
+                          spec.metrics["exposure"])
+
+    reference = to_display(cached_reference(spec, res.out_dir, variant),
+                           spec.metrics["exposure"])
+    panels = [reference, frame_of(vr), frame_of(base)]
+    scene = spec.scenes[0]
+    sensor = get_scene(scene.load_spec(), variant).sensors()[0]
+    path = write_side_by_side(os.path.join(res.out_dir, "side_by_side.png"), panels,
+                              scene.gaze, ring_radius(sensor, spec.metrics["fovea_deg"],
+                                                      scene.gaze))
+    return path, ["reference", _name(vr), _name(base)]
 
 
 def _name(r: dict) -> str:
@@ -165,26 +212,45 @@ def _pm(r: dict, col: str, fmt: str) -> str:
     return format(v, fmt) + (f"±{format(sd, fmt)}" if sd == sd else "")
 
 
-def headset_sentence(cells: list[dict], column: str) -> str:
-    """One sentence: the ``vr`` configuration with the best speed-up at equal ``column`` (one
-    the baseline reaches, where there is one) at frame 16 against uniform rendering with the
-    same history and denoiser (its family over spp), with the spread over seeds; a speed-up
-    whose spread covers x1 is a tie."""
+def headset_choice(cells: list[dict], column: str):
+    """The comparison :func:`headset_sentence` makes: ``(vr cell, its Speedup, the baseline
+    family's cells)``, or None without a ``vr`` cell at frame 16 or a uniform baseline with
+    history and a denoiser."""
     from .study.equal_time import speedup_over_seeds
-    what = "JOD" if column == "jod" else "fovea PSNR"
     vr = [c for c in cells if c["method"] == "foveated" and int(c["frame"]) == 16
           and json.loads(c["config"]).get("options", {}).get("preset") == "vr"]
     hist = [c for c in cells if c["method"].startswith("uniform+history+")]
     if not vr or not hist:
-        return "In the headset, no vr configuration or no uniform baseline with history ran."
+        return None
     family = hist[0]["method"]
     fam = [c for c in hist if c["method"] == family]
     # A bound from above (the baseline's cheapest cell already does better) ranks last.
-    best = max(((c, speedup_over_seeds(c, fam, column)) for c in vr),
+    c, s = max(((c, speedup_over_seeds(c, fam, column)) for c in vr),
                key=lambda p: (p[1].relation != "<",
                               p[1].mean if p[1].mean == p[1].mean else -1.0))
-    c, s = best
+    return c, s, fam
+
+
+def headset_sentence(cells: list[dict], column: str) -> str:
+    """One sentence: the ``vr`` configuration with the best speed-up at equal ``column`` (one
+    the baseline reaches, where there is one) at frame 16 against uniform rendering with the
+    same history and denoiser (its family over spp), with the spread over seeds; a speed-up
+    whose spread covers x1 is a tie. ``column`` is a whole-frame figure (``jod``, or ``psnr``
+    without the perceptual extra: the fovea alone would flatter foveation); the fovea's PSNR
+    follows as a secondary figure."""
+    what = {"jod": "JOD", "psnr": "full-frame PSNR", "psnr_fovea": "fovea PSNR"}.get(column,
+                                                                                 column)
+    choice = headset_choice(cells, column)
+    if choice is None:
+        return "In the headset, no vr configuration or no uniform baseline with history ran."
+    c, s, fam = choice
+    family = fam[0]["method"]
     base = f"uniform + the same history + {family.split('+')[2].upper()}"
+    fovea = c.get("psnr_fovea", float("nan"))
+    figure = (f"{what} {c[column]:.2f} dB" if column.startswith("psnr") else
+              f"{what} {c[column]:.2f} over the whole frame")
+    if fovea == fovea and column != "psnr_fovea":
+        figure += f" (fovea PSNR {fovea:.2f} dB)"
     paid = s.ratio >= 1.0
     if s.refused:
         verdict = "its frames ran otherwise than the baseline's, replayed against traced: no verdict"
@@ -197,9 +263,8 @@ def headset_sentence(cells: list[dict], column: str) -> str:
     else:
         verdict = "the baseline's cheapest configuration already does better: no verdict"
     return (f"In the headset, vr at {c['spp']:.0f} spp took {c['time_ms']:.0f} ms per frame at "
-            f"frame 16 ({c['ray_fraction']:.0%} of the rays) for {what} {c[column]:.2f}; "
-            f"{base} needs {s.text()} that time for the same {what} ({verdict}; "
-            f"{int(c['seeds'])} seeds).")
+            f"frame 16 ({c['ray_fraction']:.0%} of the rays) for {figure}; {base} needs "
+            f"{s.text()} that time for the same {what} ({verdict}; {int(c['seeds'])} seeds).")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

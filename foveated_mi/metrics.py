@@ -48,10 +48,17 @@ the weight of pixel ``i`` is proportional to the probability with which the fove
 integrator traces it, :math:`P(d_i) = 1/(w d_i^2 + 1)`, :math:`w = (1/\sigma_p - 1)/\theta^2`,
 normalised to sum 1. :func:`eccentricity_weighted_psnr` is the PSNR of the weighted MSE
 :math:`\sum_i \omega_i \tfrac1C \sum_c (r_{ic} - t_{ic})^2`.
+
+**Temporal instability (flicker).** :func:`temporal_instability` scores a sequence against
+a reference sequence of its own (one reference per frame, so a camera's own motion cancels):
+the root mean square of :math:`(t_k - t_{k-1}) - (r_k - r_{k-1})` per ring of eccentricity
+in degrees, over the periphery and over the whole frame. A still error is no flicker; noise
+that changes from frame to frame is.
 """
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -59,7 +66,8 @@ from .validate import ParameterError, check_point2, check_range
 
 __all__ = ["psnr", "ssim", "flip", "compare", "fovea_mask", "eccentricity_weights",
            "eccentricity_weighted_psnr", "normalized_distance", "ssim_win_size",
-           "COMPARE_KEYS", "SSIM_WIN_SIZE"]
+           "temporal_instability", "TemporalInstability", "flicker_ring_columns",
+           "COMPARE_KEYS", "SSIM_WIN_SIZE", "FLICKER_RINGS_DEG", "FLICKER_KEYS"]
 
 SSIM_WIN_SIZE = 7
 
@@ -387,3 +395,214 @@ def compare(reference, test, *, gaze=None, theta=None, sigma_p=None,
                 ref, tst, eccentricity_weights(ref.shape, gaze, theta, sigma_p), rng)
     return out
 
+
+# ---------------------------------------------------------------------------------------------
+# Temporal instability (flicker) per ring of eccentricity
+# ---------------------------------------------------------------------------------------------
+
+#: Ring edges in degrees of eccentricity of the studies' flicker columns: 0-5 (the fovea at
+#: the default ``fovea_deg``), 5-10, 10-20, 20-35 and 35-180 (the rest of any field of view;
+#: eccentricity never exceeds 180 degrees).
+FLICKER_RINGS_DEG = (0.0, 5.0, 10.0, 20.0, 35.0, 180.0)
+
+
+def flicker_ring_columns(rings=FLICKER_RINGS_DEG) -> tuple[str, ...]:
+    """Column names of the rings between consecutive ``rings`` edges, ``flicker_<lo>_<hi>``
+    in degrees (``flicker_0_5``, ``flicker_5_10``, ... for :data:`FLICKER_RINGS_DEG`)."""
+    edges = _check_rings(rings)
+    return tuple(f"flicker_{lo:g}_{hi:g}".replace(".", "p")
+                 for lo, hi in zip(edges, edges[1:]))
+
+
+class TemporalInstability(NamedTuple):
+    """What :func:`temporal_instability` returns (display values, the images' own units)."""
+
+    #: RMS per ring, shape ``(len(edges) - 1,)``; nan for a ring no pixel fell in.
+    rings: np.ndarray
+    #: RMS over the periphery (eccentricity ``>= fovea_deg``); nan when it is empty or no
+    #: eccentricity was given.
+    periphery: float
+    #: RMS over every pixel of the frame.
+    frame: float
+    #: The ring edges in degrees.
+    edges: np.ndarray
+
+    def columns(self) -> dict[str, float]:
+        """``{"flicker": frame, "flicker_periphery": periphery, "flicker_<lo>_<hi>": ring}``,
+        the names of :func:`flicker_ring_columns`."""
+        return {"flicker": self.frame, "flicker_periphery": self.periphery,
+                **{c: float(v) for c, v in zip(flicker_ring_columns(self.edges), self.rings)}}
+
+
+def _check_rings(rings) -> np.ndarray:
+    allowed = ("at least 2 finite, non-negative, strictly increasing ring edges in degrees "
+               "(e.g. (0, 5, 10, 20, 35, 180))")
+    try:
+        edges = np.asarray(rings, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ParameterError("rings", rings, allowed) from None
+    if edges.ndim != 1 or edges.size < 2 or not np.all(np.isfinite(edges)) or \
+            edges[0] < 0.0 or not np.all(np.diff(edges) > 0.0):
+        raise ParameterError("rings", rings, allowed)
+    return edges
+
+
+#: The flicker columns of a sequence row: the whole frame, the periphery (outside the
+#: fovea), then each ring of :data:`FLICKER_RINGS_DEG`.
+FLICKER_KEYS = ("flicker", "flicker_periphery", *flicker_ring_columns())
+
+
+def _frame_list(name: str, frames, ndims: tuple[int, ...], what: str) -> list[np.ndarray]:
+    """``frames`` (an (F, ...) array or a sequence of per-frame arrays) as a list of arrays,
+    without stacking a sequence (a long sequence at full size stays in its own frames)."""
+    allowed = f"a sequence of {what}"
+    if isinstance(frames, np.ndarray):
+        if frames.ndim - 1 not in ndims:
+            raise ParameterError(name, f"{frames.dtype} array of shape {frames.shape}",
+                                 allowed)
+        return list(frames)
+    try:
+        out = [np.asarray(f) for f in frames]
+    except TypeError:
+        raise ParameterError(name, frames, allowed) from None
+    return out
+
+
+def _check_sequence(name: str, frames) -> list[np.ndarray]:
+    what = "at least 2 real (H, W) or (H, W, C) frames of one shape"
+    seq = _frame_list(name, frames, (2, 3), what)
+    if len(seq) < 2:
+        raise ParameterError(name, f"{len(seq)} frame{'s' * (len(seq) != 1)}",
+                             what + " (a change needs two frames)")
+    shape = seq[0].shape
+    for k, f in enumerate(seq):
+        if f.ndim not in (2, 3) or 0 in f.shape or f.shape != shape or not (
+                np.issubdtype(f.dtype, np.floating) or np.issubdtype(f.dtype, np.integer)):
+            raise ParameterError(f"{name}[{k}]", f"{f.dtype} array of shape {f.shape}",
+                                 f"{what} (frame 0: {shape})")
+        bad = int(np.count_nonzero(~np.isfinite(f)))
+        if bad:
+            raise ParameterError(f"{name}[{k}]", f"array with {bad} NaN/inf values",
+                                 "finite values")
+    return seq
+
+
+def _check_eccentricity(ecc, n: int, hw: tuple[int, int]) -> list[np.ndarray] | None:
+    if ecc is None:
+        return None
+    allowed = (f"finite degrees >= 0: one (H, W) = {hw} map for every frame, or one per frame "
+               f"({n} of them)")
+    if isinstance(ecc, np.ndarray) and ecc.ndim == 2:
+        maps = [ecc] * n
+    else:
+        maps = _frame_list("eccentricity_deg", ecc, (2,), allowed)
+        if len(maps) != n:
+            raise ParameterError("eccentricity_deg", f"{len(maps)} maps", allowed)
+    for k, m in enumerate(maps):
+        if m.shape != hw or not np.issubdtype(m.dtype, np.number) or np.iscomplexobj(m):
+            raise ParameterError("eccentricity_deg", f"{m.dtype} array of shape {m.shape}",
+                                 allowed)
+        m64 = m.astype(np.float64)
+        if not np.all(np.isfinite(m64)) or (m64 < 0).any():
+            raise ParameterError("eccentricity_deg", f"map {k} with values in "
+                                 f"[{np.nanmin(m64):g}, {np.nanmax(m64):g}]", allowed)
+    return [m.astype(np.float64, copy=False) for m in maps]
+
+
+def temporal_instability(test_frames, ref_frames, eccentricity_deg=None,
+                         rings=FLICKER_RINGS_DEG, *, fovea_deg: float = 5.0
+                         ) -> TemporalInstability:
+    r"""Temporal instability (flicker) of a sequence against its per-frame reference, per ring
+    of eccentricity.
+
+    For each pair of consecutive frames :math:`(k-1, k)` and each pixel :math:`i`, the change
+    of the error from one frame to the next,
+
+    .. math::
+
+        \delta_{k,i,c} = (t_{k,i,c} - t_{k-1,i,c}) - (r_{k,i,c} - r_{k-1,i,c}),
+
+    is what the test sequence changes beyond what the reference changes: the scene's own
+    motion (a turning head, a moving object) is in both and cancels, and a still error (the
+    same bias in every frame) is no flicker. A region's value is the root mean square of
+    :math:`\delta` over its pixels, the channels and every pair of frames,
+    :math:`\sqrt{\sum \delta^2 / N}`. A pixel belongs to the ring of its eccentricity in frame
+    :math:`k`, the later frame of the pair (the gaze may move between frames).
+
+    Parameters
+    ----------
+    test_frames : (F, H, W) or (F, H, W, C) array_like, or a sequence of F frames
+        The sequence to score, F >= 2, display-referred (e.g.
+        :func:`foveated_mi.render.to_display`), finite. A sequence of frames is read frame by
+        frame, never stacked.
+    ref_frames : same shape as ``test_frames``
+        The reference of each frame (its own camera and time).
+    eccentricity_deg : (H, W) array, (F, H, W) array or sequence of F (H, W) arrays, optional
+        Each pixel's eccentricity in degrees from the gaze ray: one map for every frame (a
+        still gaze) or one per frame (e.g. :func:`foveated_mi.viewer.eccentricity_map` at each
+        frame's gaze). None: only the whole frame's figure is computed (``rings`` and
+        ``periphery`` are nan).
+    rings : sequence of float, optional
+        Ring edges in degrees, at least two, non-negative and strictly increasing; ring ``j``
+        holds ``rings[j] <= e < rings[j + 1]``, the last ring its upper edge too. Pixels
+        outside ``[rings[0], rings[-1]]`` belong to no ring. Default
+        :data:`FLICKER_RINGS_DEG`.
+    fovea_deg : float, optional
+        The fovea's radius in degrees, in (0, 180]: the periphery is every pixel at
+        ``e >= fovea_deg`` (the complement of :func:`compare`'s fovea ``e < fovea_deg``).
+
+    Returns
+    -------
+    TemporalInstability
+        ``rings`` (one RMS per ring, nan for a ring no pixel fell in), ``periphery`` (nan when
+        empty), ``frame`` (the whole frame) and ``edges``; ``columns()`` names them as the
+        study's columns. 0 exactly when ``test_frames`` equals ``ref_frames``, or differs from
+        it by the same error in every frame.
+
+    Raises
+    ------
+    ParameterError
+        One line naming the argument: fewer than 2 frames, frames of different shapes,
+        non-finite values, an eccentricity map of another size or with negative values, bad
+        ring edges or fovea radius.
+    """
+    test = _check_sequence("test_frames", test_frames)
+    ref = _check_sequence("ref_frames", ref_frames)
+    if len(ref) != len(test) or ref[0].shape != test[0].shape:
+        raise ParameterError("ref_frames", f"{len(ref)} frames of shape {ref[0].shape}",
+                             f"as many frames as the test frames, of their shape: "
+                             f"{len(test)} of {test[0].shape}")
+    edges = _check_rings(rings)
+    fovea_deg = check_range("fovea_deg", fovea_deg, 0.0, 180.0, lo_open=True)
+    eccs = _check_eccentricity(eccentricity_deg, len(test), test[0].shape[:2])
+    n_rings = len(edges) - 1
+    ring_se, ring_n = np.zeros(n_rings), np.zeros(n_rings)
+    per_se = per_n = all_se = all_n = 0.0
+    prev = test[0].astype(np.float64) - ref[0]
+    for k in range(1, len(test)):
+        err = test[k].astype(np.float64) - ref[k]
+        d = err - prev
+        prev = err
+        sq = d * d
+        if sq.ndim == 3:
+            sq = sq.mean(axis=-1)               # every pixel has all C channels
+        all_se += float(sq.sum())
+        all_n += sq.size
+        if eccs is None:
+            continue
+        e = eccs[k]
+        j = np.searchsorted(edges, e, side="right") - 1
+        j[e == edges[-1]] = n_rings - 1         # the last ring holds its upper edge
+        inside = (j >= 0) & (j < n_rings)
+        ring_se += np.bincount(j[inside], weights=sq[inside], minlength=n_rings)
+        ring_n += np.bincount(j[inside], minlength=n_rings)
+        periphery = e >= fovea_deg
+        per_se += float(sq[periphery].sum())
+        per_n += int(np.count_nonzero(periphery))
+
+    def rms(se, n):
+        return math.sqrt(se / n) if n > 0 else math.nan
+
+    ring_rms = np.array([rms(a, b) for a, b in zip(ring_se, ring_n)])
+    return TemporalInstability(ring_rms, rms(per_se, per_n) if eccs is not None else math.nan,
+                               rms(all_se, all_n), edges)

@@ -33,9 +33,10 @@ def test_psnr_by_eccentricity_pools_every_frame_of_a_ring(bench):
     assert psnr[:2] == pytest.approx([20.0, 40.0], abs=1e-9) and math.isnan(psnr[2])
 
 
-def test_the_gaze_ring_marks_only_its_circle(bench):
+def test_the_gaze_ring_marks_only_its_circle():
+    from foveated_mi.study.pictures import mark_gaze
     img = np.zeros((40, 60, 3))
-    out = bench.mark_gaze(img, (0.5, 0.5), 10)
+    out = mark_gaze(img, (0.5, 0.5), 10)
     ys, xs = np.nonzero(out[..., 0] > 0)
     d = np.hypot(xs + 0.5 - 30, ys + 0.5 - 20)
     assert len(d) > 0 and np.all(np.abs(d - 10) < 1.2) and np.all(img == 0)
@@ -73,3 +74,46 @@ def test_a_tiny_vr_study_runs_end_to_end(bench, tmp_path):
     assert (res / "vr_eccentricity.png").stat().st_size > 0
     assert (res / "vr_side_by_side.mp4").stat().st_size > 0
     assert "Speed-up at equal" in (res / "vr.md").read_text()
+    # the flicker per ring: in the tables and beside the error in the eccentricity picture
+    md = (res / "vr.md").read_text()
+    assert "## Temporal instability" in md and "| flicker, periphery |" in md
+    pics = report["pictures"]
+    assert pics["eccentricity_flicker"].keys() == pics["eccentricity_psnr"].keys()
+    assert all(len(v) == len(pics["eccentricity_edges_deg"]) - 1
+               for v in pics["eccentricity_flicker"].values())
+    assert any(x is not None and x > 0 for v in pics["eccentricity_flicker"].values() for x in v)
+
+
+def _cell_rows():
+    """Two seeds of a vr row and a uniform row, with their flicker columns."""
+    from foveated_mi.metrics import FLICKER_KEYS
+    rows = []
+    for seed in (0, 1):
+        for method, preset, f in (("foveated", "vr", 0.02), ("uniform", None, 0.01)):
+            config = {"options": {"preset": preset}} if preset else {}
+            rows.append({"scene": "city", "method": method, "spp": 1.0, "frame": 6.0,
+                         "seed": float(seed), "time_ms": 10.0, "ray_fraction": 0.5,
+                         "psnr": 30.0, "psnr_fovea": 31.0, "psnr_periphery": 29.0,
+                         "config": json.dumps(config),
+                         **{k: f * (1 + seed) for k in FLICKER_KEYS},
+                         "flicker_35_180": math.nan})
+    return rows
+
+
+def test_the_tables_carry_the_flicker_per_ring(bench):
+    """The cells table has the periphery's flicker; the flicker table one column per ring of
+    FLICKER_RINGS_DEG, each cell the mean ± standard deviation over seeds, "-" for a ring
+    the film never reaches."""
+    cells = bench.cells_table(_cell_rows(), ["jod_video"])
+    assert cells[0].endswith("| periphery | flicker, periphery | jod_video |")
+    assert all(line.count("|") == cells[0].count("|") for line in cells) and len(cells) == 4
+    vr = next(line for line in cells if "| vr 1 spp |" in line)
+    # seeds 0.02 and 0.04: mean 0.03, sample standard deviation 0.0141
+    assert "| 0.0300 ± 0.0141 |" in vr
+    table = bench.flicker_table(_cell_rows())
+    assert table[0] == ("| scene | configuration | seeds | frame | periphery | 0-5° | 5-10° | "
+                        "10-20° | 20-35° | 35+° |")
+    vr = next(line for line in table if "| vr 1 spp |" in line)
+    uni = next(line for line in table if "| uniform 1 spp |" in line)
+    assert vr.count("0.0300 ± 0.0141") == 6 and vr.endswith("| - |")
+    assert uni.count("0.0150 ± 0.0071") == 6

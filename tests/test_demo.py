@@ -77,6 +77,12 @@ def test_demo_runs_end_to_end_and_resumes(tmp_path, capsys):
            "(standard_hmd" in text and "foveated (vr) 4 spp" in text
     head = [line for line in text.splitlines() if line.startswith("In the headset, vr at ")]
     assert len(head) == 1 and "uniform + the same history + " in head[0] and "3 seeds" in head[0]
+    # judged on the whole frame (JOD, or full-frame PSNR without the extra), the fovea beside
+    from foveated_mi import perceptual
+    whole = "over the whole frame" if perceptual.available() else "for full-frame PSNR "
+    assert whole in head[0] and "(fovea PSNR " in head[0]
+    # the picture of what the sentence compares: reference | vr | baseline at 32x18 each
+    _check_side_by_side(out, text)
     hrows = (out / "headset" / "results.csv").read_text().splitlines()
     assert len(hrows) == 1 + 3 * (3 * 2 + 4 - (0 if _oidn() else 2) + 2 * 2 * 2)
     # A second run re-renders nothing: same rows, no duplicates.
@@ -88,6 +94,29 @@ def test_demo_runs_end_to_end_and_resumes(tmp_path, capsys):
 def _oidn():
     from foveated_mi.denoise import oidn_available
     return oidn_available()
+
+
+def _check_side_by_side(out, text):
+    """The demo's picture: three 32x18 panels, its path printed; the first panel is the
+    cached reference in display values with the gaze ringed, the others rendered frames."""
+    import imageio.v3 as iio
+    from foveated_mi.render import to_display
+    from foveated_mi.study.pictures import RING_COLOUR, mark_gaze
+    png = out / "headset" / "side_by_side.png"
+    [line] = [s for s in text.splitlines() if s.startswith("Side by side (reference | ")]
+    assert line.endswith(str(png)) and "| foveated (vr) " in line and "| uniform+history+" in line
+    assert f"picture: {png}" in text
+    img = iio.imread(png)
+    assert img.shape == (18, 3 * 32, 3) and img.dtype == np.uint8
+    [ref] = [np.load(p) for p in (out / "headset" / "references").glob("*.npy")]
+    # 100 degrees over 32 px: 0.3 px per degree, so the 5-degree ring takes its 3-px minimum
+    want = (np.clip(mark_gaze(to_display(ref), (0.5, 0.5), 3), 0, 1) * 255 + 0.5).astype(np.uint8)
+    assert np.array_equal(img[:, :32], want)
+    ring = np.all(img[:, :32] == (np.array(RING_COLOUR) * 255 + 0.5).astype(np.uint8), axis=-1)
+    assert 0 < ring.sum() < 32 * 18 // 4
+    for k in (1, 2):                     # the same ring on every panel, another image inside
+        assert np.array_equal(img[:, 32 * k:32 * (k + 1)][ring], img[:, :32][ring])
+        assert not np.array_equal(img[:, 32 * k:32 * (k + 1)], img[:, :32])
 
 
 def _hist(spp, frame, time_ms, fovea, seed=None, denoiser="oidn", preset="oidn", jod=None):
@@ -248,3 +277,34 @@ def test_an_equal_time_verdict_refuses_a_candidate_that_ran_otherwise():
     (v,) = equal_time_verdicts(replayed, "oidn")
     assert v.chosen is None and v.refused
     assert any("Not compared" in line for line in verdict_lines(v))
+
+
+def _psnr_rows(vr_psnr, vr_fovea, seeds=3):
+    """A vr cell at frame 16 and uniform + the same history + OIDN at 1, 2 and 4 spp, whose
+    fovea PSNR is far below its full-frame PSNR (as a denoised frame's can be in a headset)."""
+    rows = []
+    for seed in range(seeds):
+        rows.append({**_row("foveated", 4, 16, 40.0, vr_psnr, vr_fovea, "vr"),
+                     "seed": float(seed)})
+        rows += [{**_hist(s, 16, t, 0.0, seed=seed), "psnr": p, "psnr_fovea": p - 6.0}
+                 for s, t, p in ((1, 100.0, 30.0), (2, 200.0, 32.0), (4, 400.0, 34.0))]
+    return rows
+
+
+def test_the_headset_sentence_without_jod_judges_the_whole_frame():
+    """Without the perceptual extra the sentence reads full-frame PSNR: a vr frame whose
+    fovea beats every baseline cell but whose whole frame is below the cheapest one is no
+    win, and the sentence says which figure it judged, the fovea's only beside it."""
+    from foveated_mi.demo import headset_sentence
+    from foveated_mi.study.aggregate import aggregate
+    cells = aggregate(_psnr_rows(vr_psnr=27.0, vr_fovea=35.0))
+    text = headset_sentence(cells, "psnr")
+    assert "for full-frame PSNR 27.00 dB (fovea PSNR 35.00 dB)" in text
+    assert "for the same full-frame PSNR" in text and "foveation paid" not in text
+    assert "cheapest configuration already does better: no verdict" in text
+    # judged by the fovea alone the same cells would have read as a win
+    assert "foveation paid" in headset_sentence(cells, "psnr_fovea")
+    # 31 dB over the whole frame, halfway from 30 to 32 dB in log time: 100 * 2 ** 0.5 ms
+    # against 40 ms, the same on every seed; a fovea far below the baseline's changes nothing
+    text = headset_sentence(aggregate(_psnr_rows(vr_psnr=31.0, vr_fovea=20.0)), "psnr")
+    assert "needs ×3.54 ± 0.00 that time for the same full-frame PSNR (foveation paid;" in text

@@ -612,3 +612,66 @@ def test_a_second_viewing_condition_scores_the_same_frames(tmp_path):
     # the study's rows come from the same frames (fixed seeds)
     assert rows["foveated"]["jod_video_monitor"] == pytest.approx(mon, abs=1e-4)
     assert all(0.0 < r["jod_video_monitor"] <= 10.0 for r in rows.values())
+
+
+def test_a_study_in_motion_measures_flicker_per_ring_of_eccentricity(tmp_path):
+    """Each sequence row carries the flicker columns, read back as numbers: the temporal
+    instability of the frames it showed against their per-frame references, in rings of
+    each frame's eccentricity from that frame's gaze (the viewer's geometry, as the fovea
+    columns), the periphery outside metrics.fovea_deg."""
+    import mitsuba as mi
+    from foveated_mi import viewer
+    from foveated_mi.metrics import FLICKER_KEYS, temporal_instability
+    from foveated_mi.study import load_study
+    from foveated_mi.study.tasks import expand_tasks, get_scene, run_sequence_task
+    _, _, [ref], _ = _motion_rows(tmp_path)
+    rows = {r["method"]: r for r in read_rows(str(tmp_path / "local" / "results.csv"))}
+    assert all(isinstance(r[k], float) for r in rows.values() for k in FLICKER_KEYS)
+    spec = load_study(str(tmp_path / "motion.toml"))
+    gazes = spec.scenes[0].motion["gazes"]
+    task = next(t for t in expand_tasks(spec, mi.variant()) if t["method"] == "foveated")
+    row, shown = run_sequence_task(task, ref)
+    sensor = get_scene(task["scene"], mi.variant()).sensors()[0]
+    want = temporal_instability([t for _, t in shown], [r for r, _ in shown],
+                                [viewer.eccentricity_map(sensor, g) for g in gazes],
+                                fovea_deg=5.0).columns()
+    # the same computation on the same frames: equal to the last bit (nan: a ring the film's
+    # 39 degrees never reach)
+    assert {k: row[k] for k in FLICKER_KEYS} == pytest.approx(want, rel=0, abs=0, nan_ok=True)
+    assert math.isnan(want["flicker_35_180"])
+    for r in rows.values():
+        assert 0.0 < r["flicker_periphery"] < 1.0 and 0.0 < r["flicker_0_5"] < 1.0
+
+
+def test_a_task_frame_is_the_frame_its_row_was_scored_on(tmp_path):
+    """tasks.task_frame (the demo's picture) renders a still task's frame as its row was
+    rendered: scored against the cached reference it gives the row's PSNR. A sequence's
+    task is refused in one line."""
+    import mitsuba as mi
+    from foveated_mi.metrics import psnr
+    from foveated_mi.render import to_display
+    from foveated_mi.study import load_study
+    from foveated_mi.study.pictures import cached_reference
+    from foveated_mi.study.tasks import expand_tasks, task_frame
+    from foveated_mi.validate import ParameterError
+    path = study_file(tmp_path, TWO + "[uniform]\nspp = [1]\n")
+    res = run_study(path, out=str(tmp_path / "o"), progress=False, echo=None)
+    assert res.failed == []
+    spec, v = load_study(path), mi.variant()
+    ref = to_display(cached_reference(spec, str(tmp_path / "o"), v))
+    rows = {(r["task_id"], int(r["frame"])): r for r in read_rows(res.results_path)}
+    tasks = expand_tasks(spec, v)
+    for t in (tasks[0], tasks[-1]):              # foveated (voronoi), uniform
+        frame = max(t["frames"])
+        got = psnr(ref, to_display(task_frame(t, frame)), data_range=1.0)
+        want = rows[(t["task_id"], frame)]["psnr"]
+        # Splatting by atomics may differ between two renders by up to 1e-4 per value
+        # (measured on LLVM); the display mapping's steepest slope (sRGB's 12.92) makes that
+        # eta = 1.3e-3, and an RMS error moves by at most eta: PSNR within 20 log10(1 +
+        # eta / rmse). Frame 1 instead of 3 is 1.1 dB away.
+        eta, rmse = 12.92e-4, 10.0 ** (-want / 20.0)
+        assert got == pytest.approx(want, abs=20.0 * math.log10(1.0 + eta / rmse)), t["method"]
+    motion = load_study(study_file(tmp_path, MOTION, "motion.toml"))
+    with pytest.raises(ParameterError) as e:
+        task_frame(expand_tasks(motion, v)[0], 6)
+    assert str(e.value).startswith("task = ") and "\n" not in str(e.value)

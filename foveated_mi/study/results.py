@@ -10,6 +10,9 @@
   :data:`foveated_mi.timing.STAGES`). An existing file with other columns (the pipeline gained
   a stage) is rewritten once, atomically, with the union of both headers; its old rows keep
   their values and get empty cells for the new columns.
+* A row may bring columns of :data:`OPTIONAL_COLUMNS` the header lacks (the flicker columns
+  of a study in motion, :data:`foveated_mi.metrics.FLICKER_KEYS`): the file is rewritten once
+  by the same union rule, the new columns at the end, earlier rows empty there.
 * Floats are written with ``repr`` (shortest exact round trip): ``nan`` and ``inf`` as such,
   ``None`` as an empty cell. :func:`read_rows` reads them back with numbers as floats.
 """
@@ -21,10 +24,10 @@ import math
 import os
 from typing import Any, Iterable
 
-from ..metrics import COMPARE_KEYS
+from ..metrics import COMPARE_KEYS, FLICKER_KEYS
 
 __all__ = ["columns", "ResultsFile", "read_rows", "format_value", "parse_value",
-           "NUMERIC_COLUMNS"]
+           "NUMERIC_COLUMNS", "OPTIONAL_COLUMNS"]
 
 _HEAD = ("task_id", "scene", "method", "seed", "theta", "sigma_p", "reconstruction", "spp",
          "frame",
@@ -51,8 +54,13 @@ def columns(extra: Iterable[str] = ()) -> list[str]:
 #: Columns read back as numbers by :func:`read_rows` (besides any ``*_ms`` column).
 NUMERIC_COLUMNS = frozenset(("seed", "theta", "sigma_p", "spp", "frame", "rays",
                              "ray_fraction", "samples", "time_ms", *COMPARE_KEYS, "jod", "jod_video",
-                             "jod_monitor", "jod_video_monitor",
+                             "jod_monitor", "jod_video_monitor", *FLICKER_KEYS,
                              "history_hit_rate", "width", "height", "repeats"))
+
+
+#: Columns only some rows carry (a sequence row's flicker): a file gains them from the first
+#: row that brings them (:meth:`ResultsFile.append`).
+OPTIONAL_COLUMNS = frozenset(FLICKER_KEYS)
 
 
 def format_value(v: Any) -> str:
@@ -149,6 +157,14 @@ class ResultsFile:
             for r in self.rows:
                 w.writerow([r.get(c, "") or "" for c in header])
 
+    def _widen(self, new: list[str]) -> None:
+        """Rewrite the file once with ``new`` columns at the end (the union rule)."""
+        self._f.close()
+        merged = self.columns + new
+        self._rewrite(merged)
+        self.columns = merged
+        self._f = open(self.path, "a", newline="", encoding="utf-8")
+
     def _write_line(self, values: list[str]) -> None:
         buf = io.StringIO()
         csv.writer(buf, lineterminator="\n").writerow(values)
@@ -157,10 +173,13 @@ class ResultsFile:
         os.fsync(self._f.fileno())
 
     def append(self, row: dict[str, Any]) -> None:
-        """Write one row (missing columns empty; unknown keys are an error) and sync it."""
+        """Write one row (missing columns empty; unknown keys are an error, but those of
+        :data:`OPTIONAL_COLUMNS`, which the file gains) and sync it."""
         extra = set(row) - set(self.columns)
-        if extra:
+        if extra - OPTIONAL_COLUMNS:
             raise KeyError(f"results row has unknown columns {sorted(extra)}")
+        if extra:
+            self._widen([c for c in row if c in extra])
         values = [format_value(row.get(c)) for c in self.columns]
         self._write_line(values)
         self.rows.append(dict(zip(self.columns, values)))

@@ -62,7 +62,17 @@ With ``[motion]`` a row is one sequence (``frame`` = its frame count): ``time_ms
 median frame time after the first frame, the quality columns the mean over its frames, each
 scored against a reference of that frame's camera (rendered once per scene, cached) with the
 fovea at that frame's gaze, and ``jod_video`` (with the perceptual extra) FovVideoVDP's score
-of the whole sequence as a video at ``fps``, fixating the gaze path.
+of the whole sequence as a video at ``fps``, fixating the gaze path. Its flicker columns
+(:data:`foveated_mi.metrics.FLICKER_KEYS`, display values, lower is steadier) are the temporal
+instability of its frames against their references
+(:func:`foveated_mi.metrics.temporal_instability`; the camera's own motion cancels):
+``flicker`` over the whole frame and, with ``[viewer]``, ``flicker_periphery`` outside
+``metrics.fovea_deg`` and one column per ring of eccentricity from each frame's gaze ray,
+``flicker_0_5``, ``flicker_5_10``, ``flicker_10_20``, ``flicker_20_35`` and
+``flicker_35_180`` (degrees; nan where the film reaches no pixel, and without ``[viewer]``,
+which has no degrees). A uniform row without history renders every frame with its seed, so
+under a still camera its frames repeat and its flicker is 0 (a renderer drawing new samples
+each frame would flicker).
 
     [foveated.defaults]         # options shared by the grid and the list
     atrous_iterations = 0

@@ -25,7 +25,9 @@ traced alike unless a recording fails or a row is timed otherwise. Times of rows
 modes differ are not compared (:func:`foveated_mi.study.equal_time.speedup`).
 
 Quality columns: :func:`foveated_mi.metrics.compare` against the reference, plus ``jod``
-(:mod:`foveated_mi.perceptual`) when the study asks for it and the extra is installed.
+(:mod:`foveated_mi.perceptual`) when the study asks for it and the extra is installed. A
+sequence row (``[motion]``) also gets the flicker columns
+(:data:`foveated_mi.metrics.FLICKER_KEYS`, :func:`_flicker`).
 """
 from __future__ import annotations
 
@@ -39,7 +41,8 @@ from typing import Any
 import numpy as np
 
 __all__ = ["expand_tasks", "reference_task", "reference_key", "run_task", "run_reference_task",
-           "run_sequence_task", "get_scene", "scene_cache_info", "clear_scene_cache", "task_id"]
+           "run_sequence_task", "task_frame", "get_scene", "scene_cache_info",
+           "clear_scene_cache", "task_id"]
 
 #: Test hook (not API): when set to a path that does not exist, the first task a process runs
 #: creates that file and kills its own process, to test that a dead worker's task is retried.
@@ -300,7 +303,7 @@ def _sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = False):
     n = len(gazes)
     refs = reference if reference.ndim == 4 else np.broadcast_to(reference, (n,) + reference.shape)
     render, integ = _sequence_renderer(scene, task, gazes[0])
-    times, rays, shown, quality = _sequence_frames(scene, task, refs, render)
+    times, rays, shown, quality, eccs = _sequence_frames(scene, task, refs, render)
     row = _sequence_summary(task, n, times, rays)
     modes = getattr(render, "modes", None)      # the row's time: the frames after the first
     row["trace_mode"] = _mode(modes[1:] or modes) if modes else UNIFORM_MODE
@@ -310,6 +313,7 @@ def _sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = False):
                    history_hit_rate=integ.stats.get("history_hit_rate"))
     for key in quality[0]:                      # nan (an empty region) stays nan
         row[key] = float(np.mean([q[key] for q in quality]))
+    row.update(_flicker(task, shown, eccs))
     if task.get("jod"):
         from ..perceptual import jod_video
         viewing = _viewing(scene, task)
@@ -323,6 +327,20 @@ def _sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = False):
                                                  fps=motion["fps"], ppd=monitor["ppd"],
                                                  display=monitor["display"])
     return (row, shown) if keep else row
+
+
+def _flicker(task: dict, shown: list, eccs: list) -> dict:
+    """The row's flicker columns: :func:`foveated_mi.metrics.temporal_instability` of the
+    frames shown (display values) against their references, in the rings of
+    :data:`foveated_mi.metrics.FLICKER_RINGS_DEG` of each frame's eccentricity from its gaze
+    (the viewing geometry of the fovea columns, :func:`_viewing`), the periphery outside
+    ``fovea_deg``. Without ``[viewer] fov = "sensor"`` there are no degrees: only the whole
+    frame's ``flicker``, the ring and periphery columns nan."""
+    from ..metrics import FLICKER_RINGS_DEG, temporal_instability
+    degrees = eccs[0] is not None
+    return temporal_instability([t for _, t in shown], [r for r, _ in shown],
+                                eccs if degrees else None, FLICKER_RINGS_DEG,
+                                fovea_deg=task["metrics"].get("fovea_deg", 5.0)).columns()
 
 
 def _sequence_renderer(scene, task: dict, gaze):
@@ -358,23 +376,26 @@ def _sequence_renderer(scene, task: dict, gaze):
 def _sequence_frames(scene, task: dict, refs: np.ndarray, render) -> tuple:
     """Each frame of the sequence moved, fixated, rendered (``render``, see
     :func:`_sequence_renderer`) and scored against ``refs[k]``: ``(times, rays, shown,
-    quality)`` per frame, ``shown`` the (reference, image) pair in display values."""
+    quality, eccentricity)`` per frame, ``shown`` the (reference, image) pair in display
+    values, ``eccentricity`` the frame's map in degrees (:func:`_viewing`; None without
+    degrees)."""
     from ..render import to_display
     motion, m = task["motion"], task["metrics"]
     gazes, cameras = motion["gazes"], motion["cameras"]
-    times, shown, quality, rays = [], [], [], []
+    times, shown, quality, rays, eccs = [], [], [], [], []
     # A still camera (a gaze path only) is never moved, whatever the sensor.
     with _camera_path(scene) if cameras else contextlib.nullcontext() as move:
         for k in move(cameras) if cameras else range(len(gazes)):
             frame_task = dict(task, gaze=gazes[k])
             viewing = _viewing(scene, frame_task)
+            eccs.append(viewing["eccentricity"])
             image, time_ms, ray_fraction = render(gazes[k])
             times.append(time_ms)
             rays.append(ray_fraction)
             ref_d = to_display(refs[k], m["exposure"])
             shown.append((ref_d, to_display(image, m["exposure"])))
             quality.append(_quality(ref_d, image, dict(frame_task, jod=False), viewing))
-    return times, rays, shown, quality
+    return times, rays, shown, quality, eccs
 
 
 def _sequence_summary(task: dict, n: int, times: list, rays: list) -> dict:
@@ -424,6 +445,25 @@ def _foveated_frames(scene, task: dict, record: list[int]):
                 if r == 0:
                     first[k] = (np.array(img, dtype=np.float32), stats)
     return timings, first
+
+
+def task_frame(task: dict, frame: int) -> np.ndarray:
+    """The linear (H, W, 3) image a still task (not ``[motion]``) renders at ``frame``, as its
+    row at that frame was scored (its seed; a foveated task's frames 1 .. ``frame`` from a
+    reset history, a uniform one's single frame): for pictures of a study's cells."""
+    from ..validate import ParameterError, check_int
+    if task.get("motion") is not None:
+        raise ParameterError("task", task["task_id"], "a task of a still view (a sequence's "
+                             "frames come from run_sequence_task)")
+    frame = check_int("frame", frame, 1)
+    _prepare_worker(task)
+    scene = get_scene(task["scene"], task["variant"])
+    if task["kind"] == "foveated":
+        _, first = _foveated_frames(scene, {**task, "warmup": 0, "repeats": 1}, [frame])
+        return first[frame][0]
+    from ..baselines import render_uniform
+    return render_uniform(scene, spp=task["spp"], seed=task["seed"],
+                          denoise=bool(task["options"]["denoise"]))[0]
 
 
 def run_task(task: dict, reference: np.ndarray) -> list[dict]:

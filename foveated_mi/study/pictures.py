@@ -1,0 +1,74 @@
+"""Pictures of a study's frames: frames side by side, the gaze ringed at the fovea's radius
+(``foveated-mi demo`` and ``benchmarks/bench_vr.py``).
+
+Panels are display-referred (H, W, 3) images in [0, 1] (:func:`foveated_mi.render.to_display`),
+laid left to right at their own size; the ring is drawn on each at the gaze, in a red that
+the scenes' display values rarely hold.
+"""
+from __future__ import annotations
+
+import os
+from typing import Sequence
+
+import numpy as np
+
+from ..validate import ParameterError, check_point2, check_range
+
+__all__ = ["mark_gaze", "side_by_side", "ring_radius", "cached_reference",
+           "write_side_by_side", "RING_COLOUR"]
+
+#: The gaze ring's colour (display values).
+RING_COLOUR = (1.0, 0.2, 0.1)
+
+
+def mark_gaze(img: np.ndarray, gaze, radius: float) -> np.ndarray:
+    """A copy of ``img`` (display values, (H, W, 3)) with a ring of ``radius`` pixels around
+    the gaze point (normalised film coordinates, origin top-left): the pixels whose centre
+    lies within 1.2 pixels of the circle."""
+    gx, gy = check_point2("gaze", gaze)
+    radius = check_range("radius", radius, 0.0, None)
+    h, w = img.shape[:2]
+    out = np.array(img, dtype=np.float64, copy=True)
+    yy, xx = np.mgrid[0:h, 0:w]
+    d = np.hypot(xx + 0.5 - gx * w, yy + 0.5 - gy * h)
+    out[np.abs(d - radius) < 1.2] = RING_COLOUR
+    return out
+
+
+def side_by_side(panels: Sequence[np.ndarray], gaze, radius: float) -> np.ndarray:
+    """``panels`` (display values, one (H, W, 3) shape) left to right, each with the gaze
+    ringed (:func:`mark_gaze`), as an 8-bit (H, n W, 3) image."""
+    panels = [np.asarray(p) for p in panels]
+    if not panels or any(p.ndim != 3 or p.shape[2] != 3 or p.shape != panels[0].shape
+                         for p in panels):
+        raise ParameterError("panels", [p.shape for p in panels],
+                             "one or more (H, W, 3) images of one shape")
+    strip = np.concatenate([mark_gaze(p, gaze, radius) for p in panels], axis=1)
+    return (np.clip(strip, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+
+
+def ring_radius(sensor, fovea_deg: float, gaze=(0.5, 0.5)) -> int:
+    """The fovea's radius in pixels on ``sensor``'s film: ``fovea_deg`` times the pixels per
+    degree at ``gaze`` (:func:`foveated_mi.viewer.pixels_per_degree`), at least 3 pixels so
+    that a ring shows on a tiny film."""
+    from .. import viewer
+    return max(3, int(round(fovea_deg * viewer.pixels_per_degree(sensor, gaze))))
+
+
+def cached_reference(spec, out: str, variant: str, scene: int = 0) -> np.ndarray:
+    """The linear reference a study run under ``out`` rendered and cached for its
+    ``scene``-th scene ((H, W, 3), or (F, H, W, 3) along a camera path)."""
+    from .tasks import reference_key
+    s = spec.scenes[scene]
+    return np.load(os.path.join(out, "references",
+                                f"{s.label}-{reference_key(s, variant)}.npy"))
+
+
+def write_side_by_side(path: str, panels: Sequence[np.ndarray], gaze, radius: float) -> str:
+    """:func:`side_by_side` written to ``path`` as a PNG, atomically; returns ``path``."""
+    import imageio.v3 as iio
+    from ..io import atomic_write
+    strip = side_by_side(panels, gaze, radius)
+    with atomic_write(path) as tmp:
+        iio.imwrite(tmp, strip, extension=".png")
+    return path
