@@ -105,9 +105,9 @@ def test_the_fovea_shows_its_own_traced_pixels():
     assert inner.sum() > 10
     np.testing.assert_array_equal(image[inner], shading[inner])
     # Kept on the buffer's samples, the disc shows the same traced values: its own samples.
-    on_samples = FoveatedIntegrator(nested=scene.integrator(), preset="vr", history=False)
-    assert on_samples.options["foveal_space"] == "buffer"
-    same = np.array(mi.render(scene, integrator=on_samples, seed=5))
+    in_buffer = FoveatedIntegrator(nested=scene.integrator(), preset="vr", history=False)
+    assert in_buffer.options["foveal_space"] == "buffer"
+    same = np.array(mi.render(scene, integrator=in_buffer, seed=5))
     np.testing.assert_array_equal(same[inner], shading[inner])
     assert not np.array_equal(same[~inner], image[~inner])    # the cells differ outside
 

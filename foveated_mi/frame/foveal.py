@@ -10,7 +10,7 @@ of its full-resolution disc. Where the frame keeps its geometry and history is
     On the buffer's *samples*: its cells outside the disc, then the disc's pixels
     (:mod:`foveated_mi.frame.buffer_space`). The plan casts the G-buffer at the samples
     only, develops the traced values straight onto the samples
-    (:func:`foveated_mi.frame.shading.on_samples`) and reprojects the history sample to
+    (:func:`foveated_mi.frame.shading.to_samples`) and reprojects the history sample to
     sample; nothing is film-sized but the image.
 ``film``
     On the film's pixels: a full-resolution G-buffer, the history resolved on the traced
@@ -70,7 +70,7 @@ SEAM = 2.0
 ON_FILM = ("traced", "shading", "shading_mask", "history_count", "resampled", "image")
 
 #: With ``foveal_space = "buffer"``: the buffers on the samples (cells, then the disc's patch).
-ON_SAMPLES = ("traced", "shading", "shading_mask", "history_count", "resampled", "sample_on",
+SAMPLE_BUFFERS = ("traced", "shading", "shading_mask", "history_count", "resampled", "sample_on",
               "sample_pixel", "position", "normal", "depth", "hit", "reprojection_map")
 
 
@@ -241,7 +241,7 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
                 timer: StageTimer, grad_pass: bool = False) -> Formed:
     """History resolve, denoising in the buffer, one warp (module docstring)."""
     if inp.space.kind == "buffer":
-        return _form_on_samples(shading, inp, s, timer, grad_pass)
+        return _form_in_buffer(shading, inp, s, timer, grad_pass)
     width, height = inp.width, inp.height
     grid, d = s.grid, s.domain
     # History resolve (Fig. 4): this frame's samples blended with the reprojected history.
@@ -293,7 +293,7 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
     return Formed(image, buffers, history)
 
 
-def _form_on_samples(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
+def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
                      timer: StageTimer, grad_pass: bool) -> Formed:
     """``foveal_space = "buffer"``: the history resolve on the buffer's samples, denoising
     in the buffer, the albedo multiplied back on its cells, one warp; the disc shows its own
@@ -355,7 +355,7 @@ def foveal_grids(width: int, height: int, s: FovealSettings) -> dict[str, Grid]:
     if s.space != "buffer":
         return {}
     samples = s.layout.samples_grid
-    return {name: samples for name in ON_SAMPLES}
+    return {name: samples for name in SAMPLE_BUFFERS}
 
 
 def foveal_stats(buffers: dict[str, Any]) -> dict[str, Any]:

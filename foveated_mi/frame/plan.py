@@ -222,14 +222,14 @@ class Planner:
         None without history) becomes the next frame's, and the frame is counted."""
         if history is not None:
             gb = plan.gbuffer
-            on_samples = plan.space.kind == "buffer"
+            in_buffer = plan.space.kind == "buffer"
             self.history = History(**history, depth=gb.depth,
                                    camera=_reproject.camera_state(plan.sensor),
                                    width=plan.width, height=plan.height,
                                    layout=plan.space.layout,
-                                   position=gb.position if on_samples else None,
-                                   normal=gb.normal if on_samples else None,
-                                   gaze=plan.gaze if on_samples else None)
+                                   position=gb.position if in_buffer else None,
+                                   normal=gb.normal if in_buffer else None,
+                                   gaze=plan.gaze if in_buffer else None)
         self.index += 1
 
     def _check_reset(self, scene: mi.Scene, state: SceneState, width: int, height: int) -> None:

@@ -45,7 +45,7 @@ def post_pass(recon: Reconstruction, resolved: Resolved, gb: GBuffer, width: int
     entry = DENOISERS[n.name]
     run = runs(n, grad_pass)
     ctx = DenoiseInput(recon.interpolated, gb, resolved, recon.nearest, width, height,
-                       n.options, grad_pass, recon.samples)
+                       n.options, grad_pass, recon.averaged)
     out = Denoised(recon.interpolated)
     if entry.domain == "irradiance" and run:
         out = as_denoised(entry.fn(ctx))

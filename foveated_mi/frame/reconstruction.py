@@ -28,7 +28,7 @@ class Reconstruction(NamedTuple):
     filled: mi.Color3f          #: Voronoi fill
     interpolated: mi.Color3f    #: the reconstruction method's image
     #: samples the method averaged per pixel, where it declares a number (else None)
-    samples: mi.Float | None = None
+    averaged: mi.Float | None = None
 
 
 def reconstruction_pass(values: mi.Color3f, resolved: Resolved, gb: GBuffer, width: int,
@@ -69,9 +69,9 @@ def reconstruction_pass(values: mi.Color3f, resolved: Resolved, gb: GBuffer, wid
             if guided else None
         interpolated = filled if r.method == "voronoi" else _interpolate(
             method, radiance, resolved.mask, nearest, guide, seed, width, height, r)
-    samples = None if r.averages is None else \
+    averaged = None if r.averages is None else \
         dr.opaque(mi.Float, r.averages) + dr.zeros(mi.Float, width * height)
-    return Reconstruction(nearest, filled, interpolated, samples)
+    return Reconstruction(nearest, filled, interpolated, averaged)
 
 
 def _nearest_sites(mask: mi.Bool, width: int, height: int, jfa: str,

@@ -203,7 +203,7 @@ def develop_mean(samples: TracedSamples, pixels: mi.UInt32, spp: int, n_pixels: 
 
     Returns the sparse shading buffer (``n_pixels`` entries) and the mask of pixels that hold
     a value. Linear in ``samples.radiance`` (the mask and counts are fixed)."""
-    return on_film(_mean_per_ray(samples, spp), pixels, n_pixels)
+    return to_film(_mean_per_ray(samples, spp), pixels, n_pixels)
 
 
 def _mean_per_ray(samples: TracedSamples, spp: int) -> ShadingBuffer:
@@ -243,7 +243,7 @@ def _splat_per_ray(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi
     return ShadingBuffer(acc * inv, holds, m2 * inv, accepted)
 
 
-def on_film(per_ray: ShadingBuffer, pixels: mi.UInt32, n_pixels: int) -> ShadingBuffer:
+def to_film(per_ray: ShadingBuffer, pixels: mi.UInt32, n_pixels: int) -> ShadingBuffer:
     """The rays' estimates at their pixels (``pixels``: each ray's, each pixel once): the
     film-sized sparse shading buffer, nothing where no ray holds a value."""
     holds = per_ray.mask
@@ -255,7 +255,7 @@ def on_film(per_ray: ShadingBuffer, pixels: mi.UInt32, n_pixels: int) -> Shading
     return ShadingBuffer(value, mask, m2, count)
 
 
-def on_samples(per_ray: ShadingBuffer, rays: mi.UInt32, on: mi.Bool) -> ShadingBuffer:
+def to_samples(per_ray: ShadingBuffer, rays: mi.UInt32, on: mi.Bool) -> ShadingBuffer:
     """The rays' estimates at the foveal buffer's samples (``rays``: each sample's ray,
     where ``on``): a buffer the size of the samples, with nothing film-sized on the way.
     Samples on one pixel read its one ray. Linear in the rays' values (a gather)."""
@@ -332,15 +332,15 @@ def develop(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.Film,
             mode: str, at: tuple[mi.UInt32, mi.Bool] | None = None) -> ShadingBuffer:
     """The sparse shading buffer of a frame's samples (``mode`` in :data:`PIXEL_FILTERS`):
     on the film's pixels, or with ``at = (rays, on)`` on the foveal buffer's samples
-    (:func:`on_samples`)."""
+    (:func:`to_samples`)."""
     if mode == "splat" and not film.rfilter().is_box_filter():
         per_ray = _splat_per_ray(samples, pixels, spp, film)
     else:
         per_ray = _mean_per_ray(samples, spp)
     if at is not None:
-        return on_samples(per_ray, *at)
+        return to_samples(per_ray, *at)
     width, height = (int(v) for v in film.crop_size())
-    return on_film(per_ray, pixels, width * height)
+    return to_film(per_ray, pixels, width * height)
 
 
 def scatter_to_film(values: mi.Color3f, valid: mi.Bool, pixels: mi.UInt32,
