@@ -263,21 +263,14 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                             view.options(self._options), False, StageTimer(False))
         return _pipeline.uncommitted_frame(view, self._passes(), frame, self._settings)
 
-    # -- results --------------------------------------------------------------------------
-    @property
-    def buffers(self) -> dict[str, Any]:
-        """The last frame's named buffers (flat Dr.Jit arrays; :meth:`buffer` exports one)."""
-        return self._view.buffers
-
-    @property
-    def stats(self) -> dict[str, Any]:
-        """Stats of the last frame as plain Python values (reading them synchronises)."""
-        return self._view.stats
+    # -- results: the view rendered last (``views[i]`` holds each view's) --------------------
+    buffers = property(lambda self: self._view.buffers, doc="The last frame's named buffers "
+                       "(flat Dr.Jit arrays; :meth:`buffer` exports one).")
+    stats = property(lambda self: self._view.stats, doc="Stats of the last frame as plain "
+                     "Python values (reading them synchronises).")
 
     def buffer(self, name: str):
         """A buffer of the last frame as a NumPy array (H, W, C) (or (H, W) for scalars),
         on its grid. ``nearest`` comes back as the (x, y) coordinates of each cell's site (-1
         where there is none); ``reprojection_map`` as (x, y, hit)."""
         return self._view.buffer(name)
-
-
