@@ -513,21 +513,11 @@ def temporal_instability(test_frames, ref_frames, eccentricity_deg=None,
                          rings=FLICKER_RINGS_DEG, *, fovea_deg: float = 5.0
                          ) -> TemporalInstability:
     r"""Temporal instability (flicker) of a sequence against its per-frame reference, per ring
-    of eccentricity.
-
-    For each pair of consecutive frames :math:`(k-1, k)` and each pixel :math:`i`, the change
-    of the error from one frame to the next,
-
-    .. math::
-
-        \delta_{k,i,c} = (t_{k,i,c} - t_{k-1,i,c}) - (r_{k,i,c} - r_{k-1,i,c}),
-
-    is what the test sequence changes beyond what the reference changes: the scene's own
-    motion (a turning head, a moving object) is in both and cancels, and a still error (the
-    same bias in every frame) is no flicker. A region's value is the root mean square of
-    :math:`\delta` over its pixels, the channels and every pair of frames,
-    :math:`\sqrt{\sum \delta^2 / N}`. A pixel belongs to the ring of its eccentricity in frame
-    :math:`k`, the later frame of the pair (the gaze may move between frames).
+    of eccentricity: the root mean square, over a region's pixels, the channels and every
+    pair of consecutive frames, of :math:`(t_k - t_{k-1}) - (r_k - r_{k-1})`, what the test
+    changes beyond what the reference changes (the scene's own motion cancels, and a still
+    error is no flicker). A pixel belongs to the ring of its eccentricity in frame :math:`k`,
+    the later frame of the pair.
 
     Parameters
     ----------
@@ -559,13 +549,28 @@ def temporal_instability(test_frames, ref_frames, eccentricity_deg=None,
         study's columns. 0 exactly when ``test_frames`` equals ``ref_frames``, or differs from
         it by the same error in every frame.
 
-    Raises
-    ------
-    ParameterError
-        One line naming the argument: fewer than 2 frames, frames of different shapes,
-        non-finite values, an eccentricity map of another size or with negative values, bad
-        ring edges or fovea radius.
+    Bad input (fewer than 2 frames, shapes that differ, non-finite values, a bad eccentricity
+    map, ring edges or fovea radius) raises a one-line ``ParameterError``.
     """
+    test, ref, eccs, edges, fovea_deg = _flicker_inputs(test_frames, ref_frames,
+                                                        eccentricity_deg, rings, fovea_deg)
+    sums = _FlickerSums(len(edges) - 1)
+    prev = test[0].astype(np.float64) - ref[0]
+    for k in range(1, len(test)):
+        err = test[k].astype(np.float64) - ref[k]
+        d = err - prev
+        prev = err
+        sq = d * d
+        if sq.ndim == 3:
+            sq = sq.mean(axis=-1)               # every pixel has all C channels
+        sums.add(sq, None if eccs is None else eccs[k], edges, fovea_deg)
+    ring_rms = np.array([_rms(a, b) for a, b in zip(sums.ring_se, sums.ring_n)])
+    periphery = _rms(sums.per_se, sums.per_n) if eccs is not None else math.nan
+    return TemporalInstability(ring_rms, periphery, _rms(sums.all_se, sums.all_n), edges)
+
+
+def _flicker_inputs(test_frames, ref_frames, eccentricity_deg, rings, fovea_deg):
+    """:func:`temporal_instability`'s arguments, checked (one line on bad input)."""
     test = _check_sequence("test_frames", test_frames)
     ref = _check_sequence("ref_frames", ref_frames)
     if len(ref) != len(test) or ref[0].shape != test[0].shape:
@@ -575,34 +580,33 @@ def temporal_instability(test_frames, ref_frames, eccentricity_deg=None,
     edges = _check_rings(rings)
     fovea_deg = check_range("fovea_deg", fovea_deg, 0.0, 180.0, lo_open=True)
     eccs = _check_eccentricity(eccentricity_deg, len(test), test[0].shape[:2])
-    n_rings = len(edges) - 1
-    ring_se, ring_n = np.zeros(n_rings), np.zeros(n_rings)
-    per_se = per_n = all_se = all_n = 0.0
-    prev = test[0].astype(np.float64) - ref[0]
-    for k in range(1, len(test)):
-        err = test[k].astype(np.float64) - ref[k]
-        d = err - prev
-        prev = err
-        sq = d * d
-        if sq.ndim == 3:
-            sq = sq.mean(axis=-1)               # every pixel has all C channels
-        all_se += float(sq.sum())
-        all_n += sq.size
-        if eccs is None:
-            continue
-        e = eccs[k]
+    return test, ref, eccs, edges, fovea_deg
+
+
+def _rms(se: float, n: float) -> float:
+    return math.sqrt(se / n) if n > 0 else math.nan
+
+
+class _FlickerSums:
+    """Squared changes summed per ring, over the periphery and over the frame, with counts."""
+
+    def __init__(self, n_rings: int):
+        self.ring_se, self.ring_n = np.zeros(n_rings), np.zeros(n_rings)
+        self.per_se = self.per_n = self.all_se = self.all_n = 0.0
+
+    def add(self, sq: np.ndarray, e: np.ndarray | None, edges: np.ndarray,
+            fovea_deg: float) -> None:
+        """One pair of frames: ``sq`` per pixel, ``e`` the later frame's eccentricity."""
+        self.all_se += float(sq.sum())
+        self.all_n += sq.size
+        if e is None:
+            return
+        n_rings = len(self.ring_se)
         j = np.searchsorted(edges, e, side="right") - 1
         j[e == edges[-1]] = n_rings - 1         # the last ring holds its upper edge
         inside = (j >= 0) & (j < n_rings)
-        ring_se += np.bincount(j[inside], weights=sq[inside], minlength=n_rings)
-        ring_n += np.bincount(j[inside], minlength=n_rings)
+        self.ring_se += np.bincount(j[inside], weights=sq[inside], minlength=n_rings)
+        self.ring_n += np.bincount(j[inside], minlength=n_rings)
         periphery = e >= fovea_deg
-        per_se += float(sq[periphery].sum())
-        per_n += int(np.count_nonzero(periphery))
-
-    def rms(se, n):
-        return math.sqrt(se / n) if n > 0 else math.nan
-
-    ring_rms = np.array([rms(a, b) for a, b in zip(ring_se, ring_n)])
-    return TemporalInstability(ring_rms, rms(per_se, per_n) if eccs is not None else math.nan,
-                               rms(all_se, all_n), edges)
+        self.per_se += float(sq[periphery].sum())
+        self.per_n += int(np.count_nonzero(periphery))
