@@ -107,13 +107,36 @@ def register_non_differentiable(option: str, predicate: Callable[[dict], bool],
     """Declare that options for which ``predicate(options)`` holds make a frame
     non-differentiable, e.g. ``register_non_differentiable("exposure", lambda o:
     o["exposure"] > 3, "<= 3 for gradients")``. The product's own rules live in the option
-    schema."""
+    schema.
+
+    Parameters
+    ----------
+    option : str
+        The option named in the refusal (a later registration under the same name replaces it).
+    predicate : callable
+        ``predicate(options) -> bool`` on the validated options: True when the frame cannot be
+        differentiated.
+    allowed : str
+        What a differentiable run needs, quoted in the error.
+    """
     NON_DIFFERENTIABLE[option] = (predicate, allowed)
 
 
 def refusal(options: dict[str, Any]) -> ParameterError | None:
     """The one-line error for the first option that makes the frame non-differentiable, or
-    None when nothing does."""
+    None when nothing does.
+
+    Parameters
+    ----------
+    options : dict
+        The validated options, as the registered predicates read them.
+
+    Returns
+    -------
+    error : ParameterError or None
+        The error for the first registered rule whose predicate holds, in registration order;
+        None when no rule does.
+    """
     for name, (predicate, allowed) in NON_DIFFERENTIABLE.items():
         if predicate(options):
             return ParameterError(name, options.get(name), allowed)
@@ -121,7 +144,18 @@ def refusal(options: dict[str, Any]) -> ParameterError | None:
 
 
 def check_differentiable(options: dict[str, Any]) -> None:
-    """Raise :func:`refusal`'s error, if any."""
+    """Raise :func:`refusal`'s error, if any.
+
+    Parameters
+    ----------
+    options : dict
+        The validated options.
+
+    Raises
+    ------
+    ParameterError
+        When an option makes the frame non-differentiable.
+    """
     error = refusal(options)
     if error is not None:
         raise error
@@ -130,10 +164,22 @@ def check_differentiable(options: dict[str, Any]) -> None:
 # -- integrator kinds -----------------------------------------------------------------------
 
 def integrator_kind(integrator) -> str:
-    """``'projective'``, ``'adjoint'`` or ``'plain'`` (see the module docstring).
+    """How the nested integrator is differentiated (see the module docstring).
 
     Classes are matched by name along the MRO: Mitsuba re-imports its AD integrator modules on
-    every ``mi.set_variant``."""
+    every ``mi.set_variant``.
+
+    Parameters
+    ----------
+    integrator : mi.Integrator
+        The nested integrator.
+
+    Returns
+    -------
+    kind : str
+        ``'projective'`` (a ``PSIntegrator``), ``'adjoint'`` (an ``ADIntegrator``) or
+        ``'plain'`` (anything else).
+    """
     names = {(c.__name__, c.__module__.rsplit(".", 1)[-1]) for c in type(integrator).__mro__}
     if ("PSIntegrator", "common") in names:
         return "projective"
@@ -155,19 +201,47 @@ def _ad_copy(value: mi.Color3f) -> mi.Color3f:
 
 
 def record(form: Callable[[mi.Color3f], Any], value: mi.Color3f) -> tuple[mi.Color3f, Any]:
-    """``form`` evaluated at ``value`` with its derivative graph kept: ``(x, form(x))`` for an
-    AD-enabled copy ``x`` of ``value``. A primal frame that a gradient pass will follow
-    records its image formation once, and :func:`recorded_backward` /
-    :func:`recorded_forward` push through that graph instead of running the formation again
-    (every filter level's input is then computed once per gradient step)."""
+    """``form`` evaluated at ``value`` with its derivative graph kept.
+
+    A primal frame that a gradient pass will follow records its image formation once, and
+    :func:`recorded_backward` / :func:`recorded_forward` push through that graph instead of
+    running the formation again (every filter level's input is then computed once per gradient
+    step).
+
+    Parameters
+    ----------
+    form : callable
+        The image formation :math:`F`, called once as ``form(x)``.
+    value : mi.Color3f
+        :math:`S_0`, the shading buffer (its derivatives, if any, are detached).
+
+    Returns
+    -------
+    x : mi.Color3f
+        The AD-enabled copy of ``value`` the formation ran on.
+    image : Any
+        ``form(x)``, with its graph back to ``x``.
+    """
     with dr.resume_grad():
         x = _ad_copy(value)
         return x, form(x)
 
 
 def detached(tree):
-    """``tree`` (arrays in dicts, lists, tuples and named tuples) with every array detached
-    (``dr.detach`` leaves a named tuple's fields attached)."""
+    """``tree`` with every array detached (``dr.detach`` leaves a named tuple's fields
+    attached).
+
+    Parameters
+    ----------
+    tree : Any
+        Arrays in dicts, lists, tuples, named tuples and dataclass instances (their ``init``
+        fields), nested to any depth; anything else is kept as is.
+
+    Returns
+    -------
+    tree : Any
+        A copy of the same structure with every array detached.
+    """
     if dr.is_array_v(tree):
         return dr.detach(tree)
     if isinstance(tree, dict):
@@ -192,25 +266,80 @@ def _push(start: mi.Color3f, end: mi.Color3f, grad: mi.Color3f, mode: dr.ADMode)
 
 
 def recorded_backward(x: mi.Color3f, image: mi.Color3f, grad_image: mi.Color3f) -> mi.Color3f:
-    """:func:`image_backward` through a graph kept by :func:`record` (which it consumes)."""
+    r""":func:`image_backward` through a graph kept by :func:`record` (which it consumes).
+
+    Parameters
+    ----------
+    x, image : mi.Color3f
+        The pair :func:`record` returned (the formation's input and its image).
+    grad_image : mi.Color3f
+        :math:`\delta I`, one value per image pixel.
+
+    Returns
+    -------
+    grad_value : mi.Color3f
+        :math:`J_F(S_0)^{\mathsf T}\,\delta I`, one value per entry of ``x``.
+    """
     return _push(image, x, grad_image, dr.ADMode.Backward)
 
 
 def recorded_forward(x: mi.Color3f, image: mi.Color3f, tangent: mi.Color3f) -> mi.Color3f:
-    """:func:`image_forward` through a graph kept by :func:`record` (which it consumes)."""
+    r""":func:`image_forward` through a graph kept by :func:`record` (which it consumes).
+
+    Parameters
+    ----------
+    x, image : mi.Color3f
+        The pair :func:`record` returned (the formation's input and its image).
+    tangent : mi.Color3f
+        :math:`\delta S`, one value per entry of ``x``.
+
+    Returns
+    -------
+    grad_image : mi.Color3f
+        :math:`J_F(S_0)\,\delta S`, one value per image pixel.
+    """
     return _push(x, image, tangent, dr.ADMode.Forward)
 
 
 def image_backward(form: Callable[[mi.Color3f], mi.Color3f], value: mi.Color3f,
                    grad_image: mi.Color3f) -> mi.Color3f:
-    r""":math:`J_F(S_0)^{\mathsf T}\,\delta I` for ``form`` = :math:`F`, ``value`` =
-    :math:`S_0`, ``grad_image`` = :math:`\delta I` (one Color3f per pixel each)."""
+    r""":math:`J_F(S_0)^{\mathsf T}\,\delta I`, the formation's adjoint.
+
+    Parameters
+    ----------
+    form : callable
+        :math:`F`, run once on an AD-enabled copy of ``value``.
+    value : mi.Color3f
+        :math:`S_0`, the shading buffer (one Color3f per pixel).
+    grad_image : mi.Color3f
+        :math:`\delta I` (one Color3f per pixel).
+
+    Returns
+    -------
+    grad_value : mi.Color3f
+        :math:`\delta S = J_F(S_0)^{\mathsf T}\,\delta I`, one Color3f per entry of ``value``.
+    """
     return recorded_backward(*record(form, value), grad_image)
 
 
 def image_forward(form: Callable[[mi.Color3f], mi.Color3f], value: mi.Color3f,
                   tangent: mi.Color3f) -> mi.Color3f:
-    r""":math:`J_F(S_0)\,\delta S` (see :func:`image_backward`)."""
+    r""":math:`J_F(S_0)\,\delta S`, the formation's tangent (see :func:`image_backward`).
+
+    Parameters
+    ----------
+    form : callable
+        :math:`F`, run once on an AD-enabled copy of ``value``.
+    value : mi.Color3f
+        :math:`S_0`, the shading buffer (one Color3f per pixel).
+    tangent : mi.Color3f
+        :math:`\delta S`, one Color3f per entry of ``value``.
+
+    Returns
+    -------
+    grad_image : mi.Color3f
+        :math:`J_F(S_0)\,\delta S`, one Color3f per pixel.
+    """
     return recorded_forward(*record(form, value), tangent)
 
 
@@ -282,8 +411,29 @@ class NestedAdjoint:
     def backward(self, integrator, scene: mi.Scene, params, frame: FramePlan, mask: mi.Bool,
                  grad: mi.Color3f, seed, spp: int, settings: TraceSettings) -> None:
         r"""Accumulate :math:`\sum_p \delta S(p)^{\mathsf T}\partial S(p)/\partial\pi` into the
-        gradients of the scene parameters (``grad`` = :math:`\delta S`, one entry per pixel,
-        used where ``mask``)."""
+        gradients of the scene parameters.
+
+        Parameters
+        ----------
+        integrator : mi.Integrator
+            The nested integrator (its kind picks the method, :func:`integrator_kind`).
+        scene : mi.Scene
+            The scene.
+        params : mi.SceneParameters
+            The parameters handed to the integrator's ``render_backward``.
+        frame : FramePlan
+            The primal frame's plan (sensor, film size, wavefront, sampling map).
+        mask : mi.Bool
+            The traced pixels, one entry per film pixel.
+        grad : mi.Color3f
+            :math:`\delta S`, one entry per pixel, used where ``mask``.
+        seed : int or mi.UInt32
+            The gradient pass's seed.
+        spp : int
+            Samples per pixel; 0 means the source sensor's sample count.
+        settings : TraceSettings
+            The trace settings (``pixel_filter``, ``clamp``).
+        """
         kind = integrator_kind(integrator)
         if kind == "plain":
             with dr.resume_grad(), dr.scoped_set_flag(dr.JitFlag.SymbolicLoops, False):
@@ -313,8 +463,34 @@ class NestedAdjoint:
     # -- forward mode
     def forward(self, integrator, scene: mi.Scene, params, frame: FramePlan, mask: mi.Bool, seed,
                 spp: int, settings: TraceSettings) -> mi.Color3f:
-        r""":math:`\partial S(p)/\partial\pi\cdot\delta\pi` at the traced pixels (``mask``),
-        zero elsewhere, for the tangents set on the scene parameters."""
+        r""":math:`\partial S(p)/\partial\pi\cdot\delta\pi` at the traced pixels, zero elsewhere,
+        for the tangents set on the scene parameters.
+
+        Parameters
+        ----------
+        integrator : mi.Integrator
+            The nested integrator (its kind picks the method, :func:`integrator_kind`).
+        scene : mi.Scene
+            The scene.
+        params : mi.SceneParameters
+            The parameters handed to the integrator's ``render_forward``.
+        frame : FramePlan
+            The primal frame's plan (sensor, film size, wavefront, sampling map).
+        mask : mi.Bool
+            The traced pixels, one entry per film pixel.
+        seed : int or mi.UInt32
+            The gradient pass's seed.
+        spp : int
+            Samples per pixel; 0 means the source sensor's sample count.
+        settings : TraceSettings
+            The trace settings (``pixel_filter``, ``clamp``).
+
+        Returns
+        -------
+        tangent : mi.Color3f
+            :math:`\delta S`, one entry per film pixel (``width * height``), zero where not
+            ``mask``.
+        """
         n = frame.width * frame.height
         kind = integrator_kind(integrator)
         if kind == "plain":

@@ -79,8 +79,24 @@ class SampleLayout:
 
 
 def layout(width: int, height: int, theta: float, ray_budget: float) -> SampleLayout:
-    """The samples of a ``width`` x ``height`` film for a disc of radius ``theta`` (units of
-    half the film's diagonal) and a budget of ``ray_budget`` of its pixels."""
+    """The samples of a ``width`` x ``height`` film for a disc of radius ``theta``.
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size, in pixels.
+    theta : float
+        The full-resolution disc's radius, in units of half the film's diagonal
+        (:func:`~foveated_mi.frame.sampling.fovea_radius`).
+    ray_budget : float
+        The fraction of the film's pixels the samples' pixels number, with the gaze at the
+        film's centre (:func:`~foveated_mi.frame.sampling.foveal_grid`).
+
+    Returns
+    -------
+    layout : SampleLayout
+        The grid's cells outside the disc, then a square patch wide enough to hold the disc.
+    """
     r0 = fovea_radius(width, height, theta)
     # The disc's pixels are samples themselves: the grid's rings inside it would be copies.
     grid = foveal_grid(width, height, float(ray_budget), r0).outside_fovea()
@@ -97,8 +113,25 @@ def _patch_origin(lay: SampleLayout, gaze: mi.Point2f) -> tuple[mi.Int32, mi.Int
 
 def sample_pixels(lay: SampleLayout, gaze: mi.Point2f, width: int, height: int
                   ) -> tuple[mi.UInt32, mi.Bool]:
-    """Each sample's film pixel (flat index) and whether it is on: on the film, and for a
-    patch pixel, its centre in the disc."""
+    """Each sample's film pixel and whether it is on.
+
+    Parameters
+    ----------
+    lay : SampleLayout
+        The samples.
+    gaze : mi.Point2f
+        The gaze's film position, in pixels.
+    width, height : int
+        The film's size.
+
+    Returns
+    -------
+    pixels : mi.UInt32
+        Each sample's film pixel (flat index ``y * width + x``), 0 where off.
+    on : mi.Bool
+        Whether the sample is on: its pixel on the film, and for a patch pixel, its centre in
+        the disc.
+    """
     grid, nc = lay.grid, lay.cells
     idx = dr.arange(mi.UInt32, lay.size)
     is_cell = idx < nc
@@ -113,9 +146,26 @@ def sample_pixels(lay: SampleLayout, gaze: mi.Point2f, width: int, height: int
 
 def sample_rays(pixels: mi.UInt32, on: mi.Bool, wavefront: mi.UInt32, active: mi.Bool | None,
                 n_pixels: int) -> mi.UInt32:
-    """Each sample's lane in a launch of their pixels (``wavefront``: each lane's pixel,
-    ``active``: the lanes that trace, None for all; every pixel of a sample that is on is
-    traced by one lane); 0 where off."""
+    """Each sample's lane in a launch of their pixels.
+
+    Parameters
+    ----------
+    pixels : mi.UInt32
+        Each sample's film pixel (flat index), as :func:`sample_pixels` gives.
+    on : mi.Bool
+        The samples that are on; every pixel of a sample that is on is traced by one lane.
+    wavefront : mi.UInt32
+        Each lane's pixel (flat index).
+    active : mi.Bool or None
+        The lanes that trace; None for all.
+    n_pixels : int
+        The film's pixel count (``width * height``).
+
+    Returns
+    -------
+    rays : mi.UInt32
+        Each sample's lane in ``wavefront``; 0 where off.
+    """
     # Read only at traced pixels, so never filled: nothing film-sized is written but the
     # rays' own entries.
     ray_of = dr.empty(mi.UInt32, n_pixels)
@@ -140,8 +190,25 @@ def _in_disc(lay: SampleLayout, x: mi.Int32, y: mi.Int32, gaze: mi.Point2f) -> m
 
 def patch_pixels(lay: SampleLayout, gaze: mi.Point2f, width: int, height: int
                  ) -> tuple[mi.UInt32, mi.Bool]:
-    """The film pixel (flat index) of each pixel of the disc's square patch, row by row, and
-    whether it is the disc's: on the film, its centre within :math:`r_0` of the gaze."""
+    """The film pixel of each pixel of the disc's square patch, row by row, and whether it is
+    the disc's.
+
+    Parameters
+    ----------
+    lay : SampleLayout
+        The samples.
+    gaze : mi.Point2f
+        The gaze's film position, in pixels.
+    width, height : int
+        The film's size.
+
+    Returns
+    -------
+    pixels : mi.UInt32
+        The film pixel (flat index) of each of the ``side * side`` patch pixels, 0 where off.
+    on : mi.Bool
+        Whether it is the disc's: on the film, its centre within :math:`r_0` of the gaze.
+    """
     px, py = _patch_xy(lay, dr.arange(mi.Int32, lay.side * lay.side), gaze)
     on = (px >= 0) & (px < width) & (py >= 0) & (py < height) & _in_disc(lay, px, py, gaze)
     return mi.UInt32(dr.select(on, py * width + px, 0)), on
@@ -149,7 +216,24 @@ def patch_pixels(lay: SampleLayout, gaze: mi.Point2f, width: int, height: int
 
 def disc_sample(lay: SampleLayout, x: mi.Int32, y: mi.Int32, gaze: mi.Point2f
                 ) -> tuple[mi.UInt32, mi.Bool]:
-    """The patch sample of pixel ``(x, y)``, and whether its centre lies in the disc."""
+    """The patch sample of pixel ``(x, y)``, and whether its centre lies in the disc.
+
+    Parameters
+    ----------
+    lay : SampleLayout
+        The samples.
+    x, y : mi.Int32
+        Film pixel coordinates.
+    gaze : mi.Point2f
+        The gaze's film position, in pixels.
+
+    Returns
+    -------
+    sample : mi.UInt32
+        The sample's index (after the grid's cells); the patch's first sample where outside.
+    inside : mi.Bool
+        Whether the pixel's centre lies in the disc (and so in the patch).
+    """
     inside = _in_disc(lay, x, y, gaze)
     x0, y0 = _patch_origin(lay, gaze)
     k = (y - y0) * lay.side + (x - x0)
@@ -161,8 +245,25 @@ def sample_at(lay: SampleLayout, p: mi.Point2f, gaze: mi.Point2f
               ) -> tuple[mi.UInt32, mi.Bool, mi.Point2f]:
     """The sample holding film position ``p`` for the gaze at ``gaze``: the disc's pixel
     when that pixel's centre lies in the disc, else the grid's cell containing ``p``.
-    Returns its index, whether ``p`` lies within the grid's rings, and the centre of the
-    sample's pixel (what an exclusive read measures from)."""
+
+    Parameters
+    ----------
+    lay : SampleLayout
+        The samples.
+    p : mi.Point2f
+        Film positions, in pixels.
+    gaze : mi.Point2f
+        The gaze's film position, in pixels.
+
+    Returns
+    -------
+    index : mi.UInt32
+        The sample's index.
+    inside : mi.Bool
+        Whether ``p`` lies in the disc or within the grid's rings (not beyond the last one).
+    centre : mi.Point2f
+        The centre of the sample's pixel (what an exclusive read measures from).
+    """
     x, y = mi.Int32(dr.floor(p.x)), mi.Int32(dr.floor(p.y))
     disc, in_disc = disc_sample(lay, x, y, gaze)
     cell, in_grid = lay.grid.cell_at(p, gaze)
@@ -174,7 +275,21 @@ def sample_at(lay: SampleLayout, p: mi.Point2f, gaze: mi.Point2f
 
 def still_map(history: History, n: int) -> ReprojectionMap:
     """Every sample onto itself (a still camera and gaze over an unchanged scene): a hit
-    where the history holds samples; nothing is projected."""
+    where the history holds samples; nothing is projected.
+
+    Parameters
+    ----------
+    history : History
+        The previous frame's history, on the samples.
+    n : int
+        The number of samples.
+
+    Returns
+    -------
+    map : ReprojectionMap
+        The identity map: zero ``coords``, ``hit`` where the history's count is positive,
+        every sample ``agree``-ing.
+    """
     return ReprojectionMap(dr.zeros(mi.Point2f, n), history.count > 0, dr.arange(mi.UInt32, n),
                            dr.full(mi.Bool, True, n))
 
@@ -182,9 +297,24 @@ def still_map(history: History, n: int) -> ReprojectionMap:
 def reprojection_map(gb: GBuffer, on: mi.Bool, history: History | None, lay: SampleLayout,
                      width: int, height: int, *, tolerance: float = 0.02,
                      mode: str = "exclusive") -> ReprojectionMap:
-    """Reverse-reproject the samples' G-buffer into the previous frame's samples (module
-    docstring); a sample that is off (``on`` false) reads nothing and claims nothing.
-    ``coords`` are the previous film positions (pixels)."""
+    r"""Reverse-reproject the samples' G-buffer into the previous samples (module docstring).
+
+    Parameters
+    ----------
+    gb, on : GBuffer, mi.Bool
+        The samples' G-buffer, and which are on (one that is off reads and claims nothing).
+    history : History or None
+        The previous frame's history on its samples (None: every sample misses).
+    lay : SampleLayout
+    width, height : int
+        The samples, and the film's size.
+    tolerance, mode : float, str
+        :math:`\tau` of the plane test; ``'exclusive'`` reads, or another mode (``'nearest'``).
+
+    Returns
+    -------
+    map : ReprojectionMap
+        Per sample; ``coords`` are the previous film positions (pixels)."""
     n = lay.size
     if history is None:
         return ReprojectionMap(dr.zeros(mi.Point2f, n), dr.zeros(mi.Bool, n),

@@ -41,7 +41,23 @@ def jfa_bound(width: int, height: int, law: SamplingSettings,
               gaze: tuple[float, float]) -> int | None:
     """The longest Jump Flooding step a frame needs: the sampling law's largest gap between
     sites, rounded up to a power of two (what :func:`~foveated_mi.reconstruct.jump_flood`
-    does with it anyway); None where the law bounds nothing."""
+    does with it anyway).
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size.
+    law : SamplingSettings
+        The sampling law.
+    gaze : tuple of float
+        The gaze, a normalised film position (read by ``kwon`` in film units only).
+
+    Returns
+    -------
+    bound : int or None
+        A power of two, in pixels; None where the law bounds nothing (``theta_deg > 0``, or a
+        law too sparse for a useful bound).
+    """
     if law.law == "acuity":
         gap = _sampling.gap_bound(width, height, law.acuity_floor)
     elif law.law == "polar":
@@ -66,7 +82,20 @@ def jfa_bound(width: int, height: int, law: SamplingSettings,
 def film_settings(width: int, height: int, o: dict[str, Any]) -> FilmSettings:
     """The film formation's settings, compiled from validated options ``o``. The sampling
     law enters only through the Jump Flooding bound (host scalars, no sync), so a moving
-    gaze rarely changes them."""
+    gaze rarely changes them.
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size.
+    o : dict
+        The validated options, with the frame's gaze (``o["gaze"]``).
+
+    Returns
+    -------
+    settings : FilmSettings
+        The formation's settings (hashable: its recording's key).
+    """
     return FilmSettings(float(o["max_history"]), domain_settings(o), reconstruction_settings(o),
                         denoise_settings(o),
                         jfa_bound(width, height, sampling_settings(o), o["gaze"]))
@@ -75,7 +104,27 @@ def film_settings(width: int, height: int, o: dict[str, Any]) -> FilmSettings:
 def form_film(shading: ShadingBuffer, inp: FormationInput, s: FilmSettings,
               timer: StageTimer, grad_pass: bool = False) -> Formed:
     """History resolve, reconstruction and post-processing of one frame (module
-    docstring)."""
+    docstring).
+
+    Parameters
+    ----------
+    shading : ShadingBuffer
+        The frame's shading buffer, one entry per film pixel.
+    inp : FormationInput
+        The frame's G-buffer, reprojection, history and sizes.
+    s : FilmSettings
+        The formation's settings.
+    timer : StageTimer
+        Marks the ``trace``, ``reconstruct`` and ``post`` stages.
+    grad_pass : bool, optional
+        Whether this is a gradient pass (which skips a non-differentiable denoiser).
+
+    Returns
+    -------
+    formed : Formed
+        The image, the named buffers on the film's grid, and the history (``mean``, ``count``,
+        ``moment2``).
+    """
     gb, width, height, d = inp.gbuffer, inp.width, inp.height, s.domain
     if d.demodulate and inp.emission_edges is not None:
         # At an emitter's edge the emission seen at the pixel's centre is not its footprint's
@@ -108,7 +157,18 @@ def form_film(shading: ShadingBuffer, inp: FormationInput, s: FilmSettings,
 
 
 def film_stats(buffers: dict[str, Any]) -> dict[str, Any]:
-    """Pixels that took their value from the history only, and pixels without a value."""
+    """Pixels that took their value from the history only, and pixels without a value.
+
+    Parameters
+    ----------
+    buffers : dict
+        The formation's buffers (``resampled`` and ``shading_mask`` are read).
+
+    Returns
+    -------
+    stats : dict
+        ``resampled`` and ``holes``, counts on the device.
+    """
     return {"resampled": dr.count(buffers["resampled"]),
             "holes": dr.count(~buffers["shading_mask"])}
 

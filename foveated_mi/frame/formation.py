@@ -125,26 +125,34 @@ def register_formation(name: str, fn: Callable[..., Formed], *,
 
     Parameters
     ----------
-    name : the option value that chooses it.
-    fn : ``fn(shading, inp, settings, timer, grad_pass) -> Formed``.
-    grid : ``grid(width, height, settings)``, the grid of its buffers (default: the film's).
-    settings : ``settings(width, height, o)``, its settings compiled from the validated
-        options ``o`` (and the frame's gaze, ``o["gaze"]``): a frozen, hashable value, all
-        that ``fn`` receives of the options and its recording's key, so it holds exactly
-        what decides its kernels (a value in it that changes every frame records again).
-        Default: every option (:class:`OptionValues`).
-    stats : ``stats(buffers)``, counters read from its buffers (device arrays, read when the
-        stats are read).
-    counted : the buffers its stats count, evaluated with the frame's other counted buffers
-        (one launch).
-    on_film : the buffers it returns on the film's grid when its own grid is another (the
-        image always is).
-    grids : ``grids(width, height, settings)``, buffer name -> grid for those on a third
-        grid, the plan's included (a formation whose plan keeps its G-buffer on its own
-        samples).
-    space : ``space(o)``, the sample space it forms from (:data:`~.space.SPACES`): ``"film"``
-        (the default), or ``"buffer"``, the foveal buffer's samples, which the plan then
-        makes instead of the film's pixels (:mod:`.space`).
+    name : str
+        The option value that chooses it.
+    fn : callable
+        ``fn(shading, inp, settings, timer, grad_pass) -> Formed``.
+    grid : callable, optional
+        ``grid(width, height, settings)``, the grid of its buffers (default: the film's).
+    settings : callable, optional
+        ``settings(width, height, o)``, its settings compiled from the validated options ``o``
+        (and the frame's gaze, ``o["gaze"]``): a frozen, hashable value, all that ``fn``
+        receives of the options and its recording's key, so it holds exactly what decides its
+        kernels (a value in it that changes every frame records again). Default: every option
+        (:class:`OptionValues`).
+    stats : callable, optional
+        ``stats(buffers)``, counters read from its buffers (device arrays, read when the stats
+        are read). Default: none.
+    counted : tuple of str, optional
+        The buffers its stats count, evaluated with the frame's other counted buffers (one
+        launch).
+    on_film : tuple of str, optional
+        The buffers it returns on the film's grid when its own grid is another (the image
+        always is).
+    grids : callable, optional
+        ``grids(width, height, settings)``, buffer name -> grid for those on a third grid, the
+        plan's included (a formation whose plan keeps its G-buffer on its own samples).
+    space : callable, optional
+        ``space(o)``, the sample space it forms from (:data:`~.space.SPACES`): ``"film"`` (the
+        default), or ``"buffer"``, the foveal buffer's samples, which the plan then makes
+        instead of the film's pixels (:mod:`.space`).
     """
     FORMATIONS[name] = Formation(
         fn, grid if grid is not None else (lambda width, height, s: Grid.film(width, height)),
@@ -157,20 +165,50 @@ def register_formation(name: str, fn: Callable[..., Formed], *,
 
 
 def unregister_formation(name: str) -> None:
-    """Remove the formation ``name`` (tests; a frame that uses it no longer validates)."""
+    """Remove the formation ``name`` (tests; a frame that uses it no longer validates).
+
+    Parameters
+    ----------
+    name : str
+        The formation's name; one not registered is ignored.
+    """
     FORMATIONS.pop(name, None)
 
 
 def formation_settings(o: dict[str, Any], width: int, height: int) -> FormationSettings:
     """The settings of the formation of validated options ``o`` on a ``width`` x ``height``
-    film (compiled by its registration's ``settings``)."""
+    film (compiled by its registration's ``settings``).
+
+    Parameters
+    ----------
+    o : dict
+        The validated options (``o["formation"]`` names the formation).
+    width, height : int
+        The film's size.
+
+    Returns
+    -------
+    settings : FormationSettings
+        The formation's name and its own settings.
+    """
     check_choice("formation", o["formation"], FORMATIONS)
     entry = FORMATIONS[o["formation"]]
     return FormationSettings(o["formation"], entry.settings(width, height, o))
 
 
 def formation_space(o: dict[str, Any]) -> str:
-    """The sample space the formation of validated options ``o`` forms from."""
+    """The sample space the formation of validated options ``o`` forms from.
+
+    Parameters
+    ----------
+    o : dict
+        The validated options (``o["formation"]`` names the formation).
+
+    Returns
+    -------
+    space : str
+        One of :data:`~.space.SPACES`: ``'film'`` or ``'buffer'``.
+    """
     check_choice("formation", o["formation"], FORMATIONS)
     space = FORMATIONS[o["formation"]].space(o)
     return check_choice("formation space", space, SPACES)
@@ -178,13 +216,47 @@ def formation_space(o: dict[str, Any]) -> str:
 
 def form(shading: ShadingBuffer, inp: FormationInput, fs: FormationSettings, timer: StageTimer,
          grad_pass: bool = False) -> Formed:
-    """The image of one frame by the formation ``fs`` names, with its settings."""
+    """The image of one frame by the formation ``fs`` names, with its settings.
+
+    Parameters
+    ----------
+    shading : ShadingBuffer
+        The frame's shading buffer.
+    inp : FormationInput
+        What the formation reads of the frame besides its shading buffer.
+    fs : FormationSettings
+        The formation and its settings.
+    timer : StageTimer
+        The frame's stage timer.
+    grad_pass : bool, optional
+        Whether this is a gradient pass.
+
+    Returns
+    -------
+    formed : Formed
+        The image, the named buffers and the history.
+    """
     return fs.entry.fn(shading, inp, fs.settings, timer, grad_pass)
 
 
 def replayable(freeze: bool, denoiser: str, timer: StageTimer) -> bool:
     """Whether :class:`FrozenFormation` may form a frame that is not differentiated (module
-    docstring): ``freeze`` on, no stage timing, and a denoiser registered ``replayable``."""
+    docstring): ``freeze`` on, no stage timing, and a denoiser registered ``replayable``.
+
+    Parameters
+    ----------
+    freeze : bool
+        The option ``freeze``.
+    denoiser : str
+        The registered denoiser's name.
+    timer : StageTimer
+        The frame's stage timer (replay needs it disabled).
+
+    Returns
+    -------
+    replayable : bool
+        Whether the frame may be replayed.
+    """
     return bool(freeze) and not timer.enabled and DENOISERS[denoiser].replayable
 
 

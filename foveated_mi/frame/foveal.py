@@ -91,7 +91,20 @@ class FovealSettings:
 
 
 def foveal_settings(width: int, height: int, o: dict[str, Any]) -> FovealSettings:
-    """The foveal formation's settings, compiled from validated options ``o``."""
+    """The foveal formation's settings, compiled from validated options ``o``.
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size.
+    o : dict
+        The validated options (``theta``, ``ray_budget``, ``foveal_space``, ...).
+
+    Returns
+    -------
+    settings : FovealSettings
+        Its settings, with the samples' layout and the buffer's grid for this film.
+    """
     lay = _buffer_space.layout(width, height, o["theta"], o["ray_budget"])
     grid = lay.grid if o["foveal_space"] == "buffer" else foveal_grid(
         width, height, float(o["ray_budget"]), fovea_radius(width, height, o["theta"]))
@@ -101,7 +114,20 @@ def foveal_settings(width: int, height: int, o: dict[str, Any]) -> FovealSetting
 
 
 def foveal_buffer_grid(width: int, height: int, s: FovealSettings) -> PolarGrid:
-    """The buffer's grid."""
+    """The buffer's grid.
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size (unused: the grid is in ``s``).
+    s : FovealSettings
+        The formation's settings.
+
+    Returns
+    -------
+    grid : PolarGrid
+        ``s.grid``.
+    """
     return s.grid
 
 
@@ -194,11 +220,26 @@ def _disc_patch(resolved: Resolved, gb: GBuffer, index: mi.UInt32, on: mi.Bool, 
 def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, width: int,
          height: int, guide: tuple[Surface, Surface] | None = None) -> mi.Color3f:
     """The buffer on the film: bilinear over the four cells around each pixel's continuous
-    cell coordinates that are ``valid`` and finite (wrapping in angle, clamping radially);
-    0 where none is. ``guide = (film, cells)``: the film's and the cells' G-buffers, whose
-    edge-stopping weight (:func:`~foveated_mi.kernels.taps.surface_energy`, σn = 0.3 and
-    σx = 0.1, as SVGF's) multiplies each cell's (a joint bilateral upsampling: a cell on
-    another surface lends little; where all four do, the plain bilinear weights)."""
+    cell coordinates that are ``valid`` and finite (wrapping in angle, clamping radially).
+
+    Parameters
+    ----------
+    cells, valid : mi.Color3f, mi.Bool
+        The buffer's values, and the cells that hold one (one entry per cell of ``grid``).
+    grid, gaze : PolarGrid, mi.Point2f
+        The buffer's grid, and the gaze's film position (pixels).
+    width, height : int
+        The film's size.
+    guide : tuple of Surface, optional
+        ``(film, cells)``: the film's and the cells' G-buffers, whose edge-stopping weight
+        (:func:`~foveated_mi.kernels.taps.surface_energy`, σn = 0.3 and σx = 0.1, as SVGF's)
+        multiplies each cell's (a joint bilateral upsampling: a cell on another surface lends
+        little; where all four do, the plain bilinear weights). None: plain bilinear.
+
+    Returns
+    -------
+    image : mi.Color3f
+        One value per film pixel; 0 where no cell is valid."""
     film = Grid.film(width, height)
     idx, _, _ = film.cells()
     c = grid.coords_at(film.film_position(idx), gaze)
@@ -239,7 +280,13 @@ def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, w
 
 def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
                 timer: StageTimer, grad_pass: bool = False) -> Formed:
-    """History resolve, denoising in the buffer, one warp (module docstring)."""
+    """History resolve, denoising in the buffer, one warp (module docstring).
+
+    Parameters
+    ----------
+    shading, inp, s, timer, grad_pass
+        As :func:`~.film.form_film`'s, ``s`` a :class:`FovealSettings`. Returns the
+        :class:`~.formation.Formed`: the image on the film, the buffers and the history."""
     if inp.space.kind == "buffer":
         return _form_in_buffer(shading, inp, s, timer, grad_pass)
     width, height = inp.width, inp.height
@@ -351,7 +398,21 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
 
 
 def foveal_grids(width: int, height: int, s: FovealSettings) -> dict[str, Grid]:
-    """The buffers that live on the samples (``foveal_space = "buffer"``), and their grid."""
+    """The buffers that live on the samples (``foveal_space = "buffer"``), and their grid.
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size (unused).
+    s : FovealSettings
+        The formation's settings.
+
+    Returns
+    -------
+    grids : dict
+        Buffer name -> the samples' one-row grid, for each of :data:`SAMPLE_BUFFERS`; empty
+        in ``film`` space.
+    """
     if s.space != "buffer":
         return {}
     samples = s.layout.samples_grid
@@ -360,7 +421,19 @@ def foveal_grids(width: int, height: int, s: FovealSettings) -> dict[str, Grid]:
 
 def foveal_stats(buffers: dict[str, Any]) -> dict[str, Any]:
     """Film pixels, or buffer samples, that took their value from the history only, and
-    those without a value (a sample off the film is none)."""
+    those without a value (a sample off the film is none).
+
+    Parameters
+    ----------
+    buffers : dict
+        The formation's buffers (``resampled``, ``shading_mask`` and, on the samples,
+        ``sample_on``).
+
+    Returns
+    -------
+    stats : dict
+        ``resampled`` and ``holes``, counts on the device.
+    """
     on = buffers.get("sample_on")
     if on is None:
         return film_stats(buffers)

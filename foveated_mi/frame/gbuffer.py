@@ -22,11 +22,25 @@ from ..kernels.buffers import GBuffer
 
 
 def render_gbuffer(scene: mi.Scene, sensor: mi.Sensor, *, materials: bool = False) -> GBuffer:
-    """Intersect one ray per pixel centre and return the G-buffer (``albedo`` and
-    ``emission`` only with ``materials=True``).
+    """Intersect one ray per pixel centre and return the G-buffer.
 
     Runs without gradient tracking: visibility is discrete, and the albedo and emission are
     used as fixed weights of the image formation (see :mod:`foveated_mi.kernels.demodulation`).
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        The scene.
+    sensor : mi.Sensor
+        The frame's sensor (its film's crop size is the G-buffer's size).
+    materials : bool, optional
+        Also evaluate the albedo and the emission at the primary hits.
+
+    Returns
+    -------
+    gb : GBuffer
+        One entry per film pixel (``albedo`` and ``emission`` only with ``materials=True``,
+        else None).
     """
     width, height = film_size(sensor)
     _, x, y = pixel_coords(width, height)
@@ -36,8 +50,29 @@ def render_gbuffer(scene: mi.Scene, sensor: mi.Sensor, *, materials: bool = Fals
 def gbuffer_at(scene: mi.Scene, sensor: mi.Sensor, x: mi.UInt32, y: mi.UInt32, width: int,
                height: int, active: mi.Bool | bool = True, *, materials: bool = False
                ) -> GBuffer:
-    """The G-buffer of the pixel centres ``(x, y)`` only, one entry per lane (a miss where
-    not ``active``): what a formation that keeps nothing on the film casts at its samples."""
+    """The G-buffer of the pixel centres ``(x, y)`` only: what a formation that keeps nothing
+    on the film casts at its samples.
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        The scene.
+    sensor : mi.Sensor
+        The frame's sensor.
+    x, y : mi.UInt32
+        Pixel coordinates, one pair per lane.
+    width, height : int
+        The film's size.
+    active : mi.Bool or bool, optional
+        The lanes that cast a ray; the others are a miss.
+    materials : bool, optional
+        Also evaluate the albedo and the emission at the primary hits.
+
+    Returns
+    -------
+    gb : GBuffer
+        One entry per lane (``albedo`` and ``emission`` None without ``materials``).
+    """
     with dr.suspend_grad():
         ray = primary_rays(sensor, x, y, width, height)
         si = scene.ray_intersect(mi.Ray3f(ray), ray_flags=mi.RayFlags.All, coherent=True,
@@ -62,7 +97,25 @@ def surface_radiometry(scene: mi.Scene, si: mi.SurfaceInteraction3f, hit: mi.Boo
     """Diffuse albedo and emitted radiance of primary intersections ``si``.
 
     Both are made finite and non-negative: a NaN from a broken texture or emitter would
-    otherwise spread through the demodulated reconstruction."""
+    otherwise spread through the demodulated reconstruction.
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        The scene (its emitters).
+    si : mi.SurfaceInteraction3f
+        The primary intersections.
+    hit : mi.Bool
+        Where ``si`` is a valid hit.
+
+    Returns
+    -------
+    albedo : mi.Color3f
+        The BSDF's diffuse reflectance (0 on a miss).
+    emission : mi.Color3f
+        The radiance emitted towards the camera (an area emitter at the hit, or the
+        environment on a miss).
+    """
     albedo = dr.zeros(mi.Color3f, dr.width(hit))
     bsdf = si.bsdf()
     albedo = dr.select(hit, mi.Color3f(bsdf.eval_diffuse_reflectance(si, hit)), albedo)
@@ -75,7 +128,18 @@ def surface_radiometry(scene: mi.Scene, si: mi.SurfaceInteraction3f, hit: mi.Boo
 
 def filter_reach(film: mi.Film) -> int:
     """Pixels, along each axis, from a pixel to the farthest pixel centre whose samples its
-    reconstruction filter weighs (at least 1: a pixel's own box may straddle an edge)."""
+    reconstruction filter weighs (at least 1: a pixel's own box may straddle an edge).
+
+    Parameters
+    ----------
+    film : mi.Film
+        The film (its reconstruction filter's radius).
+
+    Returns
+    -------
+    reach : int
+        The reach, in pixels, at least 1.
+    """
     return max(1, math.ceil(float(film.rfilter().radius()) + 0.5) - 1)
 
 
@@ -86,7 +150,22 @@ def emission_edges(emission: mi.Color3f, width: int, height: int, reach: int) ->
 
     Such a pixel's radiance mixes a light's emission, often orders of magnitude brighter,
     with its own surface's, by sub-pixel coverage; a sparse estimate of it is a lottery over
-    which samples reach it, and its value describes no surface it could be spread to."""
+    which samples reach it, and its value describes no surface it could be spread to.
+
+    Parameters
+    ----------
+    emission : mi.Color3f
+        The G-buffer's emission, one value per pixel.
+    width, height : int
+        The film's size.
+    reach : int
+        The window's half-width, in pixels (0 to 64; :func:`filter_reach`).
+
+    Returns
+    -------
+    edges : mi.Bool
+        True on an emitter's edge, one entry per pixel.
+    """
     reach = check_int("reach", reach, 0, 64)
     emits = (emission.x > 0) | (emission.y > 0) | (emission.z > 0)
     _, x, y = pixel_coords(width, height)

@@ -43,7 +43,19 @@ class PrimalFrame:
 
 
 def formation_input(plan: FramePlan) -> FormationInput:
-    """The buffers of ``plan`` that a formation reads."""
+    """The buffers of ``plan`` that a formation reads.
+
+    Parameters
+    ----------
+    plan : FramePlan
+        The frame's plan.
+
+    Returns
+    -------
+    inp : FormationInput
+        Its G-buffer, reprojection, history, size, spp, fill seed, emission edges, gaze and
+        sample space.
+    """
     return FormationInput(plan.gbuffer, plan.reprojection, plan.history, plan.width,
                           plan.height, plan.spp, plan.fill_seed, plan.emission_edges, plan.gaze,
                           plan.space)
@@ -52,11 +64,35 @@ def formation_input(plan: FramePlan) -> FormationInput:
 def form_primal(plan: FramePlan, shading: ShadingBuffer, fs: FormationSettings,
                 timer: StageTimer, frozen: FrozenFormation | None, record: bool
                 ) -> tuple[Formed, tuple | None, bool]:
-    """A primal frame's image: ``(formed, recorded, replayed)``. With ``record`` (a gradient
-    pass will follow and its denoiser is differentiable) the derivative graph is kept; image
-    and buffers are detached either way (the history never carries a gradient into the next
-    frame). Otherwise ``frozen``, where given (a frame that may replay its passes:
-    :func:`~.formation.replayable`), forms it from its recording (``replayed``)."""
+    """A primal frame's image. With ``record`` (a gradient pass will follow and its denoiser
+    is differentiable) the derivative graph is kept; image and buffers are detached either way
+    (the history never carries a gradient into the next frame).
+
+    Parameters
+    ----------
+    plan : FramePlan
+        The frame's plan.
+    shading : ShadingBuffer
+        The frame's traced values.
+    fs : FormationSettings
+        The formation and its settings.
+    timer : StageTimer
+        The frame's stage timer.
+    frozen : FrozenFormation or None
+        Where given and not ``record`` (a frame that may replay its passes:
+        :func:`~.formation.replayable`), forms the image from its recording.
+    record : bool
+        Keep the derivative graph for a gradient pass.
+
+    Returns
+    -------
+    formed : Formed
+        The image, buffers and history.
+    recorded : tuple or None
+        ``(x, image)``, the kept graph (:func:`~.adjoint.record`); None without ``record``.
+    replayed : bool
+        Whether ``frozen`` formed it.
+    """
     inp = formation_input(plan)
     if not record:
         if frozen is not None:
@@ -69,7 +105,19 @@ def form_primal(plan: FramePlan, shading: ShadingBuffer, fs: FormationSettings,
 
 
 def formation_of(primal: PrimalFrame) -> Callable[[mi.Color3f], mi.Color3f]:
-    """The primal frame's image as a function of its traced values, every weight held."""
+    """The primal frame's image as a function of its traced values, every weight held.
+
+    Parameters
+    ----------
+    primal : PrimalFrame
+        The primal frame.
+
+    Returns
+    -------
+    image : callable
+        ``image(value) -> mi.Color3f``: the formation run again (as a gradient pass) on the
+        shading buffer with ``value`` in place of its values.
+    """
     inp = formation_input(primal.plan)
 
     def image(value):
@@ -110,8 +158,35 @@ def _pixels_to_samples(primal: PrimalFrame, tangent: mi.Color3f) -> mi.Color3f:
 
 def backward(nested_adjoint: _adjoint.NestedAdjoint, integrator, scene, params,
              primal: PrimalFrame, grad_in, seed, spp, settings: TraceSettings) -> None:
-    """Reverse mode: ``grad_in`` (H, W, 3) through the formation to the traced pixels, then
-    through the nested integrator's adjoint into the parameters' gradients."""
+    r"""Reverse mode: ``grad_in`` through the formation to the traced pixels, then through
+    the nested integrator's adjoint into the parameters' gradients.
+
+    Parameters
+    ----------
+    nested_adjoint : NestedAdjoint
+        The nested integrator's derivative (:class:`~.adjoint.NestedAdjoint`).
+    integrator : mi.Integrator
+        The nested integrator.
+    scene : mi.Scene
+        The scene.
+    params : mi.SceneParameters
+        The parameters being differentiated.
+    primal : PrimalFrame
+        The primal frame (its graph, if kept, is consumed).
+    grad_in : mi.TensorXf
+        :math:`\delta I`, the image's gradient, of shape (H, W, 3).
+    seed : int or mi.UInt32
+        The gradient pass's seed.
+    spp : int
+        The gradient pass's samples per pixel (0: the sensor's).
+    settings : TraceSettings
+        The trace settings.
+
+    Raises
+    ------
+    ParameterError
+        When ``grad_in`` is not of shape (H, W, 3).
+    """
     grad = _to_color(grad_in, primal.plan, "grad_in")
     delta = _adjoint.recorded_backward(*_graph(primal), grad)
     nested_adjoint.backward(integrator, scene, params, primal.plan, _traced_pixels(primal),
@@ -121,7 +196,32 @@ def backward(nested_adjoint: _adjoint.NestedAdjoint, integrator, scene, params,
 def forward(nested_adjoint: _adjoint.NestedAdjoint, integrator, scene, params,
             primal: PrimalFrame, seed, spp, settings: TraceSettings) -> mi.TensorXf:
     """Forward mode: the traced pixels' tangent from the nested integrator, through the
-    formation. Returns the image tangent (H, W, 3)."""
+    formation.
+
+    Parameters
+    ----------
+    nested_adjoint : NestedAdjoint
+        The nested integrator's derivative (:class:`~.adjoint.NestedAdjoint`).
+    integrator : mi.Integrator
+        The nested integrator.
+    scene : mi.Scene
+        The scene, with tangents set on its parameters.
+    params : mi.SceneParameters
+        The parameters being differentiated.
+    primal : PrimalFrame
+        The primal frame (its graph, if kept, is consumed).
+    seed : int or mi.UInt32
+        The gradient pass's seed.
+    spp : int
+        The gradient pass's samples per pixel (0: the sensor's).
+    settings : TraceSettings
+        The trace settings.
+
+    Returns
+    -------
+    tangent : mi.TensorXf
+        The image tangent, of shape (H, W, 3).
+    """
     plan = primal.plan
     tangent = nested_adjoint.forward(integrator, scene, params, plan, _traced_pixels(primal),
                                      seed, spp, settings)

@@ -53,7 +53,24 @@ class FrameOutputs:
         """Buffer ``name`` as a NumPy array (H, W, C), or (H, W) for scalars, on its grid.
 
         ``nearest`` comes back as the (x, y) cell coordinates of each cell's site (-1 where
-        there is none); ``reprojection_map`` as (x, y, hit)."""
+        there is none); ``reprojection_map`` as (x, y, hit).
+
+        Parameters
+        ----------
+        name : str
+            One of the frame's buffers (``buffers``).
+
+        Returns
+        -------
+        array : numpy.ndarray or None
+            The buffer, of its grid's height and width; ``wavefront`` and ``row_counts`` flat;
+            None where the frame made none (its entry is None).
+
+        Raises
+        ------
+        ParameterError
+            When ``name`` is not one of the frame's buffers.
+        """
         import numpy as np
         if name not in self.buffers:
             raise ParameterError("buffer", name, "one of " + ", ".join(sorted(self.buffers)))
@@ -83,10 +100,20 @@ class FrameOutputs:
 
 
 def trace_mode(trace_replayed: bool, formation_replayed: bool) -> str:
-    """How a frame's passes ran: ``replayed`` (the trace and the formation launched from
-    their ``dr.freeze`` recordings), ``traced`` (both traced by Python), or ``partly
-    replayed``. Frame times of different modes are not comparable: tracing costs host time
-    that the rays do not pay for."""
+    """How a frame's passes ran. Frame times of different modes are not comparable: tracing
+    costs host time that the rays do not pay for.
+
+    Parameters
+    ----------
+    trace_replayed, formation_replayed : bool
+        Whether the trace pass and the formation were replayed.
+
+    Returns
+    -------
+    mode : str
+        ``replayed`` (the trace and the formation launched from their ``dr.freeze``
+        recordings), ``traced`` (both traced by Python), or ``partly replayed``.
+    """
     if trace_replayed and formation_replayed:
         return "replayed"
     return "partly replayed" if trace_replayed or formation_replayed else "traced"
@@ -99,18 +126,25 @@ def frame_outputs(plan: FramePlan, samples, formed: Formed, fs: FormationSetting
 
     Parameters
     ----------
-    plan, formed : the frame's plan and what its formation returned.
-    samples : the trace pass's counters (``rejected``, ``clamped``).
-    fs : the formation that formed it, with its settings (its grids and stats).
-    timer : the frame's stage timer (its times go to the stats).
-    index : the frame's number since the view's last reset.
-    replayed : whether the trace and the formation were replayed (:func:`trace_mode`).
-    record : values the stats carry as they are (the integrator's options).
+    plan, formed : FramePlan, Formed
+        The frame's plan and what its formation returned.
+    samples : Shaded
+        The trace pass's counters (``rejected``, ``clamped``).
+    fs : FormationSettings
+        The formation that formed it, with its settings (its grids and stats).
+    timer : StageTimer
+        The frame's stage timer (its times go to the stats).
+    index : int
+        The frame's number since the view's last reset.
+    replayed : tuple of bool, optional
+        Whether the trace and the formation were replayed (:func:`trace_mode`).
+    record : dict or None, optional
+        Values the stats carry as they are (the integrator's options).
 
     Returns
     -------
-    FrameOutputs
-    """
+    outputs : FrameOutputs
+        The named buffers, the grid of each, and the stats (device values until read)."""
     gb, ro, reproj = plan.gbuffer, plan.reordered, plan.reprojection
     entry = fs.entry
     film = Grid.film(plan.width, plan.height)

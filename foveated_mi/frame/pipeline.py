@@ -67,7 +67,24 @@ class Frame:
 
 def plan_pass(view: View, frame: Frame, settings: FrameSettings,
               timer: StageTimer) -> FramePlan:
-    """The passes before the trace, on the view's planner."""
+    """The passes before the trace, on the view's planner.
+
+    Parameters
+    ----------
+    view : View
+        The view (its planner).
+    frame : Frame
+        The frame's request and inputs.
+    settings : FrameSettings
+        The frame's settings (the plan's are read).
+    timer : StageTimer
+        The frame's stage timer.
+
+    Returns
+    -------
+    plan : FramePlan
+        The frame's plan.
+    """
     return view.planner.plan(frame.scene, frame.sensor, frame.seed, frame.spp, settings.plan,
                              frame.gaze, timer, frame.state)
 
@@ -76,7 +93,28 @@ def trace_pass(passes: Passes, frame: Frame, plan: FramePlan, settings: FrameSet
                timer: StageTimer) -> tuple[_trace.Shaded, bool]:
     """The trace pass and whether it was replayed: replayed where nothing needs it traced
     (a frame neither timed nor differentiated, with ``freeze`` on; a scene with a parameter
-    that requires gradients is traced even where the configuration refuses them)."""
+    that requires gradients is traced even where the configuration refuses them).
+
+    Parameters
+    ----------
+    passes : Passes
+        The nested integrator and the recordings.
+    frame : Frame
+        The frame's request and inputs.
+    plan : FramePlan
+        The frame's plan.
+    settings : FrameSettings
+        The frame's settings (the trace's are read).
+    timer : StageTimer
+        The frame's stage timer.
+
+    Returns
+    -------
+    shaded : Shaded
+        The sparse shading buffer and the samples' counters.
+    replayed : bool
+        Whether the trace was replayed.
+    """
     if frame.freeze and not timer.enabled and not frame.record \
             and not frame.state.differentiated:
         shaded = passes.frozen_trace(frame.scene, passes.nested, plan, settings.trace,
@@ -89,7 +127,27 @@ def trace_pass(passes: Passes, frame: Frame, plan: FramePlan, settings: FrameSet
 def primal_frame(view: View, passes: Passes, frame: Frame, settings: FrameSettings,
                  timer: StageTimer, stats: dict[str, Any]) -> mi.TensorXf:
     """The primal frame of ``view``: plan, trace, form, commit (module docstring).
-    ``stats``: values the frame's stats carry as they are (the integrator's options)."""
+
+    Parameters
+    ----------
+    view : View
+        The view; its history, outputs and primal frame are updated.
+    passes : Passes
+        The nested integrator and the recordings.
+    frame : Frame
+        The frame's request and inputs.
+    settings : FrameSettings
+        The frame's settings.
+    timer : StageTimer
+        The frame's stage timer.
+    stats : dict
+        Values the frame's stats carry as they are (the integrator's options).
+
+    Returns
+    -------
+    image : mi.TensorXf
+        The frame's radiance, of shape (H, W, 3).
+    """
     # Decisions before tracing: G-buffer, reprojection, sampling map, launch.
     plan = plan_pass(view, frame, settings, timer)
     # Sparse shading (§3.3): the nested integrator traces the launch only, and its samples
@@ -110,7 +168,31 @@ def commit_pass(view: View, frame: Frame, plan: FramePlan, shaded: _trace.Shaded
                 settings: FrameSettings, timer: StageTimer, recorded,
                 replayed: tuple[bool, bool], stats: dict[str, Any]) -> None:
     """The frame's history becomes the view's (none without ``history``), its buffers and
-    stats are kept, and the frame is kept for a gradient pass."""
+    stats are kept, and the frame is kept for a gradient pass.
+
+    Parameters
+    ----------
+    view : View
+        The view that rendered it.
+    frame : Frame
+        The frame's request and inputs.
+    plan : FramePlan
+        The frame's plan.
+    shaded : Shaded
+        The trace pass's result.
+    formed : Formed
+        The formation's result.
+    settings : FrameSettings
+        The frame's settings.
+    timer : StageTimer
+        The frame's stage timer.
+    recorded : tuple or None
+        The formation's derivative graph ``(x, image)``, where kept.
+    replayed : tuple of bool
+        Whether the trace and the formation were replayed.
+    stats : dict
+        Values the frame's stats carry as they are.
+    """
     view.planner.commit(plan, formed.history if settings.plan.history.keep else None)
     view.outputs = frame_outputs(plan, shaded, formed, frame.formation, timer, view.frame - 1,
                                  replayed, stats)
@@ -121,7 +203,24 @@ def commit_pass(view: View, frame: Frame, plan: FramePlan, shaded: _trace.Shaded
 def uncommitted_frame(view: View, passes: Passes, frame: Frame,
                       settings: FrameSettings) -> _gradient.PrimalFrame:
     """The frame ``view`` would render next, planned and traced without committing it (a
-    gradient pass with no primal frame to reuse)."""
+    gradient pass with no primal frame to reuse).
+
+    Parameters
+    ----------
+    view : View
+        The view whose planner plans the frame; nothing of the frame is committed to it.
+    passes : Passes
+        The nested integrator and the recordings.
+    frame : Frame
+        The frame's request and inputs.
+    settings : FrameSettings
+        The frame's settings.
+
+    Returns
+    -------
+    primal : PrimalFrame
+        The frame, without a kept derivative graph.
+    """
     timer = StageTimer(False)
     with dr.suspend_grad():
         plan = plan_pass(view, frame, settings, timer)

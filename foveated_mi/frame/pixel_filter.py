@@ -88,7 +88,18 @@ class FilterSampler:
 
     def with_table(self, table: "_Table | None") -> "FilterSampler":
         """This sampler reading ``table``, the same values held elsewhere (a frozen
-        function's input: what it reads must come in as one)."""
+        function's input: what it reads must come in as one).
+
+        Parameters
+        ----------
+        table : _Table or None
+            The tabulated filter (:attr:`table`'s values).
+
+        Returns
+        -------
+        sampler : FilterSampler
+            A shallow copy of this sampler that reads ``table``.
+        """
         import copy
         out = copy.copy(self)
         out._table = table
@@ -100,8 +111,22 @@ class FilterSampler:
         return self._table is not None and self._table.signed
 
     def sample(self, u: mi.Point2f, x: mi.UInt32, y: mi.UInt32) -> FilterSample:
-        """Film position and weight of samples of pixels ``(x, y)`` (crop-relative) from the
-        uniform 2-D sample ``u``."""
+        """Film position and weight of samples of pixels ``(x, y)`` from the uniform 2-D sample
+        ``u``.
+
+        Parameters
+        ----------
+        u : mi.Point2f
+            Uniform 2-D samples in :math:`[0, 1)^2`.
+        x, y : mi.UInt32
+            The pixels (crop-relative).
+
+        Returns
+        -------
+        sample : FilterSample
+            The film position (crop-relative pixels, continuous) and the signed weight (1 for
+            non-negative filters and for uniform jitter).
+        """
         px, py = mi.Float(x), mi.Float(y)
         if not self.importance:
             # Mitsuba's own uniform jitter: bit-identical positions.

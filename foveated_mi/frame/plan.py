@@ -107,17 +107,18 @@ class Planner:
 
         Parameters
         ----------
-        scene, sensor : the frame's scene and the sensor that sees it.
-        seed : the render's seed; spp : samples per traced pixel (0: the sensor's).
-        settings : the plan's settings (:class:`~.settings.PlanSettings`).
-        gaze : the frame's gaze, a normalised film position (an input, never a setting).
-        timer : closes the ``gbuffer``, ``sampling`` and ``reorder`` stages.
-        state : the scene's state, when the caller has it.
+        scene, sensor : mi.Scene, mi.Sensor
+            The frame's scene and the sensor that sees it.
+        seed, spp : int or mi.UInt32, int
+            The render's seed; samples per traced pixel (0: the sensor's).
+        settings, gaze : PlanSettings, tuple of float
+            The plan's settings; the frame's gaze, a normalised film position (never a setting).
+        timer, state : StageTimer, SceneState or None
+            Closes the ``gbuffer``, ``sampling``, ``reorder`` stages; the scene's state, if known.
 
         Returns
         -------
-        FramePlan
-        """
+        plan : FramePlan"""
         width, height = _gbuffer.film_size(sensor)
         spp = check_int("spp", spp if spp else sensor.sampler().sample_count(), 1)
         state = state if state is not None else scene_state(scene, sensor)
@@ -218,8 +219,16 @@ class Planner:
                          gaze=gaze, space=dataclasses.replace(space, rays=rays))
 
     def commit(self, plan: FramePlan, history: dict[str, Any] | None) -> None:
-        """After a primal frame: its history (``mean``, ``count``, ``moment2`` on the film,
-        None without history) becomes the next frame's, and the frame is counted."""
+        """After a primal frame: its history becomes the next frame's, and the frame is counted.
+
+        Parameters
+        ----------
+        plan : FramePlan
+            The frame's plan (its G-buffer, camera, gaze and sample space go with the history).
+        history : dict or None
+            The formation's history (``mean``, ``count``, ``moment2``, on the film's pixels or
+            the foveal buffer's samples); None without history (the previous one is kept).
+        """
         if history is not None:
             gb = plan.gbuffer
             in_buffer = plan.space.kind == "buffer"

@@ -35,13 +35,49 @@ class PostProcessed(NamedTuple):
 
 def runs(n: DenoiseSettings, grad_pass: bool) -> bool:
     """Whether the denoiser runs: active for its options, and differentiable in a gradient
-    pass (which skips it otherwise)."""
+    pass (which skips it otherwise).
+
+    Parameters
+    ----------
+    n : DenoiseSettings
+        The denoiser and the options it reads.
+    grad_pass : bool
+        Whether this is a gradient pass.
+
+    Returns
+    -------
+    runs : bool
+        Whether the denoiser is called.
+    """
     return n.active and (DENOISERS[n.name].differentiable or not grad_pass)
 
 
 def post_pass(recon: Reconstruction, resolved: Resolved, gb: GBuffer, width: int, height: int,
               d: DomainSettings, n: DenoiseSettings, grad_pass: bool = False) -> PostProcessed:
-    """The denoiser ``n`` in its domain, and remodulation (module docstring)."""
+    """The denoiser ``n`` in its domain, and remodulation (module docstring).
+
+    Parameters
+    ----------
+    recon : Reconstruction
+        The reconstruction pass's buffers (working values).
+    resolved : Resolved
+        The resolved shading buffer.
+    gb : GBuffer
+        The G-buffer.
+    width, height : int
+        The film's size.
+    d : DomainSettings
+        The value domains.
+    n : DenoiseSettings
+        The denoiser and the options it reads.
+    grad_pass : bool, optional
+        Whether this is a gradient pass (which skips a non-differentiable denoiser).
+
+    Returns
+    -------
+    post : PostProcessed
+        The image, the fill and the interpolation (radiance), and the denoiser's buffers.
+    """
     entry = DENOISERS[n.name]
     run = runs(n, grad_pass)
     ctx = DenoiseInput(recon.interpolated, gb, resolved, recon.nearest, width, height,

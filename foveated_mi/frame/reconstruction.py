@@ -40,17 +40,29 @@ def reconstruction_pass(values: mi.Color3f, resolved: Resolved, gb: GBuffer, wid
 
     Parameters
     ----------
-    values, resolved, gb : the working values, the resolved shading buffer, the G-buffer.
-    width, height : the film's size.
-    r : the pass's settings and its method's parameters.
-    seed : the stochastic fill's (the render's seed, not the frame's: over a still view the
-        fill keeps its choices, so the frame changes only where new samples arrive).
-    emission_edges : pixels that lend values only to each other in the guided methods.
-    max_gap : the Jump Flooding bound (None: none; :func:`foveated_mi.frame.film.jfa_bound`).
+    values : mi.Color3f
+        The working values (radiance, or irradiance with ``demodulate``), one per pixel.
+    resolved : Resolved
+        The resolved shading buffer (its mask and counts).
+    gb : GBuffer
+        The G-buffer.
+    width, height : int
+        The film's size.
+    r : ReconstructionSettings
+        The pass's settings and its method's parameters.
+    seed : int or mi.UInt32
+        The stochastic fill's (the render's seed, not the frame's: over a still view the fill
+        keeps its choices, so the frame changes only where new samples arrive).
+    emission_edges : mi.Bool or None, optional
+        Pixels that lend values only to each other in the guided methods.
+    max_gap : float or None
+        The Jump Flooding bound (None: none; :func:`foveated_mi.frame.film.jfa_bound`).
 
     Returns
     -------
-    Reconstruction
+    recon : Reconstruction
+        ``nearest``, ``filled``, ``interpolated``, and ``averaged`` where the method declares a
+        number.
     """
     radiance = values
     method = rec.RECONSTRUCTIONS[r.method]

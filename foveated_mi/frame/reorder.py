@@ -97,7 +97,23 @@ def _row_rank(flags: mi.Bool, width: int, height: int) -> tuple[mi.UInt32, mi.UI
 
 def reorder_rows(sampling_map: mi.Bool, width: int, height: int
                  ) -> tuple[mi.UInt32, mi.UInt32]:
-    """Strategy 1: the reordered map ``R`` and ``row_counts``."""
+    """Strategy 1: the reordered map ``R`` and ``row_counts``.
+
+    Parameters
+    ----------
+    sampling_map : mi.Bool
+        True where a ray is traced, one entry per pixel.
+    width, height : int
+        The film's size.
+
+    Returns
+    -------
+    R : mi.UInt32
+        Slot -> pixel: ``R[v*W + k]`` is the pixel of thread ``k`` of row ``v`` (each row's
+        trace pixels first, then its resample pixels).
+    row_counts : mi.UInt32
+        The trace pixels of each row.
+    """
     idx = dr.arange(mi.UInt32, width * height)
     y = idx // width
     x = idx - y * width
@@ -170,9 +186,27 @@ def _surplus_deficit(counts: mi.UInt32, target: mi.UInt32):
 
 def reorder_rows_blocks(sampling_map: mi.Bool, width: int, height: int, block_height: int
                         ) -> tuple[mi.UInt32, mi.UInt32, mi.UInt32]:
-    """Strategy 2 on top of Strategy 1 as a full map: ``R``, the balanced ``row_counts`` and
-    the number of swaps the paper's loop makes. (The launch gathers the same layout from the
-    compacted trace pixels, :func:`reorder`.)"""
+    """Strategy 2 on top of Strategy 1 as a full map. (The launch gathers the same layout
+    from the compacted trace pixels, :func:`reorder`.)
+
+    Parameters
+    ----------
+    sampling_map : mi.Bool
+        True where a ray is traced, one entry per pixel.
+    width, height : int
+        The film's size.
+    block_height : int
+        Rows per block.
+
+    Returns
+    -------
+    R : mi.UInt32
+        Slot -> pixel, after the swaps.
+    row_counts : mi.UInt32
+        The balanced trace pixels of each row.
+    swaps : mi.UInt32
+        The number of swaps the paper's loop makes (one element).
+    """
     rmap, counts = reorder_rows(sampling_map, width, height)
     target = _balanced_counts(counts, height, block_height)
     surplus, s_cum, d_cum = _surplus_deficit(counts, target)
@@ -250,7 +284,18 @@ _TILE_ORDERS: dict[tuple, mi.UInt32] = {}
 
 def tile_order(width: int, height: int) -> mi.UInt32:
     """Every pixel index once, in :data:`TILE` x :data:`TILE` tile order (kept per film size:
-    built once, with one host read)."""
+    built once, with one host read).
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size.
+
+    Returns
+    -------
+    order : mi.UInt32
+        The ``width * height`` pixel indices, row-major inside a tile and between tiles.
+    """
     key = (mi.variant(), width, height)
     order = _TILE_ORDERS.get(key)
     if order is None:
@@ -271,7 +316,30 @@ def tile_order(width: int, height: int) -> mi.UInt32:
 
 def reorder(sampling_map: mi.Bool, width: int, height: int, mode: str = "compact",
             block_height: int = 8) -> Reordered:
-    """Reorder the sampling map into a trace wavefront (see the module docstring)."""
+    """Reorder the sampling map into a trace wavefront (see the module docstring).
+
+    Parameters
+    ----------
+    sampling_map : mi.Bool
+        True where a ray is traced, one entry per pixel.
+    width, height : int
+        The film's size.
+    mode : str, optional
+        One of :data:`REORDER_MODES`.
+    block_height : int, optional
+        Rows per block of Strategy 2 (``rows_blocks``), at least 1.
+
+    Returns
+    -------
+    reordered : Reordered
+        The pixel each lane traces, the lanes that trace (None when every lane does) and the
+        row counts (``rows``, ``rows_blocks``).
+
+    Raises
+    ------
+    ParameterError
+        When ``mode`` or ``block_height`` is invalid.
+    """
     check_choice("reorder", mode, REORDER_MODES)
     block_height = check_int("block_height", block_height, 1)
     n = width * height
@@ -288,13 +356,35 @@ def reorder(sampling_map: mi.Bool, width: int, height: int, mode: str = "compact
 
 def launch_of_pixels(pixels: mi.UInt32, on: mi.Bool, width: int, height: int,
                      mode: str = "compact", block_height: int = 8) -> tuple[Reordered, mi.Bool]:
-    """The launch of a set of pixels (``pixels`` where ``on``; repeats traced once) and the
-    sampling map they make, for a plan that knows its pixels rather than a map (the foveal
-    buffer's samples). ``compact``: row-major, as :func:`reorder`. ``tiles``: in
-    :data:`TILE` x :data:`TILE` tiles, built in tile order directly (a tile index is
-    arithmetic on the pixel), so the launch costs what ``compact``'s does, with no
-    film-sized gather; the film-order map is then a lazy gather, evaluated only where it is
-    read. Other modes: :func:`reorder` of the map."""
+    """The launch of a set of pixels, for a plan that knows its pixels rather than a map (the
+    foveal buffer's samples).
+
+    ``compact``: row-major, as :func:`reorder`. ``tiles``: in :data:`TILE` x :data:`TILE`
+    tiles, built in tile order directly (a tile index is arithmetic on the pixel), so the
+    launch costs what ``compact``'s does, with no film-sized gather; the film-order map is
+    then a lazy gather, evaluated only where it is read. Other modes: :func:`reorder` of the
+    map.
+
+    Parameters
+    ----------
+    pixels : mi.UInt32
+        Film pixels (flat indices), used where ``on``; repeats are traced once.
+    on : mi.Bool
+        The entries of ``pixels`` to trace.
+    width, height : int
+        The film's size.
+    mode : str, optional
+        One of :data:`REORDER_MODES`.
+    block_height : int, optional
+        Rows per block of Strategy 2.
+
+    Returns
+    -------
+    reordered : Reordered
+        The launch.
+    sampling_map : mi.Bool
+        The sampling map the pixels make, one entry per film pixel.
+    """
     check_choice("reorder", mode, REORDER_MODES)
     if mode != "tiles":
         smap = dr.zeros(mi.Bool, width * height)

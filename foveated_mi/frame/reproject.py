@@ -94,7 +94,18 @@ class ReprojectionMap(NamedTuple):
 def camera_state(sensor: mi.Sensor) -> CameraState:
     """Capture the camera of a perspective sensor for the next frame's reprojection.
 
-    The arrays are made opaque: a moving camera changes their values, never the kernels."""
+    The arrays are made opaque: a moving camera changes their values, never the kernels.
+
+    Parameters
+    ----------
+    sensor : mi.Sensor
+        A perspective sensor.
+
+    Returns
+    -------
+    camera : CameraState
+        Its world -> film matrix and its centre.
+    """
     world = sensor.world_transform().matrix
     matrix = sensor.projection_transform().matrix @ dr.rcp(world)
     origin = mi.Point3f(world[0][3], world[1][3], world[2][3])
@@ -105,7 +116,24 @@ def camera_state(sensor: mi.Sensor) -> CameraState:
 
 def project(camera: CameraState, p: mi.Point3f, width: int, height: int
             ) -> tuple[mi.Point2f, mi.Float]:
-    """World points to pixel coordinates of ``camera`` and their distance to its centre."""
+    """World points to pixel coordinates of ``camera`` and their distance to its centre.
+
+    Parameters
+    ----------
+    camera : CameraState
+        The camera.
+    p : mi.Point3f
+        World points.
+    width, height : int
+        The film's size.
+
+    Returns
+    -------
+    uv : mi.Point2f
+        The points' film coordinates, in pixels (continuous).
+    distance : mi.Float
+        Their distance to the camera's centre.
+    """
     q = camera.matrix @ mi.Vector4f(p.x, p.y, p.z, 1.0)
     inv_w = dr.rcp(q.w)
     uv = mi.Point2f(q.x * inv_w * width, q.y * inv_w * height)
@@ -176,12 +204,25 @@ def reprojection_map(position: mi.Point3f, hit: mi.Bool, history: History | None
 
 
 def still_map(history: History, width: int, height: int) -> ReprojectionMap:
-    """The reprojection map of a still camera over an unchanged scene (the G-buffer reused):
-    every pixel lands on its own centre, on the surface (or sky) it saw, and is its previous
+    """The reprojection map of a still camera over an unchanged scene (the G-buffer reused).
+
+    Every pixel lands on its own centre, on the surface (or sky) it saw, and is its previous
     pixel's nearest claim, so :func:`reprojection_map` would return this, up to rounding of
-    the projection. A hit where the history holds samples; no projection, depth test or
-    claim is computed (the frame's film-sized passes follow the rays: a still head pays
-    nothing for its history's addresses)."""
+    the projection. No projection, depth test or claim is computed (the frame's film-sized
+    passes follow the rays: a still head pays nothing for its history's addresses).
+
+    Parameters
+    ----------
+    history : History
+        The previous frame's history, on the film's pixels.
+    width, height : int
+        The film's size.
+
+    Returns
+    -------
+    map : ReprojectionMap
+        Each pixel onto itself: a hit where the history holds samples.
+    """
     n = width * height
     _, cx, cy = pixel_coords(width, height)
     coords = mi.Point2f(mi.Float(cx) + 0.5, mi.Float(cy) + 0.5)
@@ -207,9 +248,27 @@ def _any_within(values, x: mi.Int32, y: mi.Int32, width: int, height: int, reach
 
 def nearest_claim(uv: mi.Point2f, centre: mi.Point2f, target: mi.UInt32, claims: mi.Bool,
                   targets: int) -> mi.Bool:
-    """Which of the ``claims`` win their ``target`` (one of ``targets`` previous pixels or
-    samples, whose pixel's centre is ``centre``): the one landing nearest that centre, ties
-    to the lowest claimant index (an order-free minimum: the same on every run)."""
+    """Which of the ``claims`` win their ``target``: the one landing nearest that target's
+    centre, ties to the lowest claimant index (an order-free minimum: the same on every run).
+
+    Parameters
+    ----------
+    uv : mi.Point2f
+        Where each claimant lands, in pixels.
+    centre : mi.Point2f
+        The centre of each claimant's target's pixel.
+    target : mi.UInt32
+        Each claimant's target (a previous pixel or sample).
+    claims : mi.Bool
+        The claimants that claim.
+    targets : int
+        The number of targets.
+
+    Returns
+    -------
+    wins : mi.Bool
+        The claims that win, one per claimant.
+    """
     # A non-negative float's bits order like the float: the exact distance, no quantisation;
     # the claimant's index below it breaks ties, so one 64-bit minimum decides.
     d2 = dr.reinterpret_array(mi.UInt32, dr.square(uv.x - centre.x) +
@@ -222,12 +281,28 @@ def nearest_claim(uv: mi.Point2f, centre: mi.Point2f, target: mi.UInt32, claims:
 
 def unless_cut(reproj: ReprojectionMap, fraction: float) -> tuple[ReprojectionMap, mi.Bool]:
     """``reproj`` with no hit at all when fewer than ``fraction`` of the pixels land on the
-    surface they saw in the previous frame, and that verdict (a one-entry ``mi.Bool``): after
-    a camera cut the few pixels that still pass the depth test are chance matches, and a
-    frame that keeps them mixes two views. Judged by ``agree``, not by ``hit``: a sparse
-    frame holds history at few pixels (about its ray fraction after one frame), so counting
-    hits would call every move of a frame tracing under ``fraction`` of its pixels a cut.
-    Decided on the device (a one-entry count, broadcast), so the frame never waits for it."""
+    surface they saw in the previous frame, and that verdict.
+
+    After a camera cut the few pixels that still pass the depth test are chance matches, and a
+    frame that keeps them mixes two views. Judged by ``agree``, not by ``hit``: a sparse frame
+    holds history at few pixels (about its ray fraction after one frame), so counting hits
+    would call every move of a frame tracing under ``fraction`` of its pixels a cut. Decided
+    on the device (a one-entry count, broadcast), so the frame never waits for it.
+
+    Parameters
+    ----------
+    reproj : ReprojectionMap
+        The frame's reprojection map.
+    fraction : float
+        The smallest fraction of agreeing pixels (or samples) that is not a cut.
+
+    Returns
+    -------
+    reproj : ReprojectionMap
+        ``reproj``, without hits after a cut.
+    cut : mi.Bool
+        The verdict, a one-entry array.
+    """
     n = dr.width(reproj.hit)
     agree = reproj.agree if reproj.agree is not None else reproj.hit
     hits = dr.zeros(mi.UInt32, 1)
@@ -241,7 +316,28 @@ def resolve(new: mi.Color3f, traced: mi.Bool, spp: int, reproj: ReprojectionMap,
             moment2: mi.Float | None = None) -> Resolved:
     """Merge this frame's sparse samples with the reprojected history (Fig. 4).
 
-    ``moment2`` is the traced pixels' mean squared sample luminance (0 when not given)."""
+    Parameters
+    ----------
+    new : mi.Color3f
+        This frame's mean :math:`L` per pixel (or sample), read where ``traced``.
+    traced : mi.Bool
+        The traced pixels.
+    spp : int
+        :math:`s`, the samples behind each traced value.
+    reproj : ReprojectionMap
+        The reprojection map (its ``hit`` and ``index``).
+    history : History or None
+        The previous frame's history (None: the traced values alone).
+    max_history : float
+        :math:`N_{max}`, the cap on the history's count (0: no cap).
+    moment2 : mi.Float or None, optional
+        The traced pixels' mean squared sample luminance (0 when not given).
+
+    Returns
+    -------
+    resolved : Resolved
+        The blended shading buffer, its mask, counts, resampled pixels and second moment.
+    """
     s = mi.Float(spp)
     m2 = dr.zeros(mi.Float, dr.width(traced)) if moment2 is None else dr.detach(moment2)
     if history is None:
@@ -265,7 +361,23 @@ def resolve(new: mi.Color3f, traced: mi.Bool, spp: int, reproj: ReprojectionMap,
 
 def roundtrip_error(sensor: mi.Sensor, width: int, height: int, position: mi.Point3f,
                     hit: mi.Bool) -> mi.Float:
-    """Pixel -> world -> pixel error (pixels) for the G-buffer of ``sensor`` (diagnostics)."""
+    """Pixel -> world -> pixel error (pixels) for the G-buffer of ``sensor`` (diagnostics).
+
+    Parameters
+    ----------
+    sensor : mi.Sensor
+        The perspective sensor the G-buffer was cast with.
+    width, height : int
+        The film's size.
+    position, hit : mi.Point3f, mi.Bool
+        The G-buffer's hit points and hit mask.
+
+    Returns
+    -------
+    error : mi.Float
+        The distance from each pixel's centre to its point's projection, in pixels; 0 on a
+        miss.
+    """
     _, x, y = pixel_coords(width, height)
     uv, _ = project(camera_state(sensor), position, width, height)
     err = dr.sqrt(dr.square(uv.x - (mi.Float(x) + 0.5)) + dr.square(uv.y - (mi.Float(y) + 0.5)))

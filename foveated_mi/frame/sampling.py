@@ -89,10 +89,27 @@ SIGMA_P_RANGE = (0.0, 1.0)         # open at 0, closed at 1
 
 
 def sampling_weight(theta: float, sigma_p: float) -> float:
-    """:math:`w = (1/\\sigma_p - 1) / \\theta^2`, computed in double precision.
+    r""":math:`w = (1/\sigma_p - 1) / \theta^2`, computed in double precision.
 
     Very small θ makes ``w`` overflow to ``inf``; :func:`sampling_probability` maps that to
     ``P = 0`` away from the gaze and ``P = 1`` at it, without NaN.
+
+    Parameters
+    ----------
+    theta : float
+        θ, in units of half the film's diagonal (or degrees for a law in degrees); > 0.
+    sigma_p : float
+        :math:`\sigma_p = P(\theta)`, in (0, 1].
+
+    Returns
+    -------
+    w : float
+        The weight, >= 0 (``inf`` on overflow).
+
+    Raises
+    ------
+    ParameterError
+        When ``theta`` or ``sigma_p`` is out of range.
     """
     theta = check_range("theta", theta, 0.0, None, lo_open=True)
     sigma_p = check_range("sigma_p", sigma_p, 0.0, 1.0, lo_open=True)
@@ -104,8 +121,22 @@ def sampling_weight(theta: float, sigma_p: float) -> float:
 
 def normalized_distance(x: mi.Float, y: mi.Float, gaze: mi.Point2f,
                         width: int, height: int) -> mi.Float:
-    """Distance of film points ``(x, y)`` (pixels) to the gaze (normalised film coordinates,
-    origin top-left) divided by half the film diagonal."""
+    """Distance of film points ``(x, y)`` to the gaze divided by half the film diagonal.
+
+    Parameters
+    ----------
+    x, y : mi.Float
+        Film points, in pixels.
+    gaze : mi.Point2f
+        The gaze, in normalised film coordinates (origin top-left).
+    width, height : int
+        The film's size.
+
+    Returns
+    -------
+    d : mi.Float
+        The distance over half the film diagonal.
+    """
     half_diag = 0.5 * math.sqrt(width * width + height * height)
     dx = x - gaze.x * width
     dy = y - gaze.y * height
@@ -117,6 +148,18 @@ def sampling_probability(d: mi.Float, w: mi.Float) -> mi.Float:
 
     ``w d^2`` is formed as ``(sqrt(w) d)^2`` to delay overflow; ``inf * 0`` (gaze pixel with
     infinite ``w``) is defined as 0, i.e. ``P = 1``.
+
+    Parameters
+    ----------
+    d : mi.Float
+        Normalised distances to the gaze (:func:`normalized_distance`).
+    w : mi.Float
+        The weight (:func:`sampling_weight`).
+
+    Returns
+    -------
+    P : mi.Float
+        The probability of tracing a ray, per entry of ``d``.
     """
     s = dr.sqrt(w) * d
     s = dr.select(d == 0, 0.0, s)
@@ -125,19 +168,27 @@ def sampling_probability(d: mi.Float, w: mi.Float) -> mi.Float:
 
 def depth_edges(depth: mi.Float, hit: mi.Bool, width: int, height: int,
                 threshold: float, detector: str = "relative") -> mi.Bool:
-    """Pixels on a depth discontinuity, where a ray is forced.
+    """Pixels on a depth discontinuity, where a ray is forced (both sides of it marked).
 
-    ``relative``: relative depth difference to a 4-neighbour above ``threshold``, or a hit
-    next to a miss (background, depth = inf). Both sides of the discontinuity are marked.
-    Infinite depths are never subtracted, so no NaN arises against the background.
+    Parameters
+    ----------
+    depth, hit : mi.Float, mi.Bool
+        The G-buffer's depth (along the primary ray, scene units) and hit mask, per pixel.
+    width, height : int
+        The film's size.
+    threshold : float
+        A difference above it is an edge.
+    detector : {'relative', 'sobel'}
+        ``relative``: relative depth difference to a 4-neighbour, or a hit next to a miss (depth
+        = inf, never subtracted: no NaN). ``sobel``: the authors' ``edge_detect``
+        (``cuda/device_include/shared_helper_funcs.h``, lines 116-129), ``|Gx| + |Gy|`` of the
+        3x3 Sobel kernels (they clamp the sum to [0, 1], compare with 0.99); taps off the film
+        skipped, a miss is depth 0 (their cleared buffer): silhouettes on the background are edges.
 
-    ``sobel``: the authors' test (``edge_detect`` in ``cuda/device_include/
-    shared_helper_funcs.h``, lines 116-129): ``|Gx| + |Gy|`` of the 3x3 Sobel kernels on the
-    depth buffer (distance along the primary ray, scene units) above ``threshold`` (the
-    authors clamp the sum to [0, 1] and compare with 0.99). Taps outside the film are
-    skipped, as there; a miss counts as depth 0 (the authors' cleared depth buffer), so the
-    silhouette against the background is an edge.
-    """
+    Returns
+    -------
+    edges : mi.Bool
+        True on an edge, one entry per pixel."""
     from ..validate import check_choice
     check_choice("edge_detector", detector, ("relative", "sobel"))
     _, x, y = pixel_coords(width, height)
@@ -178,13 +229,37 @@ def depth_edges(depth: mi.Float, hit: mi.Bool, width: int, height: int,
 
 
 def opaque_seed(seed) -> mi.UInt32:
-    """A per-frame seed as a kernel input, not a constant: a Python int through
-    ``dr.opaque``, a seed already on the device (chosen there, e.g. after a cut) as is."""
+    """A per-frame seed as a kernel input, not a constant.
+
+    Parameters
+    ----------
+    seed : int or mi.UInt32
+        A Python int (through ``dr.opaque``, modulo 2**32), or a seed already on the device
+        (chosen there, e.g. after a cut), kept as is.
+
+    Returns
+    -------
+    seed : mi.UInt32
+        The opaque seed.
+    """
     return seed if dr.is_array_v(seed) else dr.opaque(mi.UInt32, int(seed) & 0xFFFFFFFF)
 
 
 def gaze_pixel_index(gaze: mi.Point2f, width: int, height: int) -> mi.UInt32:
-    """Index of the pixel under the gaze, clamped to the film (off-screen gaze -> border)."""
+    """Index of the pixel under the gaze, clamped to the film (off-screen gaze -> border).
+
+    Parameters
+    ----------
+    gaze : mi.Point2f
+        The gaze, a normalised film position.
+    width, height : int
+        The film's size.
+
+    Returns
+    -------
+    index : mi.UInt32
+        The pixel's flat index ``y * width + x``.
+    """
     gx = mi.Int32(dr.floor(dr.clip(gaze.x * width, 0.0, width - 1.0)))
     gy = mi.Int32(dr.floor(dr.clip(gaze.y * height, 0.0, height - 1.0)))
     return mi.UInt32(gy * width + gx)
@@ -193,11 +268,33 @@ def gaze_pixel_index(gaze: mi.Point2f, width: int, height: int) -> mi.UInt32:
 def sampling_map(width: int, height: int, *, gaze: tuple[float, float], theta: float,
                  sigma_p: float, seed: int, edges: mi.Bool | None = None,
                  probability: mi.Float | None = None) -> tuple[mi.Bool, mi.Float]:
-    """The sampling map of §3.1 (True where a ray is traced) and the probability P per pixel.
+    r"""The sampling map of §3.1 (True where a ray is traced) and the probability P per pixel.
 
     ``gaze``, ``θ``, ``σp`` and ``seed`` enter the kernel as opaque values: changing them
-    from frame to frame compiles nothing new. ``probability``: P per pixel from another law
-    (:func:`probability_in_degrees`) instead of Eq. 1 in film units.
+    from frame to frame compiles nothing new.
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size.
+    gaze : tuple of float
+        The gaze, a normalised film position; its pixel is always traced.
+    theta, sigma_p : float
+        θ (units of half the film's diagonal) and :math:`\sigma_p` of Eq. 1.
+    seed : int or mi.UInt32
+        The per-frame seed of the uniform draw.
+    edges : mi.Bool or None, optional
+        Rays forced on edges (None: none).
+    probability : mi.Float or None, optional
+        P per pixel from another law (:func:`probability_in_degrees`) instead of Eq. 1 in film
+        units (``theta`` and ``sigma_p`` are then unused).
+
+    Returns
+    -------
+    sampling_map : mi.Bool
+        True where a ray is traced, one entry per pixel.
+    probability : mi.Float
+        P per pixel.
     """
     idx, x, y = pixel_coords(width, height)
     g = mi.Point2f(dr.opaque(mi.Float, gaze[0]), dr.opaque(mi.Float, gaze[1]))
@@ -217,16 +314,33 @@ def sampling_map(width: int, height: int, *, gaze: tuple[float, float], theta: f
 
 def largest_gap(width: int, height: int, *, gaze: tuple[float, float], theta: float,
                 sigma_p: float, epsilon: float = 1e-12) -> float | None:
-    """A distance (pixels) that, with probability at least ``1 - epsilon``, no pixel of a
-    sampling map drawn from this law is farther than from its nearest ray; None when the law
-    gives no useful bound (the map may be as sparse as one ray).
+    r"""A distance (pixels) that, with probability at least ``1 - epsilon``, no pixel of a
+    sampling map drawn from this law is farther than from its nearest ray.
 
     Every pixel is traced independently with probability at least ``p_min = P(d_max)``, the
     probability at the film corner farthest from the gaze. A pixel has no ray within ``r``
     only if the (at least quarter-) disk of radius ``r`` around it holds none:
     ``(1 - p_min)^(pi r^2 / 4)``; over ``W H`` pixels, ``r^2 = 4 ln(W H / epsilon) /
     (pi (-ln(1 - p_min)))`` bounds every gap. Rays forced on edges, the gaze pixel and history
-    only add sites. Computed on the host from the frame's scalars (no synchronisation)."""
+    only add sites. Computed on the host from the frame's scalars (no synchronisation).
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size.
+    gaze : tuple of float
+        The gaze, a normalised film position.
+    theta, sigma_p : float
+        The law's θ (units of half the film's diagonal) and :math:`\sigma_p`.
+    epsilon : float, optional
+        The probability that some gap exceeds the bound.
+
+    Returns
+    -------
+    gap : float or None
+        The bound, in pixels; None when the law gives no useful bound (the map may be as
+        sparse as one ray).
+    """
     w = sampling_weight(theta, sigma_p)
     half_diag = 0.5 * math.hypot(width, height)
     gx, gy = gaze[0] * width, gaze[1] * height
@@ -238,7 +352,23 @@ def largest_gap(width: int, height: int, *, gaze: tuple[float, float], theta: fl
 
 def gap_bound(width: int, height: int, p_min: float, epsilon: float = 1e-12) -> float | None:
     """:func:`largest_gap` of any law that traces every pixel with probability at least
-    ``p_min`` (None: no useful bound)."""
+    ``p_min``.
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size.
+    p_min : float
+        The smallest probability of tracing a pixel.
+    epsilon : float, optional
+        The probability that some gap exceeds the bound.
+
+    Returns
+    -------
+    gap : float or None
+        The bound, in pixels (1 when ``p_min >= 1``); None: no useful bound (``p_min = 0``, or
+        a bound of half the film's larger side or more).
+    """
     if p_min >= 1.0:
         return 1.0
     rate = -math.log1p(-p_min)
@@ -250,7 +380,25 @@ def gap_bound(width: int, height: int, p_min: float, epsilon: float = 1e-12) -> 
 
 def expected_fraction(width: int, height: int, *, gaze: tuple[float, float], theta: float,
                       sigma_p: float) -> float:
-    """Analytic mean of P over the film (no edges): the expected ray fraction."""
+    r"""Analytic mean of P over the film (no edges): the expected ray fraction.
+
+    Eq. 1 in film units (``kwon`` with ``theta_deg = 0``); the forced gaze pixel is not
+    counted.
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size.
+    gaze : tuple of float
+        The gaze, a normalised film position.
+    theta, sigma_p : float
+        The law's θ (units of half the film's diagonal) and :math:`\sigma_p`.
+
+    Returns
+    -------
+    fraction : float
+        The mean of P over the film's pixel centres.
+    """
     import numpy as np
     w = sampling_weight(theta, sigma_p)
     ys, xs = np.mgrid[0:height, 0:width] + 0.5
@@ -263,23 +411,64 @@ def expected_fraction(width: int, height: int, *, gaze: tuple[float, float], the
 
 
 def kwon_in_degrees(ecc: mi.Float, theta_deg: float, sigma_p: float) -> mi.Float:
-    """Eq. 1 of the paper with the eccentricity in degrees: P = σp at ``theta_deg``."""
+    """Eq. 1 of the paper with the eccentricity in degrees: P = σp at ``theta_deg``.
+
+    Parameters
+    ----------
+    ecc : mi.Float
+        Each pixel's eccentricity, in degrees.
+    theta_deg : float
+        θ, in degrees.
+    sigma_p : float
+        P at ``theta_deg``.
+
+    Returns
+    -------
+    P : mi.Float
+        The probability per pixel.
+    """
     return sampling_probability(ecc, dr.opaque(mi.Float, sampling_weight(theta_deg, sigma_p)))
 
 
 def acuity_shape(ecc: mi.Float) -> mi.Float:
-    """:math:`(\\omega_0 / \\omega(e))^2`, 1 at the gaze (module docstring)."""
+    r""":math:`(\omega_0 / \omega(e))^2`, 1 at the gaze (module docstring).
+
+    Parameters
+    ----------
+    ecc : mi.Float
+        The eccentricity :math:`e`, in degrees.
+
+    Returns
+    -------
+    shape : mi.Float
+        The unscaled density, in (0, 1].
+    """
     return dr.square(ACUITY_OMEGA0 / (ACUITY_OMEGA0 + ACUITY_SLOPE * ecc))
 
 
 def acuity_probability(ecc: mi.Float, ray_budget: float, floor: float) -> mi.Float:
-    """The acuity law's P per pixel, its scale solved on the device so that the mean of P is
+    r"""The acuity law's P per pixel, its scale solved on the device so that the mean of P is
     ``ray_budget`` (or as near as the floor and the cap of 1 allow).
 
     Fixed point on :math:`k`: with :math:`S(k)` the pixels whose :math:`k g` lies inside
-    :math:`(P_{\\min}, 1)`, :math:`k \\leftarrow (B - N_1 - P_{\\min} N_{\\min}) / \\sum_S g`, the
+    :math:`(P_{\min}, 1)`, :math:`k \leftarrow (B - N_1 - P_{\min} N_{\min}) / \sum_S g`, the
     scale that spends what the clipped pixels leave on the others; it converges in a few
-    steps from the unclipped solution."""
+    steps from the unclipped solution.
+
+    Parameters
+    ----------
+    ecc : mi.Float
+        Each pixel's eccentricity, in degrees.
+    ray_budget : float
+        The mean of P sought: the expected rays over the pixels.
+    floor : float
+        :math:`P_{\min}` (``acuity_floor``).
+
+    Returns
+    -------
+    P : mi.Float
+        :math:`\operatorname{clip}(k g, P_{\min}, 1)` per pixel.
+    """
     n = dr.width(ecc)
     g = acuity_shape(ecc)
     dr.schedule(g)
@@ -298,8 +487,24 @@ def acuity_probability(ecc: mi.Float, ray_budget: float, floor: float) -> mi.Flo
 
 def probability_in_degrees(directions: mi.Vector3f, sensor: mi.Sensor, law: SamplingSettings,
                            gaze: tuple[float, float]) -> mi.Float:
-    """P per pixel of a law in degrees (``theta_deg`` or ``acuity``) around ``gaze`` (a
-    normalised film position)."""
+    """P per pixel of a law in degrees (``theta_deg`` or ``acuity``) around ``gaze``.
+
+    Parameters
+    ----------
+    directions : mi.Vector3f
+        Each pixel's primary ray direction (the G-buffer's).
+    sensor : mi.Sensor
+        The frame's sensor (its projection gives the eccentricity).
+    law : SamplingSettings
+        The sampling law: ``acuity``, else ``kwon`` with ``theta_deg``.
+    gaze : tuple of float
+        The gaze, a normalised film position.
+
+    Returns
+    -------
+    P : mi.Float
+        The probability per pixel.
+    """
     from ..viewer import eccentricity
     ecc = eccentricity(directions, sensor, gaze)
     if law.law == "acuity":
@@ -324,19 +529,46 @@ def _traced_pixels(grid: PolarGrid | None, width: int, height: int,
 
 
 def fovea_radius(width: int, height: int, theta: float) -> float:
-    """The full-resolution disc of ``sampling_law = "polar"``: θ in units of half the film's
-    diagonal (as Eq. 1's θ), in pixels."""
+    """The full-resolution disc of ``sampling_law = "polar"``, in pixels.
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size.
+    theta : float
+        θ, in units of half the film's diagonal (as Eq. 1's θ).
+
+    Returns
+    -------
+    radius : float
+        The disc's radius, in pixels.
+    """
     return float(theta) * 0.5 * math.hypot(width, height)
 
 
 @functools.lru_cache(maxsize=16)
 def foveal_grid(width: int, height: int, budget: float, fovea: float) -> PolarGrid:
-    """The log-polar buffer of a ``width`` x ``height`` film with a full-resolution disc of
-    radius ``fovea`` (pixels, traced whole) and cells outside it as large as the rest of the
-    budget allows: the pixels :func:`polar_map` traces number ``budget`` of the film with the
-    gaze at its centre (host, once per film, budget and disc). A disc that alone needs
-    more than the budget is traced whole, with the coarsest cells outside it, and a warning
-    says so once."""
+    """The log-polar buffer of a ``width`` x ``height`` film with a full-resolution disc and
+    cells outside it as large as the rest of the budget allows.
+
+    The pixels :func:`polar_map` traces number ``budget`` of the film with the gaze at its
+    centre (host, once per film, budget and disc). A disc that alone needs more than the budget
+    is traced whole, with the coarsest cells outside it, and a warning says so once.
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size.
+    budget : float
+        The traced pixels' fraction of the film.
+    fovea : float
+        The disc's radius (pixels, traced whole).
+
+    Returns
+    -------
+    grid : PolarGrid
+        The buffer's grid (cached).
+    """
     n = width * height
     target = budget * n
     lo, hi = 0.05, math.hypot(width, height)      # the cells' size at the disc's edge
@@ -359,14 +591,44 @@ def foveal_grid(width: int, height: int, budget: float, fovea: float) -> PolarGr
 
 
 def gaze_position(gaze, width: int, height: int) -> mi.Point2f:
-    """The gaze's film position in pixels, opaque: a new gaze reuses every kernel."""
+    """The gaze's film position in pixels, opaque: a new gaze reuses every kernel.
+
+    Parameters
+    ----------
+    gaze : tuple of float
+        The gaze, a normalised film position.
+    width, height : int
+        The film's size.
+
+    Returns
+    -------
+    position : mi.Point2f
+        The gaze's film position, in pixels.
+    """
     return mi.Point2f(dr.opaque(mi.Float, float(gaze[0]) * width),
                       dr.opaque(mi.Float, float(gaze[1]) * height))
 
 
 def snapped_pixels(grid: PolarGrid, gaze: mi.Point2f, width: int, height: int
                    ) -> tuple[mi.UInt32, mi.Bool]:
-    """The film pixel under each cell's centre, and whether it lies on the film."""
+    """The film pixel under each cell's centre, and whether it lies on the film.
+
+    Parameters
+    ----------
+    grid : PolarGrid
+        The log-polar buffer.
+    gaze : mi.Point2f
+        The gaze's film position, in pixels.
+    width, height : int
+        The film's size.
+
+    Returns
+    -------
+    pixels : mi.UInt32
+        Each cell's pixel (flat index), 0 where off the film.
+    on : mi.Bool
+        Whether the pixel lies on the film.
+    """
     idx, _, _ = grid.cells()
     p = grid.film_position(idx, gaze)
     qx, qy = mi.Int32(dr.floor(p.x)), mi.Int32(dr.floor(p.y))
@@ -379,7 +641,27 @@ def polar_map(width: int, height: int, gaze, budget: float, theta: float,
     """``sampling_law = "polar"``: every pixel of the full-resolution disc of radius θ
     around the gaze, and the pixel under each cell of the log-polar buffer outside it
     (:func:`foveal_grid`: the rest of ``budget``), so that each cell has a traced pixel.
-    Returns ``(sampling_map, probability)`` (1 where traced: the map is deterministic)."""
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size.
+    gaze : tuple of float
+        The gaze, a normalised film position.
+    budget : float
+        The traced pixels' fraction of the film (``ray_budget``).
+    theta : float
+        The disc's radius, in units of half the film's diagonal.
+    edges : mi.Bool or None, optional
+        Rays forced on edges (None: none).
+
+    Returns
+    -------
+    sampling_map : mi.Bool
+        True where a ray is traced, one entry per pixel.
+    probability : mi.Float
+        1 where traced, 0 elsewhere: the map is deterministic.
+    """
     grid = foveal_grid(width, height, float(budget), fovea_radius(width, height, theta))
     g = gaze_position(gaze, width, height)
     q, on = snapped_pixels(grid, g, width, height)
@@ -400,18 +682,34 @@ def sampling_pass(gb, width: int, height: int, law: SamplingSettings,
 
     Parameters
     ----------
-    gb : the frame's G-buffer (film-sized).
-    width, height : the film's size.
-    law : the sampling law's settings.
-    gaze : the frame's gaze, a normalised film position.
-    seed : the map's seed (a Python int or a device value).
-    emitting : the emission edges, forced like depth edges (None: none).
-    sensor : the frame's sensor (needed by a law in degrees).
+    gb : GBuffer
+        The frame's G-buffer (film-sized).
+    width, height : int
+        The film's size.
+    law : SamplingSettings
+        The sampling law's settings.
+    gaze : tuple of float
+        The frame's gaze, a normalised film position.
+    seed : int or mi.UInt32
+        The map's seed (a Python int or a device value).
+    emitting : mi.Bool or None, optional
+        The emission edges, forced like depth edges (None: none).
+    sensor : mi.Sensor or None, optional
+        The frame's sensor (needed by a law in degrees).
 
     Returns
     -------
-    (edges, sampling_map, probability) : the forced rays (None when ``edge_threshold = 0``
-    and no ``emitting``), the map, and P per pixel.
+    edges : mi.Bool or None
+        The forced rays (None when ``edge_threshold = 0`` and no ``emitting``).
+    sampling_map : mi.Bool
+        The map.
+    probability : mi.Float
+        P per pixel.
+
+    Raises
+    ------
+    ParameterError
+        When a law in degrees has no ``sensor``.
     """
     prob = None
     if law.in_degrees:

@@ -68,7 +68,21 @@ class SceneState:
 
 
 def scene_state(scene: mi.Scene, sensor: mi.Sensor) -> SceneState:
-    """The :class:`SceneState` of ``scene`` seen through ``sensor`` (no device read)."""
+    """The :class:`SceneState` of ``scene`` seen through ``sensor`` (no device read).
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        The scene (one ``mi.traverse`` of it).
+    sensor : mi.Sensor
+        The sensor that sees it (its film's crop and its pose join the camera's part).
+
+    Returns
+    -------
+    state : SceneState
+        The scene's and the camera's parameters as comparable tokens, whether any requires
+        gradients, and handles that keep their variables alive.
+    """
     params = mi.traverse(scene)
     scene_part, camera_part, grads, held = [id(scene)], [id(sensor)], False, []
     with dr.resume_grad():
@@ -101,7 +115,26 @@ class GeometryCache:
 
     def gbuffer(self, scene: mi.Scene, sensor: mi.Sensor, *, materials: bool,
                 state: SceneState | None = None) -> tuple[GBuffer, bool]:
-        """The G-buffer of ``scene`` seen through ``sensor``, and whether it was reused."""
+        """The G-buffer of ``scene`` seen through ``sensor``, and whether it was reused.
+
+        Parameters
+        ----------
+        scene : mi.Scene
+            The scene.
+        sensor : mi.Sensor
+            The sensor.
+        materials : bool
+            The G-buffer holds albedo and emission.
+        state : SceneState or None, optional
+            The scene's state, when the caller has it (else read here).
+
+        Returns
+        -------
+        gb : GBuffer
+            The G-buffer (:func:`~.gbuffer.render_gbuffer`).
+        reused : bool
+            Whether it is the last one (same scene state and ``materials``).
+        """
         state = state if state is not None else scene_state(scene, sensor)
         key = (state.scene, state.camera, bool(materials))
         if self._value is not None and key == self._key:

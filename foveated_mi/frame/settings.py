@@ -52,7 +52,7 @@ class LaunchSettings:
 class HistorySettings:
     """Whether the frame reads a history, and how it reprojects it (:mod:`.reproject`)."""
     keep: bool                 #: the option ``history``
-    reprojection: str          #: ``exclusive`` or ``shared`` reads
+    reprojection: str          #: ``exclusive`` or ``nearest`` reads
     tolerance: float           #: relative depth (or plane) tolerance of the reprojection test
 
 
@@ -85,7 +85,18 @@ class FrameSettings:
 
 
 def sampling_settings(o: dict[str, Any]) -> SamplingSettings:
-    """The sampling law's settings of validated options ``o``."""
+    """The sampling law's settings of validated options ``o``.
+
+    Parameters
+    ----------
+    o : dict
+        The validated options.
+
+    Returns
+    -------
+    settings : SamplingSettings
+        The sampling law and the rays it forces.
+    """
     return SamplingSettings(
         law=o["sampling_law"], theta=float(o["theta"]), theta_deg=float(o["theta_deg"]),
         sigma_p=float(o["sigma_p"]), ray_budget=float(o["ray_budget"]),
@@ -95,9 +106,21 @@ def sampling_settings(o: dict[str, Any]) -> SamplingSettings:
 
 
 def frame_settings(o: dict[str, Any], space: str = "film") -> FrameSettings:
-    """The settings of validated options ``o`` (read once per change of the options);
-    ``space``: the sample space its formation declares
-    (:func:`~.formation.formation_space`)."""
+    """The settings of validated options ``o`` (read once per change of the options).
+
+    Parameters
+    ----------
+    o : dict
+        The validated options.
+    space : str, optional
+        The sample space its formation declares (:func:`~.formation.formation_space`):
+        ``'film'`` or ``'buffer'``.
+
+    Returns
+    -------
+    settings : FrameSettings
+        The plan's and the trace pass's settings.
+    """
     sampling = sampling_settings(o)
     plan = PlanSettings(
         sampling, LaunchSettings(o["reorder"], int(o["block_height"])),
@@ -157,13 +180,36 @@ def _frozen(v: Any) -> Any:
 
 
 def domain_settings(o: dict[str, Any]) -> DomainSettings:
-    """The domain settings of validated options ``o``."""
+    """The domain settings of validated options ``o``.
+
+    Parameters
+    ----------
+    o : dict
+        The validated options.
+
+    Returns
+    -------
+    settings : DomainSettings
+        ``demodulate``, ``tonemap_samples``, ``tonemap``, ``exposure`` and ``clamp``.
+    """
     return DomainSettings(bool(o["demodulate"]), bool(o["tonemap_samples"]), o["tonemap"],
                           float(o["exposure"]), float(o["clamp"]))
 
 
 def denoise_settings(o: dict[str, Any]) -> DenoiseSettings:
-    """The denoiser of validated options ``o``, with the options it reads."""
+    """The denoiser of validated options ``o``, with the options it reads.
+
+    Parameters
+    ----------
+    o : dict
+        The validated options.
+
+    Returns
+    -------
+    settings : DenoiseSettings
+        The denoiser's name, the options its registration reads (lists as tuples), and whether
+        it is active for them.
+    """
     entry = DENOISERS[o["denoiser"]]
     params = {k: o[k] for k in entry.reads}
     active = entry.active is None or bool(entry.active(params))
@@ -172,7 +218,19 @@ def denoise_settings(o: dict[str, Any]) -> DenoiseSettings:
 
 
 def reconstruction_settings(o: dict[str, Any]) -> ReconstructionSettings:
-    """The reconstruction method of validated options ``o``, with its parameters."""
+    """The reconstruction method of validated options ``o``, with its parameters.
+
+    Parameters
+    ----------
+    o : dict
+        The validated options.
+
+    Returns
+    -------
+    settings : ReconstructionSettings
+        The method, ``sigma_p``, ``jfa``, ``max_radius``, the method's keyword parameters
+        (lists as tuples) and the samples it averages per pixel (None where it declares none).
+    """
     from ..reconstruct import RECONSTRUCTIONS
     method = RECONSTRUCTIONS[o["reconstruction"]]
     params = tuple((kw, _frozen(o[name])) for kw, name in method.options.items())

@@ -81,7 +81,18 @@ def is_ad_integrator(integrator) -> bool:
     """Whether ``integrator`` is a Python ``mi.ad.common.ADIntegrator`` (``prb``, ...).
 
     Checked by class name along the MRO: Mitsuba re-imports its AD integrator modules on
-    every ``mi.set_variant``, so the class object itself changes."""
+    every ``mi.set_variant``, so the class object itself changes.
+
+    Parameters
+    ----------
+    integrator : mi.Integrator
+        The nested integrator.
+
+    Returns
+    -------
+    is_ad : bool
+        Whether it derives from ``ADIntegrator``.
+    """
     return any(c.__name__ == "ADIntegrator" and c.__module__.endswith("integrators.common")
                for c in type(integrator).__mro__)
 
@@ -89,7 +100,28 @@ def is_ad_integrator(integrator) -> bool:
 def sample_nested(integrator: mi.SamplingIntegrator, scene: mi.Scene, sampler: mi.Sampler,
                   ray: mi.RayDifferential3f, active: mi.Bool) -> tuple[mi.Spectrum, mi.Bool]:
     """Primal radiance and validity of ``ray`` from any nested integrator (see the module
-    docstring for the two calling conventions)."""
+    docstring for the two calling conventions).
+
+    Parameters
+    ----------
+    integrator : mi.SamplingIntegrator
+        The nested integrator (C++, or a Python ``ADIntegrator``, run without gradients).
+    scene : mi.Scene
+        The scene.
+    sampler : mi.Sampler
+        The wavefront's sampler.
+    ray : mi.RayDifferential3f
+        One camera ray per lane.
+    active : mi.Bool
+        The lanes that trace.
+
+    Returns
+    -------
+    L : mi.Spectrum
+        The radiance of each lane.
+    valid : mi.Bool
+        Whether each lane's sample is valid.
+    """
     if is_ad_integrator(integrator):
         with dr.suspend_grad():
             L, valid, _, _ = integrator.sample(
@@ -103,12 +135,35 @@ def sample_nested(integrator: mi.SamplingIntegrator, scene: mi.Scene, sampler: m
 def camera_rays(sensor: mi.Sensor, sampler: mi.Sampler, pixels: mi.UInt32, width: int,
                 filter_sampler: FilterSampler, active: mi.Bool
                 ) -> tuple[mi.RayDifferential3f, mi.Spectrum, FilterSample]:
-    """One camera ray per lane through pixel ``pixels`` (flat index ``y * W + x``), at a
-    position inside the pixel's footprint from ``filter_sampler``. Returns the ray, the
-    sensor's importance weight and the filter sample (film position and weight).
+    """One camera ray per lane through pixel ``pixels``, at a position inside the pixel's
+    footprint from ``filter_sampler``.
 
     Same draw order as ``SamplingIntegrator::render_sample``: position, aperture, time,
     wavelength.
+
+    Parameters
+    ----------
+    sensor : mi.Sensor
+        The sensor.
+    sampler : mi.Sampler
+        The wavefront's sampler.
+    pixels : mi.UInt32
+        Each lane's pixel (flat index ``y * W + x``).
+    width : int
+        The film's width.
+    filter_sampler : FilterSampler
+        Draws the position inside the pixel's footprint.
+    active : mi.Bool
+        The lanes that trace.
+
+    Returns
+    -------
+    ray : mi.RayDifferential3f
+        The camera ray.
+    weight : mi.Spectrum
+        The sensor's importance weight.
+    fs : FilterSample
+        The filter sample (film position and weight).
     """
     y = pixels // width
     x = pixels - y * width
@@ -126,8 +181,24 @@ def camera_rays(sensor: mi.Sensor, sampler: mi.Sampler, pixels: mi.UInt32, width
 def lanes_of(pixels: mi.UInt32, spp: int, active: mi.Bool | None = None
              ) -> tuple[mi.UInt32, mi.Bool | None]:
     """The pixel of each lane of a wavefront (``spp`` consecutive lanes per pixel of
-    ``pixels``, as ``SamplingIntegrator::render`` lays them out), and each lane's flag from
-    ``active`` (None: every lane traces)."""
+    ``pixels``, as ``SamplingIntegrator::render`` lays them out), and each lane's flag.
+
+    Parameters
+    ----------
+    pixels : mi.UInt32
+        The wavefront's pixels (flat indices).
+    spp : int
+        Samples per pixel.
+    active : mi.Bool or None, optional
+        The flag of each entry of ``pixels`` (None: every lane traces).
+
+    Returns
+    -------
+    pix : mi.UInt32
+        Each lane's pixel (``spp * len(pixels)`` lanes).
+    active : mi.Bool or None
+        Each lane's flag from ``active`` (None when ``active`` is).
+    """
     if spp == 1:
         return pixels, active
     ray_id = dr.arange(mi.UInt32, dr.width(pixels) * spp) // spp
@@ -141,9 +212,35 @@ def trace_wavefront(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingI
                     filter_sampler: FilterSampler | None = None) -> TracedSamples:
     """Trace ``spp`` camera rays through each pixel of ``pixels`` with ``integrator``.
 
-    ``active`` (``reorder='none'``) masks lanes of a full-frame wavefront instead.
-    ``filter_sampler`` is built from the sensor's film when not given (build it once per
-    film and pass it in: tabulating a filter costs a host round trip).
+    Parameters
+    ----------
+    scene : mi.Scene
+        The scene.
+    sensor : mi.Sensor
+        The sensor (its sampler is cloned and seeded).
+    integrator : mi.SamplingIntegrator
+        The nested integrator.
+    pixels : mi.UInt32
+        The wavefront's pixels (flat index ``y * W + x``).
+    width, height : int
+        The film's size.
+    spp : int
+        Samples per pixel.
+    seed : int or mi.UInt32
+        The sampler's seed.
+    active : mi.Bool or None, optional
+        Masks lanes of a full-frame wavefront instead (``reorder='none'``); None: every
+        lane traces.
+    clamp : float, optional
+        The largest accepted sample component (a brighter sample is scaled down, hue kept).
+    filter_sampler : FilterSampler or None, optional
+        Built from the sensor's film when not given (build it once per film and pass it in:
+        tabulating a filter costs a host round trip).
+
+    Returns
+    -------
+    samples : TracedSamples
+        One sample per lane (``spp`` consecutive lanes per pixel).
     """
     pix, lane_active = lanes_of(pixels, spp, active)
     return trace_lanes(scene, sensor, integrator, pix, width, height, spp=spp, seed=seed,
@@ -155,7 +252,22 @@ def trace_lanes(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingInteg
                 active: mi.Bool | None = None, clamp: float = 1e4,
                 filter_sampler: FilterSampler | None = None) -> TracedSamples:
     """:func:`trace_wavefront` of lanes already laid out (:func:`lanes_of`): every array it
-    makes is as wide as ``pix``, so a frozen recording of it replays at any width."""
+    makes is as wide as ``pix``, so a frozen recording of it replays at any width.
+
+    Parameters
+    ----------
+    scene, sensor, integrator, width, height, spp, seed, clamp, filter_sampler
+        As :func:`trace_wavefront`'s.
+    pix : mi.UInt32
+        Each lane's pixel (flat index ``y * W + x``).
+    active : mi.Bool or None, optional
+        Each lane's flag (None: every lane traces).
+
+    Returns
+    -------
+    samples : TracedSamples
+        One sample per lane.
+    """
     lanes = dr.width(pix)
     sampler = sensor.sampler().clone()
     sampler.set_sample_count(spp)
@@ -201,8 +313,25 @@ def develop_mean(samples: TracedSamples, pixels: mi.UInt32, spp: int, n_pixels: 
                  ) -> ShadingBuffer:
     """``importance`` mode: each traced pixel holds the mean of its accepted samples.
 
-    Returns the sparse shading buffer (``n_pixels`` entries) and the mask of pixels that hold
-    a value. Linear in ``samples.radiance`` (the mask and counts are fixed)."""
+    Linear in ``samples.radiance`` (the mask and counts are fixed).
+
+    Parameters
+    ----------
+    samples : TracedSamples
+        The traced samples (``spp`` consecutive lanes per ray).
+    pixels : mi.UInt32
+        Each ray's pixel (each pixel once).
+    spp : int
+        Samples per pixel.
+    n_pixels : int
+        The film's pixel count.
+
+    Returns
+    -------
+    shading : ShadingBuffer
+        The sparse shading buffer (``n_pixels`` entries), its mask the pixels that hold a
+        value.
+    """
     return to_film(_mean_per_ray(samples, spp), pixels, n_pixels)
 
 
@@ -244,8 +373,23 @@ def _splat_per_ray(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi
 
 
 def to_film(per_ray: ShadingBuffer, pixels: mi.UInt32, n_pixels: int) -> ShadingBuffer:
-    """The rays' estimates at their pixels (``pixels``: each ray's, each pixel once): the
-    film-sized sparse shading buffer, nothing where no ray holds a value."""
+    """The rays' estimates at their pixels: the film-sized sparse shading buffer, nothing
+    where no ray holds a value.
+
+    Parameters
+    ----------
+    per_ray : ShadingBuffer
+        One entry per ray.
+    pixels : mi.UInt32
+        Each ray's pixel (each pixel once).
+    n_pixels : int
+        The film's pixel count.
+
+    Returns
+    -------
+    shading : ShadingBuffer
+        ``n_pixels`` entries.
+    """
     holds = per_ray.mask
     value, mask = scatter_to_film(per_ray.value, holds, pixels, n_pixels)
     m2 = dr.zeros(mi.Float, n_pixels)
@@ -256,9 +400,24 @@ def to_film(per_ray: ShadingBuffer, pixels: mi.UInt32, n_pixels: int) -> Shading
 
 
 def to_samples(per_ray: ShadingBuffer, rays: mi.UInt32, on: mi.Bool) -> ShadingBuffer:
-    """The rays' estimates at the foveal buffer's samples (``rays``: each sample's ray,
-    where ``on``): a buffer the size of the samples, with nothing film-sized on the way.
-    Samples on one pixel read its one ray. Linear in the rays' values (a gather)."""
+    """The rays' estimates at the foveal buffer's samples: a buffer the size of the samples,
+    with nothing film-sized on the way. Samples on one pixel read its one ray. Linear in the
+    rays' values (a gather).
+
+    Parameters
+    ----------
+    per_ray : ShadingBuffer
+        One entry per ray.
+    rays : mi.UInt32
+        Each sample's ray, read where ``on``.
+    on : mi.Bool
+        The samples that are on.
+
+    Returns
+    -------
+    shading : ShadingBuffer
+        One entry per sample (no value where off, or where its ray holds none).
+    """
     has = on & dr.gather(mi.Bool, per_ray.mask, rays, on)
     return ShadingBuffer(dr.gather(mi.Color3f, per_ray.value, rays, has), has,
                          dr.gather(mi.Float, per_ray.moment2, rays, has),
@@ -330,9 +489,30 @@ def _splat_gather(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.
 
 def develop(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.Film,
             mode: str, at: tuple[mi.UInt32, mi.Bool] | None = None) -> ShadingBuffer:
-    """The sparse shading buffer of a frame's samples (``mode`` in :data:`PIXEL_FILTERS`):
-    on the film's pixels, or with ``at = (rays, on)`` on the foveal buffer's samples
-    (:func:`to_samples`)."""
+    """The sparse shading buffer of a frame's samples: on the film's pixels, or on the foveal
+    buffer's samples.
+
+    Parameters
+    ----------
+    samples : TracedSamples
+        The traced samples (``spp`` consecutive lanes per ray).
+    pixels : mi.UInt32
+        Each ray's pixel (each pixel once).
+    spp : int
+        Samples per pixel.
+    film : mi.Film
+        The film (its crop size and filter).
+    mode : str
+        One of :data:`PIXEL_FILTERS` (the plain mean for a box filter either way).
+    at : tuple or None, optional
+        ``(rays, on)``: develop on the foveal buffer's samples (:func:`to_samples`); None:
+        on the film's pixels.
+
+    Returns
+    -------
+    shading : ShadingBuffer
+        One entry per film pixel, or per sample with ``at``.
+    """
     if mode == "splat" and not film.rfilter().is_box_filter():
         per_ray = _splat_per_ray(samples, pixels, spp, film)
     else:
@@ -346,7 +526,26 @@ def develop(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.Film,
 def scatter_to_film(values: mi.Color3f, valid: mi.Bool, pixels: mi.UInt32,
                     n_pixels: int) -> tuple[mi.Color3f, mi.Bool]:
     """Sparse shading buffer: ``values`` scattered to their pixels, and the mask of pixels
-    that hold a value."""
+    that hold a value.
+
+    Parameters
+    ----------
+    values : mi.Color3f
+        One value per ray.
+    valid : mi.Bool
+        The rays that hold a value.
+    pixels : mi.UInt32
+        Each ray's pixel.
+    n_pixels : int
+        The film's pixel count.
+
+    Returns
+    -------
+    values : mi.Color3f
+        ``n_pixels`` entries, 0 where no ray holds a value.
+    mask : mi.Bool
+        The pixels that hold a value.
+    """
     buf = dr.zeros(mi.Color3f, n_pixels)
     mask = dr.zeros(mi.Bool, n_pixels)
     dr.scatter(buf, values, pixels, valid)

@@ -52,25 +52,91 @@ class FilmSpace:
         return None
 
     def traced_pixels(self, traced: mi.Bool) -> mi.Bool:
-        """The film's pixels that hold a traced value (``traced``: per sample)."""
+        """The film's pixels that hold a traced value.
+
+        Parameters
+        ----------
+        traced : mi.Bool
+            Per sample (here, per pixel).
+
+        Returns
+        -------
+        mask : mi.Bool
+            ``traced`` itself.
+        """
         return traced
 
     def to_pixels(self, delta: mi.Color3f, traced: mi.Bool) -> mi.Color3f:
-        """A gradient on the samples summed onto their pixels."""
+        """A gradient on the samples summed onto their pixels.
+
+        Parameters
+        ----------
+        delta : mi.Color3f
+            The gradient, one value per sample.
+        traced : mi.Bool
+            Which samples hold a traced value.
+
+        Returns
+        -------
+        delta : mi.Color3f
+            ``delta`` itself (each sample is its pixel).
+        """
         return delta
 
     def from_pixels(self, tangent: mi.Color3f, traced: mi.Bool) -> mi.Color3f:
-        """A tangent of the traced pixels read at the samples."""
+        """A tangent of the traced pixels read at the samples.
+
+        Parameters
+        ----------
+        tangent : mi.Color3f
+            The tangent, one value per film pixel.
+        traced : mi.Bool
+            Which samples hold a traced value.
+
+        Returns
+        -------
+        tangent : mi.Color3f
+            ``tangent`` itself (each sample is its pixel).
+        """
         return tangent
 
     def still_map(self, history: History) -> ReprojectionMap:
-        """Every sample onto itself (a still camera over an unchanged scene)."""
+        """Every sample onto itself (a still camera over an unchanged scene).
+
+        Parameters
+        ----------
+        history : History
+            The previous frame's history.
+
+        Returns
+        -------
+        map : ReprojectionMap
+            :func:`~.reproject.still_map`.
+        """
         return _reproject.still_map(history, self.width, self.height)
 
     def reprojection_map(self, gb: GBuffer, history: History | None, *, tolerance: float,
                          mode: str, reach: int = 0) -> ReprojectionMap:
-        """The pixels reprojected into the history's pixels (:mod:`.reproject`; ``reach``:
-        the film filter's, in pixels)."""
+        """The pixels reprojected into the history's pixels (:mod:`.reproject`).
+
+        Parameters
+        ----------
+        gb : GBuffer
+            The frame's G-buffer.
+        history : History or None
+            The previous frame's history (None: every pixel misses).
+        tolerance : float
+            The depth test's relative tolerance.
+        mode : str
+            One of :data:`~.reproject.REPROJECTION_MODES`.
+        reach : int, optional
+            The film filter's reach, in pixels.
+
+        Returns
+        -------
+        map : ReprojectionMap
+            :func:`~.reproject.reprojection_map`.
+        """
         return _reproject.reprojection_map(gb.position, gb.hit, history, self.width,
                                            self.height, tolerance=tolerance,
                                            direction=gb.direction, mode=mode, reach=reach)
@@ -103,30 +169,96 @@ class BufferSpace:
         return self.rays, self.on
 
     def traced_pixels(self, traced: mi.Bool) -> mi.Bool:
-        """The film's pixels whose traced value some sample holds."""
+        """The film's pixels whose traced value some sample holds.
+
+        Parameters
+        ----------
+        traced : mi.Bool
+            Per sample.
+
+        Returns
+        -------
+        mask : mi.Bool
+            One entry per film pixel.
+        """
         mask = dr.zeros(mi.Bool, self.width * self.height)
         dr.scatter(mask, True, self.pixels, traced)
         return mask
 
     def to_pixels(self, delta: mi.Color3f, traced: mi.Bool) -> mi.Color3f:
         """A gradient on the samples summed onto their traced pixels: the transpose of the
-        gather that reads each pixel's value at its samples."""
+        gather that reads each pixel's value at its samples.
+
+        Parameters
+        ----------
+        delta : mi.Color3f
+            The gradient, one value per sample.
+        traced : mi.Bool
+            Which samples hold a traced value.
+
+        Returns
+        -------
+        delta : mi.Color3f
+            The gradient, one value per film pixel (0 where no traced sample lies).
+        """
         out = dr.zeros(mi.Color3f, self.width * self.height)
         dr.scatter_reduce(dr.ReduceOp.Add, out, delta, self.pixels, traced)
         return out
 
     def from_pixels(self, tangent: mi.Color3f, traced: mi.Bool) -> mi.Color3f:
-        """A tangent of the traced pixels read at the samples."""
+        """A tangent of the traced pixels read at the samples.
+
+        Parameters
+        ----------
+        tangent : mi.Color3f
+            The tangent, one value per film pixel.
+        traced : mi.Bool
+            Which samples hold a traced value.
+
+        Returns
+        -------
+        tangent : mi.Color3f
+            One value per sample (0 where not ``traced``).
+        """
         return dr.gather(mi.Color3f, tangent, self.pixels, traced)
 
     def still_map(self, history: History) -> ReprojectionMap:
-        """Every sample onto itself (a still camera and gaze over an unchanged scene)."""
+        """Every sample onto itself (a still camera and gaze over an unchanged scene).
+
+        Parameters
+        ----------
+        history : History
+            The previous frame's history, on the samples.
+
+        Returns
+        -------
+        map : ReprojectionMap
+            :func:`~.buffer_space.still_map`.
+        """
         return _buffer_space.still_map(history, self.layout.size)
 
     def reprojection_map(self, gb: GBuffer, history: History | None, *, tolerance: float,
                          mode: str, reach: int = 0) -> ReprojectionMap:
-        """The samples reprojected into the history's samples (:mod:`.buffer_space`; a
-        sample's footprint is its own: ``reach`` plays no part)."""
+        """The samples reprojected into the history's samples (:mod:`.buffer_space`).
+
+        Parameters
+        ----------
+        gb : GBuffer
+            The G-buffer at the samples.
+        history : History or None
+            The previous frame's history (None: every sample misses).
+        tolerance : float
+            The plane test's tolerance.
+        mode : str
+            ``'exclusive'`` or ``'nearest'`` reads.
+        reach : int, optional
+            Unused: a sample's footprint is its own.
+
+        Returns
+        -------
+        map : ReprojectionMap
+            :func:`~.buffer_space.reprojection_map`.
+        """
         return _buffer_space.reprojection_map(gb, self.on, history, self.layout, self.width,
                                               self.height, tolerance=tolerance, mode=mode)
 
@@ -140,14 +272,40 @@ class BufferSpace:
 
     @staticmethod
     def of(key: tuple, arrays: dict) -> BufferSpace:
-        """The space of :meth:`key` and :meth:`arrays` (inside a recording)."""
+        """The space of :meth:`key` and :meth:`arrays` (inside a recording).
+
+        Parameters
+        ----------
+        key : tuple
+            What :meth:`key` returned.
+        arrays : dict
+            What :meth:`arrays` returned.
+
+        Returns
+        -------
+        space : BufferSpace
+            The space rebuilt.
+        """
         _, width, height, layout = key
         return BufferSpace(width, height, layout, arrays["pixels"], arrays["on"],
                            arrays["rays"])
 
 
 def space_of(key: tuple, arrays: dict | None):
-    """A space rebuilt from its key and arrays."""
+    """A space rebuilt from its key and arrays.
+
+    Parameters
+    ----------
+    key : tuple
+        The space's ``key()``; its first entry is its kind.
+    arrays : dict or None
+        The space's ``arrays()`` (None for the film).
+
+    Returns
+    -------
+    space : FilmSpace or BufferSpace
+        The space.
+    """
     if key[0] == "film":
         return FilmSpace(key[1], key[2])
     return BufferSpace.of(key, arrays)

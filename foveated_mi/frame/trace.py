@@ -67,7 +67,24 @@ class Shaded(NamedTuple):
 
 def trace(scene: mi.Scene, integrator: mi.SamplingIntegrator, plan: FramePlan,
           settings: TraceSettings) -> TracedSamples:
-    """The nested integrator traces the plan's launch (rays x spp lanes)."""
+    """The nested integrator traces the plan's launch (rays x spp lanes).
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        The scene.
+    integrator : mi.SamplingIntegrator
+        The nested integrator.
+    plan : FramePlan
+        The frame's plan (its launch, sensor, spp, seed and filter sampler).
+    settings : TraceSettings
+        The trace settings (``clamp``).
+
+    Returns
+    -------
+    samples : TracedSamples
+        One sample per lane.
+    """
     ro = plan.reordered
     return trace_wavefront(scene, plan.sensor, integrator, ro.wavefront, plan.width,
                            plan.height, spp=plan.spp, seed=plan.seed, active=ro.active,
@@ -77,7 +94,22 @@ def trace(scene: mi.Scene, integrator: mi.SamplingIntegrator, plan: FramePlan,
 def develop_plan(samples: TracedSamples, plan: FramePlan,
                  settings: TraceSettings) -> ShadingBuffer:
     """Per-sample tone mapping where asked, then the sparse shading buffer (on the foveal
-    buffer's samples where the plan is)."""
+    buffer's samples where the plan is).
+
+    Parameters
+    ----------
+    samples : TracedSamples
+        The traced samples.
+    plan : FramePlan
+        The frame's plan.
+    settings : TraceSettings
+        The trace settings (``tonemap_samples``, ``pixel_filter``).
+
+    Returns
+    -------
+    shading : ShadingBuffer
+        The sparse shading buffer.
+    """
     if settings.tonemap_samples:
         samples = tonemap_samples(samples, settings.tonemap, settings.exposure)
     return develop(samples, plan.reordered.wavefront, plan.spp, plan.sensor.film(),
@@ -86,7 +118,24 @@ def develop_plan(samples: TracedSamples, plan: FramePlan,
 
 def shade(scene: mi.Scene, integrator: mi.SamplingIntegrator, plan: FramePlan,
           settings: TraceSettings) -> Shaded:
-    """The trace pass, traced."""
+    """The trace pass, traced.
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        The scene.
+    integrator : mi.SamplingIntegrator
+        The nested integrator.
+    plan : FramePlan
+        The frame's plan.
+    settings : TraceSettings
+        The trace settings.
+
+    Returns
+    -------
+    shaded : Shaded
+        The sparse shading buffer and the samples' counters.
+    """
     samples = trace(scene, integrator, plan, settings)
     return Shaded(develop_plan(samples, plan, settings), samples.rejected, samples.clamped)
 

@@ -46,7 +46,19 @@ class FlatLayout(NamedTuple):
 
 
 def flat_layout(n: int) -> FlatLayout:
-    """Flat film size for ``n`` traced pixels (see the module docstring)."""
+    r"""Flat film size for ``n`` traced pixels (see the module docstring).
+
+    Parameters
+    ----------
+    n : int
+        The number of traced pixels (0 counts as 1).
+
+    Returns
+    -------
+    layout : FlatLayout
+        :math:`W_f`, a power of two near :math:`\sqrt n`, and :math:`H_f`, rounded up to a
+        multiple of :math:`2^{\lfloor\log_2 H\rfloor-3}`; :math:`W_f H_f \ge n`.
+    """
     n = max(int(n), 1)
     wf = 1 << max(0, math.ceil(math.log2(math.sqrt(n))))
     hf = -(-n // wf)
@@ -121,7 +133,27 @@ class TracedSensors:
 
     def get(self, source: mi.Sensor, pixels: mi.UInt32, footprint, traced: mi.Bool | None
             ) -> tuple[mi.Sensor, FlatLayout]:
-        """A flat sensor over ``pixels`` (UInt32 flat indices of ``source``'s film)."""
+        """A flat sensor over ``pixels`` (UInt32 flat indices of ``source``'s film).
+
+        Parameters
+        ----------
+        source : mi.Sensor
+            The frame's sensor (its sample count and shutter; its rays).
+        pixels : mi.UInt32
+            The traced pixels, flat indices ``y * W + x`` of the source film.
+        footprint : FilterSampler or SplatFootprint
+            Draws each ray's position in the source film.
+        traced : mi.Bool or None
+            The frame's mask of traced pixels, for a :class:`~.pixel_filter.SplatFootprint`; None
+            for a :class:`~.pixel_filter.FilterSampler`.
+
+        Returns
+        -------
+        sensor : mi.Sensor
+            The :class:`TracedPixelSensor`, bound to ``pixels`` (padded with the last one).
+        layout : FlatLayout
+            Its flat film's size.
+        """
         n = dr.width(pixels)
         layout = flat_layout(n)
         spp = int(source.sampler().sample_count())

@@ -58,7 +58,18 @@ class View:
         self._gaze = None if value is None else check_point2(f"views[{self.index}].gaze", value)
 
     def options(self, o: dict[str, Any]) -> dict[str, Any]:
-        """The frame's options as this view reads them: its own gaze where it has one."""
+        """The frame's options as this view reads them: its own gaze where it has one.
+
+        Parameters
+        ----------
+        o : dict
+            The integrator's validated options.
+
+        Returns
+        -------
+        options : dict
+            ``o``, with ``gaze`` replaced by this view's own where it has one.
+        """
         return o if self._gaze is None else {**o, "gaze": self._gaze}
 
     @property
@@ -96,7 +107,18 @@ class View:
         return self.outputs.buffers
 
     def buffer(self, name: str):
-        """A buffer of this view's last frame as a NumPy array (see the integrator's)."""
+        """A buffer of this view's last frame as a NumPy array (see the integrator's).
+
+        Parameters
+        ----------
+        name : str
+            The buffer's name.
+
+        Returns
+        -------
+        array : numpy.ndarray or None
+            As :meth:`~.outputs.FrameOutputs.export`.
+        """
         return self.outputs.export(name)
 
 
@@ -121,7 +143,20 @@ class Views:
         return iter(self._views)
 
     def of(self, scene: mi.Scene, sensor: mi.Sensor) -> View:
-        """The view that renders ``sensor``: its index among the scene's sensors, else 0."""
+        """The view that renders ``sensor``: its index among the scene's sensors, else 0.
+
+        Parameters
+        ----------
+        scene : mi.Scene
+            The scene.
+        sensor : mi.Sensor
+            The sensor rendered.
+
+        Returns
+        -------
+        view : View
+            The view (made on first use).
+        """
         for i, s in enumerate(scene.sensors()):
             if s is sensor:
                 return self[i]
