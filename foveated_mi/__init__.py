@@ -19,7 +19,19 @@ __version__ = "0.1.0"
 
 
 def set_variant(variant: str | None = None) -> str:
-    """Set the Mitsuba variant (see :func:`foveated_mi.variant.choose_variant`) and register."""
+    """Set the Mitsuba variant (see :func:`foveated_mi.variant.choose_variant`) and register.
+
+    Parameters
+    ----------
+    variant : str or None, optional
+        The variant; None: ``$FOVEATED_MI_VARIANT``, else ``cuda_ad_rgb`` where CUDA works,
+        else ``llvm_ad_rgb``.
+
+    Returns
+    -------
+    variant : str
+        The variant set.
+    """
     from .variant import choose_variant
     v = choose_variant(variant)
     _mi.set_variant(v)

@@ -90,15 +90,37 @@ def _check_integrator(scene, integrator):
 def render_uniform(scene: "mi.Scene", *, spp: int, seed: int = 0, denoise: bool = False,
                    integrator: "mi.Integrator | None" = None, pixel_filter: str = "auto"
                    ) -> tuple[np.ndarray, dict[str, Any]]:
-    """One uniform frame: linear (H, W, 3) float32 image and stats
-    ``{"time_ms", "spp", "denoised", "pixel_filter"}`` (+ ``render_ms``, ``aov_ms``,
-    ``denoise_ms`` when denoised). ``integrator`` defaults to the scene's own.
-    ``pixel_filter``: ``auto`` (``importance`` when denoised, else ``splat``), ``splat``
-    (``mi.render``) or ``importance`` (filter importance sampling, a sampling integrator
-    only); ``stats["pixel_filter"]`` is the estimator that ran (``splat`` on a box film or
-    for an integrator that is not a sampling integrator under ``auto``). Raises
-    :class:`ParameterError` for bad arguments, and when ``denoise`` is asked for without
-    ``pyoidn``.
+    """One uniform frame: every pixel traced with ``spp`` samples, denoised on request.
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        The scene.
+    spp : int
+        Samples per pixel (>= 1).
+    seed : int, optional
+        The render's seed, in [0, 2^32).
+    denoise : bool, optional
+        Denoise with OIDN, guided by an albedo and normal pass (needs ``pyoidn``).
+    integrator : mi.Integrator or None, optional
+        The integrator (None: the scene's own).
+    pixel_filter : str, optional
+        ``auto`` (``importance`` when denoised, else ``splat``), ``splat`` (``mi.render``) or
+        ``importance`` (filter importance sampling, a sampling integrator only).
+
+    Returns
+    -------
+    image : numpy.ndarray
+        Linear float32 (H, W, 3).
+    stats : dict
+        ``{"time_ms", "render_ms", "spp", "denoised", "pixel_filter"}`` (+ ``aov_ms``,
+        ``denoise_ms`` when denoised); ``pixel_filter`` is the estimator that ran (``splat`` on
+        a box film, or for an integrator that is not a sampling integrator under ``auto``).
+
+    Raises
+    ------
+    ParameterError
+        For bad arguments, and when ``denoise`` is asked for without ``pyoidn``.
     """
     spp = check_int("spp", spp, 1)
     seed = check_int("seed", seed, 0, 2**32 - 1)
@@ -199,10 +221,30 @@ def _render_uniform(scene, integ, spp, seed, denoise, mode):
 def render_reference(scene: "mi.Scene", *, spp: int, seed: int = 0,
                      integrator: "mi.Integrator | None" = None,
                      max_samples_per_pass: int = 1 << 24) -> np.ndarray:
-    """A converged (H, W, 3) float32 reference: ``spp`` samples per pixel split into passes of
-    at most ``max_samples_per_pass`` samples (so a 1024² x 256 spp render does not build one
-    268M-lane wavefront), averaged with weights ``spp_k / spp``. Pass ``k`` uses seed
-    ``seed + k``. With one pass it is exactly ``mi.render(..., spp=spp, seed=seed)``."""
+    """A converged reference: ``spp`` samples per pixel split into passes, averaged.
+
+    Passes hold at most ``max_samples_per_pass`` samples (so a 1024² x 256 spp render does not
+    build one 268M-lane wavefront) and are averaged with weights ``spp_k / spp``. Pass ``k`` uses
+    seed ``seed + k``. With one pass it is exactly ``mi.render(..., spp=spp, seed=seed)``.
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        The scene.
+    spp : int
+        Samples per pixel (>= 1).
+    seed : int, optional
+        Seed of the first pass, in [0, 2^32).
+    integrator : mi.Integrator or None, optional
+        The integrator (None: the scene's own).
+    max_samples_per_pass : int, optional
+        Largest number of samples (pixels x spp) of one pass.
+
+    Returns
+    -------
+    reference : numpy.ndarray
+        Linear float32 (H, W, 3).
+    """
     spp = check_int("spp", spp, 1)
     seed = check_int("seed", seed, 0, 2**32 - 1)
     budget = check_int("max_samples_per_pass", max_samples_per_pass, 1)

@@ -68,6 +68,11 @@ HEADSET = {
 
 def run_demo(out: str = os.path.join("out", "demo"), *, size: tuple[int, int] | None = None,
              progress: bool = True) -> int:
+    """Run the demo (module docstring) and print its tables, verdicts and sentences.
+
+    ``out``: output folder; ``size``: film ``(W, H)`` (None: 480 x 270); ``progress``: progress
+    bars. Returns the exit status: 1 when a task failed or no scene had a verdict, else 0.
+    """
     import foveated_mi  # noqa: F401
     import mitsuba as mi
     from .options import resolve_preset
@@ -213,9 +218,22 @@ def _pm(r: dict, col: str, fmt: str) -> str:
 
 
 def headset_choice(cells: list[dict], column: str):
-    """The comparison :func:`headset_sentence` makes: ``(vr cell, its Speedup, the baseline
-    family's cells)``, or None without a ``vr`` cell at frame 16 or a uniform baseline with
-    history and a denoiser."""
+    """The comparison :func:`headset_sentence` makes.
+
+    Parameters
+    ----------
+    cells : list of dict
+        Aggregated cells of the headset study (:func:`foveated_mi.study.aggregate.aggregate`).
+    column : str
+        The quality column of the speed-up.
+
+    Returns
+    -------
+    choice : tuple or None
+        ``(vr cell, its Speedup, the baseline family's cells)``: the ``vr`` cell at frame 16
+        with the best speed-up against the first uniform family with history and a denoiser;
+        None without such a ``vr`` cell or family.
+    """
     from .study.equal_time import speedup_over_seeds
     vr = [c for c in cells if c["method"] == "foveated" and int(c["frame"]) == 16
           and json.loads(c["config"]).get("options", {}).get("preset") == "vr"]
@@ -232,12 +250,26 @@ def headset_choice(cells: list[dict], column: str):
 
 
 def headset_sentence(cells: list[dict], column: str) -> str:
-    """One sentence: the ``vr`` configuration with the best speed-up at equal ``column`` (one
-    the baseline reaches, where there is one) at frame 16 against uniform rendering with the
-    same history and denoiser (its family over spp), with the spread over seeds; a speed-up
-    whose spread covers x1 is a tie. ``column`` is a whole-frame figure (``jod``, or ``psnr``
-    without the perceptual extra: the fovea alone would flatter foveation); the fovea's PSNR
-    follows as a secondary figure."""
+    """One sentence: the ``vr`` configuration with the best speed-up at equal ``column``.
+
+    The speed-up is the one the baseline reaches, where there is one, at frame 16 against
+    uniform rendering with the same history and denoiser (its family over spp), with the spread
+    over seeds; a speed-up whose spread covers x1 is a tie. The fovea's PSNR follows as a
+    secondary figure.
+
+    Parameters
+    ----------
+    cells : list of dict
+        Aggregated cells of the headset study.
+    column : str
+        A whole-frame figure (``jod``, or ``psnr`` without the perceptual extra: the fovea alone
+        would flatter foveation).
+
+    Returns
+    -------
+    sentence : str
+        The sentence (it says so when nothing was compared).
+    """
     what = {"jod": "JOD", "psnr": "full-frame PSNR", "psnr_fovea": "fovea PSNR"}.get(column,
                                                                                  column)
     choice = headset_choice(cells, column)
@@ -268,6 +300,18 @@ def headset_sentence(cells: list[dict], column: str) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """``foveated-mi demo``: parse the command line and run :func:`run_demo`.
+
+    Parameters
+    ----------
+    argv : sequence of str or None, optional
+        The arguments (None: ``sys.argv[1:]``): ``--out``, ``--size W H``, ``--no-progress``.
+
+    Returns
+    -------
+    status : int
+        The exit status of :func:`run_demo`.
+    """
     ap = argparse.ArgumentParser(prog="foveated-mi demo", description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=os.path.join("out", "demo"))
     ap.add_argument("--size", type=int, nargs=2, metavar=("W", "H"))

@@ -50,12 +50,29 @@ _log = logging.getLogger("foveated_mi")
 
 
 def oidn_available() -> bool:
-    """Whether ``pyoidn`` (Intel Open Image Denoise) can be imported."""
+    """Whether ``pyoidn`` (Intel Open Image Denoise) can be imported.
+
+    Returns
+    -------
+    available : bool
+        Found without importing it.
+    """
     return importlib.util.find_spec("pyoidn") is not None
 
 
 def oidn_cuda_available(device_id: int = 0) -> bool:
-    """Whether ``pyoidn`` offers OIDN's CUDA device for CUDA device ``device_id``."""
+    """Whether ``pyoidn`` offers OIDN's CUDA device for CUDA device ``device_id``.
+
+    Parameters
+    ----------
+    device_id : int, optional
+        The CUDA device.
+
+    Returns
+    -------
+    available : bool
+        False without ``pyoidn``, or when its CUDA module fails.
+    """
     if not oidn_available():
         return False
     try:
@@ -69,9 +86,24 @@ def choose_device(variant: str | None, requested: str = "auto", cuda_available: 
                   name: str = DEVICE_ENV) -> str:
     """OIDN's device (``"cpu"`` or ``"cuda"``) for frames of ``variant``: a pure decision.
 
-    ``auto``: CUDA on a ``cuda_*`` variant when ``cuda_available``, else CPU. ``cpu``: CPU on
-    any variant (a CUDA frame then goes through host memory). ``cuda``: CUDA, refused with one
-    line (:class:`ParameterError` naming ``name``) on another variant or without the device.
+    Parameters
+    ----------
+    variant : str or None
+        The Mitsuba variant.
+    requested : str, optional
+        ``auto``: CUDA on a ``cuda_*`` variant when ``cuda_available``, else CPU. ``cpu``: CPU
+        on any variant (a CUDA frame then goes through host memory). ``cuda``: CUDA, refused with
+        one line (:class:`ParameterError` naming ``name``) on another variant or without the
+        device.
+    cuda_available : bool, optional
+        Whether OIDN's CUDA device exists (:func:`oidn_cuda_available`).
+    name : str, optional
+        The request's name in an error message.
+
+    Returns
+    -------
+    device : str
+        ``"cpu"`` or ``"cuda"``.
     """
     check_choice(name, requested, DEVICES)
     on_cuda = isinstance(variant, str) and variant.startswith("cuda_")
@@ -89,8 +121,21 @@ def choose_device(variant: str | None, requested: str = "auto", cuda_available: 
 
 
 def requested_device(device: str | None = None) -> tuple[str, str]:
-    """``(request, name)``: ``device`` when given, else ``$FOVEATED_MI_OIDN_DEVICE`` (unset or
-    empty: ``auto``), validated, with the name an error should carry."""
+    """The OIDN device requested: ``device`` when given, else ``$FOVEATED_MI_OIDN_DEVICE``.
+
+    Parameters
+    ----------
+    device : str or None, optional
+        ``auto``, ``cpu`` or ``cuda``; None reads the environment variable (unset or empty:
+        ``auto``).
+
+    Returns
+    -------
+    request : str
+        The validated request.
+    name : str
+        The name an error should carry (``device`` or the variable's).
+    """
     if device is not None:
         return check_choice("device", device, DEVICES), "device"
     value = os.environ.get(DEVICE_ENV, "").strip() or "auto"
@@ -98,8 +143,23 @@ def requested_device(device: str | None = None) -> tuple[str, str]:
 
 
 def resolve_device(variant: str | None, device: str | None = None, device_id: int = 0) -> str:
-    """:func:`choose_device` for ``variant`` with the request of :func:`requested_device`;
-    asks ``pyoidn`` about CUDA only on a ``cuda_*`` variant."""
+    """:func:`choose_device` for ``variant`` with the request of :func:`requested_device`; asks
+    ``pyoidn`` about CUDA only on a ``cuda_*`` variant.
+
+    Parameters
+    ----------
+    variant : str or None
+        The Mitsuba variant.
+    device : str or None, optional
+        The request (None: ``$FOVEATED_MI_OIDN_DEVICE``, else ``auto``).
+    device_id : int, optional
+        The CUDA device.
+
+    Returns
+    -------
+    device : str
+        ``"cpu"`` or ``"cuda"``.
+    """
     request, name = requested_device(device)
     on_cuda = isinstance(variant, str) and variant.startswith("cuda_")
     cuda = on_cuda and request != "cpu" and oidn_cuda_available(device_id)
@@ -111,7 +171,13 @@ _logged: set = set()
 
 
 def last_device() -> str | None:
-    """The device (``"cpu"`` / ``"cuda"``) of the last OIDN call of this process, or None."""
+    """The device (``"cpu"`` / ``"cuda"``) of the last OIDN call of this process, or None.
+
+    Returns
+    -------
+    device : str or None
+        None before the first call.
+    """
     return _last_device
 
 
@@ -171,10 +237,27 @@ def _filter(kind: str, device_id: int = 0):
 
 def run_filter(kind: str, images: dict, width: int, height: int, *, device_id: int = 0,
                hdr: bool = True, quality: str = "high", clean_aux: bool = False) -> None:
-    """Run OIDN's ``RT`` filter on the ``kind`` device. ``images`` maps ``color`` / ``albedo`` /
-    ``normal`` / ``output`` to tightly packed float32 RGB that device can read: an
-    ``(address, bytes)`` pair (memory owned elsewhere, wrapped without a copy) or a
-    ``pyoidn.Buffer`` of that device. ``output`` is written. Synchronous."""
+    """Run OIDN's ``RT`` filter on the ``kind`` device, synchronously.
+
+    Parameters
+    ----------
+    kind : str
+        ``"cpu"`` or ``"cuda"``.
+    images : dict
+        ``color`` / ``albedo`` / ``normal`` / ``output`` to tightly packed float32 RGB that
+        device can read: an ``(address, bytes)`` pair (memory owned elsewhere, wrapped without a
+        copy) or a ``pyoidn.Buffer`` of that device. ``output`` is written.
+    width, height : int
+        Image size, in pixels.
+    device_id : int, optional
+        The CUDA device.
+    hdr : bool, optional
+        The colour is linear radiance (any value >= 0).
+    quality : str, optional
+        One of :data:`QUALITIES`.
+    clean_aux : bool, optional
+        The auxiliary images are noise-free (only with an albedo).
+    """
     import pyoidn
     with _lock:
         dev, flt = _filter(kind, device_id)
@@ -245,17 +328,33 @@ def _image(name: str, value, shape: tuple[int, ...] | None) -> np.ndarray:
 def denoise(color, albedo=None, normal=None, *, hdr: bool = True,
             quality: str = "high", clean_aux: bool = False,
             device: str | None = None) -> np.ndarray:
-    """Denoised copy of ``color`` (float32, (H, W, 3)) by OIDN's ``RT`` filter.
+    """Denoised copy of ``color`` by OIDN's ``RT`` filter.
 
-    ``albedo`` and ``normal`` (same shape) guide the filter; OIDN requires albedo whenever
-    normal is given. Negative colour values are clamped to 0 for HDR input (OIDN's HDR mode
-    expects radiance >= 0). ``clean_aux`` tells OIDN the auxiliary buffers are noise-free
-    (it then skips prefiltering them); even for a noise-free G-buffer sampled at pixel
-    centres, leaving it off measured better (OIDN's prefilter also anti-aliases them).
-    ``device``: ``auto`` | ``cpu`` | ``cuda`` (default: ``$FOVEATED_MI_OIDN_DEVICE``, else
-    ``auto``; see :func:`choose_device`); on the CUDA device the images are copied through
-    OIDN device buffers. Raises :class:`ParameterError` (one line) on bad input, and when
-    ``pyoidn`` is not installed.
+    Bad input, and a missing ``pyoidn``, raise a one-line :class:`ParameterError`.
+
+    Parameters
+    ----------
+    color : array_like
+        (H, W, 3), finite; negative values are clamped to 0 for HDR input (OIDN's HDR mode
+        expects radiance >= 0), LDR input must lie in [0, 1].
+    albedo, normal : array_like or None, optional
+        Guides of the same shape; OIDN requires albedo whenever normal is given.
+    hdr : bool, optional
+        ``color`` is linear radiance.
+    quality : str, optional
+        One of :data:`QUALITIES`.
+    clean_aux : bool, optional
+        The guides are noise-free (OIDN then skips prefiltering them); even for a noise-free
+        G-buffer sampled at pixel centres, leaving it off measured better (OIDN's prefilter also
+        anti-aliases them).
+    device : str or None, optional
+        ``auto`` | ``cpu`` | ``cuda`` (None: ``$FOVEATED_MI_OIDN_DEVICE``, else ``auto``; see
+        :func:`choose_device`); on the CUDA device the images go through OIDN device buffers.
+
+    Returns
+    -------
+    image : numpy.ndarray
+        float32 (H, W, 3).
     """
     if not oidn_available():
         raise ParameterError("denoise", True, f"pyoidn installed for the OIDN denoiser "

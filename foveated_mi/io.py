@@ -67,19 +67,20 @@ def _umask() -> int:
 @contextlib.contextmanager
 def atomic_write(path: str | os.PathLike, mode: str | None = None,
                  **open_kwargs: Any) -> Iterator[Any]:
-    """Write ``path`` all at once, or not at all.
+    """Write ``path`` all at once, or not at all: a block that raises leaves ``path`` as it was.
 
-    With ``mode=None`` the context yields the path (str) of a temporary file in the same
-    directory, for writers that take a file name (OpenEXR, imageio, ffmpeg); the temporary
-    file keeps the target's extension so format detection works. With a mode such as
-    ``"w"`` or ``"wb"`` it yields the open file object instead (``open_kwargs`` are passed to
-    ``open``). When the block ends normally the file is flushed to disk, given the
-    permissions a plain ``open`` would give it (or the old file's), and renamed over
-    ``path``. When the block raises, the temporary file is removed, ``path`` is left as it
-    was, and the exception propagates.
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Target: flushed, given ``open``'s permissions (or the old file's), renamed over at the end.
+    mode, **open_kwargs : optional
+        None, or a writing mode such as ``"w"`` or ``"wb"`` with the other arguments of ``open``.
 
-    Raises:
-        OSError: the directory does not exist or is not writable, or ``path`` is a directory.
+    Yields
+    ------
+    tmp : str or file object
+        A temporary file beside ``path``, with its extension: its path (``mode`` None, for
+        writers that take a file name) or the file open in ``mode``.
     """
     path = os.fspath(path)
     if mode is not None and (not isinstance(mode, str) or "w" not in mode):
@@ -184,11 +185,22 @@ def write_exr(path: str | os.PathLike, layers: Mapping[str, np.ndarray], *,
               attrs: Mapping[str, Any] | None = None) -> None:
     """Write named layers to one multi-layer OpenEXR file (layout in the module docstring).
 
-    Args:
-        path: target file; written atomically (see :func:`atomic_write`).
-        layers: ``{name: array}``; arrays (H, W) or (H, W, C), C in 1..4, all the same H, W.
-        attrs: extra header attributes (str, int32, float, list of str, 2 or 3 numbers,
-            3x3/4x4 float matrices), e.g. render settings; layout keys are reserved.
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Target file; written atomically (see :func:`atomic_write`).
+    layers : mapping of str to numpy.ndarray
+        ``{name: array}``; arrays (H, W) or (H, W, C), C in 1..4, all the same H, W.
+    attrs : mapping or None, optional
+        Extra header attributes (str, int32, float, list of str, 2 or 3 numbers, 3x3/4x4 float
+        matrices), e.g. render settings; layout keys are reserved.
+
+    Raises
+    ------
+    ParameterError
+        For bad layers or attributes.
+    OSError
+        When the file cannot be written.
     """
     import OpenEXR
 
@@ -253,10 +265,25 @@ def _open_exr(path: str | os.PathLike, header_only: bool = False):
 def read_exr(path: str | os.PathLike) -> dict[str, np.ndarray]:
     """Read an OpenEXR file into ``{layer: (H, W, C) array}`` (inverse of :func:`write_exr`).
 
-    Channels ``<layer>.<name>`` are grouped by layer (the text before the last dot;
-    unprefixed channels form layer ``""``) and ordered as in :data:`CHANNEL_NAMES`, other
-    sets in the order R, G, B, A, X, Y, Z, W, U, V, then alphabetically. Pixel types are kept.
-    Channels of all parts of a multi-part file are merged.
+    Channels ``<layer>.<name>`` are grouped by layer (the text before the last dot; unprefixed
+    channels form layer ``""``) and ordered as in :data:`CHANNEL_NAMES`, other sets in the order
+    R, G, B, A, X, Y, Z, W, U, V, then alphabetically. Pixel types are kept. Channels of all
+    parts of a multi-part file are merged.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+
+    Returns
+    -------
+    layers : dict of str to numpy.ndarray
+        One (H, W, C) array per layer.
+
+    Raises
+    ------
+    OSError
+        For a missing or unreadable file, or a layer that mixes shapes or pixel types.
     """
     f = _open_exr(path)
     groups: dict[str, dict[str, np.ndarray]] = {}
@@ -280,7 +307,18 @@ def read_exr(path: str | os.PathLike) -> dict[str, np.ndarray]:
 
 
 def read_exr_attrs(path: str | os.PathLike) -> dict[str, Any]:
-    """The header attributes of an OpenEXR file other than the layout keys."""
+    """The header attributes of an OpenEXR file other than the layout keys.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+
+    Returns
+    -------
+    attrs : dict
+        Attribute name to value, without :data:`RESERVED_ATTRS`.
+    """
     f = _open_exr(path, header_only=True)
     return {k: v for k, v in f.header().items() if k not in RESERVED_ATTRS}
 
@@ -294,10 +332,24 @@ def encode_srgb8(linear_rgb: np.ndarray, *, exposure: float = 0.0,
     """Linear colour -> 8-bit sRGB, the pixels :func:`write_png` writes.
 
     ``v = linear * 2^exposure`` (``tonemap=None``), or ``v = tonemap(linear, tonemap,
-    exposure)`` through :func:`foveated_mi.postprocess.tonemap`; then NaN -> 0 and clip to
-    [0, 1]; then the sRGB inverse EOTF of IEC 61966-2-1 (``colour.cctf_encoding(v,
-    function="sRGB")``) and ``round(255 v)``. An alpha channel is clipped but neither
-    exposed, tone-mapped nor sRGB-encoded.
+    exposure)`` through :func:`foveated_mi.postprocess.tonemap`; then NaN -> 0 (+inf -> 1) and
+    clip to [0, 1]; then the sRGB inverse EOTF of IEC 61966-2-1 (``colour.cctf_encoding(v,
+    function="sRGB")``) and ``round(255 v)``. An alpha channel is clipped but neither exposed,
+    tone-mapped nor sRGB-encoded.
+
+    Parameters
+    ----------
+    linear_rgb : numpy.ndarray
+        Real (H, W), (H, W, 1), (H, W, 3) or (H, W, 4).
+    exposure : float, optional
+        Exposure in stops.
+    tonemap : str or None, optional
+        A key of :data:`~foveated_mi.postprocess.tonemap.TONEMAPPERS`, or None.
+
+    Returns
+    -------
+    pixels : numpy.ndarray
+        uint8 (H, W, C), C = 1, 3 or 4.
     """
     import colour
 
@@ -347,9 +399,18 @@ def _tonemap_numpy(color: np.ndarray, operator: str, exposure: float) -> np.ndar
 
 def write_png(path: str | os.PathLike, linear_rgb: np.ndarray, *, exposure: float = 0.0,
               tonemap: str | None = None) -> None:
-    """Write a linear image as an 8-bit sRGB PNG (encoding in :func:`encode_srgb8`).
+    """Write a linear image as an 8-bit sRGB PNG (encoding in :func:`encode_srgb8`), atomically.
 
-    ``linear_rgb`` is (H, W), (H, W, 1), (H, W, 3) or (H, W, 4); written atomically.
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Target file.
+    linear_rgb : numpy.ndarray
+        (H, W), (H, W, 1), (H, W, 3) or (H, W, 4).
+    exposure : float, optional
+        Exposure in stops.
+    tonemap : str or None, optional
+        Tone-mapping operator, or None.
     """
     import imageio.v3 as iio
 
@@ -361,8 +422,18 @@ def write_png(path: str | os.PathLike, linear_rgb: np.ndarray, *, exposure: floa
 
 
 def format_table(rows: list[tuple[str, ...]]) -> str:
-    """Rows of strings as an aligned text table: the first row is the header, underlined;
-    the first column is left-aligned, the others right-aligned."""
+    """Rows of strings as an aligned text table.
+
+    Parameters
+    ----------
+    rows : list of tuple of str
+        The first row is the header (underlined); all rows have its length.
+
+    Returns
+    -------
+    table : str
+        The lines, the first column left-aligned, the others right-aligned.
+    """
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     lines = []
     for j, r in enumerate(rows):

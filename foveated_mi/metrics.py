@@ -139,9 +139,23 @@ def _check_shape(shape) -> tuple[int, int]:
 # ---------------------------------------------------------------------------------------------
 
 def normalized_distance(shape, gaze) -> np.ndarray:
-    """(H, W) distance of each pixel centre to the gaze over half the film diagonal, in double
-    precision: the NumPy twin of :func:`foveated_mi.frame.sampling.normalized_distance` (same
-    convention; the tests compare the two)."""
+    """Distance of each pixel centre to the gaze over half the film diagonal, in double precision.
+
+    The NumPy twin of :func:`foveated_mi.frame.sampling.normalized_distance` (same convention;
+    the tests compare the two).
+
+    Parameters
+    ----------
+    shape : tuple of int
+        Image shape, (H, W) or (H, W, C).
+    gaze : tuple of float
+        Normalised film coordinates (origin top-left); may lie off-screen.
+
+    Returns
+    -------
+    distance : numpy.ndarray
+        float64 (H, W).
+    """
     h, w = _check_shape(shape)
     gx, gy = check_point2("gaze", gaze)
     half_diag = 0.5 * math.sqrt(w * w + h * h)
@@ -151,15 +165,29 @@ def normalized_distance(shape, gaze) -> np.ndarray:
 
 
 def fovea_mask(shape, gaze, theta) -> np.ndarray:
-    """(H, W) boolean mask of the fovea: pixel centres with normalised distance ``d < theta``
-    to ``gaze`` (see the module docstring). The gaze may lie off-screen (the mask may then be
-    empty); θ is a finite number > 0."""
+    """Boolean mask of the fovea: pixel centres with normalised distance ``d < theta`` to ``gaze``
+    (see the module docstring).
+
+    Parameters
+    ----------
+    shape : tuple of int
+        Image shape, (H, W) or (H, W, C).
+    gaze : tuple of float
+        Normalised film coordinates; it may lie off-screen (the mask may then be empty).
+    theta : float
+        The fovea's radius θ, a finite number > 0 (a fraction of half the film diagonal).
+
+    Returns
+    -------
+    mask : numpy.ndarray
+        bool (H, W).
+    """
     theta = check_range("theta", theta, 0.0, None, lo_open=True)
     return normalized_distance(shape, gaze) < theta
 
 
 def eccentricity_weights(shape, gaze, theta, sigma_p) -> np.ndarray:
-    r"""(H, W) weights following the sampling law's falloff, normalised to sum 1:
+    r"""Weights following the sampling law's falloff, normalised to sum 1:
 
     .. math::
 
@@ -170,6 +198,20 @@ def eccentricity_weights(shape, gaze, theta, sigma_p) -> np.ndarray:
     computed as ``m / (d_i^2 + 1/w)`` (``m`` the smallest denominator) and normalised, which
     keeps the limits exact: ``σp = 1`` (w = 0) gives uniform weights; a ``w`` that overflows
     (θ → 0) gives ``1/d^2`` weights, or all the weight on a pixel centred on the gaze.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        Image shape, (H, W) or (H, W, C).
+    gaze : tuple of float
+        Normalised film coordinates.
+    theta, sigma_p : float
+        The sampling law's fovea radius θ and peripheral probability σp.
+
+    Returns
+    -------
+    weights : numpy.ndarray
+        float64 (H, W), summing to 1.
     """
     from .frame.sampling import sampling_weight
 
@@ -196,10 +238,24 @@ def _psnr_from_mse(mse: float, rng: float) -> float:
 
 
 def psnr(reference, test, data_range: float | None = None, mask=None) -> float:
-    """Peak signal-to-noise ratio in dB, ``10 log10(L^2 / MSE)`` over all channels of the
-    pixels in ``mask`` (all pixels when None: ``skimage.metrics.peak_signal_noise_ratio``);
-    ``inf`` when they are identical, ``nan`` for an empty mask. ``L`` comes from the whole
-    reference (see the module docstring), so region values share one scale.
+    """Peak signal-to-noise ratio in dB, ``10 log10(L^2 / MSE)`` over all channels of the pixels in
+    ``mask``.
+
+    Parameters
+    ----------
+    reference, test : array_like
+        Finite real images of one shape, (H, W) or (H, W, C).
+    data_range : float or None, optional
+        ``L``; None: from the whole reference (see the module docstring), so region values
+        share one scale.
+    mask : numpy.ndarray or None, optional
+        bool (H, W): the pixels to measure (None: all, through
+        ``skimage.metrics.peak_signal_noise_ratio``).
+
+    Returns
+    -------
+    psnr : float
+        In dB; ``inf`` when they are identical, ``nan`` for an empty mask.
     """
     from skimage.metrics import peak_signal_noise_ratio
 
@@ -217,9 +273,23 @@ def psnr(reference, test, data_range: float | None = None, mask=None) -> float:
 
 
 def eccentricity_weighted_psnr(reference, test, weights, data_range: float = 1.0) -> float:
-    r"""PSNR of the weighted MSE, ``10 log10(L^2 / sum_i w_i mean_c (r_ic - t_ic)^2)``, with
-    ``weights`` an (H, W) array of finite non-negative numbers (normalised here to sum 1; see
-    :func:`eccentricity_weights`). ``inf`` when the weighted error is 0."""
+    """PSNR of the weighted MSE, ``10 log10(L^2 / sum_i w_i mean_c (r_ic - t_ic)^2)``.
+
+    Parameters
+    ----------
+    reference, test : array_like
+        Finite real images of one shape, (H, W) or (H, W, C).
+    weights : array_like
+        (H, W) finite non-negative numbers with a positive sum (normalised here to sum 1; see
+        :func:`eccentricity_weights`).
+    data_range : float, optional
+        ``L``, > 0.
+
+    Returns
+    -------
+    psnr : float
+        In dB; ``inf`` when the weighted error is 0.
+    """
     ref, tst = _check_pair(reference, test)
     rng = check_range("data_range", data_range, lo=0.0, lo_open=True)
     wts = np.asarray(weights)
@@ -244,7 +314,18 @@ def eccentricity_weighted_psnr(reference, test, weights, data_range: float = 1.0
 # ---------------------------------------------------------------------------------------------
 
 def ssim_win_size(height: int, width: int) -> int | None:
-    """SSIM window side: 7, or the largest odd number <= min(H, W); None below 3 px."""
+    """SSIM window side: 7, or the largest odd number <= min(H, W); None below 3 px.
+
+    Parameters
+    ----------
+    height, width : int
+        Image size, in pixels.
+
+    Returns
+    -------
+    side : int or None
+        The window's side, in pixels.
+    """
     side = min(height, width, SSIM_WIN_SIZE)
     if side % 2 == 0:
         side -= 1
@@ -253,9 +334,22 @@ def ssim_win_size(height: int, width: int) -> int | None:
 
 def ssim(reference, test, data_range: float | None = None, mask=None) -> float:
     """Mean structural similarity (Wang et al. 2004) through
-    ``skimage.metrics.structural_similarity``, averaged over channels; with ``mask``, the
-    mean of the full SSIM map over the masked pixels (see the module docstring). ``nan``
-    when the image is smaller than 3 px on a side or the mask is empty.
+    ``skimage.metrics.structural_similarity``, averaged over channels.
+
+    Parameters
+    ----------
+    reference, test : array_like
+        Finite real images of one shape, (H, W) or (H, W, C).
+    data_range : float or None, optional
+        ``L`` of SSIM's constants; None: from the reference (see the module docstring).
+    mask : numpy.ndarray or None, optional
+        bool (H, W): the mean of the full SSIM map over these pixels (see the module
+        docstring); None: scikit-image's mean.
+
+    Returns
+    -------
+    ssim : float
+        ``nan`` when the image is smaller than 3 px on a side or the mask is empty.
     """
     from skimage.metrics import structural_similarity
 
@@ -273,7 +367,22 @@ def ssim(reference, test, data_range: float | None = None, mask=None) -> float:
 
 
 def ssim_map(ref: np.ndarray, tst: np.ndarray, data_range: float, win: int) -> np.ndarray:
-    """scikit-image's full (H, W) SSIM map, averaged over channels (validated float inputs)."""
+    """scikit-image's full (H, W) SSIM map, averaged over channels (validated float inputs).
+
+    Parameters
+    ----------
+    ref, tst : numpy.ndarray
+        Validated float images of one shape, (H, W) or (H, W, C).
+    data_range : float
+        ``L`` of SSIM's constants.
+    win : int
+        Window side (:func:`ssim_win_size`).
+
+    Returns
+    -------
+    ssim : numpy.ndarray
+        (H, W) SSIM per pixel.
+    """
     from skimage.metrics import structural_similarity
 
     channel_axis = -1 if ref.ndim == 3 else None
@@ -310,9 +419,22 @@ def _flip_inputs(reference, test, ppd) -> tuple[np.ndarray, np.ndarray, float]:
 
 
 def flip_map(reference, test, *, ppd: float = 67.0) -> np.ndarray:
-    """(H, W) FLIP error map (Andersson et al. 2020, LDR, sRGB inputs) through
-    ``flip_evaluator``; inputs are validated first, since flip_evaluator exits the process on
-    bad arguments."""
+    """FLIP error map (Andersson et al. 2020, LDR, sRGB inputs) through ``flip_evaluator``.
+
+    Inputs are validated first, since flip_evaluator exits the process on bad arguments.
+
+    Parameters
+    ----------
+    reference, test : array_like
+        Display-referred images in [0, 1] of one shape, (H, W), (H, W, 1) or (H, W, 3).
+    ppd : float, optional
+        Viewing condition, in pixels per degree.
+
+    Returns
+    -------
+    error : numpy.ndarray
+        float64 (H, W), in [0, 1].
+    """
     import flip_evaluator
 
     ref, tst, ppd = _flip_inputs(reference, test, ppd)
@@ -322,10 +444,24 @@ def flip_map(reference, test, *, ppd: float = 67.0) -> np.ndarray:
 
 
 def flip(reference, test, *, ppd: float = 67.0, mask=None) -> float:
-    """Mean FLIP error in [0, 1] (0: identical) over the pixels in ``mask`` (all when None),
-    ``nan`` for an empty mask. ``ppd`` is the viewing condition in pixels per degree (67: a
-    0.7 m viewing distance from a 24" 4K monitor, FLIP's default). Images must lie in [0, 1];
-    grey (H, W) images are compared as RGB with equal channels."""
+    """Mean FLIP error in [0, 1] (0: identical) over the pixels in ``mask``.
+
+    Parameters
+    ----------
+    reference, test : array_like
+        Images in [0, 1] of one shape; grey (H, W) images are compared as RGB with equal
+        channels.
+    ppd : float, optional
+        The viewing condition in pixels per degree (67: a 0.7 m viewing distance from a 24" 4K
+        monitor, FLIP's default).
+    mask : numpy.ndarray or None, optional
+        bool (H, W): the pixels to measure (None: all).
+
+    Returns
+    -------
+    flip : float
+        ``nan`` for an empty mask.
+    """
     ref, _, _ = _flip_inputs(reference, test, ppd)
     m = _check_mask(mask, ref.shape)
     if m is not None and not m.any():
@@ -407,8 +543,19 @@ FLICKER_RINGS_DEG = (0.0, 5.0, 10.0, 20.0, 35.0, 180.0)
 
 
 def flicker_ring_columns(rings=FLICKER_RINGS_DEG) -> tuple[str, ...]:
-    """Column names of the rings between consecutive ``rings`` edges, ``flicker_<lo>_<hi>``
-    in degrees (``flicker_0_5``, ``flicker_5_10``, ... for :data:`FLICKER_RINGS_DEG`)."""
+    """Column names of the rings between consecutive ``rings`` edges.
+
+    Parameters
+    ----------
+    rings : sequence of float, optional
+        Ring edges in degrees, at least two, non-negative and strictly increasing.
+
+    Returns
+    -------
+    columns : tuple of str
+        ``flicker_<lo>_<hi>`` in degrees, a decimal point written ``p`` (``flicker_0_5``,
+        ``flicker_5_10``, ... for :data:`FLICKER_RINGS_DEG`).
+    """
     edges = _check_rings(rings)
     return tuple(f"flicker_{lo:g}_{hi:g}".replace(".", "p")
                  for lo, hi in zip(edges, edges[1:]))

@@ -163,18 +163,43 @@ def _pixel_filters():
 
 
 def resolve_pixel_filter(value: str, denoiser: str) -> str:
-    """``pixel_filter`` as the frame runs it: ``auto`` -> ``importance`` when ``denoiser`` is
-    registered with ``independent_noise`` (it leaves splatted, correlated noise in place),
-    else ``splat``; an explicit ``splat`` or ``importance`` is kept."""
+    """``pixel_filter`` as the frame runs it.
+
+    Parameters
+    ----------
+    value : str
+        ``auto``, ``splat`` or ``importance``.
+    denoiser : str
+        A registered denoiser.
+
+    Returns
+    -------
+    pixel_filter : str
+        ``auto`` -> ``importance`` when ``denoiser`` is registered with ``independent_noise`` (it
+        leaves splatted, correlated noise in place), else ``splat``; an explicit ``splat`` or
+        ``importance`` is kept.
+    """
     if value != "auto":
         return value
     return "importance" if denoisers()[denoiser].independent_noise else "splat"
 
 
 def pixel_filter_warning(given: dict[str, Any], options: dict[str, Any]) -> str | None:
-    """The one-line warning for an explicit ``pixel_filter = "splat"`` with a denoiser that
-    needs independent per-pixel noise (``given``: the options the user set; ``options``:
-    validated), else ``None``."""
+    """The one-line warning for an explicit ``pixel_filter = "splat"`` with a denoiser that needs
+    independent per-pixel noise.
+
+    Parameters
+    ----------
+    given : dict
+        The options the user set.
+    options : dict
+        The validated options.
+
+    Returns
+    -------
+    warning : str or None
+        The warning, else None.
+    """
     denoiser = options["denoiser"]
     if given.get("pixel_filter") != "splat" or not denoisers()[denoiser].independent_noise:
         return None
@@ -182,8 +207,22 @@ def pixel_filter_warning(given: dict[str, Any], options: dict[str, Any]) -> str 
 
 
 def splat_warning(setting: str, denoiser: str, instead: str) -> str:
-    """The one-line warning for splatted samples fed to ``denoiser`` (``setting``: what the
-    user set beside ``pixel_filter = 'splat'``; ``instead``: the value to leave it at)."""
+    """The one-line warning for splatted samples fed to ``denoiser``.
+
+    Parameters
+    ----------
+    setting : str
+        What the user set beside ``pixel_filter = 'splat'``.
+    denoiser : str
+        The denoiser's name.
+    instead : str
+        The value to leave ``pixel_filter`` at.
+
+    Returns
+    -------
+    warning : str
+        The warning.
+    """
     return (f"pixel_filter = 'splat' with {setting}: on a film whose filter is not box, "
             f"splatting spreads each sample's noise over neighbouring pixels and {denoiser}, "
             f"which expects independent per-pixel noise, leaves it in place; leave "
@@ -206,25 +245,49 @@ def _jfa_variants():
 
 
 def formations():
-    """The formation registry (:data:`foveated_mi.frame.formation.FORMATIONS`)."""
+    """The formation registry (:data:`foveated_mi.frame.formation.FORMATIONS`).
+
+    Returns
+    -------
+    formations : dict
+        Formation name -> its registration.
+    """
     from .frame.formation import FORMATIONS
     return FORMATIONS
 
 
 def reconstructions():
-    """The reconstruction registry (:data:`foveated_mi.reconstruct.RECONSTRUCTIONS`)."""
+    """The reconstruction registry (:data:`foveated_mi.reconstruct.RECONSTRUCTIONS`).
+
+    Returns
+    -------
+    reconstructions : dict
+        Method name -> :class:`~foveated_mi.reconstruct.registry.Method`.
+    """
     from .reconstruct import RECONSTRUCTIONS
     return RECONSTRUCTIONS
 
 
 def denoisers():
-    """The denoiser registry (:data:`foveated_mi.postprocess.DENOISERS`)."""
+    """The denoiser registry (:data:`foveated_mi.postprocess.DENOISERS`).
+
+    Returns
+    -------
+    denoisers : dict
+        Denoiser name -> :class:`~foveated_mi.postprocess.registry.Denoiser`.
+    """
     from .postprocess import DENOISERS
     return DENOISERS
 
 
 def tonemappers():
-    """The tone mapper registry (:data:`foveated_mi.postprocess.TONEMAPPERS`)."""
+    """The tone mapper registry (:data:`foveated_mi.postprocess.TONEMAPPERS`).
+
+    Returns
+    -------
+    tonemappers : dict
+        Operator name -> its function.
+    """
     from .postprocess import TONEMAPPERS
     return TONEMAPPERS
 
@@ -432,8 +495,23 @@ OPTIONS_HELP = "`foveated-mi render --help`"
 
 def unknown_option(name: str, value: Any,
                    what: str = "an option of the foveated integrator") -> ParameterError:
-    """The one-line error of an option :data:`SCHEMA` does not hold: the closest option's
-    name, or where the options are listed when none is close."""
+    """The one-line error of an option :data:`SCHEMA` does not hold: the closest option's name, or
+    where the options are listed when none is close.
+
+    Parameters
+    ----------
+    name : str
+        The unknown option.
+    value : object
+        Its value.
+    what : str, optional
+        What is allowed, in words.
+
+    Returns
+    -------
+    error : ParameterError
+        The error to raise.
+    """
     return ParameterError(name, value, unknown_name(name, SCHEMA, what, see=OPTIONS_HELP))
 
 
@@ -465,8 +543,20 @@ PRESET_NAMES = ("auto", *PRESETS)
 def resolve_preset(preset: str, gradients: bool = False) -> str:
     """The preset ``preset`` stands for (``auto`` -> ``oidn`` or ``guided``).
 
-    ``gradients``: the frames will be differentiated (a nested AD integrator such as
-    ``prb``, or a gradient pass), so ``auto`` picks the preset whose gradient is exact."""
+    Parameters
+    ----------
+    preset : str
+        One of :data:`PRESET_NAMES`.
+    gradients : bool, optional
+        The frames will be differentiated (a nested AD integrator such as ``prb``, or a gradient
+        pass), so ``auto`` picks the preset whose gradient is exact.
+
+    Returns
+    -------
+    preset : str
+        A key of :data:`PRESETS`: ``auto`` gives ``guided`` for gradients or without ``pyoidn``,
+        else ``oidn``.
+    """
     check_choice("preset", preset, PRESET_NAMES)
     if preset != "auto":
         return preset
@@ -479,12 +569,26 @@ def resolve_preset(preset: str, gradients: bool = False) -> str:
 # -- validation -----------------------------------------------------------------------------
 
 def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[str, Any]:
-    """Check every option and return them all, normalised, with the preset resolved
-    (``gradients``: see :func:`resolve_preset`) and ``pixel_filter = "auto"`` resolved by
-    the denoiser (:func:`resolve_pixel_filter`).
+    """Check every option and return them all, normalised.
 
-    Raises :class:`~foveated_mi.validate.ParameterError` (one line) for an unknown option or
-    a bad value."""
+    Parameters
+    ----------
+    options : dict
+        The options given.
+    gradients : bool, optional
+        See :func:`resolve_preset`.
+
+    Returns
+    -------
+    options : dict
+        Every option of :data:`SCHEMA`, with the preset resolved and ``pixel_filter = "auto"``
+        resolved by the denoiser (:func:`resolve_pixel_filter`).
+
+    Raises
+    ------
+    ParameterError
+        (One line) for an unknown option or a bad value.
+    """
     unknown = set(options) - set(SCHEMA)
     if unknown:
         name = sorted(unknown)[0]
@@ -539,9 +643,17 @@ def _check_combination(out: dict[str, Any]) -> None:
 # -- what a gradient pass cannot differentiate ----------------------------------------------
 
 def non_differentiable() -> dict[str, tuple[Callable[[dict], bool], str]]:
-    """Option -> (predicate on the validated options that holds where a gradient pass cannot
-    differentiate the frame, what it needs instead), from the schema. Options whose choices
-    come from a registry come last: the pipeline's own options are reported first."""
+    """The options a gradient pass may refuse, from the schema.
+
+    Options whose choices come from a registry come last: the pipeline's own options are
+    reported first.
+
+    Returns
+    -------
+    rules : dict
+        Option -> (predicate on the validated options that holds where a gradient pass cannot
+        differentiate the frame, what it needs instead).
+    """
     opts = [o for o in _SCHEMA if o.differentiable is not True]
     opts.sort(key=lambda o: callable(o.choices))
     return {o.name: (lambda options, o=o: not o.is_differentiable(
@@ -565,7 +677,13 @@ _declare_non_differentiable()
 
 def parameter_table() -> str:
     """The ``.. pluginparameters::`` table of the integrator's docstring, from the schema
-    (registered methods included)."""
+    (registered methods included).
+
+    Returns
+    -------
+    table : str
+        The reStructuredText table.
+    """
     lines = [".. pluginparameters::", ""]
     for o in _SCHEMA:
         text = o.doc if o.doc is not None else o.help[0].upper() + o.help[1:]
@@ -579,10 +697,21 @@ def parameter_table() -> str:
 
 
 def from_properties(props) -> tuple[dict[str, Any], Any]:
-    """The options and the nested integrator of an XML ``<integrator type="foveated">``
-    (``mi.Properties``): each parameter must be an option of :data:`SCHEMA` (a ``<point>``
-    becomes ``(x, y)``), and at most one child a sampling integrator. Returns ``(options,
-    nested)``, ``nested`` None when the XML names none."""
+    """The options and the nested integrator of an XML ``<integrator type="foveated">``.
+
+    Parameters
+    ----------
+    props : mi.Properties
+        Each parameter must be an option of :data:`SCHEMA` (a ``<point>`` becomes ``(x, y)``),
+        and at most one child a sampling integrator.
+
+    Returns
+    -------
+    options : dict
+        The options given.
+    nested : mi.SamplingIntegrator or None
+        None when the XML names none.
+    """
     import mitsuba as mi
     options: dict[str, Any] = {}
     nested = None
@@ -607,9 +736,22 @@ def from_properties(props) -> tuple[dict[str, Any], Any]:
 
 
 def gradient_refusal(given: dict[str, Any], options: dict[str, Any]) -> ParameterError | None:
-    """Why a gradient pass of a frame with these options would not be the gradient of the
-    image shown, as the one-line error to raise (None: it would be). ``given``: the options
-    the user set (the advice differs when the ``auto`` preset chose the denoiser)."""
+    """Why a gradient pass of a frame with these options would not be the gradient of the image
+    shown.
+
+    Parameters
+    ----------
+    given : dict
+        The options the user set (the advice differs when the ``auto`` preset chose the
+        denoiser).
+    options : dict
+        The validated options.
+
+    Returns
+    -------
+    error : ParameterError or None
+        The one-line error to raise (None: it would be the gradient).
+    """
     from .frame.adjoint import refusal
     error = refusal(options)
     if error is None or error.name != "denoiser":

@@ -48,14 +48,32 @@ COLUMNS = ("jod",)
 
 
 def columns(motion: bool, monitor: bool) -> tuple[str, ...]:
-    """The JOD columns of a study (with the extra): ``jod``, ``jod_video`` in motion, and
-    their ``_monitor`` twins with a second viewing condition (``[viewer] monitor``)."""
+    """The JOD columns of a study (with the extra).
+
+    Parameters
+    ----------
+    motion : bool
+        The study has a ``[motion]`` table (adds ``jod_video``).
+    monitor : bool
+        A second viewing condition, ``[viewer] monitor`` (adds the ``_monitor`` twins).
+
+    Returns
+    -------
+    columns : tuple of str
+        ``jod``, ``jod_video`` in motion, then their ``_monitor`` twins.
+    """
     base = COLUMNS + (("jod_video",) if motion else ())
     return base + (tuple(f"{c}_monitor" for c in base) if monitor else ())
 
 
 def available() -> bool:
-    """Whether ``pyfvvdp`` and ``torch`` can be imported (checked without importing them)."""
+    """Whether ``pyfvvdp`` and ``torch`` can be imported (checked without importing them).
+
+    Returns
+    -------
+    available : bool
+        Both are found.
+    """
     return all(importlib.util.find_spec(m) is not None for m in ("pyfvvdp", "torch"))
 
 
@@ -68,7 +86,13 @@ def _package_dir() -> str | None:
 
 @lru_cache(maxsize=1)
 def display_names() -> tuple[str, ...]:
-    """The display models pyfvvdp ships (empty without the extra); read from its JSON."""
+    """The display models pyfvvdp ships, read from its JSON.
+
+    Returns
+    -------
+    names : tuple of str
+        Empty without the extra.
+    """
     d = _package_dir()
     if d is None:
         return ()
@@ -80,7 +104,25 @@ def display_names() -> tuple[str, ...]:
 
 
 def check_display(name: str, display: str) -> str:
-    """``display`` if it names a pyfvvdp display model (any string without the extra)."""
+    """``display`` if it names a pyfvvdp display model (any string without the extra).
+
+    Parameters
+    ----------
+    name : str
+        The input's name, for the error message.
+    display : str
+        The display model.
+
+    Returns
+    -------
+    display : str
+        ``display`` itself.
+
+    Raises
+    ------
+    ParameterError
+        For an empty or unknown name.
+    """
     if not isinstance(display, str) or not display:
         raise ParameterError(name, display, "the name of a FovVideoVDP display model, e.g. "
                              f"{DEFAULT_DISPLAY!r}")
@@ -112,9 +154,31 @@ def _metric(width: int, height: int, fov: float, display: str):
 def jod(reference: np.ndarray, test: np.ndarray, *, gaze: tuple[float, float] = (0.5, 0.5),
         ppd: float = 67.0, display: str = DEFAULT_DISPLAY,
         fov_horizontal: float | None = None) -> float:
-    """FovVideoVDP's JOD of ``test`` against ``reference``: both (H, W, 3) display-referred
-    sRGB in [0, 1], fixated at ``gaze``. Raises :class:`ParameterError` for bad input or
-    without the extra."""
+    """FovVideoVDP's JOD of ``test`` against ``reference``.
+
+    Parameters
+    ----------
+    reference, test : numpy.ndarray
+        Both (H, W, 3) display-referred sRGB in [0, 1].
+    gaze : tuple of float, optional
+        The fixation, in normalised film coordinates.
+    ppd : float, optional
+        Pixels per degree at the centre of a flat display (when ``fov_horizontal`` is None).
+    display : str, optional
+        A pyfvvdp display model.
+    fov_horizontal : float or None, optional
+        Degrees across the film; None: from ``ppd``.
+
+    Returns
+    -------
+    jod : float
+        Just-objectionable-difference score (10: identical).
+
+    Raises
+    ------
+    ParameterError
+        For bad input or without the extra.
+    """
     if not available():
         raise ParameterError("jod", "pyfvvdp", f"pyfvvdp and torch installed ({INSTALL_HINT})")
     ref = np.asarray(reference, dtype=np.float32)
@@ -141,11 +205,30 @@ def jod(reference: np.ndarray, test: np.ndarray, *, gaze: tuple[float, float] = 
 def jod_video(reference: np.ndarray, test: np.ndarray, *, fixations, fps: float,
               ppd: float | None = 67.0, fov_horizontal: float | None = None,
               display: str = DEFAULT_DISPLAY) -> float:
-    """FovVideoVDP's JOD of the video ``test`` against ``reference``: both (F, H, W, 3)
-    display-referred sRGB in [0, 1], shown at ``fps`` frames per second, frame ``f`` fixated
-    at ``fixations[f]`` (normalised film coordinates; one pair for all frames also works).
-    The geometry is ``fov_horizontal`` degrees across the film when given, else ``ppd`` at its
-    centre. Raises :class:`ParameterError` for bad input or without the extra."""
+    """FovVideoVDP's JOD of the video ``test`` against ``reference``.
+
+    Bad input, or a missing extra, raises :class:`ParameterError`.
+
+    Parameters
+    ----------
+    reference, test : numpy.ndarray
+        Both (F, H, W, 3) display-referred sRGB in [0, 1], F >= 2.
+    fixations : array_like
+        Frame ``f`` fixated at ``fixations[f]`` (normalised film coordinates); one pair for all
+        frames also works.
+    fps : float
+        Frames per second.
+    ppd, fov_horizontal : float or None, optional
+        The geometry: ``fov_horizontal`` degrees across the film when given, else ``ppd`` at its
+        centre.
+    display : str, optional
+        A pyfvvdp display model.
+
+    Returns
+    -------
+    jod : float
+        Just-objectionable-difference score (10: identical).
+    """
     if not available():
         raise ParameterError("jod_video", "pyfvvdp", f"pyfvvdp and torch installed "
                              f"({INSTALL_HINT})")

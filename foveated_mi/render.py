@@ -23,8 +23,23 @@ EXR_LAYERS = ("image", "sampling_map", "shading", "nearest", "filled", "interpol
 
 
 def to_display(linear: np.ndarray, exposure: float = 0.0) -> np.ndarray:
-    """Display-referred image in [0, 1] for metrics and previews: Reinhard ``x / (1 + x)``
-    after ``2^exposure``, then the sRGB encoding (colour-science). Non-finite values -> 0."""
+    """Display-referred image in [0, 1] for metrics and previews.
+
+    Reinhard ``x / (1 + x)`` after ``2^exposure``, then the sRGB encoding (colour-science).
+    Non-finite values -> 0 (+inf -> 1).
+
+    Parameters
+    ----------
+    linear : array_like
+        Linear image, any shape.
+    exposure : float, optional
+        Exposure in stops.
+
+    Returns
+    -------
+    display : numpy.ndarray
+        float64, the shape of ``linear``.
+    """
     import colour
     x = np.nan_to_num(np.asarray(linear, dtype=np.float64), nan=0.0, posinf=1e30, neginf=0.0)
     x = np.maximum(x * 2.0 ** exposure, 0.0)
@@ -32,6 +47,21 @@ def to_display(linear: np.ndarray, exposure: float = 0.0) -> np.ndarray:
 
 
 def make_integrator(scene: mi.Scene, options: dict[str, Any]) -> FoveatedIntegrator:
+    """The ``foveated`` integrator for ``scene``.
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        The scene. When its own integrator is already ``foveated`` it is reused with
+        ``options`` set; else its own (a sampling integrator) becomes the nested one.
+    options : dict
+        Options of the foveated integrator.
+
+    Returns
+    -------
+    integrator : FoveatedIntegrator
+        The integrator.
+    """
     own = scene.integrator()
     if isinstance(own, FoveatedIntegrator):
         own.set_options(**options)
@@ -69,11 +99,25 @@ def _json(stats):
 
 
 def frame_layers(integ: FoveatedIntegrator, image: np.ndarray) -> dict[str, np.ndarray]:
-    """The EXR layers of the integrator's last frame as (H, W, C) float32 arrays: those of
-    :data:`EXR_LAYERS` that the frame's formation made on the film's pixels (a formation
-    that works in another buffer has no ``nearest``, and its ``filtered`` lies on its own
-    grid; one that keeps its G-buffer and history on its samples has no ``shading`` or
-    ``depth`` on the film)."""
+    """The EXR layers of the integrator's last frame as (H, W, C) float32 arrays.
+
+    Those of :data:`EXR_LAYERS` that the frame's formation made on the film's pixels (a
+    formation that works in another buffer has no ``nearest``, and its ``filtered`` lies on its
+    own grid; one that keeps its G-buffer and history on its samples has no ``shading`` or
+    ``depth`` on the film).
+
+    Parameters
+    ----------
+    integ : FoveatedIntegrator
+        The integrator that rendered the frame.
+    image : numpy.ndarray
+        The frame, (H, W, C).
+
+    Returns
+    -------
+    layers : dict of str to numpy.ndarray
+        Layer name -> (H, W, C) float32; ``shading`` carries its mask as a fourth channel.
+    """
     h, w = image.shape[:2]
 
     def get(name):

@@ -29,6 +29,25 @@ def _as_float(name: str, value: Any, allowed: str) -> float:
 
 
 def check_finite(name: str, value: Any) -> float:
+    """A finite number.
+
+    Parameters
+    ----------
+    name : str
+        The input's name, for the error message.
+    value : object
+        The value to check (a ``bool`` is refused).
+
+    Returns
+    -------
+    value : float
+        ``value`` as a float.
+
+    Raises
+    ------
+    ParameterError
+        If ``value`` is not a finite number.
+    """
     allowed = "a finite number"
     v = _as_float(name, value, allowed)
     if not math.isfinite(v):
@@ -44,7 +63,29 @@ def _bounds(*parts: str | None) -> str:
 
 def check_range(name: str, value: Any, lo: float | None = None, hi: float | None = None,
                 lo_open: bool = False, hi_open: bool = False) -> float:
-    """A finite float inside [lo, hi] (or open ends)."""
+    """A finite float inside [lo, hi] (or open ends).
+
+    Parameters
+    ----------
+    name : str
+        The input's name, for the error message.
+    value : object
+        The value to check (a ``bool`` is refused).
+    lo, hi : float or None, optional
+        The bounds (None: unbounded on that side).
+    lo_open, hi_open : bool, optional
+        Exclude that bound itself.
+
+    Returns
+    -------
+    value : float
+        ``value`` as a float.
+
+    Raises
+    ------
+    ParameterError
+        If ``value`` is not a finite number within the bounds.
+    """
     allowed = "a finite number" + _bounds(f"{'>' if lo_open else '>='} {lo:g}" if lo is not None
                                           else None,
                                           f"{'<' if hi_open else '<='} {hi:g}" if hi is not None
@@ -61,6 +102,28 @@ def check_range(name: str, value: Any, lo: float | None = None, hi: float | None
 
 
 def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = None) -> int:
+    """An integer inside [lo, hi].
+
+    Parameters
+    ----------
+    name : str
+        The input's name, for the error message.
+    value : object
+        The value to check: an ``int``, or anything ``int()`` converts (a float only when it is
+        integral; a ``bool`` is refused).
+    lo, hi : int or None, optional
+        The bounds, inclusive (None: unbounded on that side).
+
+    Returns
+    -------
+    value : int
+        ``value`` as an int.
+
+    Raises
+    ------
+    ParameterError
+        If ``value`` is not an integer within the bounds.
+    """
     allowed = "an integer" + _bounds(f">= {lo}" if lo is not None else None,
                                      f"<= {hi}" if hi is not None else None)
     if isinstance(value, bool):
@@ -77,6 +140,27 @@ def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = Non
 
 
 def check_choice(name: str, value: Any, choices: Iterable[str]) -> str:
+    """One of the allowed strings.
+
+    Parameters
+    ----------
+    name : str
+        The input's name, for the error message.
+    value : object
+        The value to check.
+    choices : iterable of str
+        The allowed values (listed in the error message).
+
+    Returns
+    -------
+    value : str
+        ``value`` itself.
+
+    Raises
+    ------
+    ParameterError
+        If ``value`` is not one of ``choices``.
+    """
     choices = list(choices)
     if not isinstance(value, str) or value not in choices:
         raise ParameterError(name, value, "one of " + ", ".join(repr(c) for c in choices))
@@ -84,9 +168,27 @@ def check_choice(name: str, value: Any, choices: Iterable[str]) -> str:
 
 
 def unknown_name(name: Any, names: Iterable[str], what: str, see: str | None = None) -> str:
-    """What is allowed in place of the unknown ``name``, short enough for one line: ``what``
-    and the closest of ``names`` (:func:`difflib.get_close_matches`); when none is close,
-    where the names are listed (``see``), else the names themselves."""
+    """What is allowed in place of the unknown ``name``, short enough for one line.
+
+    ``what`` and the closest of ``names`` (:func:`difflib.get_close_matches`); when none is
+    close, where the names are listed (``see``), else the names themselves.
+
+    Parameters
+    ----------
+    name : object
+        The unknown name.
+    names : iterable of str
+        The known names.
+    what : str
+        What is allowed, in words (e.g. ``"a known key"``).
+    see : str or None, optional
+        Where the names are listed (None: list them).
+
+    Returns
+    -------
+    allowed : str
+        The ``allowed`` text of a :class:`ParameterError`.
+    """
     names = list(names)
     close = difflib.get_close_matches(str(name), names, n=1)
     if close:
@@ -97,8 +199,30 @@ def unknown_name(name: Any, names: Iterable[str], what: str, see: str | None = N
 
 
 def check_point2(name: str, value: Any, bound: float = 1e6) -> tuple[float, float]:
-    """Two finite numbers of magnitude <= ``bound`` (a gaze may lie outside [0, 1]^2: the
-    viewer looks off-screen; the bound keeps ``gaze * width`` finite in float32)."""
+    """Two finite numbers of magnitude <= ``bound``.
+
+    A gaze may lie outside [0, 1]^2 (the viewer looks off-screen); the bound keeps
+    ``gaze * width`` finite in float32.
+
+    Parameters
+    ----------
+    name : str
+        The input's name, for the error message.
+    value : iterable
+        The two numbers ``(x, y)``.
+    bound : float, optional
+        Largest magnitude allowed.
+
+    Returns
+    -------
+    x, y : float
+        The two numbers.
+
+    Raises
+    ------
+    ParameterError
+        If ``value`` is not two finite numbers within ``bound``.
+    """
     allowed = f"two finite numbers (x, y) with |x|, |y| <= {bound:g}"
     try:
         x, y = (float(v) for v in value)
@@ -110,14 +234,50 @@ def check_point2(name: str, value: Any, bound: float = 1e6) -> tuple[float, floa
 
 
 def check_bool(name: str, value: Any) -> bool:
-    """A real ``bool`` (not 0/1, not a string)."""
+    """A real ``bool`` (not 0/1, not a string).
+
+    Parameters
+    ----------
+    name : str
+        The input's name, for the error message.
+    value : object
+        The value to check.
+
+    Returns
+    -------
+    value : bool
+        ``value`` itself.
+
+    Raises
+    ------
+    ParameterError
+        If ``value`` is not a ``bool``.
+    """
     if isinstance(value, bool):
         return value
     raise ParameterError(name, value, "true or false")
 
 
 def check_sigma(name: str, value: Any) -> float:
-    """A filter's sigma: a number > 0, where ``inf`` disables that weight."""
+    """A filter's sigma: a number > 0, where ``inf`` disables that weight.
+
+    Parameters
+    ----------
+    name : str
+        The input's name, for the error message.
+    value : object
+        The value to check (a ``bool`` is refused).
+
+    Returns
+    -------
+    sigma : float
+        ``value`` as a float (possibly ``inf``).
+
+    Raises
+    ------
+    ParameterError
+        If ``value`` is not a number > 0.
+    """
     allowed = "a number > 0, or inf to disable this weight"
     if isinstance(value, bool):
         raise ParameterError(name, value, allowed)

@@ -20,7 +20,13 @@ _LLVM_CANDIDATES = [
 
 
 def find_llvm() -> str | None:
-    """Path of an LLVM >= 16 shared library, newest first, or None."""
+    """Path of an LLVM >= 16 shared library, newest first, or None.
+
+    Returns
+    -------
+    path : str or None
+        From the usual system locations, else the path noted in ``.venv/llvm-path``.
+    """
     for v in range(21, 15, -1):
         for pattern in _LLVM_CANDIDATES:
             for path in glob.glob(pattern.format(v=v)):
@@ -34,6 +40,7 @@ def find_llvm() -> str | None:
 
 
 def pin_llvm() -> None:
+    """Set ``DRJIT_LIBLLVM_PATH`` to :func:`find_llvm`'s library, when unset and one is found."""
     if not os.environ.get("DRJIT_LIBLLVM_PATH"):
         path = find_llvm()
         if path:
@@ -41,6 +48,13 @@ def pin_llvm() -> None:
 
 
 def cuda_works() -> bool:
+    """Whether Dr.Jit's CUDA backend works on this machine.
+
+    Returns
+    -------
+    works : bool
+        False where the check itself fails.
+    """
     import drjit as dr
     try:
         return bool(dr.has_backend(dr.JitBackend.CUDA))
@@ -49,7 +63,24 @@ def cuda_works() -> bool:
 
 
 def choose_variant(requested: str | None = None) -> str:
-    """The variant to use: ``requested``, else ``$FOVEATED_MI_VARIANT``, else CUDA or LLVM."""
+    """The variant to use: ``requested``, else ``$FOVEATED_MI_VARIANT``, else CUDA or LLVM.
+
+    Parameters
+    ----------
+    requested : str or None, optional
+        A variant of :data:`SUPPORTED` that this Mitsuba build has.
+
+    Returns
+    -------
+    variant : str
+        The variant: ``cuda_ad_rgb`` where CUDA works, else ``llvm_ad_rgb`` unless one is asked
+        for.
+
+    Raises
+    ------
+    ParameterError
+        For a variant that is not available.
+    """
     import mitsuba as mi
     from .validate import check_choice
 

@@ -44,15 +44,58 @@ ALBEDO_FLOOR = 0.4
 
 
 def safe_albedo(albedo: mi.Color3f, floor: float = ALBEDO_FLOOR) -> mi.Color3f:
-    """:math:`\\hat a = \\max(a, a_{\\min})` per channel, held at its primal value."""
+    r""":math:`\hat a = \max(a, a_{\min})` per channel, held at its primal value.
+
+    Parameters
+    ----------
+    albedo : mi.Color3f
+        Diffuse albedo :math:`a` per pixel (detached: no gradient flows through it).
+    floor : float, optional
+        :math:`a_{\min}`, the smallest divisor (default ``ALBEDO_FLOOR``).
+
+    Returns
+    -------
+    albedo : mi.Color3f
+        The floored albedo :math:`\hat a`.
+    """
     return dr.maximum(dr.detach(albedo), floor)
 
 
 def demodulate(radiance: mi.Color3f, albedo: mi.Color3f, emission: mi.Color3f) -> mi.Color3f:
-    """Irradiance-like :math:`E = (L - L_e) / \\hat a` (see the module docstring)."""
+    r"""Irradiance-like :math:`E = (L - L_e) / \hat a` (see the module docstring).
+
+    Parameters
+    ----------
+    radiance : mi.Color3f
+        Radiance :math:`L` per pixel (gradients flow through it).
+    albedo : mi.Color3f
+        Diffuse albedo :math:`a` of the G-buffer (floored by :func:`safe_albedo`, detached).
+    emission : mi.Color3f
+        Emitted radiance :math:`L_e` of the G-buffer (detached).
+
+    Returns
+    -------
+    irradiance : mi.Color3f
+        :math:`E` per pixel.
+    """
     return (radiance - dr.detach(emission)) / safe_albedo(albedo)
 
 
 def remodulate(irradiance: mi.Color3f, albedo: mi.Color3f, emission: mi.Color3f) -> mi.Color3f:
-    """Radiance :math:`L = \\hat a E + L_e`, the inverse of :func:`demodulate`."""
+    r"""Radiance :math:`L = \hat a E + L_e`, the inverse of :func:`demodulate`.
+
+    Parameters
+    ----------
+    irradiance : mi.Color3f
+        Irradiance :math:`E` per pixel (gradients flow through it).
+    albedo : mi.Color3f
+        Diffuse albedo :math:`a` of the G-buffer (floored by :func:`safe_albedo`, detached).
+    emission : mi.Color3f
+        Emitted radiance :math:`L_e` of the G-buffer (detached).
+
+    Returns
+    -------
+    radiance : mi.Color3f
+        :math:`L` per pixel.
+    """
     return dr.fma(irradiance, safe_albedo(albedo), dr.detach(emission))

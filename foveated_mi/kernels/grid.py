@@ -106,10 +106,27 @@ class Grid:
 
 
 def wrap_padding(grid: Grid, pad: int) -> tuple[Grid, mi.UInt32, mi.UInt32]:
-    """A plain image of ``grid`` for a method that knows no neighbour rule (a network): the
-    grid with ``pad`` columns of the other side added on each side of its wrapped x axis.
-    Returns the padded grid (clamped), the cell of ``grid`` each padded cell copies, and the
-    padded cell of each cell of ``grid`` (to crop the result back)."""
+    """A plain image of ``grid`` for a method that knows no neighbour rule (a network).
+
+    The grid gets ``pad`` columns of the other side added on each side of its wrapped x axis; a
+    grid whose x axis clamps is returned as is, with the identity as both maps.
+
+    Parameters
+    ----------
+    grid : Grid
+        The grid to pad.
+    pad : int
+        Columns to add on each side (at most ``grid.width``).
+
+    Returns
+    -------
+    padded : Grid
+        The padded grid (its x axis clamped).
+    source : mi.UInt32
+        For each padded cell, the cell of ``grid`` it copies.
+    crop : mi.UInt32
+        For each cell of ``grid``, its padded cell (to crop the result back).
+    """
     if not grid.wrap_x:
         idx = dr.arange(mi.UInt32, grid.size)
         return grid, idx, idx
@@ -122,13 +139,44 @@ def wrap_padding(grid: Grid, pad: int) -> tuple[Grid, mi.UInt32, mi.UInt32]:
 
 
 def wrap(q: mi.Int32, n: int) -> mi.Int32:
-    """``q mod n`` in ``[0, n)`` for any integer ``q``."""
+    """``q mod n`` in ``[0, n)`` for any integer ``q``.
+
+    Parameters
+    ----------
+    q : mi.Int32
+        Coordinates, of either sign.
+    n : int
+        Length of the axis.
+
+    Returns
+    -------
+    wrapped : mi.Int32
+        ``q`` modulo ``n``, in ``[0, n)``.
+    """
     r = q % n
     return dr.select(r < 0, r + n, r)
 
 
 def grid_of(width: int, height: int, grid: Grid | None = None) -> Grid:
-    """``grid``, which must be ``width`` x ``height``, or the film's grid of that size."""
+    """``grid``, which must be ``width`` x ``height``, or the film's grid of that size.
+
+    Parameters
+    ----------
+    width, height : int
+        Size of the buffers, in cells.
+    grid : Grid or None, optional
+        The buffers' grid; None means the film's grid (:meth:`Grid.film`).
+
+    Returns
+    -------
+    grid : Grid
+        ``grid``, or the film's grid of ``width`` x ``height``.
+
+    Raises
+    ------
+    ParameterError
+        If ``grid`` is not ``width`` x ``height``.
+    """
     if grid is None:
         return Grid.film(width, height)
     if (grid.width, grid.height) != (width, height):

@@ -156,9 +156,25 @@ class _HeldOp(dr.CustomOp):
 
 
 def held_filter(x: mi.Color3f, level: HeldLevel) -> tuple:
-    """``(y, *extra sums)`` of one level (see :class:`HeldLevel`). Both derivative modes use
-    the primal's weights and normalisation: forward mode reruns the level on the tangent,
-    reverse mode walks the transpose. A plain value runs the primal loop only."""
+    """``(y, *extra sums)`` of one level (see :class:`HeldLevel`).
+
+    Both derivative modes use the primal's weights and normalisation: forward mode reruns the
+    level on the tangent, reverse mode walks the transpose. A plain value runs the primal loop
+    only.
+
+    Parameters
+    ----------
+    x : mi.Color3f
+        The values to filter, one per cell of ``level.grid``.
+    level : HeldLevel
+        The filter level (data, weight function, normalisation).
+
+    Returns
+    -------
+    out : tuple
+        ``(y, *extra)``: the filtered values (mi.Color3f), then the sums of ``level.extra``
+        (detached; their derivatives are 0).
+    """
     if not dr.grad_enabled(x):
         y, _, more = _apply(level, x, primal=True)
         return (y, *more)

@@ -152,16 +152,44 @@ def _gaze(gaze) -> mi.Point2f:
 
 
 def radial_log(r: float, fovea: float, offset: float, pitch: float = 1.0) -> float:
-    """:math:`\\tilde u(r)` of the module docstring (host scalar), rings ``pitch`` pixels
-    apart at the fovea's edge."""
+    r""":math:`\tilde u(r)` of the module docstring (host scalar), rings ``pitch`` pixels apart at
+    the fovea's edge.
+
+    Parameters
+    ----------
+    r : float
+        Distance from the gaze, in film pixels.
+    fovea : float
+        :math:`r_0`, the fovea's radius (pixels).
+    offset : float
+        :math:`c`, in pixels (0: log-polar).
+    pitch : float, optional
+        Ring spacing at the fovea's edge, in pixels.
+
+    Returns
+    -------
+    u : float
+        The radial coordinate :math:`\tilde u(r) / \text{pitch}`, in rings.
+    """
     if r <= fovea:
         return float(r) / pitch
     return (fovea + (fovea + offset) * math.log((r + offset) / (fovea + offset))) / pitch
 
 
 def centres_at_film_centre(grid: PolarGrid) -> tuple[np.ndarray, np.ndarray]:
-    """Film positions ``(x, y)`` of every cell's centre with the gaze at the film's centre
-    (host, float64: what a budget is sized on)."""
+    """Film positions ``(x, y)`` of every cell's centre with the gaze at the film's centre (host,
+    float64: what a budget is sized on).
+
+    Parameters
+    ----------
+    grid : PolarGrid
+        The polar grid.
+
+    Returns
+    -------
+    x, y : numpy.ndarray
+        Film positions (pixels) of the cells' centres, one per cell in index order.
+    """
     W, H = grid.film_shape
     r = grid._r_of_u(np.arange(grid.height) + 0.5)[:, None]
     angle = (np.arange(grid.width) + 0.5) * (TWO_PI / grid.width)
@@ -178,9 +206,27 @@ def _inside_cells(grid: PolarGrid) -> int:
 
 def polar_grid_of(width: int, height: int, fovea: float, pitch: float, *, offset: float = 0.0,
                   kernel: float = 1.0) -> PolarGrid:
-    """The polar grid of a film with its fovea's radius (pixels) and the cells' size at the
-    fovea's edge (``pitch`` pixels, both ways): ``2 pi (fovea + offset) / pitch`` angles and
-    the rings out to the film's diagonal."""
+    r"""The polar grid of a film with its fovea's radius and the cells' size at the fovea's edge.
+
+    Parameters
+    ----------
+    width, height : int
+        Film size, in pixels.
+    fovea : float
+        :math:`r_0`, the fovea's radius (pixels).
+    pitch : float
+        The cells' size at the fovea's edge (pixels, both ways).
+    offset : float, optional
+        :math:`c`, in pixels (0: log-polar).
+    kernel : float, optional
+        :math:`\alpha`.
+
+    Returns
+    -------
+    grid : PolarGrid
+        ``2 pi (fovea + offset) / pitch`` angles (at least 3) and the rings out to the film's
+        diagonal.
+    """
     reach = math.hypot(width, height)
     angles = max(3, int(math.ceil(TWO_PI * (fovea + offset) / pitch)))
     # The ring count after the kernel equals the isotropic one (it moves rings inward).
@@ -191,11 +237,30 @@ def polar_grid_of(width: int, height: int, fovea: float, pitch: float, *, offset
 
 def polar_grid(width: int, height: int, budget: float, *, offset: float = 0.0,
                kernel: float = 1.0) -> PolarGrid:
-    """The polar grid of a ``width`` x ``height`` film whose cells on the film number
-    ``budget`` of its pixels with the gaze at its centre (module docstring; above 1, more
-    cells than pixels: the fovea then reaches further). ``offset``:
-    :math:`c` in pixels (0: log-polar); ``kernel``: :math:`\\alpha \\ge 1`. The rings reach the
-    film's diagonal, so a gaze anywhere on the film has every pixel within them."""
+    r"""The polar grid of a ``width`` x ``height`` film whose cells on the film number ``budget``
+    of its pixels with the gaze at its centre (module docstring).
+
+    The rings reach the film's diagonal, so a gaze anywhere on the film has every pixel within
+    them.
+
+    Parameters
+    ----------
+    width, height : int
+        Film size, in pixels.
+    budget : float
+        Cells on the film per film pixel, in ``(0, 16]`` (above 1, more cells than pixels: the
+        fovea then reaches further).
+    offset : float, optional
+        :math:`c` in pixels (0: log-polar).
+    kernel : float, optional
+        :math:`\alpha \ge 1`.
+
+    Returns
+    -------
+    grid : PolarGrid
+        The grid, with its fovea's radius found by bisection (the whole film where the budget
+        covers it).
+    """
     budget = check_range("ray_budget", budget, 0.0, 16.0, lo_open=True)
     offset = check_range("offset", offset, 0.0, None)
     kernel = check_range("kernel", kernel, 1.0, 16.0)

@@ -23,7 +23,18 @@ B3_SPLINE = (1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0)
 
 
 def b3(d: mi.Int32) -> mi.Float:
-    """B3-spline tap ``h1[d + 2]`` for ``d in -2..2``."""
+    """B3-spline tap ``h1[d + 2]`` for ``d in -2..2``.
+
+    Parameters
+    ----------
+    d : mi.Int32
+        Tap offset, in ``-2..2``.
+
+    Returns
+    -------
+    weight : mi.Float
+        The one-dimensional B3-spline weight.
+    """
     a = dr.abs(d)
     return dr.select(a == 0, B3_SPLINE[2], dr.select(a == 1, B3_SPLINE[1], B3_SPLINE[0]))
 
@@ -56,10 +67,24 @@ class Surface(NamedTuple):
 
 
 def surface_energy(p: tuple, q: tuple, inv_n: mi.Float, inv_x: mi.Float) -> mi.Float:
-    """Edge-stopping energy between pixel ``p`` and its tap ``q``, each ``(normal, position,
-    hit)`` (:meth:`Surface.at`): the squared normal difference over σn², plus the squared
-    distance of ``q`` to ``p``'s tangent plane relative to their distance, over σx²; 0 between
-    misses (misses mix with misses only)."""
+    """Edge-stopping energy between pixel ``p`` and its tap ``q``.
+
+    The squared normal difference over σn², plus the squared distance of ``q`` to ``p``'s
+    tangent plane relative to their distance, over σx²; 0 between misses (misses mix with misses
+    only).
+
+    Parameters
+    ----------
+    p, q : tuple
+        ``(normal, position, hit)`` of each pixel (:meth:`Surface.at`).
+    inv_n, inv_x : mi.Float
+        1 / σn² and 1 / σx².
+
+    Returns
+    -------
+    energy : mi.Float
+        The energy (the caller weighs the tap with its exponential).
+    """
     (pn, px, ph), (qn, qx, qh) = p, q
     dxw = qx - px
     dist2 = dr.squared_norm(dxw)
@@ -91,18 +116,31 @@ def _axis(q: mi.Int32, n: int, wraps: bool):
 
 def for_each_tap(grid: Grid, step, visit: Callable[..., tuple], state: tuple, label: str,
                  unroll: bool = True, active: mi.Bool | None = None) -> tuple:
-    """``state = visit(tap, *state)`` for the 25 taps of every cell of ``grid``, spaced
-    ``step`` cells.
+    """``state = visit(tap, *state)`` for the 25 taps of every cell of ``grid``, ``step`` apart.
 
-    ``visit`` receives a :class:`Tap` and returns the new state. Along an axis the grid
-    clamps (the film), taps past its edge are visited too (``tap.inside`` false) so that the
-    caller decides how a border renormalises; along an axis it wraps (an angle), they come
-    back in on the other side. ``unroll``: the loop runs over the 5 rows with each row's 5
-    taps unrolled (faster for the à-trous and SVGF levels in ``benchmarks/bench_filters.py``;
-    all 25 unrolled would take LLVM seconds to compile), else over the 25 taps (faster for
-    the heavier guided level and the transposes). Both visit the taps in the same order.
-    ``active``: the cells to visit taps for (None: all); the others keep ``state`` as given,
-    and a SIMD packet with none of them skips the loop. Returns the final state."""
+    Parameters
+    ----------
+    grid : Grid
+        The cells to walk. Taps past a clamped edge are visited with ``tap.inside`` false (the
+        caller renormalises a border); along a wrapped axis they come back in on the other side.
+    step : int or mi.UInt32
+        Tap spacing, in cells.
+    visit : callable
+        ``visit(tap, *state)`` receives a :class:`Tap` and returns the new state (a tuple).
+    state : tuple
+        The accumulators: the loop's state.
+    label : str
+        Name of the loop.
+    unroll : bool, optional
+        Unroll each row's 5 taps (faster for à-trous and SVGF), else loop over all 25 (guided).
+    active : mi.Bool or None, optional
+        The cells to visit taps for (None: all); the others keep ``state`` as given.
+
+    Returns
+    -------
+    state : tuple
+        The final state.
+    """
     width, height = grid.width, grid.height
     px, py = pixel_xy(width, height)
 

@@ -38,8 +38,30 @@ MIN_TEMPORAL_SAMPLES = 4.0
 def sample_variance(mean: mi.Color3f, moment2: mi.Float, count: mi.Float, mask: mi.Bool,
                     normal: mi.Vector3f, hit: mi.Bool, width: int, height: int,
                     grid: Grid | None = None) -> mi.Float:
-    """Per-sample luminance variance :math:`s^2` of each pixel holding a value (0 elsewhere);
-    ``grid``: the buffers' grid (default: the film of ``width`` x ``height``)."""
+    """Per-sample luminance variance :math:`s^2` of each pixel holding a value (0 elsewhere).
+
+    Parameters
+    ----------
+    mean : mi.Color3f
+        Shading value per pixel (detached).
+    moment2 : mi.Float
+        Mean squared sample luminance :math:`m_2` per pixel.
+    count : mi.Float
+        Samples :math:`n` behind each pixel's value.
+    mask : mi.Bool
+        Pixels that hold a value.
+    normal, hit : mi.Vector3f, mi.Bool
+        Shading normals and hit flags (the spatial estimate pools taps on the same surface).
+    width, height : int
+        Buffer size, in cells.
+    grid : Grid or None, optional
+        The buffers' grid (None: the film of ``width`` x ``height``).
+
+    Returns
+    -------
+    variance : mi.Float
+        :math:`s^2` per pixel; the spatial estimate where :math:`n < 4`.
+    """
     mu = luminance(dr.detach(mean))
     n = dr.select(mask, dr.detach(count), 0.0)
     raw = dr.select(mask, dr.maximum(dr.detach(moment2) - mu * mu, 0.0), 0.0)
@@ -77,11 +99,29 @@ def sample_variance(mean: mi.Color3f, moment2: mi.Float, count: mi.Float, mask: 
 def estimate_variance(per_sample: mi.Float, count: mi.Float, mask: mi.Bool, nearest: mi.UInt32,
                       samples: mi.Float | None = None, albedo: mi.Color3f | None = None
                       ) -> mi.Float:
-    """Variance :math:`\\sigma^2 = s^2 / n` of every pixel's estimate (see module docstring).
+    r"""Variance :math:`\sigma^2 = s^2 / n` of every pixel's estimate (see module docstring).
 
-    ``per_sample`` is :func:`sample_variance` (defined at the sites), ``nearest`` the Jump
-    Flooding map, ``samples`` the number of samples the reconstruction averaged per pixel
-    (None: the nearest site's count) and ``albedo`` the demodulation albedo, if any."""
+    Parameters
+    ----------
+    per_sample : mi.Float
+        :func:`sample_variance` (defined at the sites).
+    count : mi.Float
+        Samples behind each site's value.
+    mask : mi.Bool
+        Pixels that hold a value (their own ``count`` is :math:`n`).
+    nearest : mi.UInt32
+        The Jump Flooding map (``NO_SITE``: no site, variance 0).
+    samples : mi.Float or None, optional
+        Samples the reconstruction averaged per untraced pixel (at least the nearest site's
+        count is used); None: the nearest site's count.
+    albedo : mi.Color3f or None, optional
+        The demodulation albedo, if any (divides by its luminance squared).
+
+    Returns
+    -------
+    variance : mi.Float
+        :math:`\sigma^2` per pixel.
+    """
     has = nearest != NO_SITE
     s2 = dr.gather(mi.Float, per_sample, nearest, has)
     n_site = dr.gather(mi.Float, dr.detach(count), nearest, has)

@@ -139,25 +139,26 @@ def atrous(color: mi.Color3f, normal: mi.Array3f, position: mi.Array3f, width: i
            grid: Grid | None = None, active: mi.Bool | None = None) -> mi.Color3f:
     """Edge-avoiding à-trous filter of a colour buffer guided by a G-buffer.
 
-    Args:
-        color: colour to filter (the tone-mapped image in the paper's pipeline), one entry
-            per pixel ``i = y * width + x``.
-        normal: shading normals, same layout.
-        position: world-space positions, same layout (sigma_position is in world units).
-        width, height: film size in pixels.
-        iterations: number of à-trous levels, 0..16; level ``i`` uses tap spacing ``2^i``.
-        sigma_color: colour sigma of the first level (halved every level); inf disables it.
-            The default 0.5 suits display-referred colour in [0, 1].
-        sigma_normal: normal sigma (unit normals: distance in [0, 2]); inf disables it.
-        sigma_position: position sigma in scene units; inf disables it.
-        valid: per-pixel G-buffer hit mask, or None to derive it from finite positions and
-            non-zero finite normals.
-        grid: the buffers' grid and its neighbour rule (default: the film of ``width`` x
-            ``height``, clamped at its edges).
-        active: the pixels whose result is read, or None for all; the others keep their
-            colour and cost no taps.
+    Parameters
+    ----------
+    color : mi.Color3f
+        Colour to filter (the tone-mapped image in the paper's pipeline), pixel ``y * width + x``.
+    normal, position : mi.Array3f
+        Shading normals and world-space positions, same layout.
+    width, height, iterations : int
+        Film size in pixels; à-trous levels, 0..16 (level ``i`` uses tap spacing ``2^i``).
+    sigma_color, sigma_normal, sigma_position : float, optional
+        Colour sigma of the first level (halved every level; 0.5 suits display colour in [0, 1]),
+        normal sigma (unit normals: distance in [0, 2]), position sigma (scene units); inf: off.
+    valid, active : mi.Bool or None, optional
+        G-buffer hit mask (None: from finite positions and non-zero finite normals); the pixels
+        whose result is read (None: all; the others keep their colour and cost no taps).
+    grid : Grid or None, optional
+        The buffers' grid and its neighbour rule (None: the film, clamped at its edges).
 
-    Returns:
+    Returns
+    -------
+    color : mi.Color3f
         The filtered colour (``color`` itself for ``iterations = 0``).
     """
     width = check_int("width", width, lo=1)
@@ -230,8 +231,19 @@ def _atrous_level(c: mi.Color3f, surface: Surface, grid: Grid, *, step: mi.Int32
 
 def atrous_stage(ctx: DenoiseInput) -> mi.Color3f:
     """The ``atrous`` denoiser of a frame (paper §3.5): the à-trous filter of the tone-mapped
-    image (its registration's display domain: the formation tone-maps before it and maps
-    the result back to radiance)."""
+    image (its registration's display domain: the formation tone-maps before it and maps the
+    result back to radiance).
+
+    Parameters
+    ----------
+    ctx : DenoiseInput
+        The frame's image (tone-mapped), G-buffer, grid, region and the options it reads.
+
+    Returns
+    -------
+    image : mi.Color3f
+        The filtered image.
+    """
     o, gb = ctx.options, ctx.gbuffer
     return atrous(ctx.image, gb.normal, gb.position, ctx.width, ctx.height,
                   iterations=o["atrous_iterations"], sigma_color=o["sigma_color"],

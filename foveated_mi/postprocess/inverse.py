@@ -28,7 +28,22 @@ from .tonemap import INVERSE_TONEMAPPERS, TONEMAPPERS, check_exposure
 
 def inverse_tonemap(color: mi.Color3f, operator: str = "reinhard",
                     exposure: float = 0.0) -> mi.Color3f:
-    """Invert :func:`foveated_mi.postprocess.tonemap` (see the module docstring)."""
+    """Invert :func:`foveated_mi.postprocess.tonemap` (see the module docstring).
+
+    Parameters
+    ----------
+    color : mi.Color3f
+        Display-referred colour, as the operator returns it.
+    operator : str, optional
+        A key of :data:`~foveated_mi.postprocess.tonemap.TONEMAPPERS`.
+    exposure : float, optional
+        The exposure the colour was tone-mapped with, in stops.
+
+    Returns
+    -------
+    color : mi.Color3f
+        Linear radiance (finite: inputs at a curve's limit come back as its cap).
+    """
     check_choice("operator", operator, TONEMAPPERS)
     exposure = check_exposure(exposure)
     scale = dr.opaque(mi.Float, 2.0 ** -exposure)

@@ -102,9 +102,36 @@ def oidn(color: mi.Color3f, albedo: mi.Color3f | None, normal: mi.Vector3f | Non
          device: str | None = None) -> mi.Color3f:
     """``color`` denoised by OIDN, guided by ``albedo`` and ``normal`` when given.
 
-    ``device``: ``auto`` | ``cpu`` | ``cuda`` (default: ``$FOVEATED_MI_OIDN_DEVICE``, else
-    ``auto``; see :func:`foveated_mi.denoise.choose_device`). Non-finite input values are
-    treated as 0 (OIDN would spread them)."""
+    Non-finite input values are treated as 0 (OIDN would spread them).
+
+    Parameters
+    ----------
+    color : mi.Color3f
+        HDR radiance to denoise (detached: OIDN has no gradient).
+    albedo : mi.Color3f or None
+        Albedo guide (required whenever ``normal`` is given).
+    normal : mi.Vector3f or None
+        Normal guide.
+    width, height : int
+        Film size, in pixels.
+    quality : str, optional
+        OIDN's filter quality.
+    clean_aux : bool, optional
+        The guides are noise-free.
+    device : str or None, optional
+        ``auto`` | ``cpu`` | ``cuda`` (default: ``$FOVEATED_MI_OIDN_DEVICE``, else ``auto``; see
+        :func:`foveated_mi.denoise.choose_device`).
+
+    Returns
+    -------
+    color : mi.Color3f
+        The denoised image.
+
+    Raises
+    ------
+    ParameterError
+        If pyoidn is not installed.
+    """
     if not _dn.oidn_available():
         raise ParameterError("denoise", True, f"pyoidn installed for the OIDN denoiser "
                              f"({_dn.INSTALL_HINT})")
@@ -127,8 +154,20 @@ def oidn(color: mi.Color3f, albedo: mi.Color3f | None, normal: mi.Vector3f | Non
 
 
 def oidn_stage(ctx: DenoiseInput) -> Denoised:
-    """The ``oidn`` denoiser of a frame: :func:`oidn` on the radiance, guided by the
-    G-buffer's albedo and normal (a stage boundary)."""
+    """The ``oidn`` denoiser of a frame: :func:`oidn` on the radiance, guided by the G-buffer's
+    albedo and normal (a stage boundary).
+
+    Parameters
+    ----------
+    ctx : DenoiseInput
+        The frame's image, G-buffer and options (``oidn_quality``, ``clamp``).
+
+    Returns
+    -------
+    denoised : Denoised
+        The denoised image, clamped at ``clamp`` (the network may overshoot), as both the image
+        and the filtered buffer.
+    """
     gb = ctx.gbuffer
     image = dr.minimum(oidn(ctx.image, gb.albedo, gb.normal, ctx.width, ctx.height,
                             quality=ctx.options["oidn_quality"]),

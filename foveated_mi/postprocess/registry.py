@@ -82,25 +82,51 @@ def register_denoiser(name: str, fn: Callable[[DenoiseInput], Any], *, different
                       grid_aware: bool = False) -> None:
     """Make ``fn`` the denoiser ``name`` (the option value ``denoiser = name``).
 
-    ``differentiable``: a gradient pass may differentiate it (else a gradient pass of a
-    frame that used it raises, and the image formation skips it when run for gradients).
-    ``domain``: the values ``ctx.image`` holds and it returns (:mod:`foveated_mi.frame.domain`):
-    ``"irradiance"``, the reconstruction's own values (irradiance with ``demodulate``) before
-    the albedo is multiplied back; ``"radiance"``, after it; ``"display"``, the tone-mapped
-    radiance, mapped back after it (the formation does both conversions).
-    ``materials``: it reads the G-buffer's albedo and emission. ``display_values``: it also
-    works on tone-mapped samples (``tonemap_samples``). ``available``: whether its
-    dependency is installed; ``requirement`` says what to install. ``replayable``: it is
-    Dr.Jit arithmetic only (no host call, no read of a value), so its kernels may be recorded
-    once and replayed (:mod:`foveated_mi.frame.formation`). ``independent_noise``: it expects
-    each pixel's noise independent of its neighbours' (a network trained on such noise), so
-    ``pixel_filter = "auto"`` gives it filter importance sampling instead of splatting.
-    ``reads``: the options it reads (``ctx.options`` holds exactly these). ``active(options)``:
-    whether it changes a frame with these options, the ones it reads (else it is not called,
-    and costs nothing: no tone-mapping round trip either). ``grid_aware``: it reads neighbours through
-    ``ctx.grid``'s neighbour rule (a wrapped axis wraps); a formation in a buffer with a
-    wrapped axis hands any other denoiser a plain image padded with the columns of the other
-    side, and crops the result (:func:`foveated_mi.kernels.grid.wrap_padding`)."""
+    Parameters
+    ----------
+    name : str
+        The denoiser's name.
+    fn : callable
+        ``fn(ctx)`` of a :class:`DenoiseInput`, returning the image or a :class:`Denoised`.
+    differentiable : bool
+        A gradient pass may differentiate it (else a gradient pass of a frame that used it
+        raises, and the image formation skips it when run for gradients).
+    domain : str, optional
+        The values ``ctx.image`` holds and it returns (:mod:`foveated_mi.frame.domain`):
+        ``"irradiance"``, the reconstruction's own values (irradiance with ``demodulate``) before
+        the albedo is multiplied back; ``"radiance"``, after it; ``"display"``, the tone-mapped
+        radiance, mapped back after it (the formation does both conversions).
+    materials : bool, optional
+        It reads the G-buffer's albedo and emission.
+    display_values : bool, optional
+        It also works on tone-mapped samples (``tonemap_samples``).
+    available : callable or None, optional
+        Whether its dependency is installed (None: always).
+    requirement : str, optional
+        What to install.
+    replayable : bool, optional
+        It is Dr.Jit arithmetic only (no host call, no read of a value), so its kernels may be
+        recorded once and replayed (:mod:`foveated_mi.frame.formation`).
+    independent_noise : bool, optional
+        It expects each pixel's noise independent of its neighbours' (a network trained on such
+        noise), so ``pixel_filter = "auto"`` gives it filter importance sampling instead of
+        splatting.
+    reads : tuple of str, optional
+        The options it reads (``ctx.options`` holds exactly these).
+    active : callable or None, optional
+        ``active(options)``: whether it changes a frame with these options, the ones it reads
+        (else it is not called, and costs nothing: no tone-mapping round trip either).
+    grid_aware : bool, optional
+        It reads neighbours through ``ctx.grid``'s neighbour rule (a wrapped axis wraps); a
+        formation in a buffer with a wrapped axis hands any other denoiser a plain image padded
+        with the columns of the other side, and crops the result
+        (:func:`foveated_mi.kernels.grid.wrap_padding`).
+
+    Raises
+    ------
+    ParameterError
+        If ``domain`` is not one of :data:`DOMAINS`.
+    """
     check_choice("domain", domain, DOMAINS)
     DENOISERS[name] = Denoiser(fn, bool(differentiable), domain, bool(materials),
                                bool(display_values), available, requirement, bool(replayable),
@@ -108,12 +134,29 @@ def register_denoiser(name: str, fn: Callable[[DenoiseInput], Any], *, different
 
 
 def unregister_denoiser(name: str) -> None:
-    """Remove the denoiser ``name`` (tests; a frame that uses it no longer validates)."""
+    """Remove the denoiser ``name`` (tests; a frame that uses it no longer validates).
+
+    Parameters
+    ----------
+    name : str
+        The denoiser's name (an unknown name is ignored).
+    """
     DENOISERS.pop(name, None)
 
 
 def as_denoised(result: Any) -> Denoised:
-    """A denoiser's result as a :class:`Denoised` (a bare image is its filtered image)."""
+    """A denoiser's result as a :class:`Denoised` (a bare image is its filtered image).
+
+    Parameters
+    ----------
+    result : mi.Color3f or Denoised
+        What the denoiser returned.
+
+    Returns
+    -------
+    denoised : Denoised
+        ``result`` itself, or ``Denoised(result, filtered=result)``.
+    """
     return result if isinstance(result, Denoised) else Denoised(result, filtered=result)
 
 

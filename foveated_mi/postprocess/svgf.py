@@ -72,12 +72,35 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
          sigma_luminance: float = 4.0, sigma_normal: float = 0.3,
          sigma_plane: float = 0.1, grid: Grid | None = None,
          active: mi.Bool | None = None) -> mi.Color3f:
-    """Variance-guided à-trous filter of ``color`` (see the module docstring); ``grid``: the
-    buffers' grid (default: the film of ``width`` x ``height``); ``active``: the pixels whose
-    result is read (None: all), the others keep their value and cost no taps.
+    """Variance-guided à-trous filter of ``color`` (see the module docstring).
 
-    ``variance`` is the noise variance of each pixel's value (e.g. from
-    :func:`foveated_mi.kernels.variance.estimate_variance`); 0 leaves a pixel's differences intact.
+    Parameters
+    ----------
+    color : mi.Color3f
+        The values to filter, one per cell of the grid.
+    variance : mi.Float
+        Noise variance of each pixel's value (e.g. from
+        :func:`foveated_mi.kernels.variance.estimate_variance`); 0 leaves its differences intact.
+    normal, position : mi.Vector3f
+        Shading normals and world-space positions.
+    hit : mi.Bool
+        Whether the primary ray hit a surface (hits mix with hits, misses with misses).
+    width, height : int
+        Buffer size, in cells.
+    iterations : int, optional
+        Levels, 0..16 (level ``i`` spaces its taps ``2^i``).
+    sigma_luminance, sigma_normal, sigma_plane : float, optional
+        Scale of the colour distance in noise standard deviations (inf: no colour weight), and
+        the sigmas of the normal difference and of the distance to the tangent plane.
+    grid : Grid or None, optional
+        The buffers' grid (None: the film of ``width`` x ``height``).
+    active : mi.Bool or None, optional
+        The pixels whose result is read (None: all); the others keep their value, no taps.
+
+    Returns
+    -------
+    color : mi.Color3f
+        The filtered values (``color`` itself for ``iterations = 0``).
     """
     grid = grid_of(width, height, grid)
     n = grid.size
@@ -150,7 +173,19 @@ def _level(c: mi.Color3f, var: mi.Float, surface: Surface, grid: Grid, *, step,
 
 def svgf_stage(ctx: DenoiseInput) -> Denoised:
     """The ``svgf`` denoiser of a frame: the noise variance of each pixel's value
-    (:mod:`foveated_mi.kernels.variance`), then :func:`svgf` on the reconstruction's values."""
+    (:mod:`foveated_mi.kernels.variance`), then :func:`svgf` on the reconstruction's values.
+
+    Parameters
+    ----------
+    ctx : DenoiseInput
+        The frame's image, G-buffer, resolved history, nearest sites, grid and options.
+
+    Returns
+    -------
+    denoised : Denoised
+        The filtered image (also as ``filtered``) and the variance it used; the image as is
+        with 0 levels.
+    """
     o, gb, res = ctx.options, ctx.gbuffer, ctx.resolved
     levels = o["atrous_iterations"]
     if levels == 0:

@@ -66,9 +66,20 @@ INVERSE_TONEMAPPERS: dict = {}
 
 
 def register_tonemapper(name: str, fn, inverse) -> None:
-    """Make ``fn`` the tone-mapping operator ``name`` (``tonemap = name``); ``inverse`` maps
-    its display values back (the à-trous round trip, ``tonemap_samples``). The options, the
-    CLI and the docs learn of it from :data:`TONEMAPPERS`."""
+    """Make ``fn`` the tone-mapping operator ``name`` (``tonemap = name``).
+
+    The options, the CLI and the docs learn of it from :data:`TONEMAPPERS`.
+
+    Parameters
+    ----------
+    name : str
+        The operator's name.
+    fn : callable
+        ``fn(x)``: the display colour of the exposed linear colour ``x`` (``mi.Color3f``).
+    inverse : callable
+        ``inverse(y)``: maps its display values back (the à-trous round trip,
+        ``tonemap_samples``).
+    """
     TONEMAPPERS[name] = fn
     INVERSE_TONEMAPPERS[name] = inverse
 
@@ -80,7 +91,18 @@ def _sanitize(x):
 
 
 def tonemap_none(x: mi.Color3f) -> mi.Color3f:
-    """Identity: the exposed linear colour."""
+    """Identity: the exposed linear colour.
+
+    Parameters
+    ----------
+    x : mi.Color3f
+        Exposed linear colour.
+
+    Returns
+    -------
+    y : mi.Color3f
+        ``x`` itself (not clamped, not sanitised).
+    """
     return x
 
 
@@ -88,7 +110,18 @@ register_tonemapper("none", tonemap_none, lambda y: y)
 
 
 def tonemap_reinhard(x: mi.Color3f) -> mi.Color3f:
-    """Per-channel Reinhard ``x / (1 + x)``; NaN/negative -> 0, +inf -> 1."""
+    """Per-channel Reinhard ``x / (1 + x)``; NaN/negative -> 0, +inf -> 1.
+
+    Parameters
+    ----------
+    x : mi.Color3f
+        Exposed linear colour.
+
+    Returns
+    -------
+    y : mi.Color3f
+        Display colour in [0, 1].
+    """
     x = dr.minimum(_sanitize(x), _REINHARD_CAP)
     # Already in [0, 1] for x in [0, cap]; a clamp would tie at 0 and zero the derivative
     # of black pixels.
@@ -96,6 +129,18 @@ def tonemap_reinhard(x: mi.Color3f) -> mi.Color3f:
 
 
 def inverse_reinhard(y: mi.Color3f) -> mi.Color3f:
+    """Inverse of :func:`tonemap_reinhard`: ``y / (1 - y)``.
+
+    Parameters
+    ----------
+    y : mi.Color3f
+        Display colour (clipped to ``[0, 1 - 2^-24]`` so the result stays finite).
+
+    Returns
+    -------
+    x : mi.Color3f
+        Exposed linear colour.
+    """
     y = dr.clip(y, 0.0, _Y_MAX)
     return y / (1.0 - y)
 
@@ -104,13 +149,36 @@ register_tonemapper("reinhard", tonemap_reinhard, inverse_reinhard)
 
 
 def tonemap_aces(x: mi.Color3f) -> mi.Color3f:
-    """Narkowicz (2015) ACES fit; NaN/negative -> 0, +inf -> 1."""
+    """Narkowicz (2015) ACES fit; NaN/negative -> 0, +inf -> 1.
+
+    Parameters
+    ----------
+    x : mi.Color3f
+        Exposed linear colour.
+
+    Returns
+    -------
+    y : mi.Color3f
+        Display colour in [0, 1].
+    """
     x = dr.minimum(_sanitize(x), _ACES_CAP)
     y = (x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)
     return dr.minimum(y, 1.0)   # y >= 0 for x >= 0: only the top needs the clamp
 
 
 def inverse_aces(y: mi.Color3f) -> mi.Color3f:
+    """Inverse of :func:`tonemap_aces`: the positive root of the curve's quadratic.
+
+    Parameters
+    ----------
+    y : mi.Color3f
+        Display colour (clipped to [0, 1]).
+
+    Returns
+    -------
+    x : mi.Color3f
+        Exposed linear colour (values at the clip, 1, come back as about 7.24).
+    """
     y = dr.clip(y, 0.0, 1.0)
     a = 2.43 * y - 2.51
     b = 0.59 * y - 0.03
@@ -134,13 +202,36 @@ def _u2(x):
 
 
 def tonemap_uncharted2(x: mi.Color3f) -> mi.Color3f:
-    """The authors' Uncharted 2 operator; NaN/negative -> 0, +inf -> its limit."""
+    """The authors' Uncharted 2 operator; NaN/negative -> 0, +inf -> its limit.
+
+    Parameters
+    ----------
+    x : mi.Color3f
+        Exposed linear colour.
+
+    Returns
+    -------
+    y : mi.Color3f
+        Display colour in [0, 1.74] (1 at ``x = 5.6``).
+    """
     x = dr.minimum(_sanitize(x), _U2_CAP)
     y = _u2(U2_BIAS * x) * (1.0 / _u2(U2_WHITE))
     return dr.power(dr.maximum(y, 0.0), U2_EXPONENT)
 
 
 def inverse_uncharted2(y: mi.Color3f) -> mi.Color3f:
+    """Inverse of :func:`tonemap_uncharted2`: the non-negative root of its quadratic.
+
+    Parameters
+    ----------
+    y : mi.Color3f
+        Display colour (clipped to the operator's value at its input cap).
+
+    Returns
+    -------
+    x : mi.Color3f
+        Exposed linear colour, at most the input cap (1e4).
+    """
     A, B, C, D, E, F = (U2[k] for k in "ABCDEF")
     y_max = float(_u2(U2_BIAS * _U2_CAP) / _u2(U2_WHITE)) ** U2_EXPONENT
     y = dr.clip(y, 0.0, y_max)
@@ -157,7 +248,25 @@ register_tonemapper("uncharted2", tonemap_uncharted2, inverse_uncharted2)
 
 
 def as_color3f(name: str, value) -> mi.Color3f:
-    """``value`` as an ``mi.Color3f`` (any 3-component Dr.Jit array is converted)."""
+    """``value`` as an ``mi.Color3f`` (any 3-component Dr.Jit array is converted).
+
+    Parameters
+    ----------
+    name : str
+        Parameter name for the error message.
+    value : Dr.Jit array
+        A 3 x N array.
+
+    Returns
+    -------
+    color : mi.Color3f
+        ``value``, converted where needed.
+
+    Raises
+    ------
+    ParameterError
+        If ``value`` is not a 3 x N Dr.Jit array.
+    """
     if isinstance(value, mi.Color3f):
         return value
     if dr.is_array_v(value) and dr.size_v(value) == 3 and dr.depth_v(value) == 2:
@@ -166,22 +275,45 @@ def as_color3f(name: str, value) -> mi.Color3f:
 
 
 def check_exposure(exposure) -> float:
-    """A finite exposure in stops, |exposure| <= :data:`MAX_EXPOSURE`."""
+    """A finite exposure in stops, |exposure| <= :data:`MAX_EXPOSURE`.
+
+    Parameters
+    ----------
+    exposure : float
+        Exposure in stops.
+
+    Returns
+    -------
+    exposure : float
+        The validated exposure.
+
+    Raises
+    ------
+    ParameterError
+        If it is not finite or out of range.
+    """
     return check_range("exposure", exposure, -MAX_EXPOSURE, MAX_EXPOSURE)
 
 
 def tonemap(color: mi.Color3f, operator: str = "reinhard", exposure: float = 0.0) -> mi.Color3f:
     """Tone-map a linear colour buffer: ``TONEMAPPERS[operator](color * 2^exposure)``.
 
-    Args:
-        color: linear RGB, one entry per pixel.
-        operator: a key of :data:`TONEMAPPERS` (``"none"``, ``"reinhard"``, ``"aces"``).
-        exposure: exposure in stops; enters the kernel through ``dr.opaque`` so a new value
-            per frame compiles no new kernel.
+    Parameters
+    ----------
+    color : mi.Color3f
+        Linear RGB, one entry per pixel.
+    operator : str, optional
+        A key of :data:`TONEMAPPERS` (``"none"``, ``"reinhard"``, ``"aces"``, ``"uncharted2"``).
+    exposure : float, optional
+        Exposure in stops; enters the kernel through ``dr.opaque`` so a new value per frame
+        compiles no new kernel.
 
-    Returns:
+    Returns
+    -------
+    color : mi.Color3f
         The display-referred colour; in [0, 1] and finite for ``"reinhard"`` and ``"aces"``
-        whatever the input (see the module docstring for the NaN/inf rule).
+        whatever the input, in [0, 1.74] for ``"uncharted2"`` (see the module docstring for the
+        NaN/inf rule).
     """
     check_choice("operator", operator, TONEMAPPERS)
     exposure = check_exposure(exposure)

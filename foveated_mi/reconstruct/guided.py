@@ -85,15 +85,51 @@ class Guide(NamedTuple):
 MIN_WEIGHT = 1e-20
 
 def level_variance(level: int) -> float:
-    """Per-axis variance (px²) of the cascade kernel after levels ``0 .. level``."""
+    """Per-axis variance (px²) of the cascade kernel after levels ``0 .. level``.
+
+    Parameters
+    ----------
+    level : int
+        The last level of the cascade, from 0.
+
+    Returns
+    -------
+    variance : float
+        :math:`(4^{level+1} - 1) / 3`, in px².
+    """
     return (4.0 ** (level + 1) - 1.0) / 3.0
 
 
 def check_guided_inputs(method: str, shading, site_mask, nearest, width, height,
                         guide: Guide | None, *, weights: bool) -> tuple[int, int, mi.Bool | None]:
-    """The film size and the guide's emission edges (detached, or None) of a guided
-    reconstruction ``method``, every buffer checked (``weights``: the guide's sample counts
-    are used too)."""
+    """The film size and the guide's emission edges of a guided reconstruction, every buffer
+    checked.
+
+    Parameters
+    ----------
+    method : str
+        The reconstruction's name, for the error message.
+    shading, site_mask, nearest
+        The reconstruction's buffers, ``width * height`` entries each.
+    width, height : int
+        Film size, in pixels.
+    guide : Guide or None
+        The G-buffer guide (required).
+    weights : bool
+        The guide's sample counts (``guide.weight``) are used too.
+
+    Returns
+    -------
+    width, height : int
+        The validated film size.
+    emission_edge : mi.Bool or None
+        The guide's emission edges, detached (None where the guide has none).
+
+    Raises
+    ------
+    ParameterError
+        If ``guide`` is None or a buffer has the wrong size.
+    """
     width, height = check_film(width, height)
     n = width * height
     if guide is None:

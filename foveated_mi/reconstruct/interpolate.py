@@ -166,7 +166,23 @@ def voronoi(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: 
             *, max_radius: int = 32) -> mi.Color3f:
     """Nearest-site colour ``F(p) = shading[nearest[p]]`` (zero without any site).
 
-    ``site_mask`` and ``max_radius`` are validated for interface uniformity only.
+    Parameters
+    ----------
+    shading : mi.Color3f
+        The sparse shading buffer, one entry per pixel (read at the sites).
+    site_mask : mi.Bool
+        The sites (validated for interface uniformity only).
+    nearest : mi.UInt32
+        Each pixel's nearest site, from :func:`~foveated_mi.reconstruct.jfa.jump_flood`.
+    width, height : int
+        Film size, in pixels.
+    max_radius : int, optional
+        Validated for interface uniformity only.
+
+    Returns
+    -------
+    image : mi.Color3f
+        The Voronoi fill (non-finite values as 0).
     """
     filled, *_ = _prepare(shading, site_mask, nearest, width, height, max_radius)
     return filled
@@ -184,11 +200,28 @@ def sibson(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: i
     exactly, and every output lies within the range of the site colours. Differentiable in
     both modes (the loop only accumulates sums: ``max_iterations=-1`` fast path).
 
-    ``inclusive=False`` is the paper's test as printed, ``d(q, p) < r`` (§3.4): the disk loses
-    its rim, ``|q - p|^2 <= r_p^2 - 1`` in integers; a site keeps its own colour (the
-    authors' shader falls back to the closest site when the disk is empty). ``True`` (``<=``)
-    is the authors' shader (``sibsonFS.glsl`` line 37: ``if (radius > dist_to_closest)
-    continue``).
+    Parameters
+    ----------
+    shading : mi.Color3f
+        The sparse shading buffer, one entry per pixel (read at the sites).
+    site_mask : mi.Bool
+        The sites (traced pixels).
+    nearest : mi.UInt32
+        Each pixel's nearest site, from :func:`~foveated_mi.reconstruct.jfa.jump_flood`.
+    width, height : int
+        Film size, in pixels.
+    max_radius : int, optional
+        Cap on the disk's radius, in pixels.
+    inclusive : bool, optional
+        ``False`` is the paper's test as printed, ``d(q, p) < r`` (§3.4): the disk loses its
+        rim, ``|q - p|^2 <= r_p^2 - 1`` in integers; a site keeps its own colour (the authors'
+        shader falls back to the closest site when the disk is empty). ``True`` (``<=``) is the
+        authors' shader (``sibsonFS.glsl`` line 37: ``if (radius > dist_to_closest) continue``).
+
+    Returns
+    -------
+    image : mi.Color3f
+        The interpolated image.
     """
     filled, x, y, r2, has_site, width, height, radius = _prepare(shading, site_mask, nearest, width, height,
                                                                  max_radius)
@@ -238,6 +271,24 @@ def discrete_sibson(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32,
     most one Float32 rounding, and constant images stay constant. ``count >= 1`` everywhere
     because ``q`` is in its own disk. Cost ``~ sum_q pi r_q^2`` scatters. Differentiable
     through a custom op (:class:`_DiscreteSibsonOp`).
+
+    Parameters
+    ----------
+    shading : mi.Color3f
+        The sparse shading buffer, one entry per pixel (read at the sites).
+    site_mask : mi.Bool
+        The sites (traced pixels).
+    nearest : mi.UInt32
+        Each pixel's nearest site, from :func:`~foveated_mi.reconstruct.jfa.jump_flood`.
+    width, height : int
+        Film size, in pixels.
+    max_radius : int, optional
+        Cap on the disk's radius, in pixels.
+
+    Returns
+    -------
+    image : mi.Color3f
+        The interpolated image.
     """
     filled, x, y, r2, has_site, width, height, radius = _prepare(shading, site_mask, nearest, width, height,
                                                                  max_radius)
@@ -304,7 +355,7 @@ def _square_half_size(r2: mi.Int32, radius: int) -> mi.Int32:
 
 def fast_sibson(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, width: int, height: int,
                 *, max_radius: int = 32) -> mi.Color3f:
-    """``sibson`` at constant cost per pixel: a square window of the disk's size from a summed-area table.
+    """``sibson`` at constant cost per pixel: a disk-sized square from a summed-area table.
 
     The disk ``D_p`` (``N(r_p^2)`` pixels, Gauss circle count) becomes the ``(2k+1)^2`` square
     centred on ``p`` with ``k = round((sqrt(N) - 1) / 2)`` (a square and a disk of equal area
@@ -319,6 +370,20 @@ def fast_sibson(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, wid
     :mod:`~foveated_mi.reconstruct.sat` for why Float64). The result is clamped to the range
     of ``F``, since the table's rounding could otherwise step outside it (e.g. below zero); the
     clamp passes gradients straight through. Differentiable (gathers, prefix sums).
+
+    Parameters
+    ----------
+    shading, site_mask, nearest
+        The sparse shading buffer, its sites and each pixel's nearest site, as for :func:`voronoi`.
+    width, height : int
+        Film size, in pixels.
+    max_radius : int, optional
+        Cap on the disk's radius, in pixels.
+
+    Returns
+    -------
+    image : mi.Color3f
+        The interpolated image.
     """
     filled, x, y, r2, has_site, width, height, radius = _prepare(shading, site_mask, nearest, width, height,
                                                                  max_radius)

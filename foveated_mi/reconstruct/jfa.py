@@ -53,14 +53,45 @@ _D2_INF = 0xFFFFFFFF
 
 
 def check_film(width, height) -> tuple[int, int]:
-    """Validate a film size: two integers in ``[1, 32767]``."""
+    """Validate a film size: two integers in ``[1, 32767]``.
+
+    Parameters
+    ----------
+    width, height : int
+        Film size, in pixels.
+
+    Returns
+    -------
+    width, height : int
+        The validated size.
+
+    Raises
+    ------
+    ParameterError
+        If either is not an integer in range.
+    """
     w = check_int("width", width, 1, MAX_FILM_SIDE)
     h = check_int("height", height, 1, MAX_FILM_SIDE)
     return w, h
 
 
 def check_buffer(name: str, value, n: int) -> None:
-    """Raise ParameterError unless the buffer has ``n`` entries (one per pixel)."""
+    """Raise ParameterError unless the buffer has ``n`` entries (one per pixel).
+
+    Parameters
+    ----------
+    name : str
+        The buffer's name, for the error message.
+    value : Dr.Jit array
+        The buffer.
+    n : int
+        The entries it must have (``width * height``).
+
+    Raises
+    ------
+    ParameterError
+        If ``dr.width(value) != n``.
+    """
     size = dr.width(value)
     if size != n:
         raise ParameterError(name, f"<buffer of {size} entries>", f"a buffer of {n} entries (width * height)")
@@ -70,8 +101,22 @@ def jfa_steps(width: int, height: int, variant: str = "jfa+1",
               max_gap: float | None = None) -> list[int]:
     """The JFA step lengths for a ``width`` x ``height`` film (see module docstring).
 
-    ``max_gap``: a bound on the distance from any pixel to its nearest site (see
-    :func:`jump_flood`); the first step is then the smallest power of two reaching it."""
+    Parameters
+    ----------
+    width, height : int
+        Film size, in pixels.
+    variant : str, optional
+        Step sequence, one of :data:`JFA_VARIANTS`.
+    max_gap : float or None, optional
+        A bound on the distance from any pixel to its nearest site (see :func:`jump_flood`);
+        the first step is then the smallest power of two reaching it (None: half the film's
+        larger side, rounded up to a power of two).
+
+    Returns
+    -------
+    steps : list of int
+        The step lengths, in pixels, in the order the passes take them.
+    """
     width, height = check_film(width, height)
     check_choice("variant", variant, JFA_VARIANTS)
     n = 1
@@ -149,22 +194,30 @@ def jump_flood(site_mask: mi.Bool, width: int, height: int, variant: str = "jfa+
                max_gap: float | None = None, *, grid: Grid | None = None) -> mi.UInt32:
     """Index of the (approximately) nearest site for every pixel, by jump flooding.
 
-    Args:
-        site_mask: ``mi.Bool`` with ``width * height`` entries, true at the sites (shaded pixels).
-        width, height: film size in pixels (any size, not only powers of two).
-        variant: step sequence, one of :data:`JFA_VARIANTS` (see module docstring).
-        max_gap: a bound on the distance from any pixel to its nearest site, such as
-            :func:`foveated_mi.frame.sampling.largest_gap` of the sampling law: no step longer
-            than it is taken (steps longer than every gap only carry sites that later steps
-            replace). Fallback: a pixel left without a site (the bound was wrong) searches
-            square rings around itself, out to ``4 max_gap`` pixels; packets of pixels that
-            all have a site skip that search at the cost of one test.
-        grid: the cells and their neighbour rule (default: the film of ``width`` x
-            ``height``); across a wrapped axis, jumps and distances go round.
+    Parameters
+    ----------
+    site_mask : mi.Bool
+        ``width * height`` entries, true at the sites (shaded pixels).
+    width, height : int
+        Film size in pixels (any size, not only powers of two).
+    variant : str, optional
+        Step sequence, one of :data:`JFA_VARIANTS` (see module docstring).
+    max_gap : float or None, optional
+        A bound on the distance from any pixel to its nearest site, such as
+        :func:`foveated_mi.frame.sampling.largest_gap` of the sampling law: no step longer than
+        it is taken (steps longer than every gap only carry sites that later steps replace).
+        Fallback: a pixel left without a site (the bound was wrong) searches square rings around
+        itself, out to ``4 max_gap`` pixels; packets of pixels that all have a site skip that
+        search at the cost of one test.
+    grid : Grid or None, optional
+        The cells and their neighbour rule (None: the film of ``width`` x ``height``); across a
+        wrapped axis, jumps and distances go round.
 
-    Returns:
-        ``mi.UInt32`` buffer: the pixel index ``s_y * W + s_x`` of the site assigned to each
-        pixel; a site is assigned to itself. Without any site every entry is :data:`NO_SITE`.
+    Returns
+    -------
+    nearest : mi.UInt32
+        The pixel index ``s_y * W + s_x`` of the site assigned to each pixel; a site is assigned
+        to itself. Without any site every entry is :data:`NO_SITE`.
     """
     width, height = check_film(width, height)
     grid = grid_of(width, height, grid)
@@ -231,9 +284,21 @@ def _ring_search(seed: mi.UInt32, site_mask: mi.Bool, x: mi.Int32, y: mi.Int32, 
 def site_distance2(nearest: mi.UInt32, width: int, height: int):
     """Pixel coordinates and the squared distance to the assigned site.
 
-    Returns ``(x, y, d2, has_site)`` with ``x, y`` (``mi.Int32``) the pixel coordinates,
-    ``d2`` (``mi.Int32``) the squared distance ``|p - s|^2`` in pixels (0 where ``nearest`` is
-    :data:`NO_SITE`) and ``has_site`` (``mi.Bool``).
+    Parameters
+    ----------
+    nearest : mi.UInt32
+        Each pixel's site, from :func:`jump_flood`.
+    width, height : int
+        Film size, in pixels.
+
+    Returns
+    -------
+    x, y : mi.Int32
+        The pixel coordinates.
+    d2 : mi.Int32
+        The squared distance ``|p - s|^2`` in pixels (0 where ``nearest`` is :data:`NO_SITE`).
+    has_site : mi.Bool
+        Whether the pixel has a site.
     """
     x, y = pixel_xy(width, height)
     nearest = mi.UInt32(nearest)
@@ -249,6 +314,18 @@ def voronoi_fill(values: mi.Color3f, nearest: mi.UInt32) -> mi.Color3f:
     """Voronoi (nearest-site) fill ``F(p) = values[nearest[p]]``; zero where there is no site.
 
     A differentiable gather: gradients flow back to the site values.
+
+    Parameters
+    ----------
+    values : mi.Color3f
+        Values per pixel (read at the sites), as many as ``nearest``.
+    nearest : mi.UInt32
+        Each pixel's site, from :func:`jump_flood`.
+
+    Returns
+    -------
+    filled : mi.Color3f
+        Each pixel's site value.
     """
     nearest = mi.UInt32(nearest)
     check_buffer("values", values, dr.width(nearest))

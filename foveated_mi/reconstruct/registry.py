@@ -45,13 +45,41 @@ def register_reconstruction(name: str, fn: Callable[..., mi.Color3f], *, guided:
                             seeded: bool = False, options: dict[str, str] | None = None,
                             averages: str | None = None) -> None:
     """Make ``fn`` the reconstruction method ``name`` (``reconstruction = name``), with what it
-    reads (module docstring)."""
+    reads (module docstring).
+
+    Parameters
+    ----------
+    name : str
+        The method's name.
+    fn : callable
+        ``fn(shading, site_mask, nearest, width, height, *, max_radius=32, ...)``, returning
+        the dense image (``mi.Color3f``).
+    guided : bool, optional
+        It takes the frame's :class:`~foveated_mi.reconstruct.guided.Guide` as ``guide``.
+    seeded : bool, optional
+        It takes the fill's ``seed``.
+    options : dict of str to str or None, optional
+        Its keyword parameters, each mapped to the option that sets it.
+    averages : str or None, optional
+        The option whose value is the number of samples it averages per pixel.
+    """
     RECONSTRUCTIONS[name] = Method(fn, bool(guided), bool(seeded), dict(options or {}),
                                    averages)
 
 
 def uses_guide(method: str) -> bool:
-    """Whether ``method`` takes the G-buffer guide (and so needs no noise-free sites)."""
+    """Whether ``method`` takes the G-buffer guide (and so needs no noise-free sites).
+
+    Parameters
+    ----------
+    method : str
+        A key of :data:`RECONSTRUCTIONS`.
+
+    Returns
+    -------
+    guided : bool
+        Whether it was registered with ``guided=True``.
+    """
     return RECONSTRUCTIONS[method].guided
 
 
@@ -60,8 +88,31 @@ def reconstruct(method: str, shading: mi.Color3f, site_mask: mi.Bool, nearest: m
                 **params) -> mi.Color3f:
     """Interpolate with the method named ``method`` (a key of :data:`RECONSTRUCTIONS`).
 
-    ``guide`` and each of ``params`` go to the methods that declare them; the others are
-    ignored, so a caller can offer every method's parameters at once."""
+    Parameters
+    ----------
+    method : str
+        The method's name.
+    shading : mi.Color3f
+        The sparse shading buffer, one entry per pixel (read at the sites).
+    site_mask : mi.Bool
+        The sites (traced pixels).
+    nearest : mi.UInt32
+        Each pixel's nearest site (:func:`~foveated_mi.reconstruct.jfa.jump_flood`).
+    width, height : int
+        Film size, in pixels.
+    max_radius : int, optional
+        Cap on an interpolation's radius, in pixels (at least 1).
+    guide : Guide or None, optional
+        The G-buffer guide, for the methods that declare it.
+    **params
+        Keyword parameters, passed to the methods that declare them; the others are ignored, so
+        a caller can offer every method's parameters at once.
+
+    Returns
+    -------
+    image : mi.Color3f
+        The dense image.
+    """
     check_choice("method", method, RECONSTRUCTIONS)
     max_radius = check_int("max_radius", max_radius, 1)
     entry = RECONSTRUCTIONS[method]

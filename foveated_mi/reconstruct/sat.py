@@ -36,6 +36,16 @@ def interleave_rgb0(values: mi.Color3f) -> mi.Float:
     """The colours interleaved as ``[r0, g0, b0, 0, r1, ...]`` (one evaluated buffer).
 
     ``dr.gather(mi.Array4f, buffer, i)`` then reads pixel ``i`` with one packet load.
+
+    Parameters
+    ----------
+    values : mi.Color3f
+        Colours, one per pixel.
+
+    Returns
+    -------
+    quads : mi.Float
+        The flat interleaved buffer, ``4 * n`` entries.
     """
     values = mi.Color3f(values)
     return dr.ravel(mi.Array4f(values.x, values.y, values.z, 0.0), order="F")
@@ -114,9 +124,20 @@ class _SummedAreaTableOp(dr.CustomOp):
 def summed_area_table(quads: mi.Float, width: int, height: int):
     """Inclusive Float64 summed-area tables of a buffer from :func:`interleave_rgb0`.
 
-    Returns ``(table, lo, hi)``: the flat ``mi.Float64`` table, ``S_c(x, y)`` at
-    ``c * W * H + y * W + x``, and the per-channel minimum and maximum of the input
-    (``mi.Float`` of 3 entries each, no gradients), found by the same pass.
+    Parameters
+    ----------
+    quads : mi.Float
+        ``[r, g, b, 0]`` per pixel.
+    width, height : int
+        Film size, in pixels.
+
+    Returns
+    -------
+    table : mi.Float64
+        The flat table, ``S_c(x, y)`` at ``c * W * H + y * W + x``.
+    lo, hi : mi.Float
+        The per-channel minimum and maximum of the input (3 entries each, no gradients), found
+        by the same pass.
     """
     bounds = _Bounds()
     table = dr.custom(_SummedAreaTableOp, mi.Float(quads), width, height, bounds)
@@ -134,8 +155,25 @@ def box_sum(table: mi.Float64, x: mi.Int32, y: mi.Int32, kx: mi.Int32, ky: mi.In
             width: int, height: int, active=True):
     """Sums over the boxes ``[x - kx, x + kx] x [y - ky, y + ky]`` clipped to the film.
 
-    Returns ``(sums, area)``: the three channel sums (``mi.Array3f64``, 0 on inactive lanes,
-    whose lookups are skipped) and the clipped pixel count (``mi.Float64``).
+    Parameters
+    ----------
+    table : mi.Float64
+        A table from :func:`summed_area_table`.
+    x, y : mi.Int32
+        Box centres, in pixels.
+    kx, ky : mi.Int32
+        Half-sizes of the boxes, in pixels.
+    width, height : int
+        Film size, in pixels.
+    active : mi.Bool or bool, optional
+        Lanes that read (the others' lookups are skipped).
+
+    Returns
+    -------
+    sums : mi.Array3f64
+        The three channel sums (0 on inactive lanes).
+    area : mi.Float64
+        The clipped pixel count.
     """
     n = width * height
     x0, x1 = dr.maximum(x - kx, 0), dr.minimum(x + kx, width - 1)
@@ -153,6 +191,22 @@ def box_mean(table: mi.Float64, x: mi.Int32, y: mi.Int32, k: mi.Int32, width: in
     """Mean over the ``(2k+1)^2`` square centred on ``(x, y)``, clipped to the film.
 
     The division is exact IEEE Float64, so ``c * m / m == c`` for a constant image.
+
+    Parameters
+    ----------
+    table : mi.Float64
+        A table from :func:`summed_area_table`.
+    x, y : mi.Int32
+        Square centres, in pixels.
+    k : mi.Int32
+        Half-size of the squares, in pixels.
+    width, height : int
+        Film size, in pixels.
+
+    Returns
+    -------
+    mean : mi.Color3f
+        The mean colour over each clipped square.
     """
     s, area = box_sum(table, x, y, k, k, width, height)
     return mi.Color3f(mi.Float(s.x / area), mi.Float(s.y / area), mi.Float(s.z / area))

@@ -47,7 +47,24 @@ SAME_SURFACE_PLANE = 0.2
 
 
 def same_surface(p: mi.UInt32, q: mi.UInt32, guide: Guide, valid: mi.Bool) -> mi.Bool:
-    """Whether pixels ``p`` and ``q`` see the same surface (or both see the background)."""
+    """Whether pixels ``p`` and ``q`` see the same surface (or both see the background).
+
+    Parameters
+    ----------
+    p, q : mi.UInt32
+        Pixel indices.
+    guide : Guide
+        The G-buffer guide (normals, positions, hits, emission edges).
+    valid : mi.Bool
+        Lanes where ``q`` is a real candidate (the others are false).
+
+    Returns
+    -------
+    same : mi.Bool
+        Both hit or both miss; for hits, normals within ``SAME_SURFACE_COS`` and ``q`` near
+        ``p``'s tangent plane (``SAME_SURFACE_PLANE``); with emission edges, both or neither on
+        one.
+    """
     normal, position = mi.Vector3f(guide.normal), mi.Vector3f(guide.position)
     hp = dr.gather(mi.Bool, guide.hit, p)
     hq = dr.gather(mi.Bool, guide.hit, q, valid)

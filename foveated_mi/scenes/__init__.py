@@ -100,13 +100,34 @@ def scene_dict(name: str, *, width: int = 256, height: int = 256, spp: int = 1,
                **params: Any) -> dict:
     """Mitsuba scene dict of a built-in scene, for :func:`mi.load_dict`.
 
-    ``params`` go to the scene's builder (``voxel-city``: ``size``, ``seed``, ``envmap``,
-    ``sun``; ``eye-exam``: ``chart_width``, ``chart_height``, ``seed``). ``camera``
-    (``origin``, ``target``, ``up``, ``fov``) replaces :data:`SCENE_CAMERAS` ``[name]``;
-    ``integrator`` replaces ``{"type": "path", "max_depth": 6}``.
+    The dict holds objects built for the current variant (the voxel city's mesh, the bitmaps):
+    build it again after :func:`mi.set_variant`.
 
-    The dict holds objects built for the current variant (the voxel city's mesh, the
-    bitmaps): build it again after :func:`mi.set_variant`.
+    Parameters
+    ----------
+    name : str
+        A key of :data:`SCENES`.
+    width, height : int, optional
+        Film size, in pixels.
+    spp : int, optional
+        Samples per pixel of the sampler.
+    integrator : dict or None, optional
+        A Mitsuba plugin dict replacing ``{"type": "path", "max_depth": 6}``.
+    camera : dict or None, optional
+        ``{origin, target, up, fov}``, replacing :data:`SCENE_CAMERAS` ``[name]``.
+    **params
+        Go to the scene's builder (``voxel-city``: ``size``, ``seed``, ``envmap``, ``sun``;
+        ``eye-exam``: ``chart_width``, ``chart_height``, ``seed``).
+
+    Returns
+    -------
+    scene : dict
+        The scene dict, with ``sensor`` and ``integrator``.
+
+    Raises
+    ------
+    ParameterError
+        For an unknown scene, builder parameter or integrator dict.
     """
     if not isinstance(name, str) or name not in SCENES:
         raise ParameterError("scene", name, "one of " + ", ".join(repr(n) for n in SCENES))
@@ -138,14 +159,32 @@ def load_scene(name_or_path: str, *, width: int | None = None, height: int | Non
                camera: dict | None = None, **params: Any) -> "mi.Scene":
     """Load a built-in scene by name, or a Mitsuba XML file, with optional overrides.
 
-    Built-ins default to 256 x 256, 1 spp and ``{"type": "path", "max_depth": 6}``. For an
-    XML file, only what is given is overridden: film ``width``/``height``, sampler
-    ``sample_count`` (``spp``), the ``integrator`` (a plugin dict, may nest another) and the
-    sensor pose (``camera``); ``params`` are the file's ``<default>`` parameters
-    (``$name`` substitutions). Unknown names, missing files and unknown parameters raise
-    :class:`ParameterError`, as does a bad option of a ``foveated`` integrator, in one line:
-    the file's (``scene.xml, line 2: foveated integrator: theta = ...``, checked also when
+    Built-ins default to 256 x 256, 1 spp and ``{"type": "path", "max_depth": 6}``. For an XML
+    file, only what is given is overridden. Unknown names, missing files and unknown parameters
+    raise :class:`ParameterError`, as does a bad option of a ``foveated`` integrator, in one
+    line: the file's (``scene.xml, line 2: foveated integrator: theta = ...``, checked also when
     ``integrator`` replaces it) or the given dict's (``integrator.theta = ...``).
+
+    Parameters
+    ----------
+    name_or_path : str
+        A key of :data:`SCENES`, or the path of a Mitsuba XML file.
+    width, height : int or None, optional
+        Film size in pixels, 1..16384.
+    spp : int or None, optional
+        The sampler's ``sample_count``.
+    integrator : dict or None, optional
+        The integrator, a plugin dict (may nest another).
+    camera : dict or None, optional
+        The sensor pose ``{origin, target, up, fov}``.
+    **params
+        The built-in's builder parameters (see :func:`scene_dict`), or the XML file's
+        ``<default>`` parameters (``$name`` substitutions).
+
+    Returns
+    -------
+    scene : mi.Scene
+        The loaded scene.
     """
     for key, value, lo in (("width", width, 1), ("height", height, 1), ("spp", spp, 1)):
         if value is not None:
@@ -173,12 +212,13 @@ def load_scene(name_or_path: str, *, width: int | None = None, height: int | Non
 
 @contextlib.contextmanager
 def loader_threads():
-    """At least two Dr.Jit threads while a scene loads.
+    """At least two Dr.Jit threads while a scene loads (a context manager).
 
-    Mitsuba reads EXR images through OpenEXR, whose worker tasks run on Dr.Jit's thread
-    pool while the reading thread waits on a semaphore. With ``dr.set_thread_count(1)`` (a
-    Dask worker given one core) the pool has no thread left to run them, and the load never
-    returns. The previous count is restored afterwards."""
+    Mitsuba reads EXR images through OpenEXR, whose worker tasks run on Dr.Jit's thread pool
+    while the reading thread waits on a semaphore. With ``dr.set_thread_count(1)`` (a Dask
+    worker given one core) the pool has no thread left to run them, and the load never
+    returns. The previous count is restored afterwards.
+    """
     import drjit as dr
     n = dr.thread_count()
     if n >= 2:
@@ -196,6 +236,16 @@ def scene_camera(name_or_path: str) -> dict[str, Any]:
 
     For XML, the first sensor's ``to_world`` and field of view are read from the parsed file
     without loading any mesh; ``fov`` is converted to the horizontal field of view.
+
+    Parameters
+    ----------
+    name_or_path : str
+        A key of :data:`SCENES`, or the path of a Mitsuba XML file.
+
+    Returns
+    -------
+    camera : dict
+        ``origin``, ``target``, ``up`` (world space) and ``fov`` (degrees along x).
     """
     if _is_builtin(name_or_path):
         cam = SCENE_CAMERAS[name_or_path]

@@ -28,7 +28,27 @@ def _vec3(name: str, value: Any) -> list[float]:
 
 
 def check_camera(camera: Any, name: str = "camera") -> dict[str, Any]:
-    """A validated copy of a camera dict ``{origin, target, up, fov}`` (all keys required)."""
+    """A validated copy of a camera dict ``{origin, target, up, fov}`` (all keys required).
+
+    Parameters
+    ----------
+    camera : dict
+        ``origin``, ``target``, ``up``: three finite numbers each (world space); ``fov``:
+        degrees along x, in (0, 180).
+    name : str, optional
+        The camera's name, for the error message.
+
+    Returns
+    -------
+    camera : dict
+        The camera, its vectors as lists of floats.
+
+    Raises
+    ------
+    ParameterError
+        For a missing or unknown key, a bad value, ``target`` at ``origin``, or ``up``
+        parallel to the viewing direction.
+    """
     keys = ("origin", "target", "up", "fov")
     if not isinstance(camera, dict) or set(camera) - set(keys) or not set(keys) <= set(camera):
         raise ParameterError(name, camera, "a dict with keys 'origin', 'target', 'up', 'fov'")
@@ -46,21 +66,58 @@ def check_camera(camera: Any, name: str = "camera") -> dict[str, Any]:
 
 
 def look_at(camera: dict) -> "mi.ScalarTransform4f":
-    """Camera-to-world transform of a camera dict (Mitsuba's ``look_at``)."""
+    """Camera-to-world transform of a camera dict (Mitsuba's ``look_at``).
+
+    Parameters
+    ----------
+    camera : dict
+        ``{origin, target, up, fov}`` (validated).
+
+    Returns
+    -------
+    to_world : mi.ScalarTransform4f
+        The camera-to-world transform.
+    """
     cam = check_camera(camera)
     return mi.ScalarTransform4f().look_at(origin=cam["origin"], target=cam["target"],
                                           up=cam["up"])
 
 
 def film_dict(width: int, height: int) -> dict:
-    """The project's film: HDR, box reconstruction filter (one sample per pixel), RGB."""
+    """The project's film: HDR, box reconstruction filter (one sample per pixel), RGB.
+
+    Parameters
+    ----------
+    width, height : int
+        Film size in pixels, 1..16384.
+
+    Returns
+    -------
+    film : dict
+        The ``hdrfilm`` plugin dict.
+    """
     return {"type": "hdrfilm", "width": check_int("width", width, 1, 16384),
             "height": check_int("height", height, 1, 16384), "rfilter": {"type": "box"},
             "pixel_format": "rgb"}
 
 
 def sensor_dict(camera: dict, *, width: int = 256, height: int = 256, spp: int = 1) -> dict:
-    """A ``perspective`` sensor at ``camera`` with the project's film and an independent sampler."""
+    """A ``perspective`` sensor at ``camera`` with the project's film and an independent sampler.
+
+    Parameters
+    ----------
+    camera : dict
+        ``{origin, target, up, fov}`` (validated; ``fov`` along x).
+    width, height : int, optional
+        Film size, in pixels.
+    spp : int, optional
+        Samples per pixel (at least 1).
+
+    Returns
+    -------
+    sensor : dict
+        The sensor plugin dict.
+    """
     cam = check_camera(camera)
     return {"type": "perspective", "fov": cam["fov"], "fov_axis": "x", "to_world": look_at(cam),
             "near_clip": 1e-2, "far_clip": 1e4,
@@ -84,6 +141,13 @@ def apply_camera(scene_or_sensor: Any, camera: dict) -> None:
 
     Updates ``to_world`` and ``x_fov`` through :func:`mi.traverse`, so the scene, its
     acceleration structure and compiled kernels are kept.
+
+    Parameters
+    ----------
+    scene_or_sensor : mi.Scene or mi.Sensor
+        The scene (its first sensor is moved) or the sensor.
+    camera : dict
+        ``{origin, target, up, fov}``.
     """
     cam = check_camera(camera)
     params = mi.traverse(_sensor_of(scene_or_sensor))
@@ -103,7 +167,18 @@ def _camera_from_matrix(m: np.ndarray, fov: float) -> dict[str, Any]:
 
 
 def camera_of(scene_or_sensor: Any) -> dict[str, Any]:
-    """Camera dict ``{origin, target (one unit ahead), up, fov}`` of a loaded perspective sensor."""
+    """Camera dict of a loaded perspective sensor.
+
+    Parameters
+    ----------
+    scene_or_sensor : mi.Scene or mi.Sensor
+        The scene (its first sensor is read) or the sensor.
+
+    Returns
+    -------
+    camera : dict
+        ``{origin, target (one unit ahead), up, fov}``, ``fov`` in degrees along x.
+    """
     sensor = _sensor_of(scene_or_sensor)
     params = mi.traverse(sensor)
     if "x_fov" not in params:

@@ -54,15 +54,29 @@ def eye_chart(width: int = CHART_SIZE[0], height: int = CHART_SIZE[1], seed: int
               rows: tuple[int, ...] = CHART_ROWS) -> tuple[np.ndarray, list[dict]]:
     """Eye chart texture: rows of tumbling letter E of decreasing size on white paper.
 
-    Each letter is the 5 x 5 optotype :data:`_E` (stroke = gap = one fifth of the letter,
-    as in a Snellen "E") scaled by ``s / 5`` for ``s`` in ``rows`` (multiples of 5) and
-    rotated by a random multiple of 90 degrees. Rows are ``s / 2`` apart (at least 6
-    texels), letters ``s / 2`` apart, centred, as many as fit in 90 % of the width; after
-    ``rows`` the chart is filled to the bottom with rows of :data:`CHART_FINE_ROWS`, down to
-    one-texel strokes. Returns ``(image, letters)``: ``image`` is (height, width) float32
-    holding :data:`CHART_PAPER` and :data:`CHART_INK`, row 0 at the top; ``letters`` lists
-    every letter as ``dict(row, x, y, size, quarter_turns)`` (top-left corner in texels;
-    ``quarter_turns`` counter-clockwise, as ``np.rot90``).
+    Each letter is the 5 x 5 optotype :data:`_E` (stroke = gap = one fifth of the letter, as in
+    a Snellen "E") scaled by ``s / 5`` for ``s`` in ``rows`` and rotated by a random multiple of
+    90 degrees. Rows are ``s / 2`` apart (at least 6 texels), letters ``s / 2`` apart, centred,
+    as many as fit in 90 % of the width; after ``rows`` the chart is filled to the bottom with
+    rows of :data:`CHART_FINE_ROWS`, down to one-texel strokes.
+
+    Parameters
+    ----------
+    width, height : int, optional
+        Texture size in texels (at least 64).
+    seed : int, optional
+        Seed of the letters' rotations (>= 0).
+    rows : tuple of int, optional
+        Letter sizes of the rows, in texels (multiples of 5).
+
+    Returns
+    -------
+    image : numpy.ndarray
+        (height, width) float32 holding :data:`CHART_PAPER` and :data:`CHART_INK`, row 0 at the
+        top.
+    letters : list of dict
+        Every letter as ``dict(row, x, y, size, quarter_turns)`` (top-left corner in texels;
+        ``quarter_turns`` counter-clockwise, as ``np.rot90``).
     """
     width = check_int("width", width, 64)
     height = check_int("height", height, 64)

@@ -50,13 +50,19 @@ _LIT = np.array([0.95, 0.80, 0.45], dtype=np.float32)
 
 
 def voxel_city_heights(size: int = 128, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Height field and cell colours of the voxel city.
+    """Height field and cell colours of the voxel city (peak ``max(12, 0.45 size)`` voxels).
 
-    Returns ``(h, kind)``: ``h[i, j]`` is the column height in voxels of cell ``i`` along x,
-    ``j`` along z (int64, >= 0) and ``kind[i, j]`` is the cell's material: 0 asphalt,
-    1 sidewalk, 2 grass, 3 tree, ``4 + k`` building facade ``k``.
-    The peak downtown height is ``max(12, size // 4)`` voxels, so the skyline keeps its shape
-    when ``size`` changes.
+    Parameters
+    ----------
+    size, seed : int, optional
+        Cells along each side of the grid (4..4096), and the random seed (>= 0).
+
+    Returns
+    -------
+    h, kind : numpy.ndarray
+        ``(size, size)`` int64: ``h[i, j]`` the column height in voxels (>= 0) of cell ``i``
+        along x, ``j`` along z; ``kind[i, j]`` the cell's material: 0 asphalt, 1 sidewalk,
+        2 grass, 3 tree, ``4 + k`` building facade ``k``.
     """
     size = check_int("size", size, 4, 4096)
     seed = check_int("seed", seed, 0)
@@ -113,7 +119,20 @@ def _side_counts(h: np.ndarray) -> list[np.ndarray]:
 
 
 def voxel_city_triangle_count(size: int = 128, seed: int = 0) -> int:
-    """Triangles of the voxel city mesh plus its ground plane (formula in the module docs)."""
+    """Triangles of the voxel city mesh plus its ground plane (formula in the module docs).
+
+    Parameters
+    ----------
+    size : int, optional
+        Cells along each side of the grid.
+    seed : int, optional
+        The city's random seed.
+
+    Returns
+    -------
+    count : int
+        The triangle count ``T``.
+    """
     h, _ = voxel_city_heights(size, seed)
     return 2 * (h.size + int(sum(int(s.sum()) for s in _side_counts(h)))) + 2
 

@@ -27,7 +27,18 @@ _IDENTITY = frozenset(("seed", "theta", "sigma_p", "spp", "frame", "width", "hei
 
 
 def cell_key(row: dict) -> tuple:
-    """What a cell is: everything but the seed (the config column names no seed)."""
+    """What a cell is: everything but the seed (the config column names no seed).
+
+    Parameters
+    ----------
+    row : dict
+        A study row (``scene``, ``method``, ``config``, ``spp``, ``frame``).
+
+    Returns
+    -------
+    key : tuple
+        ``(scene, method, config, spp, frame)``, ``config`` "" when absent.
+    """
     return (row["scene"], row["method"], row.get("config") or "", float(row["spp"]),
             int(row["frame"]))
 
@@ -50,8 +61,20 @@ def _seed(row: dict) -> Any:
 
 
 def aggregate(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """One dict per cell, in first-seen order: the first row's text columns, the mean of each
-    measured column, ``<column>_sd``, ``seeds`` and ``rows`` (the cell's own rows)."""
+    """One dict per cell, in first-seen order, averaged over its seeds.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Study rows (as read by :func:`~foveated_mi.study.results.read_rows`), any seeds.
+
+    Returns
+    -------
+    cells : list of dict
+        Per cell: the first row's text and identity columns, the mean of each measured column
+        over its finite values (NaN with none), ``<column>_sd``, ``seeds`` and ``rows`` (the
+        cell's own rows).
+    """
     groups: dict[tuple, list[dict]] = {}
     for r in rows:
         groups.setdefault(cell_key(r), []).append(r)
@@ -101,8 +124,23 @@ def _rows(cell: dict) -> list[dict]:
 
 
 def margin(a: dict, b: dict, column: str, need: float = 0.0) -> Margin:
-    """The margin ``a - b`` in ``column`` between two cells (from :func:`aggregate`, or plain
-    rows), paired by seed where both have the seed (see the module docstring)."""
+    """The margin ``a - b`` in ``column`` between two cells, paired by seed where both have the
+    seed (see the module docstring).
+
+    Parameters
+    ----------
+    a, b : dict
+        Cells from :func:`aggregate`, or plain rows.
+    column : str
+        The measured column.
+    need : float, optional
+        The margin needed (the verdict's threshold).
+
+    Returns
+    -------
+    margin : Margin
+        Mean difference over seeds, its spread, the number of seeds and ``need``.
+    """
     ra = {_seed(r): r[column] for r in _rows(a)}
     rb = {_seed(r): r[column] for r in _rows(b)}
     common = [s for s in ra if s in rb and s is not None]

@@ -97,8 +97,22 @@ def _denoiser(preset: str, cands: dict) -> str:
 
 
 def equal_time_verdicts(rows: list[dict[str, Any]], preset: str) -> list[Verdict]:
-    """One :class:`Verdict` per scene with a baseline, for foveated rows whose only given
-    option is ``preset`` (plus spp). ``rows`` are study rows (any number of seeds)."""
+    """One :class:`Verdict` per scene with a baseline, for foveated rows whose only given option is
+    ``preset`` (plus spp).
+
+    Parameters
+    ----------
+    rows : list of dict
+        Study rows (any number of seeds).
+    preset : str
+        The foveated preset to judge.
+
+    Returns
+    -------
+    verdicts : list of Verdict
+        In the order the scenes first appear; a scene without a uniform 1-spp baseline (with or
+        without history) has none.
+    """
     out = []
     cells = aggregate(rows)
     for scene in dict.fromkeys(r["scene"] for r in cells):
@@ -140,8 +154,18 @@ def equal_time_verdicts(rows: list[dict[str, Any]], preset: str) -> list[Verdict
 
 
 def trace_modes(rows: list[dict]) -> dict[str, int]:
-    """How many of ``rows`` (or of aggregated cells' rows) ran each ``trace_mode``
-    (:mod:`.tasks`); rows written before the column existed count for nothing."""
+    """How many of ``rows`` (or of aggregated cells' rows) ran each ``trace_mode`` (:mod:`.tasks`).
+
+    Parameters
+    ----------
+    rows : list of dict
+        Study rows, or cells of :func:`~foveated_mi.study.aggregate.aggregate`.
+
+    Returns
+    -------
+    counts : dict of str to int
+        Rows per mode; rows written before the column existed count for nothing.
+    """
     out: dict[str, int] = {}
     for r in rows:
         for x in r.get("rows") or [r]:
@@ -152,13 +176,37 @@ def trace_modes(rows: list[dict]) -> dict[str, int]:
 
 
 def comparable(rows: list[dict]) -> bool:
-    """Whether the times of ``rows`` may be compared: their frames all ran one way (all
-    replayed, or all traced). A replayed frame skips host work that a traced one pays."""
+    """Whether the times of ``rows`` may be compared: their frames all ran one way (all replayed,
+    or all traced). A replayed frame skips host work that a traced one pays.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Study rows, or aggregated cells.
+
+    Returns
+    -------
+    comparable : bool
+        At most one ``trace_mode`` among them.
+    """
     return len(trace_modes(rows)) <= 1
 
 
 def modes_warning(rows: list[dict], table: str) -> str | None:
-    """One line when the rows of one table ran their frames in different ways, else None."""
+    """One line when the rows of one table ran their frames in different ways, else None.
+
+    Parameters
+    ----------
+    rows : list of dict
+        The table's rows, or aggregated cells.
+    table : str
+        The table's name in the warning.
+
+    Returns
+    -------
+    warning : str or None
+        The warning, naming how many rows ran each way.
+    """
     modes = trace_modes(rows)
     if len(modes) <= 1:
         return None
@@ -168,13 +216,30 @@ def modes_warning(rows: list[dict], table: str) -> str | None:
 
 
 def speedup(cell: dict, family: list[dict], column: str) -> tuple[float, str]:
-    """How many times longer than ``cell`` a uniform ``family`` (one method's cells at several
-    spp) takes to reach ``cell``'s quality in ``column`` at the same frame (``cell``'s, or
-    frame 1 for a family without history): ``(ratio, relation)``. The family's quality is
-    interpolated linearly in log time along its best-so-far curve; ``relation`` is ``"="``,
-    ``">"`` (the family never reaches it: at least the ratio at its slowest cell) or ``"<"``
-    (its fastest cell already does). NaN without data, and NaN with ``relation`` ``"≠"``
-    where the cell's frames and the family's ran differently (:func:`comparable`)."""
+    """How many times longer than ``cell`` a uniform ``family`` takes to reach ``cell``'s quality.
+
+    The family's quality is interpolated linearly in log time along its best-so-far curve, at
+    the same frame (``cell``'s, or frame 1 for a family without history).
+
+    Parameters
+    ----------
+    cell : dict
+        A foveated row or cell (``time_ms``, ``frame`` and ``column``).
+    family : list of dict
+        One method's cells at several spp.
+    column : str
+        The quality column (higher is better).
+
+    Returns
+    -------
+    ratio : float
+        The family's time over ``cell``'s; NaN without data, and where the cell's frames and
+        the family's ran differently (:func:`comparable`).
+    relation : str
+        ``"="``; ``">"`` (the family never reaches it: at least the ratio at its slowest
+        cell); ``"<"`` (its fastest cell already does); ``"≠"`` where the times are not
+        comparable.
+    """
     if not comparable([cell, *family]):
         return math.nan, "≠"
     q = cell.get(column, math.nan)
@@ -239,8 +304,23 @@ class Speedup:
 
 
 def speedup_over_seeds(cell: dict, family: list[dict], column: str) -> Speedup:
-    """:func:`speedup` of an aggregated ``cell`` against a ``family`` of aggregated cells, on
-    the means and for each of the cell's seeds against the family's rows of that seed."""
+    """:func:`speedup` of an aggregated ``cell`` against a ``family`` of aggregated cells, on the
+    means and for each of the cell's seeds against the family's rows of that seed.
+
+    Parameters
+    ----------
+    cell : dict
+        An aggregated foveated cell (its ``rows`` hold the seeds).
+    family : list of dict
+        One method's aggregated cells at several spp.
+    column : str
+        The quality column.
+
+    Returns
+    -------
+    speedup : Speedup
+        The ratio on the means, the per-seed ratios, their mean and spread.
+    """
     ratio, rel = speedup(cell, family, column)
     per_seed = []
     for r in cell.get("rows") or [cell]:
@@ -272,8 +352,19 @@ def _seeds(v: Verdict) -> int:
 
 
 def verdict_lines(v: Verdict) -> list[str]:
-    """Markdown bullet lines: the baselines, the chosen configuration, each target met,
-    missed or tied, and the speed-ups at equal quality."""
+    """Markdown bullet lines: the baselines, the chosen configuration, each target met, missed or
+    tied, and the speed-ups at equal quality.
+
+    Parameters
+    ----------
+    v : Verdict
+        A verdict of :func:`equal_time_verdicts`.
+
+    Returns
+    -------
+    lines : list of str
+        The lines, without newlines.
+    """
     n = _seeds(v)
     seeds = f" Means over {n} seeds ± standard deviation." if n > 1 else ""
     lines = []
@@ -326,7 +417,18 @@ def _word(m: Margin) -> str:
 
 def verdict_sentence(v: Verdict) -> str:
     """One plain sentence: what foveation gained or lost, at what time, against the stronger
-    baseline (uniform with the same history and denoiser) when the study has it."""
+    baseline (uniform with the same history and denoiser) when the study has it.
+
+    Parameters
+    ----------
+    v : Verdict
+        A verdict of :func:`equal_time_verdicts`.
+
+    Returns
+    -------
+    sentence : str
+        The sentence (it says so when no foveated configuration was as fast).
+    """
     b = v.baseline
     c = v.chosen
     if v.uniform is None:

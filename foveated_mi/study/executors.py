@@ -144,7 +144,30 @@ class DaskExecutor:
 
 def make_executor(kind: str = "local", *, scheduler: str | None = None,
                   workers: int | None = None, task_timeout: float | None = None):
-    """An executor by name; ``--scheduler`` and ``--workers`` only make sense with dask."""
+    """An executor by name; ``--scheduler`` and ``--workers`` only make sense with dask.
+
+    Parameters
+    ----------
+    kind : str, optional
+        ``"local"`` or ``"dask"`` (:data:`EXECUTORS`).
+    scheduler : str or None, optional
+        Address of an existing Dask scheduler (``tcp://host:8786``); None: a local cluster.
+    workers : int or None, optional
+        Worker processes of the local Dask cluster.
+    task_timeout : float or None, optional
+        Seconds without a finished job before the pending ones fail (Dask; None:
+        :data:`TASK_TIMEOUT_S`).
+
+    Returns
+    -------
+    executor : LocalExecutor or DaskExecutor
+        The executor (close it when done).
+
+    Raises
+    ------
+    ParameterError
+        For an unknown kind, or a scheduler or workers with ``local``.
+    """
     if kind not in EXECUTORS:
         raise ParameterError("--executor", kind, "one of " + ", ".join(EXECUTORS))
     if kind == "local":

@@ -22,8 +22,20 @@ LOWER_IS_BETTER = frozenset({"flip", "flip_fovea", "flip_periphery"})
 
 
 def pareto_front(times: Sequence[float], qualities: Sequence[float]) -> list[int]:
-    """Indices of the non-dominated points (minimum time, maximum quality), by increasing
-    time. Non-finite points never enter the front."""
+    """Indices of the non-dominated points (minimum time, maximum quality), by increasing time.
+
+    Non-finite points never enter the front; among exact duplicates only the first does.
+
+    Parameters
+    ----------
+    times, qualities : sequence of float
+        One time and one quality (higher is better) per point.
+
+    Returns
+    -------
+    front : list of int
+        Indices of the front's points.
+    """
     t = np.asarray(times, dtype=np.float64)
     q = np.asarray(qualities, dtype=np.float64)
     if t.shape != q.shape:
@@ -46,8 +58,20 @@ def _quality(row: dict, metric: str) -> float:
 
 
 def scene_fronts(rows: list[dict[str, Any]], metric: str) -> dict[str, list[dict]]:
-    """``{scene: front rows}`` (rows as read by :func:`~foveated_mi.study.results.read_rows`),
-    scenes in the order they first appear."""
+    """``{scene: front rows}``, scenes in the order they first appear.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Study rows, as read by :func:`~foveated_mi.study.results.read_rows`.
+    metric : str
+        The quality column (lower is better for those of :data:`LOWER_IS_BETTER`).
+
+    Returns
+    -------
+    fronts : dict of str to list of dict
+        Each scene's front rows, by increasing time.
+    """
     out: dict[str, list[dict]] = {}
     for scene in dict.fromkeys(r["scene"] for r in rows):
         sub = [r for r in rows if r["scene"] == scene]
@@ -91,7 +115,23 @@ def _foveated_name(r: dict[str, Any]) -> str:
 def plot_pareto(rows: list[dict[str, Any]], metric: str, out_dir: str, *,
                 title: str | None = None) -> tuple[str, str]:
     """Write ``pareto.png`` and ``pareto.svg`` in ``out_dir`` (:func:`pareto_figure`).
-    Returns the two paths."""
+
+    Parameters
+    ----------
+    rows : list of dict
+        Study rows.
+    metric : str
+        The quality column.
+    out_dir : str
+        The folder (created if missing); the files are written atomically.
+    title : str or None, optional
+        The figure's title.
+
+    Returns
+    -------
+    png, svg : str
+        The two paths.
+    """
     from ..io import atomic_write
     fig = pareto_figure(rows, metric, title=title)
     os.makedirs(out_dir, exist_ok=True)
@@ -105,11 +145,27 @@ def plot_pareto(rows: list[dict[str, Any]], metric: str, out_dir: str, *,
 
 
 def pareto_figure(rows: list[dict[str, Any]], metric: str, *, title: str | None = None):
-    """The Pareto plot as a matplotlib ``Figure`` (Agg canvas): one panel per scene, foveated
-    points as circles coloured by preset and reconstruction, each baseline family with a
-    marker of its own (uniform, uniform + OIDN, uniform + history, uniform + history + its
-    denoiser, ...), the front as a step line with ringed points. The first panel's legend
-    names every family of every panel."""
+    """The Pareto plot as a matplotlib ``Figure`` (Agg canvas).
+
+    One panel per scene, foveated points as circles coloured by preset and reconstruction, each
+    baseline family with a marker of its own (uniform, uniform + OIDN, uniform + history,
+    uniform + history + its denoiser, ...), the front as a step line with ringed points. The
+    first panel's legend names every family of every panel.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Study rows.
+    metric : str
+        The quality column (the y axis; time per frame on a log x axis).
+    title : str or None, optional
+        The figure's title.
+
+    Returns
+    -------
+    figure : matplotlib.figure.Figure
+        The figure, outside pyplot's state.
+    """
     # A bare Figure (Agg canvas) rather than pyplot: no global backend switch and no figure
     # left in pyplot's state, so a notebook's inline plots keep working.
     from matplotlib.figure import Figure
@@ -223,8 +279,22 @@ def _varying_options(rows: list[dict[str, Any]]) -> list[str]:
 
 
 def front_table(rows: list[dict[str, Any]], metric: str) -> str:
-    """The fronts of every scene as an aligned text table (``foveated_mi.io.format_table``);
-    foveated options that vary within the study are listed in an ``options`` column."""
+    """The fronts of every scene as an aligned text table (``foveated_mi.io.format_table``).
+
+    Foveated options that vary within the study are listed in an ``options`` column.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Study rows.
+    metric : str
+        The quality column.
+
+    Returns
+    -------
+    table : str
+        The table, one line per front point under a header.
+    """
     import json
     from ..io import format_table
     varying = _varying_options(rows)

@@ -22,9 +22,25 @@ RING_COLOUR = (1.0, 0.2, 0.1)
 
 
 def mark_gaze(img: np.ndarray, gaze, radius: float) -> np.ndarray:
-    """A copy of ``img`` (display values, (H, W, 3)) with a ring of ``radius`` pixels around
-    the gaze point (normalised film coordinates, origin top-left): the pixels whose centre
-    lies within 1.2 pixels of the circle."""
+    """A copy of ``img`` with a ring of ``radius`` pixels around the gaze point.
+
+    The ring is the pixels whose centre lies within 1.2 pixels of the circle, in
+    :data:`RING_COLOUR`.
+
+    Parameters
+    ----------
+    img : numpy.ndarray
+        Display values, (H, W, 3).
+    gaze : tuple of float
+        Normalised film coordinates, origin top-left.
+    radius : float
+        The ring's radius, in pixels (>= 0).
+
+    Returns
+    -------
+    img : numpy.ndarray
+        The marked copy, float64 (H, W, 3).
+    """
     gx, gy = check_point2("gaze", gaze)
     radius = check_range("radius", radius, 0.0, None)
     h, w = img.shape[:2]
@@ -36,8 +52,22 @@ def mark_gaze(img: np.ndarray, gaze, radius: float) -> np.ndarray:
 
 
 def side_by_side(panels: Sequence[np.ndarray], gaze, radius: float) -> np.ndarray:
-    """``panels`` (display values, one (H, W, 3) shape) left to right, each with the gaze
-    ringed (:func:`mark_gaze`), as an 8-bit (H, n W, 3) image."""
+    """``panels`` left to right, each with the gaze ringed (:func:`mark_gaze`), as an 8-bit image.
+
+    Parameters
+    ----------
+    panels : sequence of numpy.ndarray
+        Display values, all of one (H, W, 3) shape.
+    gaze : tuple of float
+        Normalised film coordinates, origin top-left.
+    radius : float
+        The ring's radius, in pixels.
+
+    Returns
+    -------
+    strip : numpy.ndarray
+        uint8 (H, n W, 3), values clipped to [0, 1] before the conversion.
+    """
     panels = [np.asarray(p) for p in panels]
     if not panels or any(p.ndim != 3 or p.shape[2] != 3 or p.shape != panels[0].shape
                          for p in panels):
@@ -48,16 +78,49 @@ def side_by_side(panels: Sequence[np.ndarray], gaze, radius: float) -> np.ndarra
 
 
 def ring_radius(sensor, fovea_deg: float, gaze=(0.5, 0.5)) -> int:
-    """The fovea's radius in pixels on ``sensor``'s film: ``fovea_deg`` times the pixels per
-    degree at ``gaze`` (:func:`foveated_mi.viewer.pixels_per_degree`), at least 3 pixels so
-    that a ring shows on a tiny film."""
+    """The fovea's radius in pixels on ``sensor``'s film.
+
+    ``fovea_deg`` times the pixels per degree at ``gaze``
+    (:func:`foveated_mi.viewer.pixels_per_degree`), at least 3 pixels so that a ring shows on a
+    tiny film.
+
+    Parameters
+    ----------
+    sensor : mi.Sensor
+        The sensor.
+    fovea_deg : float
+        The fovea's radius, in degrees.
+    gaze : tuple of float, optional
+        Normalised film coordinates.
+
+    Returns
+    -------
+    radius : int
+        The radius, in pixels.
+    """
     from .. import viewer
     return max(3, int(round(fovea_deg * viewer.pixels_per_degree(sensor, gaze))))
 
 
 def cached_reference(spec, out: str, variant: str, scene: int = 0) -> np.ndarray:
-    """The linear reference a study run under ``out`` rendered and cached for its
-    ``scene``-th scene ((H, W, 3), or (F, H, W, 3) along a camera path)."""
+    """The linear reference a study run under ``out`` rendered and cached for a scene.
+
+    Parameters
+    ----------
+    spec : StudySpec
+        The study.
+    out : str
+        The study's output folder.
+    variant : str
+        The Mitsuba variant the reference was rendered with.
+    scene : int, optional
+        Index of the scene in ``spec.scenes``.
+
+    Returns
+    -------
+    reference : numpy.ndarray
+        (H, W, 3), or (F, H, W, 3) along a camera path.
+    """
     from .tasks import reference_key
     s = spec.scenes[scene]
     return np.load(os.path.join(out, "references",
@@ -65,7 +128,24 @@ def cached_reference(spec, out: str, variant: str, scene: int = 0) -> np.ndarray
 
 
 def write_side_by_side(path: str, panels: Sequence[np.ndarray], gaze, radius: float) -> str:
-    """:func:`side_by_side` written to ``path`` as a PNG, atomically; returns ``path``."""
+    """:func:`side_by_side` written to ``path`` as a PNG, atomically.
+
+    Parameters
+    ----------
+    path : str
+        The PNG's path.
+    panels : sequence of numpy.ndarray
+        Display values, all of one (H, W, 3) shape.
+    gaze : tuple of float
+        Normalised film coordinates, origin top-left.
+    radius : float
+        The ring's radius, in pixels.
+
+    Returns
+    -------
+    path : str
+        ``path``.
+    """
     import imageio.v3 as iio
     from ..io import atomic_write
     strip = side_by_side(panels, gaze, radius)

@@ -37,16 +37,32 @@ _TAIL = ("aov_ms", "denoise_ms", *COMPARE_KEYS, "history_hit_rate", "width", "he
 
 
 def stage_columns() -> list[str]:
-    """``<stage>_ms`` for every stage of :data:`foveated_mi.timing.STAGES` but ``total``
-    (which is ``time_ms``)."""
+    """``<stage>_ms`` for every stage of :data:`foveated_mi.timing.STAGES` but ``total`` (which
+    is ``time_ms``).
+
+    Returns
+    -------
+    columns : list of str
+        The per-stage time columns, in stage order.
+    """
     from ..timing import STAGES
     return [f"{s}_ms" for s in STAGES if s != "total"]
 
 
 def columns(extra: Iterable[str] = ()) -> list[str]:
-    """The columns of ``results.csv``, in order; ``extra`` (e.g. ``jod`` when the perceptual
-    extra is installed) go after the quality columns. Without them the columns are absent,
-    never empty or zero."""
+    """The columns of ``results.csv``, in order.
+
+    Parameters
+    ----------
+    extra : iterable of str, optional
+        Columns to add after the quality columns (e.g. ``jod`` when the perceptual extra is
+        installed). Without them the columns are absent, never empty or zero.
+
+    Returns
+    -------
+    columns : list of str
+        The header.
+    """
     i = _TAIL.index("history_hit_rate")
     return [*_HEAD, *stage_columns(), *_TAIL[:i], *extra, *_TAIL[i:]]
 
@@ -64,6 +80,19 @@ OPTIONAL_COLUMNS = frozenset(FLICKER_KEYS)
 
 
 def format_value(v: Any) -> str:
+    """A value as its CSV cell.
+
+    Parameters
+    ----------
+    v : object
+        The value.
+
+    Returns
+    -------
+    text : str
+        ``""`` for None, ``true`` / ``false`` for a bool, ``repr`` of a float (shortest exact
+        round trip, ``nan`` and ``inf`` as such), else ``str(v)``.
+    """
     if v is None:
         return ""
     if isinstance(v, bool):
@@ -74,6 +103,20 @@ def format_value(v: Any) -> str:
 
 
 def parse_value(column: str, text: str) -> Any:
+    """A CSV cell read back: numbers for :data:`NUMERIC_COLUMNS` and every ``*_ms`` column.
+
+    Parameters
+    ----------
+    column : str
+        The column's name.
+    text : str
+        The cell.
+
+    Returns
+    -------
+    value : float or str
+        A float (``nan`` for an empty cell) in a numeric column, else ``text``.
+    """
     if column in NUMERIC_COLUMNS or column.endswith("_ms"):
         if text == "":
             return math.nan
@@ -109,8 +152,21 @@ def _repair(path: str) -> int:
 
 
 def read_rows(path: str | os.PathLike, *, raw: bool = False) -> list[dict[str, Any]]:
-    """The rows of a results file (a trailing partial line is ignored). Numbers come back
-    as floats (``nan`` for an empty cell) unless ``raw``."""
+    """The rows of a results file (a trailing partial line is ignored).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The ``results.csv`` file.
+    raw : bool, optional
+        Keep every cell as its text.
+
+    Returns
+    -------
+    rows : list of dict
+        One dict per row; numbers come back as floats (``nan`` for an empty cell) unless
+        ``raw``.
+    """
     with open(path, newline="", encoding="utf-8") as f:
         text = f.read()
     if text and not text.endswith("\n"):

@@ -61,8 +61,27 @@ def _size_arg(size) -> tuple[int, int] | None:
 
 def load_reference_file(ref: dict, scene) -> np.ndarray:
     """A reference file (EXR layer or .npy) as linear float32 (H, W, 3), checked against the
-    scene's film size. EXR: ``layer`` if given, else ``image``, else the unnamed RGB layer,
-    else the file's only layer."""
+    scene's film size.
+
+    Parameters
+    ----------
+    ref : dict
+        The scene's ``reference`` table: ``file`` (as given), ``path`` (resolved) and, for an
+        EXR, ``layer`` (None: ``image`` if present, else the unnamed RGB layer, else the file's
+        only layer).
+    scene : SceneSpec
+        The scene (its ``label`` names errors, its ``size`` is the expected film size).
+
+    Returns
+    -------
+    reference : numpy.ndarray
+        float32 (H, W, 3), the file's first three channels.
+
+    Raises
+    ------
+    ParameterError
+        For an unreadable file, a missing layer, a wrong shape or non-finite values.
+    """
     path, name = ref["path"], f"{scene.label}: reference.file"
     if path.lower().endswith(".npy"):
         try:
@@ -121,11 +140,26 @@ def run_study(study: str | os.PathLike | StudySpec, *, out: str | None = None,
               task_timeout: float | None = None) -> StudyResult:
     """Run (or resume) a study and write its results, plots and front table.
 
-    ``study`` is a TOML path or a parsed :class:`StudySpec`; ``size`` (``W`` or ``(W, H)``)
-    overrides every scene's film size; ``metric`` the TOML's quality axis. Bad input raises
-    :class:`ParameterError` before anything runs. Tasks that fail are reported in
-    :attr:`StudyResult.failed` (one line each) and the others go on. ``task_timeout``
-    (seconds, Dask only): when no task finishes for that long the pending ones fail.
+    Parameters
+    ----------
+    study : str, os.PathLike or StudySpec
+        A TOML path or a parsed :class:`StudySpec`; bad input raises :class:`ParameterError`
+        before anything runs.
+    out : str or None, optional
+        Output folder (None: ``out/studies/<study name>``).
+    executor, scheduler, workers, task_timeout : optional
+        ``"local"`` or ``"dask"``, the Dask scheduler's address and worker count; ``task_timeout``
+        (seconds, Dask only): when no task finishes for that long the pending ones fail.
+    size, metric, variant : optional
+        Overrides of every scene's film size (``W`` or ``(W, H)``), of the TOML's quality axis,
+        and the Mitsuba variant (None: chosen as :func:`foveated_mi.set_variant` does).
+    progress, echo : optional
+        Show progress bars; the function that reports each line (None: silent).
+
+    Returns
+    -------
+    result : StudyResult
+        What ran; tasks that fail are listed in :attr:`StudyResult.failed`, the others go on.
     """
     from . import tasks as T
     from .executors import make_executor

@@ -222,7 +222,24 @@ class StudySpec:
 
 
 def load_study(path: str | os.PathLike) -> StudySpec:
-    """Read and validate a study TOML file (see the module docs for the layout)."""
+    """Read and validate a study TOML file (see the module docs for the layout).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The TOML file; relative paths in it resolve against its folder, and its file name
+        (without extension) is the study's name.
+
+    Returns
+    -------
+    spec : StudySpec
+        The validated study.
+
+    Raises
+    ------
+    ParameterError
+        For an unreadable file or a bad value (one line naming the file and the key).
+    """
     data, path = read_toml("study", path)
     return parse_study(data, base_dir=os.path.dirname(os.path.abspath(path)), source=path,
                        name=os.path.splitext(os.path.basename(path))[0])
@@ -230,7 +247,24 @@ def load_study(path: str | os.PathLike) -> StudySpec:
 
 def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
                 name: str = "study") -> StudySpec:
-    """Validate an already-parsed TOML table; relative paths resolve against ``base_dir``."""
+    """Validate an already-parsed TOML table; relative paths resolve against ``base_dir``.
+
+    Parameters
+    ----------
+    data : dict
+        The study's table (layout in the module docs).
+    base_dir : str, optional
+        Folder that relative paths (XML scenes, reference files) resolve against.
+    source : str, optional
+        Where the table comes from, as error messages name it (e.g. the file's path).
+    name : str, optional
+        The study's name (its default output folder is ``out/studies/<name>``).
+
+    Returns
+    -------
+    spec : StudySpec
+        The validated study.
+    """
     ctx = TableContext(source)
     ctx.table("", data)
     ctx.known("", data, _TOP_KEYS)

@@ -59,8 +59,31 @@ def _hash(payload: Any, n: int = 16) -> str:
 
 def task_id(scene_identity: dict, method: str, options: dict, spp: int, seed: int,
             variant: str, metrics: dict) -> str:
-    """Stable id of a configuration on a scene: a hash of everything that changes its rows
-    except the frames recorded, the repeats and the warm-up (rows of those are resumable)."""
+    """Stable id of a configuration on a scene: a hash of everything that changes its rows except
+    the frames recorded, the repeats and the warm-up (rows of those are resumable).
+
+    Parameters
+    ----------
+    scene_identity : dict
+        What identifies the scene (``SceneSpec.identity()``).
+    method : str
+        The row's method (``foveated``, ``uniform``, ``uniform+oidn``, ``uniform+history...``).
+    options : dict
+        The configuration's options.
+    spp : int
+        Samples per pixel.
+    seed : int
+        The task's seed.
+    variant : str
+        The Mitsuba variant.
+    metrics : dict
+        The metric settings that change the quality columns.
+
+    Returns
+    -------
+    task_id : str
+        16 hexadecimal digits.
+    """
     return _hash({"scene": scene_identity, "method": method, "options": options, "spp": spp,
                   "seed": seed, "variant": variant, "metrics": metrics})
 
@@ -70,8 +93,21 @@ def task_id(scene_identity: dict, method: str, options: dict, spp: int, seed: in
 # ---------------------------------------------------------------------------------------------
 
 def reference_key(scene, variant: str) -> str:
-    """Cache key of a rendered reference: scene, size, parameters, integrator, spp, seed,
-    camera and variant (and the XML file's modification time)."""
+    """Cache key of a rendered reference: scene, size, parameters, integrator, spp, seed, camera
+    and variant (and the XML file's modification time).
+
+    Parameters
+    ----------
+    scene : SceneSpec
+        The scene (along a camera path, its cameras are part of the key).
+    variant : str
+        The Mitsuba variant.
+
+    Returns
+    -------
+    key : str
+        16 hexadecimal digits.
+    """
     from ..scenes import scene_camera
     camera = scene.camera or scene_camera(scene.source)
     mtime = None if scene.builtin else os.stat(scene.source).st_mtime_ns
@@ -85,6 +121,20 @@ def reference_key(scene, variant: str) -> str:
 
 
 def reference_task(scene, variant: str) -> dict:
+    """The task that renders a scene's reference (:func:`run_reference_task`).
+
+    Parameters
+    ----------
+    scene : SceneSpec
+        The scene, with its ``reference`` settings (``spp``, ``seed``).
+    variant : str
+        The Mitsuba variant.
+
+    Returns
+    -------
+    task : dict
+        A JSON-able task (``kind`` ``"reference"``); ``cameras`` None without a camera path.
+    """
     return {"kind": "reference", "scene": scene.load_spec(), "variant": variant,
             "spp": scene.reference["spp"], "seed": scene.reference["seed"],
             "label": scene.label,
@@ -184,7 +234,20 @@ def _prepare_worker(task: dict) -> None:
 
 
 def get_scene(load_spec: dict, variant: str):
-    """The scene of ``load_spec`` for ``variant``, loaded once per process and kept."""
+    """The scene of ``load_spec`` for ``variant``, loaded once per process and kept.
+
+    Parameters
+    ----------
+    load_spec : dict
+        ``SceneSpec.load_spec()``: source, film size, integrator, camera and parameters.
+    variant : str
+        The Mitsuba variant, which must be the active one.
+
+    Returns
+    -------
+    scene : mi.Scene
+        The loaded scene (1 spp; the caller passes its own spp).
+    """
     import mitsuba as mi
     from ..scenes import load_scene
     key = json.dumps({**load_spec, "variant": variant}, sort_keys=True)
@@ -206,13 +269,30 @@ def clear_scene_cache() -> None:
 
 
 def scene_cache_info() -> dict:
-    """Scenes cached in this process and how many loads happened (for tests and logs)."""
+    """Scenes cached in this process and how many loads happened (for tests and logs).
+
+    Returns
+    -------
+    info : dict
+        ``{"cached": int, "loads": int, "pid": int}``.
+    """
     return {"cached": len(_SCENES), "loads": _LOADS["count"], "pid": os.getpid()}
 
 
 def run_reference_task(task: dict) -> dict:
-    """Render a scene's reference with its nested integrator: ``{"image": linear float32
-    (H, W, 3), "rfilter": the film's reconstruction filter (text)}``."""
+    """Render a scene's reference with its nested integrator.
+
+    Parameters
+    ----------
+    task : dict
+        A task of :func:`reference_task`.
+
+    Returns
+    -------
+    result : dict
+        ``{"image": linear float32 (H, W, 3), or (F, H, W, 3) along a camera path, "rfilter":
+        the film's reconstruction filter (text)}``.
+    """
     _prepare_worker(task)
     from ..baselines import render_reference
     scene = get_scene(task["scene"], task["variant"])
@@ -285,9 +365,23 @@ def _quality(reference_display: np.ndarray, image: np.ndarray, task: dict,
 
 
 def run_sequence_task(task: dict, reference: np.ndarray) -> tuple[dict, list]:
-    """One ``[motion]`` task, as :func:`run_task` runs it, with the frames it showed:
-    ``(row, shown)``, ``shown`` a (reference, image) pair of display-referred (H, W, 3)
-    arrays per frame (for pictures and videos of a sequence)."""
+    """One ``[motion]`` task, as :func:`run_task` runs it, with the frames it showed.
+
+    Parameters
+    ----------
+    task : dict
+        A task of :func:`expand_tasks` whose scene has a ``[motion]`` table.
+    reference : numpy.ndarray
+        The linear reference, (H, W, 3), or (F, H, W, 3) along a camera path.
+
+    Returns
+    -------
+    row : dict
+        The sequence's row.
+    shown : list of tuple
+        A (reference, image) pair of display-referred (H, W, 3) arrays per frame (for pictures
+        and videos of a sequence).
+    """
     _prepare_worker(task)
     scene = get_scene(task["scene"], task["variant"])
     return _sequence_row(scene, task, reference, keep=True)
@@ -448,9 +542,22 @@ def _foveated_frames(scene, task: dict, record: list[int]):
 
 
 def task_frame(task: dict, frame: int) -> np.ndarray:
-    """The linear (H, W, 3) image a still task (not ``[motion]``) renders at ``frame``, as its
-    row at that frame was scored (its seed; a foveated task's frames 1 .. ``frame`` from a
-    reset history, a uniform one's single frame): for pictures of a study's cells."""
+    """The linear (H, W, 3) image a still task (not ``[motion]``) renders at ``frame``, as its row
+    at that frame was scored: for pictures of a study's cells.
+
+    Parameters
+    ----------
+    task : dict
+        A task of :func:`expand_tasks`.
+    frame : int
+        The frame (>= 1): a foveated task renders frames 1 .. ``frame`` from a reset history with
+        its seed; a uniform one its single frame.
+
+    Returns
+    -------
+    image : numpy.ndarray
+        Linear float32 (H, W, 3).
+    """
     from ..validate import ParameterError, check_int
     if task.get("motion") is not None:
         raise ParameterError("task", task["task_id"], "a task of a still view (a sequence's "
@@ -467,9 +574,18 @@ def task_frame(task: dict, frame: int) -> np.ndarray:
 
 
 def run_task(task: dict, reference: np.ndarray) -> list[dict]:
-    """Run one configuration; returns its rows (one per recorded frame not yet done: the
-    task's ``frames_todo``, default all of ``frames``; one per sequence under ``[motion]``)
-    as plain dicts."""
+    """Run one configuration of a study (in a worker, or in the client).
+
+    Parameters
+    ----------
+    task, reference
+        A task of :func:`expand_tasks` and its scene's linear reference (a NumPy array).
+
+    Returns
+    -------
+    rows : list of dict
+        One per frame to record (``frames_todo``, else ``frames``); one per ``[motion]`` sequence.
+    """
     _prepare_worker(task)
     from ..render import to_display
     from .results import stage_columns
