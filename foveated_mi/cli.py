@@ -1,4 +1,4 @@
-"""``foveated-mi``: render a foveated frame or a sequence, or run a study (command line).
+"""``foveated-mi``: render a foveated frame or a sequence, run a study, or view live (command line).
 
 Bad input prints one line (``foveated-mi: error: <name> = <value> is invalid: expected ...``)
 and exits with status 2; no traceback, no half-written output.
@@ -47,6 +47,40 @@ def _frame_options() -> tuple[str, ...]:
 
 #: Options the ``render`` command takes as flags (every option of the schema but ``timing``).
 FRAME_OPTIONS = _frame_options()
+
+
+def _add_view_parser(sub) -> None:
+    """``foveated-mi view``: the live view's flags."""
+    v = sub.add_parser("view", help="live view: serve a page on 127.0.0.1 that shows frames "
+                       "as they are rendered (the mouse is the gaze)")
+    v.add_argument("scene", help="Mitsuba XML path or built-in scene "
+                   "(cornell-box, voxel-city, eye-exam)")
+    v.add_argument("--preset", help="preset of the foveated integrator (default auto)")
+    v.add_argument("--ray-budget", type=float, dest="ray_budget",
+                   help="rays per frame as a fraction of the film (polar and acuity laws)")
+    v.add_argument("--denoiser", help="the post-processing filter")
+    v.add_argument("--size", type=int, nargs=2, metavar=("W", "H"), default=[480, 270],
+                   help="film size (default 480 270)")
+    v.add_argument("--spp", type=int, default=1, help="samples per pixel (default 1)")
+    v.add_argument("--max-depth", type=int, dest="max_depth",
+                   help="use a path tracer of this max_depth as the nested integrator")
+    v.add_argument("--port", type=int, default=8765, help="port (default 8765; 0: any free)")
+    v.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1; "
+                   "another interface needs --allow-remote)")
+    v.add_argument("--allow-remote", action="store_true", dest="allow_remote",
+                   help="allow binding an interface other machines reach (turns --token on)")
+    v.add_argument("--token", action="store_true",
+                   help="require a random token, printed with the address")
+    v.add_argument("--gaze-csv", dest="gaze_csv", help="replay this t,x,y gaze CSV instead "
+                   "of the mouse")
+    v.add_argument("--record-dir", dest="record_dir", default=os.path.join("out", "live"),
+                   help="where recorded walk-throughs go (default out/live)")
+    v.add_argument("--jpeg-quality", type=int, dest="jpeg_quality", default=85,
+                   help="JPEG quality of the frames sent to the page (default 85)")
+    v.add_argument("--max-fps", type=float, dest="max_fps", default=60.0,
+                   help="frames per second rendered at most (default 60; 0: no cap)")
+    v.add_argument("--variant", help="Mitsuba variant (default: cuda_ad_rgb if usable, "
+                   "else llvm_ad_rgb; or $FOVEATED_MI_VARIANT)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -98,6 +132,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "study's metric, else psnr_fovea)")
     st.add_argument("--variant")
     st.add_argument("--no-progress", action="store_true", dest="no_progress")
+
+    _add_view_parser(sub)
 
     d = sub.add_parser("demo", help="equal-time comparison against a converged reference "
                        "(what `make demo` runs)")
@@ -176,7 +212,8 @@ def cmd_sequence(args: argparse.Namespace) -> int:
     from .validate import check_int
     cfg = load_config(args.config)
     if args.frames is not None:
-        cfg.frames = check_int("--frames", args.frames, 1)
+        cfg.frames = check_int("--frames", args.frames, 1,
+                               len(cfg.poses) if cfg.poses is not None else None)
     foveated_mi.set_variant(args.variant)
     from .sequence import run_sequence
     run_sequence(cfg, out_dir=args.out, compare_full=args.compare_full,
@@ -194,6 +231,62 @@ def cmd_study(args: argparse.Namespace) -> int:
     return 1 if result.failed else 0
 
 
+def cmd_view(args: argparse.Namespace) -> int:
+    """Check everything, load the scene (a failure: one line, exit 2, nothing served), then
+    serve the live view until Ctrl-C."""
+    import importlib.util
+    from .live.protocol import SPP_MAX
+    from .live.server import check_bind
+    from .options import validate_options
+    from .validate import check_int, check_range
+
+    options = {k: getattr(args, k) for k in ("preset", "ray_budget", "denoiser")
+               if getattr(args, k) is not None}
+    validate_options(options)
+    check_int("--spp", args.spp, 1, SPP_MAX)
+    check_int("--size W", args.size[0], 1, 16384)
+    check_int("--size H", args.size[1], 1, 16384)
+    check_int("--port", args.port, 0, 65535)
+    check_int("--jpeg-quality", args.jpeg_quality, 1, 100)
+    check_range("--max-fps", args.max_fps, 0.0, 1000.0)
+    max_depth = None if args.max_depth is None else check_int("--max-depth", args.max_depth, -1)
+    check_bind(args.host, args.allow_remote)
+    if args.gaze_csv is not None:
+        from .paths import GazeCSV
+        from .validate import ParameterError
+        if not os.path.isfile(args.gaze_csv):
+            raise ParameterError("--gaze-csv", args.gaze_csv, "an existing CSV file of t,x,y "
+                                 "lines")
+        GazeCSV(args.gaze_csv, relative=True, name="--gaze-csv")
+    if importlib.util.find_spec("aiohttp") is None:
+        sys.stderr.write("foveated-mi: error: the live view needs aiohttp: "
+                         "pip install -e '.[view]' (from a clone)\n")
+        return 1
+    import foveated_mi
+    foveated_mi.set_variant(args.variant)
+    from .live.server import LiveView
+    nested = None if max_depth is None else {"type": "path", "max_depth": max_depth}
+    view = LiveView(args.scene, size=tuple(args.size), spp=args.spp, options=options,
+                    host=args.host, port=args.port, token=args.token or args.allow_remote,
+                    allow_remote=args.allow_remote, integrator=nested,
+                    record_dir=args.record_dir, gaze_csv=args.gaze_csv,
+                    jpeg_quality=args.jpeg_quality, max_fps=args.max_fps)
+    print(f"foveated-mi view: {args.scene} at {view.url}  (Ctrl-C stops)", flush=True)
+    import signal
+
+    def _terminate(signum, frame):      # SIGTERM stops as Ctrl-C does
+        raise KeyboardInterrupt
+    signal.signal(signal.SIGTERM, _terminate)
+    try:
+        view.wait()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        view.stop()
+    print(f"foveated-mi view: stopped after {view.renderer.frames_rendered} frames", flush=True)
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from .validate import ParameterError
@@ -202,6 +295,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return cmd_render(args)
         if args.command == "study":
             return cmd_study(args)
+        if args.command == "view":
+            return cmd_view(args)
         if args.command == "demo":
             from .demo import run_demo
             return run_demo(args.out, size=tuple(args.size) if args.size else None,

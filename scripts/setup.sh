@@ -37,12 +37,26 @@ elif ! LLVM=$(find_llvm); then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
     echo "foveated_mi setup: installing libllvm19 (Dr.Jit needs LLVM >= 16)"
     DEBIAN_FRONTEND=noninteractive apt-get update -qq
+    APT_UPDATED=1
     DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libllvm19 >/dev/null
     LLVM=$(find_llvm) || { echo "foveated_mi setup: libllvm19 installed but libLLVM.so.19 not found" >&2; exit 1; }
   else
     echo "foveated_mi setup: Dr.Jit needs LLVM >= 16; install it (Debian/Ubuntu: sudo apt-get install libllvm19) or set DRJIT_LIBLLVM_PATH." >&2
     exit 1
   fi
+fi
+
+# The live view's browser tests drive Debian's chromium through chromedriver (selenium).
+# Optional: without them those tests skip, saying why.
+if [ -x /usr/bin/chromium ] && [ -x /usr/bin/chromedriver ]; then
+  :
+elif [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+  echo "foveated_mi setup: installing chromium and chromium-driver (the live view's browser tests)"
+  { [ -n "${APT_UPDATED:-}" ] || DEBIAN_FRONTEND=noninteractive apt-get update -qq; } &&
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver >/dev/null 2>&1 ||
+    echo "foveated_mi setup: chromium could not be installed; the live view's browser tests will skip" >&2
+else
+  echo "foveated_mi setup: no chromium/chromedriver and not root: the live view's browser tests will skip (sudo apt-get install chromium chromium-driver)"
 fi
 
 if [ ! -x "$VENV/bin/python" ]; then
