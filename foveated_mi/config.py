@@ -25,6 +25,9 @@ Layout (every key optional except ``scene``)::
     type = "fixed"                # fixed (x, y) | keyframes (keyframes, interpolation) |
     x = 0.5                       # saccades (targets, dwell, duration, loop) |
     y = 0.5                       # csv (path relative to this file, interpolation, relative)
+    [poses]                       # instead of [camera] and [gaze]: a pose per frame, as the
+    path = "walk.csv"             # live view records them (foveated_mi.live.poses); frames
+                                  # defaults to its row count (at most that)
     [output]
     dir = "out/seq"               # relative to the working directory; default out/<stem>
     video = "mp4"                 # mp4 | gif | none
@@ -67,7 +70,7 @@ FOVEATED_KEYS: dict[str, tuple[type, ...]] = {
     name: opt.toml_types() for name, opt in SCHEMA.items() if opt.kind != "point"}
 
 _TOP_KEYS = ("scene", "description", "frames", "fps", "size", "spp", "seed", "scene_params",
-             "integrator", "foveated", "camera", "gaze", "output")
+             "integrator", "foveated", "camera", "gaze", "poses", "output")
 
 
 @dataclass(frozen=True)
@@ -96,6 +99,7 @@ class SequenceConfig:
     output: OutputConfig = field(default_factory=lambda: OutputConfig(dir="out/sequence"))
     description: str = ""
     source: str | None = None               # the TOML file
+    poses: Any = None                       # a PoseTrack: camera, gaze and cut per frame
 
     @property
     def width(self) -> int:
@@ -107,17 +111,25 @@ class SequenceConfig:
 
     def time(self, index: int) -> float:
         """Time in seconds of frame ``index``."""
+        if self.poses is not None:
+            return self.poses.time(index)
         return index / self.fps
 
     def camera_at(self, index: int) -> dict | None:
         """Camera dict of frame ``index`` (None when the scene's own camera is used)."""
+        if self.poses is not None:
+            return self.poses.camera(index)
         return None if self.camera is None else self.camera.at(self.time(index))
 
     def gaze_at(self, index: int) -> tuple[float, float]:
+        if self.poses is not None:
+            return self.poses.gaze(index)
         return self.gaze.at(self.time(index))
 
     def cut_before(self, index: int) -> bool:
         """Whether the camera cuts between frame ``index - 1`` and frame ``index``."""
+        if self.poses is not None:
+            return self.poses.cut_before(index)
         if self.camera is None or index <= 0:
             return False
         return self.camera.cut_between(self.time(index - 1), self.time(index))
@@ -166,7 +178,9 @@ def parse_config(data: dict, *, base_dir: str = ".", source: str = "<config>",
                             + " or an existing XML file (relative to the config file)")
         scene = os.path.abspath(xml)
 
-    frames = ctx.integer("frames", data.get("frames", 1), 1)
+    poses = _poses(ctx, data, base_dir)
+    frames = ctx.integer("frames", data.get("frames", 1 if poses is None else len(poses)), 1,
+                         None if poses is None else len(poses))
     fps = ctx.number("fps", data.get("fps", 30.0), 0.0, lo_open=True)
     size = data.get("size", [256, 256])
     if isinstance(size, int) and not isinstance(size, bool):
@@ -195,7 +209,7 @@ def parse_config(data: dict, *, base_dir: str = ".", source: str = "<config>",
     return SequenceConfig(scene=scene, frames=frames, fps=fps, size=size, spp=spp, seed=seed,
                           scene_params=scene_params, integrator=integrator, foveated=foveated,
                           camera=camera, gaze=gaze, output=output, description=description,
-                          source=source)
+                          source=source, poses=poses)
 
 
 def _foveated(ctx: TableContext, table: Any) -> dict:
@@ -245,6 +259,26 @@ def _camera(ctx: TableContext, table: Any, scene: str,
                           cut_threshold=cut_threshold, name="camera")
     except ParameterError as e:
         raise ctx.rename(e, "camera") from None
+
+
+def _poses(ctx: TableContext, data: dict, base_dir: str):
+    """The ``[poses]`` table's pose file (:class:`foveated_mi.live.poses.PoseTrack`), or None;
+    it replaces ``[camera]`` and ``[gaze]``."""
+    if "poses" not in data:
+        return None
+    table = ctx.table("poses", data["poses"])
+    ctx.known("poses", table, ("path",))
+    for other in ("camera", "gaze"):
+        if other in data:
+            raise ctx.error(other, data[other], "no [camera] or [gaze] beside [poses] (the "
+                            "pose file gives every frame's camera and gaze)")
+    path = ctx.string("poses.path", table.get("path"))
+    full = path if os.path.isabs(path) else os.path.join(base_dir, path)
+    if not os.path.isfile(full):
+        raise ctx.error("poses.path", path, "an existing CSV file of per-frame poses "
+                        "(relative to the config file)")
+    from .live.poses import PoseTrack
+    return PoseTrack.read(full, name=path)   # errors name the file and line
 
 
 def _gaze(ctx: TableContext, table: Any, base_dir: str) -> GazePath:

@@ -4,8 +4,10 @@ Per frame the runner moves the camera (:func:`foveated_mi.scenes.apply_camera`, 
 no kernel is recompiled), sets the gaze, renders with the history of the previous frames,
 writes ``frame_NNNN.exr`` / ``.png`` atomically and appends one JSON line to
 ``stats.jsonl``. A camera cut in the config resets the history, so the frame after a cut is
-exactly a fresh first frame. At the end (or on Ctrl-C, with the frames done so far) it
-writes ``sequence.mp4`` or ``sequence.gif``.
+exactly a fresh first frame. A config with ``[poses]`` (a walk-through the live view
+recorded) gives every frame's camera, gaze and cut instead of paths. Each stats line holds
+the frame's gaze and, where the config moves the camera, its camera. At the end (or on Ctrl-C, with the frames done so far) it writes
+``sequence.mp4`` or ``sequence.gif``.
 """
 from __future__ import annotations
 
@@ -111,6 +113,8 @@ def _render_frame(cfg: SequenceConfig, i: int, scene, fr, out_dir: str, compare_
     res = fr.render_frame(seed=cfg.seed, compare_full=compare_full)
     stats = {"frame": i, "time_s": cfg.time(i), "gaze": list(integ.gaze),
              **{k: v for k, v in res.stats.items() if k not in ("frame", "gaze")}}
+    if cam is not None:
+        stats["camera"] = cam
     stats["wall_ms"] = (time.perf_counter() - t0) * 1e3
     name = os.path.join(out_dir, f"frame_{i:04d}")
     if cfg.output.exr:
