@@ -166,3 +166,17 @@ def test_horizontal_fov_is_the_sensors(axis):
     expect = fov if axis == "x" else 2 * math.degrees(math.atan(math.tan(math.radians(fov / 2))
                                                                  * w / h))
     assert abs(viewer.horizontal_fov(_sensor(fov, axis, w, h)) - expect) <= _angle_error_deg()
+
+
+@pytest.mark.parametrize("sigma_p", [0.5, 1.0])
+def test_the_acuity_law_fills_its_untraced_pixels_whatever_sigma_p(sigma_p):
+    # sigma_p belongs to Eq. 1 alone: at 1 it traces every pixel there, but the acuity law
+    # traces its budget whatever it says, so its frame must still be reconstructed.
+    scene = _scene()
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="paper", history=False,
+                               sampling_law="acuity", ray_budget=0.2, sigma_p=sigma_p,
+                               atrous_iterations=0)
+    image = np.array(mi.render(scene, integrator=integ, seed=3))
+    assert integ.stats["ray_fraction"] < 0.5
+    # Sky and floor are lit everywhere: no pixel of a reconstructed frame is black.
+    assert np.count_nonzero(image.max(axis=-1) <= 0.0) == 0

@@ -167,7 +167,9 @@ class DenoiseSettings:
 class ReconstructionSettings:
     """The reconstruction pass (:mod:`.reconstruction`, §3.4) and its method's parameters."""
     method: str                #: one of :data:`~foveated_mi.reconstruct.RECONSTRUCTIONS`
-    sigma_p: float             #: 1 traces every pixel: the paper's methods are the identity
+    #: the sampling law traces every pixel (``kwon`` at ``sigma_p = 1``): the paper's methods
+    #: are then the identity
+    every_pixel: bool
     jfa: str                   #: the Jump Flooding variant
     max_radius: int            #: the interpolation's largest radius
     #: the method's keyword parameters, each from the option its registration names
@@ -228,12 +230,16 @@ def reconstruction_settings(o: dict[str, Any]) -> ReconstructionSettings:
     Returns
     -------
     settings : ReconstructionSettings
-        The method, ``sigma_p``, ``jfa``, ``max_radius``, the method's keyword parameters
+        The method, whether every pixel is traced, ``jfa``, ``max_radius``, the method's
+        keyword parameters
         (lists as tuples) and the samples it averages per pixel (None where it declares none).
     """
     from ..reconstruct import RECONSTRUCTIONS
     method = RECONSTRUCTIONS[o["reconstruction"]]
     params = tuple((kw, _frozen(o[name])) for kw, name in method.options.items())
-    return ReconstructionSettings(o["reconstruction"], float(o["sigma_p"]), o["jfa"],
+    # Only Eq. 1's law reads sigma_p: at 1 it traces every pixel (in film units or degrees);
+    # the acuity and polar laws trace their budget whatever sigma_p says.
+    every_pixel = o["sampling_law"] == "kwon" and float(o["sigma_p"]) >= 1.0
+    return ReconstructionSettings(o["reconstruction"], every_pixel, o["jfa"],
                                   int(o["max_radius"]), params,
                                   None if method.averages is None else o[method.averages])
