@@ -19,7 +19,7 @@ demo: $(STAMP)
 # its module fixtures and the kernels they compile.
 XDIST  = -n auto --maxprocesses 4 --dist loadfile
 
-test: $(STAMP)            # the fast tier (< 4 minutes on 2 cores with a cold kernel cache)
+test: $(STAMP)            # the fast tier (times: docs/results.md#the-test-suite)
 	$(RUN) $(PY) -m pytest -q $(XDIST) --durations=15
 
 test-all: $(STAMP)        # everything, the slow checks included (before each release)
