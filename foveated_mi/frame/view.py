@@ -57,21 +57,6 @@ class View:
     def gaze(self, value) -> None:
         self._gaze = None if value is None else check_point2(f"views[{self.index}].gaze", value)
 
-    def options(self, o: dict[str, Any]) -> dict[str, Any]:
-        """The frame's options as this view reads them: its own gaze where it has one.
-
-        Parameters
-        ----------
-        o : dict
-            The integrator's validated options.
-
-        Returns
-        -------
-        options : dict
-            ``o``, with ``gaze`` replaced by this view's own where it has one.
-        """
-        return o if self._gaze is None else {**o, "gaze": self._gaze}
-
     @property
     def primal(self):
         """The last primal frame (:class:`~.gradient.PrimalFrame`), or None."""

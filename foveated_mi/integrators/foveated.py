@@ -186,13 +186,18 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             # mi.render(scene, params) with parameters that need gradients: 'auto' becomes
             # the exact preset before this primal frame, which the gradient pass reuses.
             self._prepare_gradients()
-        o, timer = view.options(self._options), StageTimer(self._options["timing"])
+        o, timer = self._view_options(view), StageTimer(self._options["timing"])
         # The graph is kept when mi.render will differentiate the frame.
         record = state.differentiated and gradient_refusal(self._given, o) is None
         frame = self._frame(scene, sensor, seed, spp, state, o, record, timer)
         stats = {k: (list(v) if k == "gaze" else v) for k, v in o.items() if k != "timing"}
         # Plan, trace, form, commit (foveated_mi.frame.pipeline).
         return _pipeline.primal_frame(view, self._passes(), frame, self._settings, timer, stats)
+
+    def _view_options(self, view) -> dict[str, Any]:
+        """The options as ``view`` reads them: its own gaze, where it has one."""
+        o = self._options
+        return o if view.gaze is None else {**o, "gaze": view.gaze}
 
     @staticmethod
     def _compile(o: dict[str, Any]) -> FrameSettings:
@@ -260,7 +265,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         if p is not None and p.scene_id == id(scene) and p.plan.sensor is sensor:
             return p
         frame = self._frame(scene, sensor, seed, spp, scene_state(scene, sensor),
-                            view.options(self._options), False, StageTimer(False))
+                            self._view_options(view), False, StageTimer(False))
         return _pipeline.uncommitted_frame(view, self._passes(), frame, self._settings)
 
     # -- results: the view rendered last (``views[i]`` holds each view's) --------------------
