@@ -660,17 +660,70 @@ def non_differentiable() -> dict[str, tuple[Callable[[dict], bool], str]]:
         options.get(o.name, o.default)), o.gradient) for o in opts}
 
 
-def _declare_non_differentiable() -> None:
-    """Declare the schema's rules (:func:`non_differentiable`) to the gradient pass, which
-    refuses a configuration by them (:func:`foveated_mi.frame.adjoint.check_differentiable`).
-    The options sit above the frame's passes: they hand the rules down, as a denoiser
-    registers itself, and the frame never imports the options."""
-    from .frame import adjoint
-    for name, (predicate, allowed) in non_differentiable().items():
-        adjoint.register_non_differentiable(name, predicate, allowed)
+#: option -> (predicate on the validated options, what a differentiable run needs), in
+#: registration order: the schema's rules (:func:`non_differentiable`: ``tonemap_samples``,
+#: and a denoiser registered with ``differentiable=False``), then any registered after.
+NON_DIFFERENTIABLE: dict[str, tuple[Callable[[dict], bool], str]] = dict(non_differentiable())
 
 
-_declare_non_differentiable()
+def register_non_differentiable(option: str, predicate: Callable[[dict], bool],
+                                allowed: str) -> None:
+    """Declare that options for which ``predicate(options)`` holds make a frame
+    non-differentiable, e.g. ``register_non_differentiable("exposure", lambda o:
+    o["exposure"] > 3, "<= 3 for gradients")``. The product's own rules live in the option
+    schema.
+
+    Parameters
+    ----------
+    option : str
+        The option named in the refusal (a later registration under the same name replaces it).
+    predicate : callable
+        ``predicate(options) -> bool`` on the validated options: True when the frame cannot be
+        differentiated.
+    allowed : str
+        What a differentiable run needs, quoted in the error.
+    """
+    NON_DIFFERENTIABLE[option] = (predicate, allowed)
+
+
+def refusal(options: dict[str, Any]) -> ParameterError | None:
+    """The one-line error for the first option that makes the frame non-differentiable, or
+    None when nothing does.
+
+    Parameters
+    ----------
+    options : dict
+        The validated options, as the registered predicates read them.
+
+    Returns
+    -------
+    error : ParameterError or None
+        The error for the first registered rule whose predicate holds, in registration order;
+        None when no rule does.
+    """
+    for name, (predicate, allowed) in NON_DIFFERENTIABLE.items():
+        if predicate(options):
+            return ParameterError(name, options.get(name), allowed)
+    return None
+
+
+def check_differentiable(options: dict[str, Any]) -> None:
+    """Raise :func:`refusal`'s error, if any.
+
+    Parameters
+    ----------
+    options : dict
+        The validated options.
+
+    Raises
+    ------
+    ParameterError
+        When an option makes the frame non-differentiable.
+    """
+    error = refusal(options)
+    if error is not None:
+        raise error
+
 
 
 # -- docs -----------------------------------------------------------------------------------
@@ -752,7 +805,6 @@ def gradient_refusal(given: dict[str, Any], options: dict[str, Any]) -> Paramete
     error : ParameterError or None
         The one-line error to raise (None: it would be the gradient).
     """
-    from .frame.adjoint import refusal
     error = refusal(options)
     if error is None or error.name != "denoiser":
         return error

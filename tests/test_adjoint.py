@@ -7,7 +7,8 @@ import pytest
 
 import tolerances
 from foveated_mi.frame import reproject
-from foveated_mi.frame.adjoint import (NON_DIFFERENTIABLE, check_differentiable, integrator_kind,
+from foveated_mi.frame.adjoint import integrator_kind
+from foveated_mi.options import (NON_DIFFERENTIABLE, check_differentiable,
                                  register_non_differentiable)
 from foveated_mi.frame.pixel_filter import FilterSampler, SplatFootprint
 from foveated_mi.postprocess import atrous

@@ -118,7 +118,7 @@ def test_frames_that_need_tracing_are_traced():
 
 def test_the_replay_key_is_what_the_passes_declare():
     import dataclasses
-    from foveated_mi.frame.film import film_settings
+    from foveated_mi.configure import film_settings
     from foveated_mi.options import validate_options
     from foveated_mi.postprocess import DENOISERS
     from foveated_mi.reconstruct import RECONSTRUCTIONS

@@ -13,6 +13,7 @@ import pytest
 import gradcheck
 import tolerances
 from gradcheck import BALL_GAZE, OPTION_SETS, TRANSPOSE_ONLY, Probe, agreement
+from foveated_mi import options as _options
 from foveated_mi.frame import adjoint as _adjoint
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.validate import ParameterError
@@ -254,15 +255,15 @@ def test_grad_in_of_the_wrong_shape_is_refused_in_one_line():
 
 def test_registered_non_differentiable_stage_stops_the_gradient_pass():
     sc = gradcheck.scene("prb")
-    _adjoint.register_non_differentiable("exposure", lambda o: o["exposure"] > 3,
-                                         "<= 3 for gradients (test predicate)")
+    _options.register_non_differentiable("exposure", lambda o: o["exposure"] > 3,
+                                          "<= 3 for gradients (test predicate)")
     try:
         sc.integrator().exposure = 4.0
         probe = Probe(sc, "albedo")
         with pytest.raises(ParameterError, match="exposure = 4.0 is invalid"):
             probe.reverse(0, 1)
     finally:
-        _adjoint.NON_DIFFERENTIABLE.pop("exposure")
+        _options.NON_DIFFERENTIABLE.pop("exposure")
 
 
 @pytest.mark.parametrize("pixel_filter,preset", [("importance", "paper"), ("splat", "paper"),

@@ -105,7 +105,7 @@ def _frame(denoiser, **options):
 @pytest.mark.parametrize("domain", ["radiance", "irradiance", "display"])
 def test_a_denoiser_gets_the_values_of_the_domain_it_declares(domain):
     from foveated_mi.frame.domain import to_display
-    from foveated_mi.frame.settings import domain_settings
+    from foveated_mi.configure import domain_settings
     seen = []
 
     def keep(ctx):

@@ -73,9 +73,10 @@ sample count, and a projective integrator's ``sppc``/``sppp``/``sppi`` apply as 
 are not differentiated: the adjoint is that of the unclamped estimator (Mitsuba's
 integrators have no clamp). What cannot be differentiated is declared in the option schema
 (:data:`foveated_mi.options.SCHEMA`: an option's ``differentiable`` predicate, a denoiser's
-registration), which hands its rules down at import with :func:`register_non_differentiable`
-(this module never imports the options); :func:`check_differentiable` then refuses the
-configuration in one line. A test may register a predicate of its own.
+registration), and :func:`foveated_mi.options.check_differentiable` refuses such a
+configuration in one line before a gradient pass runs (this module never reads the options).
+A test may register a predicate of its own
+(:func:`foveated_mi.options.register_non_differentiable`).
 """
 from __future__ import annotations
 
@@ -91,75 +92,6 @@ from . import shading as _shading
 from .pixel_filter import FilterSampler, SplatFootprint
 from .settings import TraceSettings
 from .traced_sensor import TracedSensors
-from ..validate import ParameterError
-
-# -- configurations that cannot be differentiated -------------------------------------------
-
-#: option -> (predicate on the validated options, what a differentiable run needs), in
-#: registration order. :mod:`foveated_mi.options` registers the schema's rules when it is
-#: imported (:func:`foveated_mi.options.non_differentiable`: ``tonemap_samples``, and a
-#: denoiser registered with ``differentiable=False``).
-NON_DIFFERENTIABLE: dict[str, tuple[Callable[[dict], bool], str]] = {}
-
-
-def register_non_differentiable(option: str, predicate: Callable[[dict], bool],
-                                allowed: str) -> None:
-    """Declare that options for which ``predicate(options)`` holds make a frame
-    non-differentiable, e.g. ``register_non_differentiable("exposure", lambda o:
-    o["exposure"] > 3, "<= 3 for gradients")``. The product's own rules live in the option
-    schema.
-
-    Parameters
-    ----------
-    option : str
-        The option named in the refusal (a later registration under the same name replaces it).
-    predicate : callable
-        ``predicate(options) -> bool`` on the validated options: True when the frame cannot be
-        differentiated.
-    allowed : str
-        What a differentiable run needs, quoted in the error.
-    """
-    NON_DIFFERENTIABLE[option] = (predicate, allowed)
-
-
-def refusal(options: dict[str, Any]) -> ParameterError | None:
-    """The one-line error for the first option that makes the frame non-differentiable, or
-    None when nothing does.
-
-    Parameters
-    ----------
-    options : dict
-        The validated options, as the registered predicates read them.
-
-    Returns
-    -------
-    error : ParameterError or None
-        The error for the first registered rule whose predicate holds, in registration order;
-        None when no rule does.
-    """
-    for name, (predicate, allowed) in NON_DIFFERENTIABLE.items():
-        if predicate(options):
-            return ParameterError(name, options.get(name), allowed)
-    return None
-
-
-def check_differentiable(options: dict[str, Any]) -> None:
-    """Raise :func:`refusal`'s error, if any.
-
-    Parameters
-    ----------
-    options : dict
-        The validated options.
-
-    Raises
-    ------
-    ParameterError
-        When an option makes the frame non-differentiable.
-    """
-    error = refusal(options)
-    if error is not None:
-        raise error
-
 
 # -- integrator kinds -----------------------------------------------------------------------
 

@@ -21,8 +21,7 @@ from . import domain
 from .post import post_pass
 from .reconstruction import reconstruction_pass
 from .settings import (DenoiseSettings, DomainSettings, ReconstructionSettings,
-                       SamplingSettings, denoise_settings, domain_settings,
-                       reconstruction_settings, sampling_settings)
+                       SamplingSettings)
 from .shading import ShadingBuffer
 
 @dataclass(frozen=True)
@@ -77,28 +76,6 @@ def jfa_bound(width: int, height: int, law: SamplingSettings,
     while b < gap:
         b *= 2
     return b
-
-
-def film_settings(width: int, height: int, o: dict[str, Any]) -> FilmSettings:
-    """The film formation's settings, compiled from validated options ``o``. The sampling
-    law enters only through the Jump Flooding bound (host scalars, no sync), so a moving
-    gaze rarely changes them.
-
-    Parameters
-    ----------
-    width, height : int
-        The film's size.
-    o : dict
-        The validated options, with the frame's gaze (``o["gaze"]``).
-
-    Returns
-    -------
-    settings : FilmSettings
-        The formation's settings (hashable: its recording's key).
-    """
-    return FilmSettings(float(o["max_history"]), domain_settings(o), reconstruction_settings(o),
-                        denoise_settings(o),
-                        jfa_bound(width, height, sampling_settings(o), o["gaze"]))
 
 
 def form_film(shading: ShadingBuffer, inp: FormationInput, s: FilmSettings,
@@ -173,5 +150,5 @@ def film_stats(buffers: dict[str, Any]) -> dict[str, Any]:
             "holes": dr.count(~buffers["shading_mask"])}
 
 
-register_formation("film", form_film, settings=film_settings, stats=film_stats,
+register_formation("film", form_film, stats=film_stats,
                    counted=("resampled", "shading_mask"))

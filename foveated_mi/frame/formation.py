@@ -3,11 +3,11 @@
 A *formation* turns a frame's sparse shading buffer into its image. It registers beside its
 code, as ``mi.register_integrator`` does::
 
-    register_formation("film", form_film, settings=film_settings)
+    register_formation("film", form_film, stats=film_stats)
 
 and is chosen by the option ``formation``. It is called as ``fn(shading, inp, settings,
-timer, grad_pass)`` (``inp``: :class:`FormationInput`; ``settings``: its own, which its
-registration compiles from the options, :class:`FormationSettings`) and returns a
+timer, grad_pass)`` (``inp``: :class:`FormationInput`; ``settings``: its own, compiled once from the options
+by its reader, :func:`foveated_mi.configure.formation_settings`) and returns a
 :class:`Formed`: the image on the film, its named buffers on the formation's own grid
 (:class:`~foveated_mi.kernels.grid.Grid`, declared at registration), and the history the next
 frame reads. The integrator, the gradient pass (:mod:`foveated_mi.frame.adjoint`), the
@@ -40,12 +40,11 @@ import mitsuba as mi
 from ..kernels.grid import Grid
 from ..postprocess import DENOISERS
 from ..timing import StageTimer
-from ..validate import check_choice
 from . import reproject as _reproject
 from . import sampling as _sampling
 from ..kernels.buffers import GBuffer
 from .shading import ShadingBuffer
-from .space import SPACES, space_of
+from .space import space_of
 
 #: Recorded configurations kept by a :class:`FrozenFormation` (least recently used dropped).
 RECORDINGS = 8
@@ -82,12 +81,13 @@ class Formation(NamedTuple):
     """A registered formation (see :func:`register_formation`)."""
     fn: Callable[..., Formed]
     grid: Callable[[int, int, Any], Grid]
-    settings: Callable[[int, int, dict], Any]
+    #: ``reader(width, height, options)``; None: :mod:`foveated_mi.configure` reads it
+    settings: Callable[[int, int, dict], Any] | None
     stats: Callable[[dict], dict]
     counted: tuple[str, ...]
     on_film: tuple[str, ...]
     grids: Callable[[int, int, Any], dict]
-    space: Callable[[dict], str]
+    space: Callable[[dict], str] | None   #: ``reader(options)``; None: as ``settings``
 
 
 @dataclass(frozen=True)
@@ -135,7 +135,8 @@ def register_formation(name: str, fn: Callable[..., Formed], *,
         ``settings(width, height, o)``, its settings compiled from the validated options ``o``
         (and the frame's gaze, ``o["gaze"]``): a frozen, hashable value, all that ``fn``
         receives of the options and its recording's key, so it holds exactly what decides its
-        kernels (a value in it that changes every frame records again). Default: every option
+        kernels (a value in it that changes every frame records again). Default: the built-in
+        formation's reader in :mod:`foveated_mi.configure`, else every option
         (:class:`OptionValues`).
     stats : callable, optional
         ``stats(buffers)``, counters read from its buffers (device arrays, read when the stats
@@ -151,17 +152,13 @@ def register_formation(name: str, fn: Callable[..., Formed], *,
         plan's included (a formation whose plan keeps its G-buffer on its own samples).
     space : callable, optional
         ``space(o)``, the sample space it forms from (:data:`~.space.SPACES`): ``"film"`` (the
-        default), or ``"buffer"``, the foveal buffer's samples, which the plan then makes
-        instead of the film's pixels (:mod:`.space`).
+        default, or the built-in formation's reader), or ``"buffer"``, the foveal buffer's
+        samples, which the plan then makes instead of the film's pixels (:mod:`.space`).
     """
     FORMATIONS[name] = Formation(
         fn, grid if grid is not None else (lambda width, height, s: Grid.film(width, height)),
-        settings if settings is not None else
-        (lambda width, height, o: OptionValues(tuple(sorted(
-            (k, tuple(v) if isinstance(v, list) else v) for k, v in o.items())))),
-        stats if stats is not None else (lambda buffers: {}), tuple(counted), tuple(on_film),
-        grids if grids is not None else (lambda width, height, s: {}),
-        space if space is not None else (lambda o: "film"))
+        settings, stats if stats is not None else (lambda buffers: {}), tuple(counted),
+        tuple(on_film), grids if grids is not None else (lambda width, height, s: {}), space)
 
 
 def unregister_formation(name: str) -> None:
@@ -173,45 +170,6 @@ def unregister_formation(name: str) -> None:
         The formation's name; one not registered is ignored.
     """
     FORMATIONS.pop(name, None)
-
-
-def formation_settings(o: dict[str, Any], width: int, height: int) -> FormationSettings:
-    """The settings of the formation of validated options ``o`` on a ``width`` x ``height``
-    film (compiled by its registration's ``settings``).
-
-    Parameters
-    ----------
-    o : dict
-        The validated options (``o["formation"]`` names the formation).
-    width, height : int
-        The film's size.
-
-    Returns
-    -------
-    settings : FormationSettings
-        The formation's name and its own settings.
-    """
-    check_choice("formation", o["formation"], FORMATIONS)
-    entry = FORMATIONS[o["formation"]]
-    return FormationSettings(o["formation"], entry.settings(width, height, o))
-
-
-def formation_space(o: dict[str, Any]) -> str:
-    """The sample space the formation of validated options ``o`` forms from.
-
-    Parameters
-    ----------
-    o : dict
-        The validated options (``o["formation"]`` names the formation).
-
-    Returns
-    -------
-    space : str
-        One of :data:`~.space.SPACES`: ``'film'`` or ``'buffer'``.
-    """
-    check_choice("formation", o["formation"], FORMATIONS)
-    space = FORMATIONS[o["formation"]].space(o)
-    return check_choice("formation space", space, SPACES)
 
 
 def form(shading: ShadingBuffer, inp: FormationInput, fs: FormationSettings, timer: StageTimer,

@@ -59,8 +59,8 @@ from . import reproject as _reproject
 from .film import film_stats
 from .formation import FormationInput, Formed, register_formation
 from .post import runs
-from .settings import DenoiseSettings, DomainSettings, denoise_settings, domain_settings
-from .sampling import foveal_grid, fovea_radius, snapped_pixels
+from .settings import DenoiseSettings, DomainSettings
+from .sampling import snapped_pixels
 from .shading import ShadingBuffer
 
 #: Pixels over which the fovea's own values blend into the warped buffer at the disc's edge.
@@ -88,29 +88,6 @@ class FovealSettings:
     layout: _buffer_space.SampleLayout
     #: the buffer's grid (without the rings inside the disc in ``buffer`` space)
     grid: PolarGrid
-
-
-def foveal_settings(width: int, height: int, o: dict[str, Any]) -> FovealSettings:
-    """The foveal formation's settings, compiled from validated options ``o``.
-
-    Parameters
-    ----------
-    width, height : int
-        The film's size.
-    o : dict
-        The validated options (``theta``, ``ray_budget``, ``foveal_space``, ...).
-
-    Returns
-    -------
-    settings : FovealSettings
-        Its settings, with the samples' layout and the buffer's grid for this film.
-    """
-    lay = _buffer_space.layout(width, height, o["theta"], o["ray_budget"])
-    grid = lay.grid if o["foveal_space"] == "buffer" else foveal_grid(
-        width, height, float(o["ray_budget"]), fovea_radius(width, height, o["theta"]))
-    return FovealSettings(float(o["max_history"]), domain_settings(o), denoise_settings(o),
-                          o["foveal_upsampling"], o["foveal_space"], o["foveal_disc"], lay,
-                          grid)
 
 
 def foveal_buffer_grid(width: int, height: int, s: FovealSettings) -> PolarGrid:
@@ -441,6 +418,5 @@ def foveal_stats(buffers: dict[str, Any]) -> dict[str, Any]:
             "holes": dr.count(on & ~buffers["shading_mask"])}
 
 
-register_formation("foveal", form_foveal, grid=foveal_buffer_grid, settings=foveal_settings,
-                   stats=foveal_stats, counted=("resampled", "shading_mask"), on_film=ON_FILM,
-                   grids=foveal_grids, space=lambda o: o["foveal_space"])
+register_formation("foveal", form_foveal, grid=foveal_buffer_grid, stats=foveal_stats,
+                   counted=("resampled", "shading_mask"), on_film=ON_FILM, grids=foveal_grids)

@@ -1,24 +1,20 @@
 """The frame's settings: the validated options read once into typed values, a set per pass.
 
-As a Mitsuba plugin reads its properties once into typed attributes, the integrator reads its
-validated options (:func:`foveated_mi.options.validate_options`) once per change into
-:class:`FrameSettings`: frozen, hashable dataclasses, one per pass, each holding only what
-its pass reads. A pass takes its own settings, never the options. What changes from frame to
-frame (the gaze, the seed, the frame's index, the camera) is an input of the frame and never
-part of the settings: a moving gaze changes no settings, so it records and compiles nothing.
+As a Mitsuba plugin reads its properties once into typed attributes, the integrator compiles
+its validated options once per change into these frozen, hashable dataclasses
+(:mod:`foveated_mi.configure`), one per pass, each holding only what its pass reads. A pass
+takes its own settings, never the options. What changes from frame to frame (the gaze, the seed, the frame's index, the camera) is an input of the frame and never part of the
+settings: a moving gaze changes no settings, so it records and compiles nothing.
 
 The passes before the trace read :class:`PlanSettings` (:mod:`.plan`): the sampling law's
 (:class:`SamplingSettings`), the launch's (:class:`LaunchSettings`) and the history's
-(:class:`HistorySettings`). The trace pass reads :class:`TraceSettings` (:mod:`.trace`). The
-formations read the options as their registration's ``view`` declares them
-(:mod:`.formation`).
+(:class:`HistorySettings`). The trace pass reads :class:`TraceSettings` (:mod:`.trace`). Each
+formation reads its own settings (:mod:`.formation`), built of the shared parts below.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Any
-
-from ..postprocess import DENOISERS
 
 
 @dataclass(frozen=True)
@@ -84,60 +80,9 @@ class FrameSettings:
     trace: TraceSettings
 
 
-def sampling_settings(o: dict[str, Any]) -> SamplingSettings:
-    """The sampling law's settings of validated options ``o``.
-
-    Parameters
-    ----------
-    o : dict
-        The validated options.
-
-    Returns
-    -------
-    settings : SamplingSettings
-        The sampling law and the rays it forces.
-    """
-    return SamplingSettings(
-        law=o["sampling_law"], theta=float(o["theta"]), theta_deg=float(o["theta_deg"]),
-        sigma_p=float(o["sigma_p"]), ray_budget=float(o["ray_budget"]),
-        acuity_floor=float(o["acuity_floor"]), edge_threshold=float(o["edge_threshold"]),
-        edge_detector=o["edge_detector"], emission_edges=bool(o["emission_edges"]),
-        map_seed=int(o["map_seed"]))
-
-
-def frame_settings(o: dict[str, Any], space: str = "film") -> FrameSettings:
-    """The settings of validated options ``o`` (read once per change of the options).
-
-    Parameters
-    ----------
-    o : dict
-        The validated options.
-    space : str, optional
-        The sample space its formation declares (:func:`~.formation.formation_space`):
-        ``'film'`` or ``'buffer'``.
-
-    Returns
-    -------
-    settings : FrameSettings
-        The plan's and the trace pass's settings.
-    """
-    sampling = sampling_settings(o)
-    plan = PlanSettings(
-        sampling, LaunchSettings(o["reorder"], int(o["block_height"])),
-        HistorySettings(bool(o["history"]), o["reprojection"],
-                        float(o["reprojection_tolerance"])),
-        space=space,
-        materials=bool(o["demodulate"] or o["emission_edges"]
-                       or DENOISERS[o["denoiser"]].materials),
-        pixel_filter=o["pixel_filter"])
-    trace = TraceSettings(float(o["clamp"]), o["pixel_filter"], bool(o["tonemap_samples"]),
-                          o["tonemap"], float(o["exposure"]))
-    return FrameSettings(plan, trace)
-
-
 # -- the passes after the trace ----------------------------------------------------------------
-# A formation reads its own settings, which its registration compiles from the options
-# (:func:`~.formation.register_formation`'s ``settings``); these are the parts they share.
+# A formation reads its own settings (:func:`foveated_mi.configure.formation_settings`);
+# these are the parts they share.
 
 @dataclass(frozen=True)
 class DomainSettings:
@@ -175,71 +120,3 @@ class ReconstructionSettings:
     #: the method's keyword parameters, each from the option its registration names
     params: tuple[tuple[str, Any], ...]
     averages: float | None     #: samples it averages per pixel, where it declares a number
-
-
-def _frozen(v: Any) -> Any:
-    return tuple(v) if isinstance(v, list) else v
-
-
-def domain_settings(o: dict[str, Any]) -> DomainSettings:
-    """The domain settings of validated options ``o``.
-
-    Parameters
-    ----------
-    o : dict
-        The validated options.
-
-    Returns
-    -------
-    settings : DomainSettings
-        ``demodulate``, ``tonemap_samples``, ``tonemap``, ``exposure`` and ``clamp``.
-    """
-    return DomainSettings(bool(o["demodulate"]), bool(o["tonemap_samples"]), o["tonemap"],
-                          float(o["exposure"]), float(o["clamp"]))
-
-
-def denoise_settings(o: dict[str, Any]) -> DenoiseSettings:
-    """The denoiser of validated options ``o``, with the options it reads.
-
-    Parameters
-    ----------
-    o : dict
-        The validated options.
-
-    Returns
-    -------
-    settings : DenoiseSettings
-        The denoiser's name, the options its registration reads (lists as tuples), and whether
-        it is active for them.
-    """
-    entry = DENOISERS[o["denoiser"]]
-    params = {k: o[k] for k in entry.reads}
-    active = entry.active is None or bool(entry.active(params))
-    return DenoiseSettings(o["denoiser"], tuple((k, _frozen(v)) for k, v in params.items()),
-                           active)
-
-
-def reconstruction_settings(o: dict[str, Any]) -> ReconstructionSettings:
-    """The reconstruction method of validated options ``o``, with its parameters.
-
-    Parameters
-    ----------
-    o : dict
-        The validated options.
-
-    Returns
-    -------
-    settings : ReconstructionSettings
-        The method, whether every pixel is traced, ``jfa``, ``max_radius``, the method's
-        keyword parameters
-        (lists as tuples) and the samples it averages per pixel (None where it declares none).
-    """
-    from ..reconstruct import RECONSTRUCTIONS
-    method = RECONSTRUCTIONS[o["reconstruction"]]
-    params = tuple((kw, _frozen(o[name])) for kw, name in method.options.items())
-    # Only Eq. 1's law reads sigma_p: at 1 it traces every pixel (in film units or degrees);
-    # the acuity and polar laws trace their budget whatever sigma_p says.
-    every_pixel = o["sampling_law"] == "kwon" and float(o["sigma_p"]) >= 1.0
-    return ReconstructionSettings(o["reconstruction"], every_pixel, o["jfa"],
-                                  int(o["max_radius"]), params,
-                                  None if method.averages is None else o[method.averages])

@@ -54,12 +54,12 @@ from ..frame import gradient as _gradient
 from ..frame import pipeline as _pipeline
 from ..frame import trace as _trace
 from ..frame.adjoint import NestedAdjoint
-from ..frame.formation import (FrozenFormation, formation_settings, formation_space,
-                               replayable)
+from ..configure import formation_settings, frame_settings
+from ..frame.formation import FrozenFormation, replayable
 from ..frame.gbuffer import film_size
 from ..frame.reproject import History
 from ..frame.scene_state import scene_state
-from ..frame.settings import FrameSettings, frame_settings
+from ..frame.settings import FrameSettings
 from ..frame.shading import is_ad_integrator
 from ..frame.view import Views
 from ..options import (SCHEMA, from_properties, gradient_refusal, parameter_table,
@@ -202,7 +202,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
     @staticmethod
     def _compile(o: dict[str, Any]) -> FrameSettings:
         """Each pass's settings, read once per change of the options."""
-        return frame_settings(o, formation_space(o))
+        return frame_settings(o)
 
     def _passes(self) -> _pipeline.Passes:
         return _pipeline.Passes(self.nested, self._frozen_trace, self._frozen)

@@ -1,0 +1,261 @@
+"""The validated options compiled once into the frame's typed settings.
+
+As a Mitsuba plugin reads its properties once into typed attributes, the integrator compiles
+its validated options (:func:`foveated_mi.options.validate_options`) here, once per change,
+into the frozen settings of :mod:`foveated_mi.frame.settings`: one set per pass, each holding
+only what its pass reads. This module is the only place that reads the options by name for
+the frame: no pass in :mod:`foveated_mi.frame` takes them.
+
+A formation's own settings are compiled by its *reader*, ``reader(width, height, o)``: the
+built-in formations' readers are below (:data:`READERS`); a formation registered elsewhere
+passes its own to :func:`~foveated_mi.frame.formation.register_formation`.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable
+
+from .frame import buffer_space as _buffer_space
+from .frame.film import FilmSettings, jfa_bound
+from .frame.formation import FORMATIONS, FormationSettings, OptionValues
+from .frame.foveal import FovealSettings
+from .frame.sampling import foveal_grid, fovea_radius
+from .frame.settings import (DenoiseSettings, DomainSettings, FrameSettings, HistorySettings,
+                             LaunchSettings, PlanSettings, ReconstructionSettings,
+                             SamplingSettings, TraceSettings)
+from .frame.space import SPACES
+from .postprocess import DENOISERS
+from .validate import check_choice
+
+Options = dict[str, Any]
+
+
+def _frozen(v: Any) -> Any:
+    return tuple(v) if isinstance(v, list) else v
+
+
+# -- the passes before the trace, and the trace ------------------------------------------------
+
+def sampling_settings(o: Options) -> SamplingSettings:
+    """The sampling law's settings of validated options ``o``.
+
+    Parameters
+    ----------
+    o : dict
+        The validated options.
+
+    Returns
+    -------
+    settings : SamplingSettings
+        The sampling law and the rays it forces.
+    """
+    return SamplingSettings(
+        law=o["sampling_law"], theta=float(o["theta"]), theta_deg=float(o["theta_deg"]),
+        sigma_p=float(o["sigma_p"]), ray_budget=float(o["ray_budget"]),
+        acuity_floor=float(o["acuity_floor"]), edge_threshold=float(o["edge_threshold"]),
+        edge_detector=o["edge_detector"], emission_edges=bool(o["emission_edges"]),
+        map_seed=int(o["map_seed"]))
+
+
+def frame_settings(o: Options) -> FrameSettings:
+    """The plan's and the trace pass's settings of validated options ``o``.
+
+    Parameters
+    ----------
+    o : dict
+        The validated options.
+
+    Returns
+    -------
+    settings : FrameSettings
+        The plan's settings (with the sample space the formation declares,
+        :func:`formation_space`) and the trace pass's.
+    """
+    plan = PlanSettings(
+        sampling_settings(o), LaunchSettings(o["reorder"], int(o["block_height"])),
+        HistorySettings(bool(o["history"]), o["reprojection"],
+                        float(o["reprojection_tolerance"])),
+        space=formation_space(o),
+        materials=bool(o["demodulate"] or o["emission_edges"]
+                       or DENOISERS[o["denoiser"]].materials),
+        pixel_filter=o["pixel_filter"])
+    trace = TraceSettings(float(o["clamp"]), o["pixel_filter"], bool(o["tonemap_samples"]),
+                          o["tonemap"], float(o["exposure"]))
+    return FrameSettings(plan, trace)
+
+
+# -- the parts the formations share ------------------------------------------------------------
+
+def domain_settings(o: Options) -> DomainSettings:
+    """The domain settings of validated options ``o``.
+
+    Parameters
+    ----------
+    o : dict
+        The validated options.
+
+    Returns
+    -------
+    settings : DomainSettings
+        ``demodulate``, ``tonemap_samples``, ``tonemap``, ``exposure`` and ``clamp``.
+    """
+    return DomainSettings(bool(o["demodulate"]), bool(o["tonemap_samples"]), o["tonemap"],
+                          float(o["exposure"]), float(o["clamp"]))
+
+
+def denoise_settings(o: Options) -> DenoiseSettings:
+    """The denoiser of validated options ``o``, with the options it reads.
+
+    Parameters
+    ----------
+    o : dict
+        The validated options.
+
+    Returns
+    -------
+    settings : DenoiseSettings
+        The denoiser's name, the options its registration reads (lists as tuples), and whether
+        it is active for them.
+    """
+    entry = DENOISERS[o["denoiser"]]
+    params = {k: o[k] for k in entry.reads}
+    active = entry.active is None or bool(entry.active(params))
+    return DenoiseSettings(o["denoiser"], tuple((k, _frozen(v)) for k, v in params.items()),
+                           active)
+
+
+def reconstruction_settings(o: Options) -> ReconstructionSettings:
+    """The reconstruction method of validated options ``o``, with its parameters.
+
+    Parameters
+    ----------
+    o : dict
+        The validated options.
+
+    Returns
+    -------
+    settings : ReconstructionSettings
+        The method, whether every pixel is traced, ``jfa``, ``max_radius``, the method's
+        keyword parameters (lists as tuples) and the samples it averages per pixel (None where
+        it declares none).
+    """
+    from .reconstruct import RECONSTRUCTIONS
+    method = RECONSTRUCTIONS[o["reconstruction"]]
+    params = tuple((kw, _frozen(o[name])) for kw, name in method.options.items())
+    # Only Eq. 1's law reads sigma_p: at 1 it traces every pixel (in film units or degrees);
+    # the acuity and polar laws trace their budget whatever sigma_p says.
+    every_pixel = o["sampling_law"] == "kwon" and float(o["sigma_p"]) >= 1.0
+    return ReconstructionSettings(o["reconstruction"], every_pixel, o["jfa"],
+                                  int(o["max_radius"]), params,
+                                  None if method.averages is None else o[method.averages])
+
+
+# -- the built-in formations' readers ----------------------------------------------------------
+
+def film_settings(width: int, height: int, o: Options) -> FilmSettings:
+    """The film formation's settings. The sampling law enters only through the Jump Flooding
+    bound (host scalars, no sync), so a moving gaze rarely changes them.
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size.
+    o : dict
+        The validated options, with the frame's gaze (``o["gaze"]``).
+
+    Returns
+    -------
+    settings : FilmSettings
+        The formation's settings (hashable: its recording's key).
+    """
+    return FilmSettings(float(o["max_history"]), domain_settings(o), reconstruction_settings(o),
+                        denoise_settings(o),
+                        jfa_bound(width, height, sampling_settings(o), o["gaze"]))
+
+
+def foveal_settings(width: int, height: int, o: Options) -> FovealSettings:
+    """The foveal formation's settings.
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size.
+    o : dict
+        The validated options (``theta``, ``ray_budget``, ``foveal_space``, ...).
+
+    Returns
+    -------
+    settings : FovealSettings
+        Its settings, with the samples' layout and the buffer's grid for this film.
+    """
+    lay = _buffer_space.layout(width, height, o["theta"], o["ray_budget"])
+    grid = lay.grid if o["foveal_space"] == "buffer" else foveal_grid(
+        width, height, float(o["ray_budget"]), fovea_radius(width, height, o["theta"]))
+    return FovealSettings(float(o["max_history"]), domain_settings(o), denoise_settings(o),
+                          o["foveal_upsampling"], o["foveal_space"], o["foveal_disc"], lay,
+                          grid)
+
+
+def every_option(width: int, height: int, o: Options) -> OptionValues:
+    """The settings of a formation that declares no reader: every option, read by name.
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size (unused).
+    o : dict
+        The validated options.
+
+    Returns
+    -------
+    settings : OptionValues
+        Every option (lists as tuples), sorted by name.
+    """
+    return OptionValues(tuple(sorted((k, _frozen(v)) for k, v in o.items())))
+
+
+#: Built-in formation -> (its settings reader, its sample-space reader; None: the film's).
+READERS: dict[str, tuple[Callable[[int, int, Options], Any],
+                         Callable[[Options], str] | None]] = {
+    "film": (film_settings, None),
+    "foveal": (foveal_settings, lambda o: o["foveal_space"]),
+}
+
+
+def formation_settings(o: Options, width: int, height: int) -> FormationSettings:
+    """The settings of the formation of validated options ``o`` on a ``width`` x ``height``
+    film.
+
+    Parameters
+    ----------
+    o : dict
+        The validated options (``o["formation"]`` names the formation).
+    width, height : int
+        The film's size.
+
+    Returns
+    -------
+    settings : FormationSettings
+        The formation's name and its own settings, by its registration's reader, else the
+        built-in one (:data:`READERS`), else every option.
+    """
+    name = check_choice("formation", o["formation"], FORMATIONS)
+    reader = FORMATIONS[name].settings or READERS.get(name, (every_option,))[0]
+    return FormationSettings(name, reader(width, height, o))
+
+
+def formation_space(o: Options) -> str:
+    """The sample space the formation of validated options ``o`` forms from.
+
+    Parameters
+    ----------
+    o : dict
+        The validated options (``o["formation"]`` names the formation).
+
+    Returns
+    -------
+    space : str
+        One of :data:`~foveated_mi.frame.space.SPACES`: ``'film'`` or ``'buffer'``.
+    """
+    name = check_choice("formation", o["formation"], FORMATIONS)
+    reader = FORMATIONS[name].space or READERS.get(name, (None, None))[1]
+    return check_choice("formation space", "film" if reader is None else reader(o), SPACES)

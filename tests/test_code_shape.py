@@ -1,0 +1,124 @@
+"""The shape of the code that later work keeps: no import cycle, no function over 60 lines, an
+integrator that only orchestrates (under 300 lines), no pass in ``frame/`` that takes the
+options, and a README of at most 350 lines (figures live in docs/results.md).
+
+Each rule is a plain function of source text, checked first on a small case that breaks it,
+so a rule that stopped seeing anything would fail here."""
+from __future__ import annotations
+
+import ast
+import collections
+import pathlib
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "foveated_mi"
+OPTION_NAMES = ("o", "options", "opts")
+
+
+def _modules(root: pathlib.Path) -> dict[str, pathlib.Path]:
+    mods = {}
+    for p in root.rglob("*.py"):
+        name = ".".join(p.relative_to(root.parent).with_suffix("").parts)
+        mods[name[:-len(".__init__")] if name.endswith(".__init__") else name] = p
+    return mods
+
+
+def import_cycles(sources: dict[str, tuple[str, bool]]) -> list[list[str]]:
+    """Cycles among module-level imports (a function-level import is deferred, so it cannot
+    close one). ``sources``: module name -> (its text, whether it is a package's __init__)."""
+    graph = collections.defaultdict(set)
+    for name, (text, is_pkg) in sources.items():
+        pkg = name if is_pkg else name.rpartition(".")[0]
+        for node in ast.parse(text).body:
+            targets = []
+            if isinstance(node, ast.ImportFrom):
+                base = pkg.split(".")
+                if node.level > 1:
+                    base = base[:len(base) - (node.level - 1)]
+                mod = (".".join(base + ([node.module] if node.module else []))
+                       if node.level else node.module or "")
+                targets = [f"{mod}.{a.name}" if f"{mod}.{a.name}" in sources else mod
+                           for a in node.names]
+            elif isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            graph[name].update(t for t in targets if t in sources and t != name)
+    colour, stack, found = {}, [], []
+
+    def visit(u):
+        colour[u] = 1
+        stack.append(u)
+        for v in sorted(graph[u]):
+            if colour.get(v) == 1:
+                found.append(stack[stack.index(v):] + [v])
+            elif v not in colour:
+                visit(v)
+        stack.pop()
+        colour[u] = 2
+
+    for u in sorted(sources):
+        if u not in colour:
+            visit(u)
+    return found
+
+
+def long_functions(text: str, limit: int = 60) -> list[tuple[str, int]]:
+    """Functions (methods included) longer than ``limit`` lines, with their lengths."""
+    return [(n.name, n.end_lineno - n.lineno + 1) for n in ast.walk(ast.parse(text))
+            if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))
+            and n.end_lineno - n.lineno + 1 > limit]
+
+
+def option_takers(text: str) -> list[str]:
+    """Functions and lambdas with a parameter that names the options (``o``, ``options``)."""
+    found = []
+    for n in ast.walk(ast.parse(text)):
+        if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+            a = n.args
+            names = {x.arg for x in a.posonlyargs + a.args + a.kwonlyargs}
+            if names & set(OPTION_NAMES):
+                found.append(getattr(n, "name", f"lambda at line {n.lineno}"))
+    return found
+
+
+def test_the_rules_see_what_breaks_them():
+    cyclic = {"p": ("", True), "p.a": ("from . import b\n", False),
+              "p.b": ("from .a import x\n", False)}
+    assert import_cycles(cyclic) == [["p.a", "p.b", "p.a"]]
+    deferred = {**cyclic, "p.b": ("def f():\n    from .a import x\n", False)}
+    assert import_cycles(deferred) == []
+    body = "def f():\n" + "    x = 1\n" * 60
+    assert long_functions(body) == [("f", 61)]
+    assert long_functions(body, limit=61) == []
+    assert option_takers("def f(width, o):\n    pass\ng = lambda options: 1\n") == [
+        "f", "lambda at line 3"]
+    assert option_takers("def f(settings):\n    pass\n") == []
+
+
+def test_no_import_cycle():
+    sources = {name: (p.read_text(), p.name == "__init__.py")
+               for name, p in _modules(PACKAGE).items()}
+    assert len(sources) > 50
+    assert import_cycles(sources) == []
+
+
+def test_no_function_over_sixty_lines():
+    found = {f"{p.relative_to(ROOT)}:{name}": n for p in PACKAGE.rglob("*.py")
+             for name, n in long_functions(p.read_text())}
+    assert found == {}
+
+
+def test_the_integrator_only_orchestrates():
+    lines = (PACKAGE / "integrators" / "foveated.py").read_text().count("\n")
+    assert lines < 300, lines
+
+
+def test_no_pass_takes_the_options():
+    files = sorted((PACKAGE / "frame").rglob("*.py"))
+    assert len(files) > 20
+    found = {str(p.relative_to(ROOT)): option_takers(p.read_text()) for p in files}
+    assert {k: v for k, v in found.items() if v} == {}
+
+
+def test_the_readme_stays_short():
+    lines = (ROOT / "README.md").read_text().count("\n")
+    assert lines <= 350, lines
