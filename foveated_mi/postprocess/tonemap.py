@@ -96,12 +96,12 @@ def tonemap_none(x: mi.Color3f) -> mi.Color3f:
     Parameters
     ----------
     x : mi.Color3f
-        Exposed linear colour.
+        Exposed linear colour, passed through as is: not clamped, not sanitised.
 
     Returns
     -------
     y : mi.Color3f
-        ``x`` itself (not clamped, not sanitised).
+        ``x``.
     """
     return x
 
@@ -115,12 +115,12 @@ def tonemap_reinhard(x: mi.Color3f) -> mi.Color3f:
     Parameters
     ----------
     x : mi.Color3f
-        Exposed linear colour.
+        Exposed linear colour (capped at 1e30, so that +inf maps to 1).
 
     Returns
     -------
     y : mi.Color3f
-        Display colour in [0, 1].
+        Display colour ``x / (1 + x)``, in [0, 1].
     """
     x = dr.minimum(_sanitize(x), _REINHARD_CAP)
     # Already in [0, 1] for x in [0, cap]; a clamp would tie at 0 and zero the derivative
@@ -154,16 +154,24 @@ def tonemap_aces(x: mi.Color3f) -> mi.Color3f:
     Parameters
     ----------
     x : mi.Color3f
-        Exposed linear colour.
+        Exposed linear colour; above 1e4 the fit reads 1e4 (its output is clamped to 1 there).
 
     Returns
     -------
     y : mi.Color3f
-        Display colour in [0, 1].
+        Display colour, clamped to 1 at the top.
     """
     x = dr.minimum(_sanitize(x), _ACES_CAP)
     y = (x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)
     return dr.minimum(y, 1.0)   # y >= 0 for x >= 0: only the top needs the clamp
+
+
+def _upper_root(a, b, c):
+    """The root ``max((-b - sqrt(b^2 - 4ac)) / 2a, 0)`` that inverts a rational curve (ACES,
+    Uncharted 2) at a display value: both inverses solve the same quadratic form. A negative
+    discriminant (rounding at the clip) reads as 0."""
+    disc = dr.sqrt(dr.maximum(b * b - 4.0 * a * c, 0.0))
+    return dr.maximum((-b - disc) / (2.0 * a), 0.0)
 
 
 def inverse_aces(y: mi.Color3f) -> mi.Color3f:
@@ -182,9 +190,7 @@ def inverse_aces(y: mi.Color3f) -> mi.Color3f:
     y = dr.clip(y, 0.0, 1.0)
     a = 2.43 * y - 2.51
     b = 0.59 * y - 0.03
-    c = 0.14 * y
-    disc = dr.sqrt(dr.maximum(b * b - 4.0 * a * c, 0.0))
-    return dr.maximum((-b - disc) / (2.0 * a), 0.0)
+    return _upper_root(a, b, 0.14 * y)
 
 
 register_tonemapper("aces", tonemap_aces, inverse_aces)
@@ -207,7 +213,7 @@ def tonemap_uncharted2(x: mi.Color3f) -> mi.Color3f:
     Parameters
     ----------
     x : mi.Color3f
-        Exposed linear colour.
+        Exposed linear colour, capped at 1e4 (the input cap).
 
     Returns
     -------
@@ -238,9 +244,7 @@ def inverse_uncharted2(y: mi.Color3f) -> mi.Color3f:
     r = dr.power(y, 1.0 / U2_EXPONENT) * _u2(U2_WHITE) + E / F
     a = A * (r - 1.0)
     b = B * (r - C)
-    c = D * (r * F - E)
-    disc = dr.sqrt(dr.maximum(b * b - 4.0 * a * c, 0.0))
-    u = dr.maximum((-b - disc) / (2.0 * a), 0.0)
+    u = _upper_root(a, b, D * (r * F - E))
     return dr.minimum(u / U2_BIAS, _U2_CAP)
 
 
