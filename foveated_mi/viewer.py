@@ -64,9 +64,9 @@ def eccentricity(directions: mi.Vector3f, sensor: mi.Sensor, gaze) -> mi.Float:
     directions : mi.Vector3f
         A frame's primary rays, e.g. the G-buffer's.
     sensor : mi.Sensor
-        The sensor.
+        The sensor that traced them.
     gaze : tuple of float
-        Normalised film coordinates of the gaze.
+        The gaze, as in :func:`gaze_direction`.
 
     Returns
     -------
@@ -82,9 +82,9 @@ def pixel_eccentricity(sensor: mi.Sensor, gaze) -> mi.Float:
     Parameters
     ----------
     sensor : mi.Sensor
-        The sensor.
+        The sensor; the pixel centres of its film's crop window are measured.
     gaze : tuple of float
-        Normalised film coordinates of the gaze.
+        The gaze, as in :func:`gaze_direction`.
 
     Returns
     -------
@@ -104,10 +104,8 @@ def eccentricity_map(sensor: mi.Sensor, gaze):
 
     Parameters
     ----------
-    sensor : mi.Sensor
-        The sensor.
-    gaze : tuple of float
-        Normalised film coordinates of the gaze.
+    sensor, gaze
+        As in :func:`pixel_eccentricity`.
 
     Returns
     -------
@@ -128,9 +126,9 @@ def pixels_per_degree(sensor: mi.Sensor, gaze=(0.5, 0.5)) -> float:
     Parameters
     ----------
     sensor : mi.Sensor
-        The sensor.
+        The sensor (its film's width sets the size of a pixel).
     gaze : tuple of float, optional
-        Normalised film coordinates.
+        Normalised film coordinates of the point measured.
 
     Returns
     -------
@@ -150,7 +148,7 @@ def horizontal_fov(sensor: mi.Sensor) -> float:
     Parameters
     ----------
     sensor : mi.Sensor
-        The sensor.
+        The sensor, whose film's left and right edges bound the view.
 
     Returns
     -------

@@ -58,7 +58,7 @@ def check_film(width, height) -> tuple[int, int]:
     Parameters
     ----------
     width, height : int
-        Film size, in pixels.
+        The film size to check, in pixels.
 
     Returns
     -------
