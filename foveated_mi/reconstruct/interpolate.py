@@ -274,21 +274,13 @@ def discrete_sibson(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32,
 
     Parameters
     ----------
-    shading : mi.Color3f
-        The sparse shading buffer, one entry per pixel (read at the sites).
-    site_mask : mi.Bool
-        The sites (traced pixels).
-    nearest : mi.UInt32
-        Each pixel's nearest site, from :func:`~foveated_mi.reconstruct.jfa.jump_flood`.
-    width, height : int
-        Film size, in pixels.
-    max_radius : int, optional
-        Cap on the disk's radius, in pixels.
+    shading, site_mask, nearest, width, height, max_radius
+        As for :func:`sibson` (here ``max_radius`` caps the disks that scatter).
 
     Returns
     -------
     image : mi.Color3f
-        The interpolated image.
+        The interpolated image, exact while no disk is capped.
     """
     filled, x, y, r2, has_site, width, height, radius = _prepare(shading, site_mask, nearest, width, height,
                                                                  max_radius)
@@ -373,17 +365,13 @@ def fast_sibson(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, wid
 
     Parameters
     ----------
-    shading, site_mask, nearest
-        The sparse shading buffer, its sites and each pixel's nearest site, as for :func:`voronoi`.
-    width, height : int
-        Film size, in pixels.
-    max_radius : int, optional
-        Cap on the disk's radius, in pixels.
+    shading, site_mask, nearest, width, height, max_radius
+        As for :func:`sibson`; the square stands for the disk of the capped radius.
 
     Returns
     -------
     image : mi.Color3f
-        The interpolated image.
+        The interpolated image, clamped to the range of ``F``.
     """
     filled, x, y, r2, has_site, width, height, radius = _prepare(shading, site_mask, nearest, width, height,
                                                                  max_radius)
