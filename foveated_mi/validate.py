@@ -29,14 +29,12 @@ def _as_float(name: str, value: Any, allowed: str) -> float:
 
 
 def check_finite(name: str, value: Any) -> float:
-    """A finite number.
+    """A finite number: :func:`check_range` without bounds.
 
     Parameters
     ----------
-    name : str
-        The input's name, for the error message.
-    value : object
-        The value to check (a ``bool`` is refused).
+    name, value : str, object
+        The input's name, for the error message, and its value (a ``bool`` is refused).
 
     Returns
     -------
@@ -48,11 +46,7 @@ def check_finite(name: str, value: Any) -> float:
     ParameterError
         If ``value`` is not a finite number.
     """
-    allowed = "a finite number"
-    v = _as_float(name, value, allowed)
-    if not math.isfinite(v):
-        raise ParameterError(name, value, allowed)
-    return v
+    return check_range(name, value)
 
 
 def _bounds(*parts: str | None) -> str:
@@ -67,10 +61,8 @@ def check_range(name: str, value: Any, lo: float | None = None, hi: float | None
 
     Parameters
     ----------
-    name : str
-        The input's name, for the error message.
-    value : object
-        The value to check (a ``bool`` is refused).
+    name, value : str, object
+        As for :func:`check_finite`.
     lo, hi : float or None, optional
         The bounds (None: unbounded on that side).
     lo_open, hi_open : bool, optional
@@ -79,7 +71,7 @@ def check_range(name: str, value: Any, lo: float | None = None, hi: float | None
     Returns
     -------
     value : float
-        ``value`` as a float.
+        ``value`` as a float, inside the bounds.
 
     Raises
     ------
@@ -107,10 +99,10 @@ def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = Non
     Parameters
     ----------
     name : str
-        The input's name, for the error message.
+        As for :func:`check_finite`.
     value : object
-        The value to check: an ``int``, or anything ``int()`` converts (a float only when it is
-        integral; a ``bool`` is refused).
+        An ``int``, or anything ``int()`` converts (a float only when it is integral; a
+        ``bool`` is refused).
     lo, hi : int or None, optional
         The bounds, inclusive (None: unbounded on that side).
 
@@ -144,10 +136,8 @@ def check_choice(name: str, value: Any, choices: Iterable[str]) -> str:
 
     Parameters
     ----------
-    name : str
-        The input's name, for the error message.
-    value : object
-        The value to check.
+    name, value : str, object
+        As for :func:`check_finite` (any type; only a listed string passes).
     choices : iterable of str
         The allowed values (listed in the error message).
 
@@ -207,7 +197,7 @@ def check_point2(name: str, value: Any, bound: float = 1e6) -> tuple[float, floa
     Parameters
     ----------
     name : str
-        The input's name, for the error message.
+        As for :func:`check_finite`.
     value : iterable
         The two numbers ``(x, y)``.
     bound : float, optional
@@ -238,10 +228,8 @@ def check_bool(name: str, value: Any) -> bool:
 
     Parameters
     ----------
-    name : str
-        The input's name, for the error message.
-    value : object
-        The value to check.
+    name, value : str, object
+        As for :func:`check_finite`, but of any type (only a ``bool`` passes).
 
     Returns
     -------
@@ -263,10 +251,8 @@ def check_sigma(name: str, value: Any) -> float:
 
     Parameters
     ----------
-    name : str
-        The input's name, for the error message.
-    value : object
-        The value to check (a ``bool`` is refused).
+    name, value : str, object
+        As for :func:`check_finite` (``inf`` passes).
 
     Returns
     -------
