@@ -108,15 +108,14 @@ def check_display(name: str, display: str) -> str:
 
     Parameters
     ----------
-    name : str
-        The input's name, for the error message.
-    display : str
-        The display model.
+    name, display : str
+        The input's name, for the error message, and the model's name (one of
+        :func:`display_names` when the extra is installed).
 
     Returns
     -------
     display : str
-        ``display`` itself.
+        ``display``, unchanged.
 
     Raises
     ------
