@@ -41,7 +41,7 @@ def sampling_settings(o: Options) -> SamplingSettings:
     Parameters
     ----------
     o : dict
-        The validated options.
+        The validated options; the sampling law's are read.
 
     Returns
     -------
@@ -57,12 +57,13 @@ def sampling_settings(o: Options) -> SamplingSettings:
 
 
 def frame_settings(o: Options) -> FrameSettings:
-    """The plan's and the trace pass's settings of validated options ``o``.
+    """The settings of the passes up to the trace, read from validated options ``o`` once
+    per change of the options.
 
     Parameters
     ----------
     o : dict
-        The validated options.
+        The validated options; the plan's and the trace's are read.
 
     Returns
     -------
@@ -91,7 +92,7 @@ def domain_settings(o: Options) -> DomainSettings:
     Parameters
     ----------
     o : dict
-        The validated options.
+        The validated options; the value domains' are read.
 
     Returns
     -------
@@ -108,7 +109,7 @@ def denoise_settings(o: Options) -> DenoiseSettings:
     Parameters
     ----------
     o : dict
-        The validated options.
+        The validated options; ``denoiser`` and what it reads are read.
 
     Returns
     -------
@@ -129,7 +130,8 @@ def reconstruction_settings(o: Options) -> ReconstructionSettings:
     Parameters
     ----------
     o : dict
-        The validated options.
+        The validated options; ``reconstruction``, ``jfa``, ``max_radius``, ``sampling_law``
+        and ``sigma_p`` are read, with the method's own.
 
     Returns
     -------
@@ -178,7 +180,7 @@ def foveal_settings(width: int, height: int, o: Options) -> FovealSettings:
     Parameters
     ----------
     width, height : int
-        The film's size.
+        The film's size in pixels, which sizes its buffer.
     o : dict
         The validated options (``theta``, ``ray_budget``, ``foveal_space``, ...).
 
@@ -203,7 +205,7 @@ def every_option(width: int, height: int, o: Options) -> OptionValues:
     width, height : int
         The film's size (unused).
     o : dict
-        The validated options.
+        The validated options, every one of which is kept.
 
     Returns
     -------

@@ -89,35 +89,10 @@ import mitsuba as mi
 
 from .plan import FramePlan
 from . import shading as _shading
+from .shading import integrator_kind
 from .pixel_filter import FilterSampler, SplatFootprint
 from .settings import TraceSettings
 from .traced_sensor import TracedSensors
-
-# -- integrator kinds -----------------------------------------------------------------------
-
-def integrator_kind(integrator) -> str:
-    """How the nested integrator is differentiated (see the module docstring).
-
-    Classes are matched by name along the MRO: Mitsuba re-imports its AD integrator modules on
-    every ``mi.set_variant``.
-
-    Parameters
-    ----------
-    integrator : mi.Integrator
-        The nested integrator.
-
-    Returns
-    -------
-    kind : str
-        ``'projective'`` (a ``PSIntegrator``), ``'adjoint'`` (an ``ADIntegrator``) or
-        ``'plain'`` (anything else).
-    """
-    names = {(c.__name__, c.__module__.rsplit(".", 1)[-1]) for c in type(integrator).__mro__}
-    if ("PSIntegrator", "common") in names:
-        return "projective"
-    if ("ADIntegrator", "common") in names:
-        return "adjoint"
-    return "plain"
 
 
 # -- the image formation --------------------------------------------------------------------

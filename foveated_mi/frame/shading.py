@@ -77,11 +77,11 @@ class TracedSamples(NamedTuple):
     clamped: mi.UInt32     #: number of clamped samples, a 1-element array
 
 
-def is_ad_integrator(integrator) -> bool:
-    """Whether ``integrator`` is a Python ``mi.ad.common.ADIntegrator`` (``prb``, ...).
+def integrator_kind(integrator) -> str:
+    """How the nested integrator is differentiated (:mod:`.adjoint`).
 
-    Checked by class name along the MRO: Mitsuba re-imports its AD integrator modules on
-    every ``mi.set_variant``, so the class object itself changes.
+    Classes are matched by name along the MRO: Mitsuba re-imports its AD integrator modules on
+    every ``mi.set_variant``.
 
     Parameters
     ----------
@@ -90,11 +90,22 @@ def is_ad_integrator(integrator) -> bool:
 
     Returns
     -------
-    is_ad : bool
-        Whether it derives from ``ADIntegrator``.
+    kind : str
+        ``'projective'`` (a ``PSIntegrator``), ``'adjoint'`` (an ``ADIntegrator``) or
+        ``'plain'`` (anything else).
     """
-    return any(c.__name__ == "ADIntegrator" and c.__module__.endswith("integrators.common")
-               for c in type(integrator).__mro__)
+    names = {(c.__name__, c.__module__.rsplit(".", 1)[-1]) for c in type(integrator).__mro__}
+    if ("PSIntegrator", "common") in names:
+        return "projective"
+    if ("ADIntegrator", "common") in names:
+        return "adjoint"
+    return "plain"
+
+
+def is_ad_integrator(integrator) -> bool:
+    """Whether ``integrator`` is a Python ``mi.ad.common.ADIntegrator`` (``prb``, the
+    projective ones, ...): :func:`integrator_kind` is not ``'plain'``."""
+    return integrator_kind(integrator) != "plain"
 
 
 def sample_nested(integrator: mi.SamplingIntegrator, scene: mi.Scene, sampler: mi.Sampler,

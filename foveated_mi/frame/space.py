@@ -4,18 +4,19 @@ A frame's shading buffer, G-buffer, reprojection map and history live either on 
 pixels (:class:`FilmSpace`) or on the foveal buffer's samples (:class:`BufferSpace`: the
 log-polar cells and the disc's pixels, :mod:`.buffer_space`). A formation declares which
 space it forms from (:func:`~.formation.register_formation`'s ``space``); the plan makes that
-space and every pass after it asks the space, never which formation or law ran:
+space and every pass after it asks the space (the interface :class:`SampleSpace`), never
+which formation or law ran:
 
-- :meth:`~FilmSpace.develop_at`: where the trace pass develops the rays' estimates
+- :meth:`~SampleSpace.develop_at`: where the trace pass develops the rays' estimates
   (:func:`~.shading.develop`);
-- :meth:`~FilmSpace.traced_pixels`, :meth:`~FilmSpace.to_pixels`,
-  :meth:`~FilmSpace.from_pixels`: the film's traced pixels, and a gradient summed onto them
+- :meth:`~SampleSpace.traced_pixels`, :meth:`~SampleSpace.to_pixels`,
+  :meth:`~SampleSpace.from_pixels`: the film's traced pixels, and a gradient summed onto them
   from the samples or a tangent read back at the samples (the gradient pass's seam);
-- :meth:`~FilmSpace.still_map`, :meth:`~FilmSpace.reprojection_map`: the history's map;
-- :attr:`~FilmSpace.layout`: what the history records of the space's layout.
+- :meth:`~SampleSpace.still_map`, :meth:`~SampleSpace.reprojection_map`: the history's map;
+- :attr:`~SampleSpace.layout`: what the history records of the space's layout.
 
-A space's device arrays (:meth:`~BufferSpace.arrays`) are a frozen recording's inputs and its
-host values (:meth:`~BufferSpace.key`) its key: :meth:`BufferSpace.of` rebuilds it inside.
+A space's device arrays (:meth:`~SampleSpace.arrays`) are a frozen recording's inputs and its
+host values (:meth:`~SampleSpace.key`) its key: :func:`space_of` rebuilds it inside.
 Sample positions may change from frame to frame (the gaze moves the buffer's samples), and a
 history may be kept on another space than the frame's (the plan then reads none).
 """
@@ -35,138 +36,24 @@ from .reproject import History, ReprojectionMap
 SPACES = ("film", "buffer")
 
 
-@dataclass(frozen=True)
-class FilmSpace:
-    """The film's pixels, one sample each."""
+class SampleSpace:
+    """Where a frame keeps its samples: the interface every pass reads (module docstring).
+    ``width`` and ``height`` are the film's; ``kind`` is one of :data:`SPACES`; ``layout`` what
+    the history records of the space's layout (None for the film)."""
     width: int
     height: int
-    kind = "film"
-    layout = None
+    kind: str
+    layout: _buffer_space.SampleLayout | None
 
     @property
     def size(self) -> int:
-        return self.width * self.height
+        """Number of samples."""
+        raise NotImplementedError
 
-    def develop_at(self):
-        """Where the trace pass develops the rays' estimates: the film (None)."""
-        return None
-
-    def traced_pixels(self, traced: mi.Bool) -> mi.Bool:
-        """The film's pixels that hold a traced value.
-
-        Parameters
-        ----------
-        traced : mi.Bool
-            Per sample (here, per pixel).
-
-        Returns
-        -------
-        mask : mi.Bool
-            ``traced`` itself.
-        """
-        return traced
-
-    def to_pixels(self, delta: mi.Color3f, traced: mi.Bool) -> mi.Color3f:
-        """A gradient on the samples summed onto their pixels.
-
-        Parameters
-        ----------
-        delta : mi.Color3f
-            The gradient, one value per sample.
-        traced : mi.Bool
-            Which samples hold a traced value.
-
-        Returns
-        -------
-        delta : mi.Color3f
-            ``delta`` itself (each sample is its pixel).
-        """
-        return delta
-
-    def from_pixels(self, tangent: mi.Color3f, traced: mi.Bool) -> mi.Color3f:
-        """A tangent of the traced pixels read at the samples.
-
-        Parameters
-        ----------
-        tangent : mi.Color3f
-            The tangent, one value per film pixel.
-        traced : mi.Bool
-            Which samples hold a traced value.
-
-        Returns
-        -------
-        tangent : mi.Color3f
-            ``tangent`` itself (each sample is its pixel).
-        """
-        return tangent
-
-    def still_map(self, history: History) -> ReprojectionMap:
-        """Every sample onto itself (a still camera over an unchanged scene).
-
-        Parameters
-        ----------
-        history : History
-            The previous frame's history.
-
-        Returns
-        -------
-        map : ReprojectionMap
-            :func:`~.reproject.still_map`.
-        """
-        return _reproject.still_map(history, self.width, self.height)
-
-    def reprojection_map(self, gb: GBuffer, history: History | None, *, tolerance: float,
-                         mode: str, reach: int = 0) -> ReprojectionMap:
-        """The pixels reprojected into the history's pixels (:mod:`.reproject`).
-
-        Parameters
-        ----------
-        gb : GBuffer
-            The frame's G-buffer.
-        history : History or None
-            The previous frame's history (None: every pixel misses).
-        tolerance : float
-            The depth test's relative tolerance.
-        mode : str
-            One of :data:`~.reproject.REPROJECTION_MODES`.
-        reach : int, optional
-            The film filter's reach, in pixels.
-
-        Returns
-        -------
-        map : ReprojectionMap
-            :func:`~.reproject.reprojection_map`.
-        """
-        return _reproject.reprojection_map(gb.position, gb.hit, history, self.width,
-                                           self.height, tolerance=tolerance,
-                                           direction=gb.direction, mode=mode, reach=reach)
-
-    def arrays(self) -> None:
-        return None
-
-    def key(self) -> tuple:
-        return (self.kind, self.width, self.height)
-
-
-@dataclass(frozen=True, eq=False)
-class BufferSpace:
-    """The foveal buffer's samples (:mod:`.buffer_space`): each one's film ``pixel``, whether
-    it is ``on`` (on the film; a patch pixel inside the disc), and its ``ray`` in the launch."""
-    width: int
-    height: int
-    layout: _buffer_space.SampleLayout
-    pixels: mi.UInt32
-    on: mi.Bool
-    rays: mi.UInt32
-    kind = "buffer"
-
-    @property
-    def size(self) -> int:
-        return self.layout.size
-
-    def develop_at(self) -> tuple[mi.UInt32, mi.Bool]:
-        """Where the trace pass develops the rays' estimates: each sample's ray, where on."""
-        return self.rays, self.on
+    def develop_at(self) -> tuple[mi.UInt32, mi.Bool] | None:
+        """Where the trace pass develops the rays' estimates: each sample's ray and whether it
+        is on, or None for the film's pixels in launch order."""
+        raise NotImplementedError
 
     def traced_pixels(self, traced: mi.Bool) -> mi.Bool:
         """The film's pixels whose traced value some sample holds.
@@ -181,13 +68,11 @@ class BufferSpace:
         mask : mi.Bool
             One entry per film pixel.
         """
-        mask = dr.zeros(mi.Bool, self.width * self.height)
-        dr.scatter(mask, True, self.pixels, traced)
-        return mask
+        raise NotImplementedError
 
     def to_pixels(self, delta: mi.Color3f, traced: mi.Bool) -> mi.Color3f:
-        """A gradient on the samples summed onto their traced pixels: the transpose of the
-        gather that reads each pixel's value at its samples.
+        """A gradient on the samples summed onto their traced pixels: the transpose of
+        :meth:`from_pixels`.
 
         Parameters
         ----------
@@ -201,9 +86,7 @@ class BufferSpace:
         delta : mi.Color3f
             The gradient, one value per film pixel (0 where no traced sample lies).
         """
-        out = dr.zeros(mi.Color3f, self.width * self.height)
-        dr.scatter_reduce(dr.ReduceOp.Add, out, delta, self.pixels, traced)
-        return out
+        raise NotImplementedError
 
     def from_pixels(self, tangent: mi.Color3f, traced: mi.Bool) -> mi.Color3f:
         """A tangent of the traced pixels read at the samples.
@@ -220,7 +103,7 @@ class BufferSpace:
         tangent : mi.Color3f
             One value per sample (0 where not ``traced``).
         """
-        return dr.gather(mi.Color3f, tangent, self.pixels, traced)
+        raise NotImplementedError
 
     def still_map(self, history: History) -> ReprojectionMap:
         """Every sample onto itself (a still camera and gaze over an unchanged scene).
@@ -228,18 +111,18 @@ class BufferSpace:
         Parameters
         ----------
         history : History
-            The previous frame's history, on the samples.
+            The previous frame's history, on this space.
 
         Returns
         -------
         map : ReprojectionMap
-            :func:`~.buffer_space.still_map`.
+            The identity map.
         """
-        return _buffer_space.still_map(history, self.layout.size)
+        raise NotImplementedError
 
     def reprojection_map(self, gb: GBuffer, history: History | None, *, tolerance: float,
                          mode: str, reach: int = 0) -> ReprojectionMap:
-        """The samples reprojected into the history's samples (:mod:`.buffer_space`).
+        """The samples reprojected into the history's samples.
 
         Parameters
         ----------
@@ -248,26 +131,117 @@ class BufferSpace:
         history : History or None
             The previous frame's history (None: every sample misses).
         tolerance : float
-            The plane test's tolerance.
+            The depth (or plane) test's relative tolerance.
         mode : str
-            ``'exclusive'`` or ``'nearest'`` reads.
+            One of :data:`~.reproject.REPROJECTION_MODES`.
         reach : int, optional
-            Unused: a sample's footprint is its own.
+            The film filter's reach, in pixels (a space whose sample's footprint is its own
+            ignores it).
 
         Returns
         -------
         map : ReprojectionMap
-            :func:`~.buffer_space.reprojection_map`.
+            Where each sample's history lies, and whether it may be read.
         """
+        raise NotImplementedError
+
+    def arrays(self) -> dict | None:
+        """Its device arrays (a recording's inputs; None: it has none)."""
+        raise NotImplementedError
+
+    def key(self) -> tuple:
+        """Its host values (a recording's key; its first entry is its ``kind``)."""
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class FilmSpace(SampleSpace):
+    """The film's pixels, one sample each: every map is the identity."""
+    width: int
+    height: int
+    kind = "film"
+    layout = None
+
+    @property
+    def size(self) -> int:
+        return self.width * self.height
+
+    def develop_at(self) -> None:
+        return None
+
+    def traced_pixels(self, traced: mi.Bool) -> mi.Bool:
+        return traced
+
+    def to_pixels(self, delta: mi.Color3f, traced: mi.Bool) -> mi.Color3f:
+        return delta
+
+    def from_pixels(self, tangent: mi.Color3f, traced: mi.Bool) -> mi.Color3f:
+        return tangent
+
+    def still_map(self, history: History) -> ReprojectionMap:
+        """:func:`~.reproject.still_map`."""
+        return _reproject.still_map(history, self.width, self.height)
+
+    def reprojection_map(self, gb: GBuffer, history: History | None, *, tolerance: float,
+                         mode: str, reach: int = 0) -> ReprojectionMap:
+        """:func:`~.reproject.reprojection_map`: a depth test, the film filter's reach."""
+        return _reproject.reprojection_map(gb.position, gb.hit, history, self.width,
+                                           self.height, tolerance=tolerance,
+                                           direction=gb.direction, mode=mode, reach=reach)
+
+    def arrays(self) -> None:
+        return None
+
+    def key(self) -> tuple:
+        return (self.kind, self.width, self.height)
+
+
+@dataclass(frozen=True, eq=False)
+class BufferSpace(SampleSpace):
+    """The foveal buffer's samples (:mod:`.buffer_space`): each one's film ``pixel``, whether
+    it is ``on`` (on the film; a patch pixel inside the disc), and its ``ray`` in the launch."""
+    width: int
+    height: int
+    layout: _buffer_space.SampleLayout
+    pixels: mi.UInt32
+    on: mi.Bool
+    rays: mi.UInt32
+    kind = "buffer"
+
+    @property
+    def size(self) -> int:
+        return self.layout.size
+
+    def develop_at(self) -> tuple[mi.UInt32, mi.Bool]:
+        return self.rays, self.on
+
+    def traced_pixels(self, traced: mi.Bool) -> mi.Bool:
+        mask = dr.zeros(mi.Bool, self.width * self.height)
+        dr.scatter(mask, True, self.pixels, traced)
+        return mask
+
+    def to_pixels(self, delta: mi.Color3f, traced: mi.Bool) -> mi.Color3f:
+        out = dr.zeros(mi.Color3f, self.width * self.height)
+        dr.scatter_reduce(dr.ReduceOp.Add, out, delta, self.pixels, traced)
+        return out
+
+    def from_pixels(self, tangent: mi.Color3f, traced: mi.Bool) -> mi.Color3f:
+        return dr.gather(mi.Color3f, tangent, self.pixels, traced)
+
+    def still_map(self, history: History) -> ReprojectionMap:
+        """:func:`~.buffer_space.still_map`."""
+        return _buffer_space.still_map(history, self.layout.size)
+
+    def reprojection_map(self, gb: GBuffer, history: History | None, *, tolerance: float,
+                         mode: str, reach: int = 0) -> ReprojectionMap:
+        """:func:`~.buffer_space.reprojection_map`: a plane test; ``reach`` is unused."""
         return _buffer_space.reprojection_map(gb, self.on, history, self.layout, self.width,
                                               self.height, tolerance=tolerance, mode=mode)
 
     def arrays(self) -> dict:
-        """Its device arrays (a recording's inputs)."""
         return {"pixels": self.pixels, "on": self.on, "rays": self.rays}
 
     def key(self) -> tuple:
-        """Its host values (a recording's key)."""
         return (self.kind, self.width, self.height, self.layout)
 
     @staticmethod
@@ -291,7 +265,7 @@ class BufferSpace:
                            arrays["rays"])
 
 
-def space_of(key: tuple, arrays: dict | None):
+def space_of(key: tuple, arrays: dict | None) -> SampleSpace:
     """A space rebuilt from its key and arrays.
 
     Parameters
@@ -303,7 +277,7 @@ def space_of(key: tuple, arrays: dict | None):
 
     Returns
     -------
-    space : FilmSpace or BufferSpace
+    space : SampleSpace
         The space.
     """
     if key[0] == "film":
