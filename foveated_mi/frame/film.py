@@ -111,7 +111,7 @@ def form_film(shading: ShadingBuffer, inp: FormationInput, s: FilmSettings,
     # History resolve (Fig. 4): this frame's samples blended with the reprojected history.
     resolved = _reproject.resolve(shading.value, shading.mask, inp.spp, inp.reprojection,
                                   inp.history, s.max_history, shading.moment2)
-    timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
+    timer.mark("reconstruct", resolved.shading, resolved.mask, resolved.count)
     # Reconstruction (§3.4): nearest sites, Voronoi fill and interpolation, on irradiance
     # with demodulate; a reconstruction of tone-mapped samples back to linear values.
     recon = reconstruction_pass(domain.to_irradiance(resolved.shading, gb, d), resolved, gb,

@@ -58,7 +58,7 @@ from . import domain
 from . import reproject as _reproject
 from .film import film_stats
 from .formation import FormationInput, Formed, register_formation
-from .post import runs
+from .post import denoise_in_domain, runs
 from .settings import DenoiseSettings, DomainSettings
 from .sampling import snapped_pixels
 from .shading import ShadingBuffer
@@ -137,17 +137,9 @@ def _denoise(res: Resolved, cgb: GBuffer, grid: Grid, s: FovealSettings,
                        grid.height, s.denoise.options, grad_pass, None, grid, region)
     call = entry.fn if entry.grid_aware else _padded(entry.fn, grid)
     if entry.domain == "irradiance":
-        return as_denoised(call(ctx))
-    radiance = domain.to_radiance(res.shading, cgb, d)
-    if entry.domain == "display":
-        # The tone curve maps a cell without a value (NaN) to a finite colour: it stays one
-        # without a value, which no filter tap reads.
-        tonemapped = dr.select(res.mask, domain.to_display(radiance, d), dr.nan)
-        filtered = as_denoised(call(ctx._replace(image=tonemapped))).image
-        return Denoised(domain.to_irradiance(domain.from_display(filtered, d), cgb, d),
-                        filtered=filtered, tonemapped=tonemapped)
-    # A network sees no non-finite value: the empty cells are black (the warp skips them).
-    out = as_denoised(call(ctx._replace(image=dr.select(res.mask, radiance, 0.0))))
+        return denoise_in_domain(call, entry.domain, ctx, res.shading, d)
+    out = denoise_in_domain(call, entry.domain, ctx, domain.to_radiance(res.shading, cgb, d), d,
+                            on=res.mask)
     return out._replace(image=domain.to_irradiance(out.image, cgb, d))
 
 
@@ -271,7 +263,7 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
     # History resolve (Fig. 4): this frame's samples blended with the reprojected history.
     resolved = _reproject.resolve(shading.value, shading.mask, inp.spp, inp.reprojection,
                                   inp.history, s.max_history, shading.moment2)
-    timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
+    timer.mark("reconstruct", resolved.shading, resolved.mask, resolved.count)
     # The buffer: each cell from the pixel under its centre.
     q, on = snapped_pixels(grid, inp.gaze, width, height)
     has = on & dr.gather(mi.Bool, resolved.mask, q, on)
@@ -331,7 +323,7 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
     # This frame's samples (the shading buffer is on them), blended with their own history.
     resolved = _reproject.resolve(shading.value, shading.mask, inp.spp, inp.reprojection,
                                   inp.history, s.max_history, shading.moment2)
-    timer.mark("trace", resolved.shading, resolved.mask, resolved.count)
+    timer.mark("reconstruct", resolved.shading, resolved.mask, resolved.count)
     # The cells: the first samples, in the working domain (irradiance with demodulate).
     c = dr.arange(mi.UInt32, nc)
     cr = _gather(resolved, c)

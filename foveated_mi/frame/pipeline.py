@@ -121,7 +121,9 @@ def trace_pass(passes: Passes, frame: Frame, plan: FramePlan, settings: FrameSet
                                      frame.state.host_values())
         if shaded is not None:
             return shaded, True
-    return _trace.shade(frame.scene, passes.nested, plan, settings.trace), False
+    shaded = _trace.shade(frame.scene, passes.nested, plan, settings.trace)
+    timer.mark("trace", shaded.shading.value, shaded.shading.mask)
+    return shaded, False
 
 
 def primal_frame(view: View, passes: Passes, frame: Frame, settings: FrameSettings,

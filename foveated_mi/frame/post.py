@@ -12,8 +12,9 @@ raises before it gets here).
 """
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
+import drjit as dr
 import mitsuba as mi
 
 from ..postprocess import DENOISERS, DenoiseInput, Denoised
@@ -52,6 +53,46 @@ def runs(n: DenoiseSettings, grad_pass: bool) -> bool:
     return n.active and (DENOISERS[n.name].differentiable or not grad_pass)
 
 
+def denoise_in_domain(call: Callable[[DenoiseInput], object], where: str, ctx: DenoiseInput,
+                      image: mi.Color3f, d: DomainSettings,
+                      on: mi.Bool | None = None) -> Denoised:
+    """A denoiser called in the domain its registration declares.
+
+    Parameters
+    ----------
+    call : callable
+        The denoiser, ``call(ctx)``.
+    where : str
+        Its domain (:data:`~foveated_mi.postprocess.registry.DOMAINS`).
+    ctx : DenoiseInput
+        Its input; its ``image`` is replaced.
+    image : mi.Color3f
+        The values to denoise: the working values for ``irradiance``, radiance otherwise.
+    d : DomainSettings
+        The value domains.
+    on : mi.Bool, optional
+        The entries that hold a value, where some do not (a buffer's empty cells): they stay
+        without one in ``display`` (NaN, which no filter tap reads) and are black in
+        ``radiance`` (a network sees no non-finite value).
+
+    Returns
+    -------
+    denoised : Denoised
+        The result in the values of ``image``, with the tone-mapped input and the filtered
+        output in ``display``.
+    """
+    if where == "display":
+        tonemapped = domain.to_display(image, d)
+        if on is not None:
+            tonemapped = dr.select(on, tonemapped, dr.nan)
+        filtered = as_denoised(call(ctx._replace(image=tonemapped))).image
+        return Denoised(domain.from_display(filtered, d), filtered=filtered,
+                        tonemapped=tonemapped)
+    if where == "radiance" and on is not None:
+        image = dr.select(on, image, 0.0)
+    return as_denoised(call(ctx._replace(image=image)))
+
+
 def post_pass(recon: Reconstruction, resolved: Resolved, gb: GBuffer, width: int, height: int,
               d: DomainSettings, n: DenoiseSettings, grad_pass: bool = False) -> PostProcessed:
     """The denoiser ``n`` in its domain, and remodulation (module docstring).
@@ -84,18 +125,13 @@ def post_pass(recon: Reconstruction, resolved: Resolved, gb: GBuffer, width: int
                        n.options, grad_pass, recon.averaged)
     out = Denoised(recon.interpolated)
     if entry.domain == "irradiance" and run:
-        out = as_denoised(entry.fn(ctx))
+        out = denoise_in_domain(entry.fn, entry.domain, ctx, recon.interpolated, d)
     filled = domain.to_radiance(recon.filled, gb, d)
     interpolated = domain.to_radiance(recon.interpolated, gb, d)
     if d.demodulate:
         image = domain.to_radiance(out.image, gb, d, clamp=True)
         out = out._replace(image=image, filtered=None if out.filtered is None else image)
-    if entry.domain == "radiance" and run:
-        out = as_denoised(entry.fn(ctx._replace(image=out.image)))
-    elif entry.domain == "display" and run:
-        tonemapped = domain.to_display(out.image, d)
-        filtered = as_denoised(entry.fn(ctx._replace(image=tonemapped))).image
-        out = Denoised(domain.from_display(filtered, d), filtered=filtered,
-                       tonemapped=tonemapped)
+    if entry.domain != "irradiance" and run:
+        out = denoise_in_domain(entry.fn, entry.domain, ctx, out.image, d)
     return PostProcessed(out.image, filled, interpolated, out.tonemapped, out.filtered,
                          out.variance)
