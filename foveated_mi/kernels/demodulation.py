@@ -88,10 +88,8 @@ def remodulate(irradiance: mi.Color3f, albedo: mi.Color3f, emission: mi.Color3f)
     ----------
     irradiance : mi.Color3f
         Irradiance :math:`E` per pixel (gradients flow through it).
-    albedo : mi.Color3f
-        Diffuse albedo :math:`a` of the G-buffer (floored by :func:`safe_albedo`, detached).
-    emission : mi.Color3f
-        Emitted radiance :math:`L_e` of the G-buffer (detached).
+    albedo, emission : mi.Color3f
+        The G-buffer's, as for :func:`demodulate` (the albedo floored, both detached).
 
     Returns
     -------
