@@ -134,12 +134,8 @@ def write_side_by_side(path: str, panels: Sequence[np.ndarray], gaze, radius: fl
     ----------
     path : str
         The PNG's path.
-    panels : sequence of numpy.ndarray
-        Display values, all of one (H, W, 3) shape.
-    gaze : tuple of float
-        Normalised film coordinates, origin top-left.
-    radius : float
-        The ring's radius, in pixels.
+    panels, gaze, radius
+        As for :func:`side_by_side`.
 
     Returns
     -------
