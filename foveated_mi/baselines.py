@@ -229,14 +229,10 @@ def render_reference(scene: "mi.Scene", *, spp: int, seed: int = 0,
 
     Parameters
     ----------
-    scene : mi.Scene
-        The scene.
-    spp : int
-        Samples per pixel (>= 1).
+    scene, spp, integrator
+        As for :func:`render_uniform`.
     seed : int, optional
         Seed of the first pass, in [0, 2^32).
-    integrator : mi.Integrator or None, optional
-        The integrator (None: the scene's own).
     max_samples_per_pass : int, optional
         Largest number of samples (pixels x spp) of one pass.
 
