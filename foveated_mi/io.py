@@ -312,7 +312,7 @@ def read_exr_attrs(path: str | os.PathLike) -> dict[str, Any]:
     Parameters
     ----------
     path : str or os.PathLike
-        The file.
+        The file, as for :func:`read_exr` (only its header is read).
 
     Returns
     -------
