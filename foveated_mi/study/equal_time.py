@@ -358,7 +358,7 @@ def verdict_lines(v: Verdict) -> list[str]:
     Parameters
     ----------
     v : Verdict
-        A verdict of :func:`equal_time_verdicts`.
+        One scene's verdict, from :func:`equal_time_verdicts`.
 
     Returns
     -------
@@ -422,7 +422,7 @@ def verdict_sentence(v: Verdict) -> str:
     Parameters
     ----------
     v : Verdict
-        A verdict of :func:`equal_time_verdicts`.
+        As for :func:`verdict_lines`.
 
     Returns
     -------

@@ -285,7 +285,7 @@ def run_reference_task(task: dict) -> dict:
     Parameters
     ----------
     task : dict
-        A task of :func:`reference_task`.
+        What :func:`reference_task` built.
 
     Returns
     -------
