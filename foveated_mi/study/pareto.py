@@ -118,14 +118,10 @@ def plot_pareto(rows: list[dict[str, Any]], metric: str, out_dir: str, *,
 
     Parameters
     ----------
-    rows : list of dict
-        Study rows.
-    metric : str
-        The quality column.
+    rows, metric, title
+        As for :func:`pareto_figure`.
     out_dir : str
         The folder (created if missing); the files are written atomically.
-    title : str or None, optional
-        The figure's title.
 
     Returns
     -------
@@ -285,10 +281,8 @@ def front_table(rows: list[dict[str, Any]], metric: str) -> str:
 
     Parameters
     ----------
-    rows : list of dict
-        Study rows.
-    metric : str
-        The quality column.
+    rows, metric
+        The study rows and quality column, as for :func:`scene_fronts`.
 
     Returns
     -------
