@@ -57,6 +57,7 @@ behind them.
 """
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable
 
@@ -229,67 +230,44 @@ def splat_warning(setting: str, denoiser: str, instead: str) -> str:
             f"pixel_filter {instead} or set it to 'importance'")
 
 
+def _registry(module: str, name: str) -> dict:
+    """Registry ``name`` of ``module`` (relative to this package), imported on first use: the
+    registries' modules import Mitsuba and Dr.Jit, which reading the options does not need."""
+    return getattr(importlib.import_module(module, __package__), name)
+
+
 def _sampling_laws():
-    from .frame.sampling import SAMPLING_LAWS
-    return SAMPLING_LAWS
+    return _registry(".frame.sampling", "SAMPLING_LAWS")
 
 
 def _reprojection_modes():
-    from .frame.reproject import REPROJECTION_MODES
-    return REPROJECTION_MODES
+    return _registry(".frame.reproject", "REPROJECTION_MODES")
 
 
 def _jfa_variants():
-    from .reconstruct import JFA_VARIANTS
-    return JFA_VARIANTS
+    return _registry(".reconstruct", "JFA_VARIANTS")
 
 
-def formations():
-    """The formation registry (:data:`foveated_mi.frame.formation.FORMATIONS`).
-
-    Returns
-    -------
-    formations : dict
-        Formation name -> its registration.
-    """
-    from .frame.formation import FORMATIONS
-    return FORMATIONS
+def formations() -> dict:
+    """Formation name -> its registration (:data:`foveated_mi.frame.formation.FORMATIONS`)."""
+    return _registry(".frame.formation", "FORMATIONS")
 
 
-def reconstructions():
-    """The reconstruction registry (:data:`foveated_mi.reconstruct.RECONSTRUCTIONS`).
-
-    Returns
-    -------
-    reconstructions : dict
-        Method name -> :class:`~foveated_mi.reconstruct.registry.Method`.
-    """
-    from .reconstruct import RECONSTRUCTIONS
-    return RECONSTRUCTIONS
+def reconstructions() -> dict:
+    """Method name -> :class:`~foveated_mi.reconstruct.registry.Method`
+    (:data:`foveated_mi.reconstruct.RECONSTRUCTIONS`)."""
+    return _registry(".reconstruct", "RECONSTRUCTIONS")
 
 
-def denoisers():
-    """The denoiser registry (:data:`foveated_mi.postprocess.DENOISERS`).
-
-    Returns
-    -------
-    denoisers : dict
-        Denoiser name -> :class:`~foveated_mi.postprocess.registry.Denoiser`.
-    """
-    from .postprocess import DENOISERS
-    return DENOISERS
+def denoisers() -> dict:
+    """Denoiser name -> :class:`~foveated_mi.postprocess.registry.Denoiser`
+    (:data:`foveated_mi.postprocess.DENOISERS`)."""
+    return _registry(".postprocess", "DENOISERS")
 
 
-def tonemappers():
-    """The tone mapper registry (:data:`foveated_mi.postprocess.TONEMAPPERS`).
-
-    Returns
-    -------
-    tonemappers : dict
-        Operator name -> its function.
-    """
-    from .postprocess import TONEMAPPERS
-    return TONEMAPPERS
+def tonemappers() -> dict:
+    """Operator name -> its function (:data:`foveated_mi.postprocess.TONEMAPPERS`)."""
+    return _registry(".postprocess", "TONEMAPPERS")
 
 
 def _check_max_history(name: str, value) -> float:
@@ -336,8 +314,9 @@ _SCHEMA: tuple[Option, ...] = (
            "outside it whose cells are as large as the rest of ``ray_budget`` allows "
            "(:mod:`foveated_mi.kernels.polar`). See "
            ":mod:`foveated_mi.frame.sampling`"),
-    Option("ray_budget", 0.1, "float", "rays per frame as a fraction of the film's pixels "
-           "(sampling_law = acuity or polar)", lo=0.0, hi=1.0, lo_open=True),
+    Option("ray_budget", 0.1, "float",
+           "rays per frame as a fraction of the film's pixels (sampling_law = acuity or polar)",
+           lo=0.0, hi=1.0, lo_open=True),
     Option("acuity_floor", 0.01, "float", "smallest probability of the acuity law "
            "(at most ray_budget)", lo=0.0, hi=1.0),
     Option("gaze", (0.5, 0.5), "point", "gaze in normalised film coordinates, origin top-left",
