@@ -194,14 +194,10 @@ def box_mean(table: mi.Float64, x: mi.Int32, y: mi.Int32, k: mi.Int32, width: in
 
     Parameters
     ----------
-    table : mi.Float64
-        A table from :func:`summed_area_table`.
-    x, y : mi.Int32
-        Square centres, in pixels.
+    table, x, y, width, height
+        As for :func:`box_sum`.
     k : mi.Int32
-        Half-size of the squares, in pixels.
-    width, height : int
-        Film size, in pixels.
+        Half-size of the squares, in pixels (``kx = ky = k`` of :func:`box_sum`).
 
     Returns
     -------
