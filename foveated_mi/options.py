@@ -378,7 +378,10 @@ _SCHEMA: tuple[Option, ...] = (
             "pixel is traced: ``resolved``, each pixel's own value blended with its history; "
             "``denoised``, the same values through the frame's denoiser on the disc's square "
             "patch of pixels (a plain image, so a network gets what it was trained on), as the "
-            "buffer's cells are"),
+            "buffer's cells are (the ``vr`` preset's: with SVGF it smooths only where the "
+            "history's variance says a pixel is noisy, and it raised the fovea's PSNR by 2.0 dB "
+            "on voxel-city and 3.9 dB on a path-traced interior at 1 spp, "
+            "``docs/results.md#the-disc-around-the-gaze-denoised``)"),
     Option("reconstruction", "sibson", "string", "interpolation of the sparse shading buffer "
            "(§3.4)", choices=lambda: reconstructions(),
            doc="Interpolation of the sparse shading buffer (§3.4); ``guided`` and "
@@ -514,7 +517,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     # trace faster in 2D packets (docs/results.md#the-vr-preset).
     "vr": {"sampling_law": "polar", "formation": "foveal", "ray_budget": 0.1, "theta": 0.15,
            "reorder": "tiles", "edge_threshold": 0.0, "denoiser": "svgf",
-           "atrous_iterations": 2},
+           "atrous_iterations": 2, "foveal_disc": "denoised"},
 }
 PRESET_NAMES = ("auto", *PRESETS)
 
