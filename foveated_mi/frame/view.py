@@ -112,6 +112,8 @@ class Views:
 
     def __init__(self):
         self._views: list[View] = [View(0)]
+        # (sensor, view) pairs bound by bind(), out of reach of a frozen function's traversal
+        self._bound = Hidden([])
 
     def __getitem__(self, index: int) -> View:
         if isinstance(index, (str, bytes, bool)):      # check_int would take "1"
@@ -127,8 +129,30 @@ class Views:
     def __iter__(self):
         return iter(self._views)
 
+    def bind(self, sensor: mi.Sensor, index: int) -> View:
+        """Render ``sensor``, which need not be one of the scene's, as view ``index`` (an eye
+        of :class:`foveated_mi.stereo.Stereo`).
+
+        Parameters
+        ----------
+        sensor : mi.Sensor
+            The sensor.
+        index : int
+            The view.
+
+        Returns
+        -------
+        view : View
+            The view (made on first use).
+        """
+        view = self[index]
+        pairs = [(s, i) for s, i in self._bound.value if s is not sensor]
+        self._bound.value = pairs + [(sensor, index)]
+        return view
+
     def of(self, scene: mi.Scene, sensor: mi.Sensor) -> View:
-        """The view that renders ``sensor``: its index among the scene's sensors, else 0.
+        """The view that renders ``sensor``: the one it is bound to (:meth:`bind`), else its
+        index among the scene's sensors, else 0.
 
         Parameters
         ----------
@@ -142,6 +166,9 @@ class Views:
         view : View
             The view (made on first use).
         """
+        for s, i in self._bound.value:
+            if s is sensor:
+                return self[i]
         for i, s in enumerate(scene.sensors()):
             if s is sensor:
                 return self[i]

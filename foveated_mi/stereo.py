@@ -1,0 +1,354 @@
+"""Two eyes from one head pose: a stereo rig, each eye's off-axis frustum and sensor, and the
+gaze of each eye from one fixation point.
+
+The scene's own sensor is the *head* (the cyclopean eye between the two): its pose moves the
+rig, and a gaze on its film is the cyclopean gaze. :class:`StereoRig` places the eyes
+``ipd / 2`` to either side along the head's right axis, with parallel axes (a headset's eyes
+are not turned inward), and gives each its own frustum: the angles from its axis to the left,
+right, top and bottom edges of its eye buffer, asymmetric as a headset's are (the nasal side
+narrower). An eye's sensor is Mitsuba's ``perspective`` with its principal point shifted off
+the film's centre, so that its corner rays make exactly those angles.
+
+Both eyes look at one point (:func:`fixation`): where the head's gaze ray meets a surface,
+or, on a miss, a set distance along it (2 m by default). Each eye's gaze is that point on its
+own film (:func:`eye_gaze`), so the two foveae fall on the same surface.
+
+:class:`Stereo` renders both eyes of one head pose with one call. Each eye is a view of the
+integrator of its own (:class:`foveated_mi.frame.view.Views`): its own gaze, plan and history,
+as two integrators would keep them. A cut resets both histories (:meth:`Stereo.cut`).
+Scene units are taken to be metres (the IPD's default, 63 mm, and the 2 m fixation).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import mitsuba as mi
+import numpy as np
+
+from .validate import ParameterError, check_int, check_point2, check_range
+
+#: The eyes, in the order :class:`Stereo` renders them.
+EYES = ("left", "right")
+
+
+@dataclass(frozen=True)
+class Frustum:
+    """One eye's field of view: the angles in degrees from its axis to the left, right, top
+    and bottom edges of its eye buffer, each in (0, 90)."""
+    left: float
+    right: float
+    up: float
+    down: float
+
+    def __post_init__(self):
+        for side in ("left", "right", "up", "down"):
+            check_range(f"frustum {side}", getattr(self, side), 0.0, 90.0, lo_open=True,
+                        hi_open=True)
+
+    @property
+    def tangents(self) -> tuple[float, float, float, float]:
+        """The tangents of (left, right, up, down)."""
+        return tuple(math.tan(math.radians(a))
+                     for a in (self.left, self.right, self.up, self.down))
+
+    def mirrored(self) -> Frustum:
+        """The other eye's frustum: left and right swapped."""
+        return Frustum(self.right, self.left, self.up, self.down)
+
+
+@dataclass(frozen=True)
+class StereoRig:
+    """Two eyes ``ipd`` apart (scene units; 63 mm by default), each with its own frustum
+    (``right`` defaults to ``left`` mirrored) and an eye buffer ``width`` pixels wide, as
+    many high as its frustum's aspect asks for with square pixels."""
+    left: Frustum = Frustum(50.0, 40.0, 45.0, 50.0)
+    right: Frustum | None = None
+    ipd: float = 0.063
+    width: int = 640
+
+    def __post_init__(self):
+        check_range("ipd", self.ipd, 0.0, lo_open=True)
+        check_int("eye buffer width", self.width, 8, 16384)
+        for name in ("left", "right"):
+            f = getattr(self, name)
+            if f is not None and not isinstance(f, Frustum):
+                raise ParameterError(f"{name} frustum", f, "a Frustum(left, right, up, down)")
+        if self.right is None:
+            object.__setattr__(self, "right", self.left.mirrored())
+
+    def frustum(self, eye: str) -> Frustum:
+        """The frustum of ``eye`` (``'left'`` or ``'right'``).
+
+        Parameters
+        ----------
+        eye : str
+            One of :data:`EYES`.
+
+        Returns
+        -------
+        frustum : Frustum
+            Its angles.
+        """
+        return self.left if _eye(eye) == "left" else self.right
+
+    def size(self, eye: str) -> tuple[int, int]:
+        """The eye buffer's size: ``width`` across, the height its frustum's aspect gives.
+
+        Parameters
+        ----------
+        eye : str
+            One of :data:`EYES`.
+
+        Returns
+        -------
+        size : tuple of int
+            ``(width, height)`` in pixels.
+        """
+        tl, tr, tu, td = self.frustum(eye).tangents
+        return self.width, max(1, round(self.width * (tu + td) / (tl + tr)))
+
+    def realised(self, eye: str) -> Frustum:
+        """The frustum the eye's sensor has: its left and right angles exactly, its up and
+        down angles within half a pixel of the frustum's (the eye buffer's height is a whole
+        number of square pixels, so its vertical extent scales by the rounded height over the
+        exact one).
+
+        Parameters
+        ----------
+        eye : str
+            One of :data:`EYES`.
+
+        Returns
+        -------
+        frustum : Frustum
+            The angles of the sensor's corner rays.
+        """
+        f = self.frustum(eye)
+        tl, tr, tu, td = f.tangents
+        width, height = self.size(eye)
+        k = (tl + tr) * height / (width * (tu + td))
+        return Frustum(f.left, f.right, math.degrees(math.atan(k * tu)),
+                       math.degrees(math.atan(k * td)))
+
+    def eye_to_world(self, head: mi.ScalarTransform4f, eye: str) -> mi.ScalarTransform4f:
+        """The pose of ``eye``: the head's, moved ``ipd / 2`` along the head's right axis (its
+        local -x: a Mitsuba camera's local +x points to its left), axes parallel.
+
+        Parameters
+        ----------
+        head : mi.ScalarTransform4f
+            The head's to-world transform (the scene sensor's).
+        eye : str
+            One of :data:`EYES`.
+
+        Returns
+        -------
+        to_world : mi.ScalarTransform4f
+            The eye's to-world transform.
+        """
+        side = 0.5 * self.ipd if _eye(eye) == "left" else -0.5 * self.ipd
+        return head @ mi.ScalarTransform4f().translate([side, 0.0, 0.0])
+
+    def sensor(self, head: mi.ScalarTransform4f, eye: str, *, spp: int = 1,
+               rfilter: dict | None = None) -> mi.Sensor:
+        """A perspective sensor for ``eye``: its pose, its off-axis frustum, its eye buffer.
+
+        Parameters
+        ----------
+        head : mi.ScalarTransform4f
+            The head's to-world transform.
+        eye : str
+            One of :data:`EYES`.
+        spp : int, optional
+            Its sampler's samples per pixel.
+        rfilter : dict, optional
+            Its film's reconstruction filter (Mitsuba's default, ``gaussian``, when None).
+
+        Returns
+        -------
+        sensor : mi.Sensor
+            A ``perspective`` sensor whose corner rays make the angles of :meth:`realised`.
+        """
+        tl, tr, tu, td = self.frustum(eye).tangents
+        width, height = self.size(eye)
+        film = {"type": "hdrfilm", "width": width, "height": height, "pixel_format": "rgb"}
+        if rfilter is not None:
+            film["rfilter"] = rfilter
+        return mi.load_dict({
+            "type": "perspective", "fov_axis": "x",
+            "fov": math.degrees(2.0 * math.atan(0.5 * (tl + tr))),
+            # The principal point off the film's centre: Mitsuba shifts the frustum by twice
+            # the offset times the half-extent, in units of the film's width (height).
+            "principal_point_offset_x": (tr - tl) / (2.0 * (tl + tr)),
+            "principal_point_offset_y": (td - tu) / (2.0 * (tu + td)),
+            "to_world": self.eye_to_world(head, eye),
+            "sampler": {"type": "independent", "sample_count": int(spp)},
+            "film": film})
+
+
+def _eye(eye: str) -> str:
+    if eye not in EYES:
+        raise ParameterError("eye", eye, "'left' or 'right'")
+    return eye
+
+
+def fixation(scene: mi.Scene, head: mi.Sensor, gaze, distance: float = 2.0
+             ) -> tuple[np.ndarray, bool]:
+    """The point both eyes look at: where the head's gaze ray meets a surface, else
+    ``distance`` along it.
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        The scene.
+    head : mi.Sensor
+        The head's sensor (the cyclopean eye).
+    gaze : tuple of float
+        The gaze on the head's film, normalised (origin top-left).
+    distance : float, optional
+        Where the point lies on a miss (the sky), in scene units.
+
+    Returns
+    -------
+    point : numpy.ndarray
+        The fixation point, world space, shape (3,).
+    hit : bool
+        Whether the gaze ray met a surface.
+    """
+    gaze = check_point2("gaze", gaze)
+    check_range("fixation distance", distance, 0.0, lo_open=True)
+    ray, _ = head.sample_ray(0.0, 0.5, mi.Point2f(*gaze), mi.Point2f(0.5, 0.5))
+    si = scene.ray_intersect(ray)
+    d = np.array([ray.d.x[0], ray.d.y[0], ray.d.z[0]], dtype=np.float64)
+    if bool(si.is_valid()[0]):
+        return np.array([si.p.x[0], si.p.y[0], si.p.z[0]], dtype=np.float64), True
+    # The distance counts from the eye's centre (the ray starts on the near clip plane).
+    centre = np.array(mi.traverse(head)["to_world"].matrix, dtype=np.float64).reshape(4, 4)[:3, 3]
+    return centre + float(distance) * d, False
+
+
+def eye_gaze(rig: StereoRig, head: mi.ScalarTransform4f, eye: str, point) -> tuple[float, float]:
+    """Where ``point`` lies on the film of ``eye``: its gaze, normalised (origin top-left;
+    outside [0, 1] where the point is outside the eye's frustum).
+
+    Parameters
+    ----------
+    rig : StereoRig
+        The rig.
+    head : mi.ScalarTransform4f
+        The head's to-world transform.
+    eye : str
+        One of :data:`EYES`.
+    point : array_like
+        A world-space point in front of the eye.
+
+    Returns
+    -------
+    gaze : tuple of float
+        Its normalised film position.
+    """
+    to_local = rig.eye_to_world(head, eye).inverse()
+    p = to_local @ mi.ScalarPoint3f(*[float(v) for v in point])
+    if not p.z > 0.0:
+        raise ParameterError("fixation point", tuple(point), f"a point in front of the {eye} eye")
+    tl, tr, tu, td = rig.frustum(eye).tangents
+    # Local +x is the camera's left and +y its up: the film's u grows to the right, v down.
+    return (float((tl - p.x / p.z) / (tl + tr)), float((tu - p.y / p.z) / (tu + td)))
+
+
+class StereoFrame(NamedTuple):
+    """Both eyes' images of one head pose."""
+    left: Any                      #: the left eye's image, (H, W, 3)
+    right: Any                     #: the right eye's image
+    gazes: tuple[tuple[float, float], tuple[float, float]]   #: each eye's gaze (normalised)
+    fixation: np.ndarray           #: the point both eyes look at
+    hit: bool                      #: whether the head's gaze ray met a surface
+
+
+class Stereo:
+    """Renders both eyes of a rig with one foveated integrator, each eye a view of its own
+    (module docstring).
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        The scene; its first sensor is the head.
+    integrator : FoveatedIntegrator
+        The integrator that renders both eyes.
+    rig : StereoRig, optional
+        The eyes (default: :class:`StereoRig`'s).
+    views : tuple of int, optional
+        The integrator's views the eyes use (default: 1 and 2; view 0 stays the scene's
+        sensor's).
+    fixation_distance : float, optional
+        Where the eyes converge when the head's gaze ray meets nothing.
+    """
+
+    def __init__(self, scene: mi.Scene, integrator, rig: StereoRig | None = None,
+                 views: tuple[int, int] = (1, 2), fixation_distance: float = 2.0):
+        self.scene, self.integrator = scene, integrator
+        self.rig = rig if rig is not None else StereoRig()
+        if len(views) != 2 or views[0] == views[1]:
+            raise ParameterError("views", views, "two different view indices")
+        self.fixation_distance = check_range("fixation distance", fixation_distance, 0.0,
+                                             lo_open=True)
+        self.head = scene.sensors()[0]
+        spp = self.head.sampler().sample_count()
+        pose = self.head_pose()
+        self.sensors = {eye: self.rig.sensor(pose, eye, spp=spp) for eye in EYES}
+        self._poses = {eye: np.array(self.rig.eye_to_world(pose, eye).matrix, dtype=np.float64)
+                       for eye in EYES}
+        self.views = {eye: integrator.views.bind(self.sensors[eye], v)
+                      for eye, v in zip(EYES, views)}
+
+    def head_pose(self) -> mi.ScalarTransform4f:
+        """The head's to-world transform, as the scene's sensor has it now."""
+        m = np.array(mi.traverse(self.head)["to_world"].matrix, dtype=np.float64)
+        return mi.ScalarTransform4f(m.reshape(4, 4))
+
+    def cut(self) -> None:
+        """A camera cut: both eyes' histories start again."""
+        for view in self.views.values():
+            view.reset()
+
+    def render(self, gaze=(0.5, 0.5), *, seed: int = 0, spp: int = 0) -> StereoFrame:
+        """Both eyes at the head's current pose, looking at the head's gaze.
+
+        Parameters
+        ----------
+        gaze : tuple of float, optional
+            The gaze on the head's film, normalised (origin top-left).
+        seed : int, optional
+            The frame's seed (the right eye's is ``seed`` + 1, so the eyes' noise is
+            independent).
+        spp : int, optional
+            Samples per pixel (0: the head sensor's).
+
+        Returns
+        -------
+        frame : StereoFrame
+            Both images, each eye's gaze and the fixation point.
+        """
+        pose = self.head_pose()
+        point, hit = fixation(self.scene, self.head, gaze, self.fixation_distance)
+        images, gazes = {}, []
+        for k, eye in enumerate(EYES):
+            sensor = self.sensors[eye]
+            to_world = self.rig.eye_to_world(pose, eye)
+            matrix = np.array(to_world.matrix, dtype=np.float64)
+            if not np.array_equal(self._poses[eye], matrix):
+                # Only a moved head updates the eye: an update is a camera move to the frame.
+                params = mi.traverse(sensor)
+                params["to_world"] = to_world
+                params.update()
+                self._poses[eye] = matrix
+            g = eye_gaze(self.rig, pose, eye, point)
+            # A fixation outside an eye's frustum puts its fovea at the nearest edge.
+            g = (min(max(g[0], 0.0), 1.0), min(max(g[1], 0.0), 1.0))
+            self.views[eye].gaze = g
+            gazes.append(g)
+            images[eye] = mi.render(self.scene, integrator=self.integrator, sensor=sensor,
+                                    seed=seed + k, spp=spp)
+        return StereoFrame(images["left"], images["right"], tuple(gazes), point, hit)

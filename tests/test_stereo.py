@@ -1,0 +1,148 @@
+"""Two eyes from one head pose: where the eyes sit, the angles of their off-axis frusta, both
+gaze rays through one fixation point, each eye's own history as two integrators would keep
+it, a cut that resets both, and one line for bad input."""
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from foveated_mi.integrators.foveated import FoveatedIntegrator
+from foveated_mi.scenes import load_scene
+from foveated_mi.stereo import EYES, Frustum, Stereo, StereoRig, eye_gaze, fixation
+from foveated_mi.validate import ParameterError
+
+#: A Meta Quest 3's left eye as its runtime reports it (hmdq, risa2000/hmdgdb
+#: ``hmd_cfgs/MetaQuest3_Native_R72.md``): 54 deg temporal, 40 deg nasal, 43.98 up, 54.27 down.
+QUEST3 = Frustum(54.0, 40.0, 43.98, 54.27)
+
+
+def _head(origin=(0.2, 0.3, -2.0), target=(0.5, 0.1, 1.0)):
+    return mi.ScalarTransform4f().look_at(origin=list(origin), target=list(target), up=[0, 1, 0])
+
+
+def _ray(sensor, u, v):
+    ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(u, v), mi.Point2f(0.5, 0.5))
+    return (np.array([ray.o.x[0], ray.o.y[0], ray.o.z[0]], dtype=np.float64),
+            np.array([ray.d.x[0], ray.d.y[0], ray.d.z[0]], dtype=np.float64))
+
+
+def _scene(size=(40, 32)):
+    return load_scene("cornell-box", width=size[0], height=size[1], spp=1,
+                      integrator={"type": "path", "max_depth": 3})
+
+
+def test_each_eye_sits_half_the_ipd_along_the_head_s_right_axis():
+    rig = StereoRig(QUEST3, ipd=0.07, width=32)
+    head = _head()
+    m = np.array(head.matrix, dtype=np.float64).reshape(4, 4)
+    right_axis = -m[:3, 0] / np.linalg.norm(m[:3, 0])        # a camera's local +x is its left
+    for eye, sign in (("left", -1.0), ("right", 1.0)):
+        sensor = rig.sensor(head, eye)
+        o = np.array(mi.traverse(sensor)["to_world"].matrix, dtype=np.float64).reshape(4, 4)
+        np.testing.assert_allclose(o[:3, 3], m[:3, 3] + sign * 0.035 * right_axis, atol=1e-6)
+        # The axes stay parallel: the eye's forward axis is the head's.
+        fwd = np.array(rig.eye_to_world(head, eye).matrix, dtype=np.float64).reshape(4, 4)[:3, 2]
+        np.testing.assert_allclose(fwd, m[:3, 2], atol=1e-6)
+
+
+@pytest.mark.parametrize("eye", EYES)
+def test_the_corner_rays_make_the_frustum_s_angles(eye):
+    rig = StereoRig(QUEST3, width=64)
+    sensor = rig.sensor(mi.ScalarTransform4f(), eye)     # eye space: +x left, +y up, +z ahead
+    f = rig.frustum(eye)
+    assert f == (QUEST3 if eye == "left" else QUEST3.mirrored())
+    angle = {}
+    _, d = _ray(sensor, 0.0, 0.5)
+    angle["left"] = math.atan2(d[0], d[2])
+    _, d = _ray(sensor, 1.0, 0.5)
+    angle["right"] = math.atan2(-d[0], d[2])
+    _, d = _ray(sensor, 0.5, 0.0)
+    angle["up"] = math.atan2(d[1], d[2])
+    _, d = _ray(sensor, 0.5, 1.0)
+    angle["down"] = math.atan2(-d[1], d[2])
+    real = rig.realised(eye)
+    for side, a in angle.items():
+        assert abs(a - math.radians(getattr(real, side))) < 1e-4, (side, math.degrees(a))
+    # Left and right exactly; up and down within half a pixel: the eye buffer's height is a
+    # whole number of square pixels.
+    assert (real.left, real.right) == (f.left, f.right)
+    w, h = rig.size(eye)
+    tl, tr, tu, td = f.tangents
+    exact = w * (tu + td) / (tl + tr)
+    assert abs(h - exact) <= 0.5
+    for side, t in (("up", tu), ("down", td)):
+        half_pixel = math.atan(t * (1 + 0.5 / exact)) - math.atan(t)
+        assert abs(math.radians(getattr(real, side) - getattr(f, side))) <= half_pixel + 1e-9
+
+
+@pytest.mark.parametrize("gaze", [(0.5, 0.5), (0.25, 0.7), (0.8, 0.2)])
+def test_both_gaze_rays_pass_through_the_fixation_point(gaze):
+    scene = _scene()
+    rig = StereoRig(QUEST3, width=48)
+    head = scene.sensors()[0]
+    pose = Stereo(scene, FoveatedIntegrator(preset="paper"), rig).head_pose()
+    point, hit = fixation(scene, head, gaze)
+    assert hit
+    for eye in EYES:
+        g = eye_gaze(rig, pose, eye, point)
+        o, d = _ray(rig.sensor(pose, eye), *g)
+        # Distance from the point to the eye's gaze ray.
+        v = point - o
+        assert np.linalg.norm(v - np.dot(v, d) * d) < 1e-3, (eye, g)
+
+
+def test_a_gaze_at_the_sky_fixates_at_the_set_distance():
+    scene = mi.load_dict({"type": "scene", "sensor": {
+        "type": "perspective", "fov": 60,
+        "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 0], target=[0, 0, 1],
+                                                   up=[0, 1, 0]),
+        "film": {"type": "hdrfilm", "width": 16, "height": 16}},
+        "ball": {"type": "sphere", "center": [0, -50, 5], "radius": 0.1}})
+    point, hit = fixation(scene, scene.sensors()[0], (0.5, 0.5), distance=3.0)
+    assert not hit
+    np.testing.assert_allclose(point, [0.0, 0.0, 3.0], atol=1e-5)
+
+
+def test_each_eye_keeps_its_own_history_as_two_integrators_would():
+    scene = _scene()
+    rig = StereoRig(QUEST3, width=40)
+    one = FoveatedIntegrator(preset="vr", nested=scene.integrator())
+    stereo = Stereo(scene, one, rig)
+    alone = {eye: FoveatedIntegrator(preset="vr", nested=scene.integrator()) for eye in EYES}
+    sensors = {eye: rig.sensor(stereo.head_pose(), eye) for eye in EYES}
+    for frame, gaze in enumerate([(0.5, 0.5), (0.5, 0.5), (0.35, 0.6)]):
+        both = stereo.render(gaze, seed=10 * frame)
+        for k, eye in enumerate(EYES):
+            alone[eye].gaze = both.gazes[k]
+            image = mi.render(scene, integrator=alone[eye], sensor=sensors[eye],
+                              seed=10 * frame + k)
+            np.testing.assert_array_equal(np.array(getattr(both, eye)), np.array(image))
+    assert one.views[1].frame == one.views[2].frame == 3 and one.views[0].frame == 0
+
+
+def test_a_cut_resets_both_eyes():
+    scene = _scene()
+    integ = FoveatedIntegrator(preset="vr", nested=scene.integrator())
+    stereo = Stereo(scene, integ, StereoRig(width=32))
+    stereo.render(seed=0)
+    stereo.render(seed=1)
+    assert all(v.history is not None for v in stereo.views.values())
+    stereo.cut()
+    assert all(v.history is None and v.frame == 0 for v in stereo.views.values())
+    dr.sync_thread()
+
+
+@pytest.mark.parametrize("make,match", [
+    (lambda: StereoRig(ipd=0.0), r"ipd = 0.0 is invalid"),
+    (lambda: StereoRig(ipd=-0.06), r"ipd = -0.06 is invalid"),
+    (lambda: Frustum(50.0, 90.0, 40.0, 40.0), r"frustum right = 90.0 is invalid"),
+    (lambda: Frustum(50.0, 40.0, -1.0, 40.0), r"frustum up = -1.0 is invalid"),
+    (lambda: StereoRig(left=(50, 40, 40, 40)), r"left frustum = \(50, 40, 40, 40\) is invalid"),
+    (lambda: StereoRig().frustum("middle"), r"eye = 'middle' is invalid"),
+])
+def test_bad_input_gets_one_line(make, match):
+    with pytest.raises(ParameterError, match=match) as e:
+        make()
+    assert "\n" not in str(e.value)
