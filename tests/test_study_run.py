@@ -675,3 +675,42 @@ def test_a_task_frame_is_the_frame_its_row_was_scored_on(tmp_path):
     with pytest.raises(ParameterError) as e:
         task_frame(expand_tasks(motion, v)[0], 6)
     assert str(e.value).startswith("task = ") and "\n" not in str(e.value)
+
+
+def test_a_tracker_s_latency_renders_earlier_gazes_and_scores_the_true_ones(tmp_path, monkeypatch):
+    """[viewer] gaze_latency_ms of one frame: the foveated integrator is given each frame's
+    previous gaze, while the metrics fixate the frame's own."""
+    from foveated_mi.study import tasks
+    given, scored = [], []
+    real_renderer, real_viewing = tasks._sequence_renderer, tasks._viewing
+
+    def renderer(scene, task, gaze):
+        render, integ = real_renderer(scene, task, gaze)
+
+        def spy(g):
+            if integ is not None:
+                given.append(list(g))
+            return render(g)
+        spy.modes = getattr(render, "modes", None)
+        return spy, integ
+
+    def viewing(scene, task):
+        if task["kind"] == "foveated":
+            scored.append(list(task["gaze"]))
+        return real_viewing(scene, task)
+    monkeypatch.setattr(tasks, "_sequence_renderer", renderer)
+    monkeypatch.setattr(tasks, "_viewing", viewing)
+    # 100 ms at 30 frames per second: three frames late.
+    text = MOTION.replace('[viewer]\nfov = "sensor"\n',
+                          '[viewer]\nfov = "sensor"\ngaze_latency_ms = 100.0\n')
+    assert "gaze_latency_ms" in text
+    res = run_study(study_file(tmp_path, text, "late.toml"), out=str(tmp_path / "out"),
+                    progress=False, echo=None)
+    assert res.failed == []
+    from foveated_mi.study import load_study
+    motion = load_study(str(tmp_path / "late.toml")).scenes[0].motion
+    shift = round(100.0 * motion["fps"] / 1000.0)
+    assert len(given) == len(scored) == len(motion["gazes"]) and shift >= 1
+    assert scored == motion["gazes"]
+    assert given == [motion["gazes"][max(k - shift, 0)] for k in range(len(given))]
+    assert given != scored

@@ -422,3 +422,82 @@ def test_a_misspelt_option_in_a_study_names_the_closest_one(tmp_path, capsys):
     assert cli.main(["study", path, "--out", str(tmp_path / "out"), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert "none is close" in err and "sigma_p" not in err, err
+
+
+# ---------------------------------------------------------------------------------------------
+# an eye tracker: latency and noise of the rendered gaze
+# ---------------------------------------------------------------------------------------------
+
+TRACKED = BASE + """
+[viewer]
+fov = "sensor"
+{viewer}
+[motion]
+frames = 12
+fps = 90
+[motion.gaze]
+type = "saccades"
+targets = [[0.3, 0.4], [0.7, 0.6]]
+dwell = 0.03
+duration = 0.02
+"""
+
+
+def _motion(tmp_path, viewer=""):
+    study = load_study(write(tmp_path, TRACKED.format(viewer=viewer)))
+    return study, study.scenes[0].motion
+
+
+def test_no_tracker_and_a_zero_tracker_are_the_same_study(tmp_path):
+    plain, m0 = _motion(tmp_path)
+    zero, m1 = _motion(tmp_path, "gaze_latency_ms = 0.0\ngaze_noise_deg = 0.0")
+    assert m0 == m1 and "rendered_gazes" not in m1 and "gaze_noise_deg" not in m1
+    ids = [[t["task_id"] for t in expand_tasks(s, "llvm_ad_rgb")] for s in (plain, zero)]
+    assert ids[0] == ids[1] and len(ids[0]) > 1
+
+
+def test_a_latency_of_one_frame_renders_the_previous_frame_s_gaze(tmp_path):
+    _, m = _motion(tmp_path, f"gaze_latency_ms = {1000.0 / 90.0!r}")
+    gazes, late = m["gazes"], m["rendered_gazes"]
+    assert late == [gazes[0]] + gazes[:-1]
+    assert any(a != b for a, b in zip(gazes, late))        # the saccades do move the gaze
+
+
+def test_a_latency_between_frames_reads_the_path_that_much_earlier(tmp_path):
+    from foveated_mi.config import _gaze
+    from foveated_mi.study.spec import TableContext
+    _, m = _motion(tmp_path, "gaze_latency_ms = 50.0")
+    path = _gaze(TableContext("t"), {"type": "saccades", "targets": [[0.3, 0.4], [0.7, 0.6]],
+                                     "dwell": 0.03, "duration": 0.02}, ".")
+    for k, g in enumerate(m["rendered_gazes"]):
+        assert g == [float(v) for v in path.at(max(k / 90 - 0.05, 0.0))]
+
+
+@pytest.mark.parametrize("viewer,key", [("gaze_latency_ms = -1.0", "viewer.gaze_latency_ms"),
+                                        ("gaze_noise_deg = -0.5", "viewer.gaze_noise_deg"),
+                                        ("gaze_noise_deg = 'a'", "viewer.gaze_noise_deg")])
+def test_a_bad_tracker_gets_one_line(tmp_path, viewer, key):
+    with pytest.raises(ParameterError, match=rf"{key} = .* is invalid") as e:
+        _motion(tmp_path, viewer)
+    assert "\n" not in str(e.value)
+
+
+def test_tracker_noise_has_the_deviation_it_asks_for_in_degrees(tmp_path):
+    """2000 gazes jittered by 0.5 degrees: the sample deviation of the jitter, converted back
+    at the film's pixels per degree, is 0.5 within 10 % (its own standard error is 1.6 %)."""
+    import mitsuba as mi
+    import numpy as np
+    from foveated_mi.scenes import load_scene
+    from foveated_mi.study.tasks import rendered_gazes
+    from foveated_mi.viewer import pixels_per_degree
+    scene = load_scene("cornell-box", width=400, height=300)
+    n, g = 2000, [0.5, 0.5]
+    task = {"seed": 3, "scene": {"width": 400, "height": 300},
+            "motion": {"gazes": [g] * n, "gaze_noise_deg": 0.5}}
+    out = np.array(rendered_gazes(scene, task))
+    ppd = pixels_per_degree(scene.sensors()[0], tuple(g))
+    deg = (out - g) * [400, 300] / ppd
+    assert abs(deg.std(axis=0) - 0.5).max() < 0.05, deg.std(axis=0)
+    assert np.array_equal(out, np.array(rendered_gazes(scene, task)))      # seeded
+    assert rendered_gazes(scene, dict(task, motion={"gazes": [g] * 3})) == [g] * 3
+    assert mi.variant().startswith(("llvm", "cuda"))

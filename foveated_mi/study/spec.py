@@ -45,6 +45,10 @@ Layout (every key optional except ``scenes``)::
     monitor = { ppd = 67.0, display = "standard_fhd" }   # also JOD as seen on a monitor at
                                 #   ppd (columns jod_monitor, jod_video_monitor): the same
                                 #   frames judged under both conditions, rendered once
+    gaze_latency_ms = 0.0       #   the eye tracker's delay: with [motion], each frame is
+                                #   rendered with the gaze of that long ago; the metrics
+                                #   fixate the true gaze
+    gaze_noise_deg = 0.0        #   its jitter: a Gaussian in degrees on the rendered gaze
 
     [motion]                    # rows are sequences instead of frames of a still view
     frames = 45                 #   frames per sequence (>= 2), shown at fps
@@ -288,7 +292,7 @@ def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
     scenes = [_scene(ctx, f"scenes[{i}]", s, defaults, base_dir)
               for i, s in enumerate(scenes_in)]
     if "motion" in data:
-        scenes = _motion(ctx, data["motion"], scenes, base_dir)
+        scenes = _motion(ctx, data["motion"], scenes, base_dir, _tracker(ctx, data.get("viewer")))
     labels = [s.label for s in scenes]
     for i, lab in enumerate(labels):
         if lab in labels[:i]:
@@ -452,9 +456,54 @@ def _scene_camera(ctx: TableContext, key: str, keys: dict, source: str) -> dict:
     return path.at(0.0)
 
 
-def _motion(ctx: TableContext, table: Any, scenes: list, base_dir: str) -> list:
+def _tracker(ctx: TableContext, table: Any) -> tuple[float, float]:
+    """``[viewer] gaze_latency_ms`` and ``gaze_noise_deg``: the eye tracker's delay from eye to
+    photon and its jitter (a Gaussian's standard deviation in degrees); 0 and 0 without them.
+
+    Parameters
+    ----------
+    ctx : TableContext
+        The study file's context (for one-line errors).
+    table : dict or None
+        The ``[viewer]`` table.
+
+    Returns
+    -------
+    tracker : tuple of float
+        ``(latency_ms, noise_deg)``.
+    """
+    if not isinstance(table, dict):
+        return 0.0, 0.0
+    from ..validate import check_range
+    try:
+        return (check_range("viewer.gaze_latency_ms", table.get("gaze_latency_ms", 0.0), 0.0,
+                            1000.0),
+                check_range("viewer.gaze_noise_deg", table.get("gaze_noise_deg", 0.0), 0.0,
+                            10.0))
+    except ParameterError as e:
+        raise ctx.rename(e) from None
+
+
+def _delayed(path, gazes: list, fps: float, latency_ms: float) -> list:
+    """The gaze each frame is rendered with, ``latency_ms`` late: a whole number of frames
+    takes that earlier frame's gaze exactly; otherwise the path at the earlier time (the
+    first gaze before the path starts)."""
+    shift = latency_ms * fps / 1000.0
+    if abs(shift - round(shift)) < 1e-9:
+        return [gazes[max(k - round(shift), 0)] for k in range(len(gazes))]
+    if path is None:                          # a still gaze: late or not, the same
+        return list(gazes)
+    return [list(map(float, path.at(max(k / fps - latency_ms / 1000.0, 0.0))))
+            for k in range(len(gazes))]
+
+
+def _motion(ctx: TableContext, table: Any, scenes: list, base_dir: str,
+            tracker: tuple[float, float] = (0.0, 0.0)) -> list:
     """The scenes with their ``motion``: the ``[motion]`` paths sampled at each frame (plain
-    values a worker can take; the camera path is completed by each scene's own camera)."""
+    values a worker can take; the camera path is completed by each scene's own camera). With
+    an eye tracker's latency (:func:`_tracker`), ``rendered_gazes`` are the gazes the renderer
+    is given (the metrics fixate ``gazes``); with its noise, ``gaze_noise_deg``. Neither key
+    is there without them, so the task ids of studies written before them stay the same."""
     from ..config import _camera, _gaze
     table = dict(ctx.table("motion", table))
     ctx.known("motion", table, ("frames", "fps", "camera", "gaze"))
@@ -477,7 +526,12 @@ def _motion(ctx: TableContext, table: Any, scenes: list, base_dir: str) -> list:
             camera = [path.at(k / fps) for k in range(frames)]
         gazes = [list(map(float, gaze.at(k / fps))) for k in range(frames)] if gaze else \
             [list(scene.gaze)] * frames
-        out.append(replace(scene, motion={"fps": fps, "cameras": camera, "gazes": gazes}))
+        motion = {"fps": fps, "cameras": camera, "gazes": gazes}
+        if tracker[0] > 0.0:
+            motion["rendered_gazes"] = _delayed(gaze, gazes, fps, tracker[0])
+        if tracker[1] > 0.0:
+            motion["gaze_noise_deg"] = tracker[1]
+        out.append(replace(scene, motion=motion))
     return out
 
 
@@ -503,7 +557,8 @@ def _viewer(ctx: TableContext, table: Any, fovea_deg, perceptual: dict) -> dict:
                             "\"sensor\" (degrees need the sensor's field of view)")
         return {}
     table = dict(ctx.table("viewer", table))
-    ctx.known("viewer", table, ("fov", "display", "monitor"))
+    ctx.known("viewer", table, ("fov", "display", "monitor", "gaze_latency_ms",
+                                "gaze_noise_deg"))
     from ..perceptual import check_display
     if "display" in table:
         try:

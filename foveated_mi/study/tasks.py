@@ -396,8 +396,9 @@ def _sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = False):
     gazes = motion["gazes"]
     n = len(gazes)
     refs = reference if reference.ndim == 4 else np.broadcast_to(reference, (n,) + reference.shape)
-    render, integ = _sequence_renderer(scene, task, gazes[0])
-    times, rays, shown, quality, eccs = _sequence_frames(scene, task, refs, render)
+    rendered = rendered_gazes(scene, task)
+    render, integ = _sequence_renderer(scene, task, rendered[0])
+    times, rays, shown, quality, eccs = _sequence_frames(scene, task, refs, render, rendered)
     row = _sequence_summary(task, n, times, rays)
     modes = getattr(render, "modes", None)      # the row's time: the frames after the first
     row["trace_mode"] = _mode(modes[1:] or modes) if modes else UNIFORM_MODE
@@ -467,12 +468,50 @@ def _sequence_renderer(scene, task: dict, gaze):
     return render_baseline, None
 
 
-def _sequence_frames(scene, task: dict, refs: np.ndarray, render) -> tuple:
+def rendered_gazes(scene, task: dict) -> list:
+    """The gazes a sequence's frames are rendered with: the eye tracker's, late by
+    ``[viewer] gaze_latency_ms`` (``motion["rendered_gazes"]``) and jittered by a Gaussian of
+    ``gaze_noise_deg`` degrees (converted at each gaze's pixels per degree, seeded by the
+    task's seed, kept on the film); the true gazes without a tracker. The metrics always
+    fixate the true gazes.
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        The task's scene (its sensor converts degrees to pixels).
+    task : dict
+        A sequence task (``task["motion"]``).
+
+    Returns
+    -------
+    gazes : list of list of float
+        One normalised film position per frame.
+    """
+    motion = task["motion"]
+    gazes = motion.get("rendered_gazes", motion["gazes"])
+    sigma = motion.get("gaze_noise_deg", 0.0)
+    if sigma <= 0.0:
+        return gazes
+    from ..viewer import pixels_per_degree
+    sensor = scene.sensors()[0]
+    w, h = task["scene"]["width"], task["scene"]["height"]
+    rng = np.random.default_rng([int(task["seed"]), 0x6A5E])
+    out, ppd = [], {}
+    for g in gazes:
+        key = tuple(g)
+        if key not in ppd:                      # a fixation holds one gaze for many frames
+            ppd[key] = pixels_per_degree(sensor, key)
+        dx, dy = rng.normal(0.0, sigma * ppd[key], 2)
+        out.append([min(max(g[0] + dx / w, 0.0), 1.0), min(max(g[1] + dy / h, 0.0), 1.0)])
+    return out
+
+
+def _sequence_frames(scene, task: dict, refs: np.ndarray, render, rendered: list) -> tuple:
     """Each frame of the sequence moved, fixated, rendered (``render``, see
-    :func:`_sequence_renderer`) and scored against ``refs[k]``: ``(times, rays, shown,
-    quality, eccentricity)`` per frame, ``shown`` the (reference, image) pair in display
-    values, ``eccentricity`` the frame's map in degrees (:func:`_viewing`; None without
-    degrees)."""
+    :func:`_sequence_renderer`, with the gaze of ``rendered``) and scored against ``refs[k]``
+    at its true gaze: ``(times, rays, shown, quality, eccentricity)`` per frame, ``shown``
+    the (reference, image) pair in display values, ``eccentricity`` the frame's map in
+    degrees (:func:`_viewing`; None without degrees)."""
     from ..render import to_display
     motion, m = task["motion"], task["metrics"]
     gazes, cameras = motion["gazes"], motion["cameras"]
@@ -483,7 +522,7 @@ def _sequence_frames(scene, task: dict, refs: np.ndarray, render) -> tuple:
             frame_task = dict(task, gaze=gazes[k])
             viewing = _viewing(scene, frame_task)
             eccs.append(viewing["eccentricity"])
-            image, time_ms, ray_fraction = render(gazes[k])
+            image, time_ms, ray_fraction = render(rendered[k])
             times.append(time_ms)
             rays.append(ray_fraction)
             ref_d = to_display(refs[k], m["exposure"])
