@@ -146,3 +146,37 @@ def test_bad_input_gets_one_line(make, match):
     with pytest.raises(ParameterError, match=match) as e:
         make()
     assert "\n" not in str(e.value)
+
+
+def test_one_loss_over_both_eyes_gives_one_gradient():
+    """Reverse mode through both eyes at once is the sum of each eye's own gradient (same
+    seeds, no history): the eyes' views share nothing a gradient pass could mix up."""
+    import gradcheck
+    import tolerances
+    sc = gradcheck.scene("prb", preset="guided", theta=0.2)
+    integ = sc.integrator()
+    stereo = Stereo(sc, integ, StereoRig(QUEST3, width=24))
+    params = mi.traverse(sc)
+    key = gradcheck.PARAMS["albedo"].key
+    base = type(params[key])(params[key])
+
+    def gradient(eyes):
+        params[key] = type(base)(base)
+        dr.enable_grad(params[key])
+        params.update()
+        loss = 0.0
+        for eye in eyes:
+            k = EYES.index(eye)
+            stereo.views[eye].gaze = (0.4 + 0.2 * k, 0.5)
+            image = mi.render(sc, params, integrator=integ, sensor=stereo.sensors[eye],
+                              seed=7 + k, spp=2)
+            loss = loss + dr.mean(image, axis=None)
+        dr.backward(loss)
+        return np.array(dr.grad(params[key]), dtype=np.float64).ravel()
+
+    both = gradient(EYES)
+    each = gradient(["left"]) + gradient(["right"])
+    assert np.all(np.isfinite(both)) and np.abs(both).max() > 0
+    # The same terms summed in another order: the two eyes' pixels and samples.
+    bound = tolerances.gamma(2 * 24 * 40 * 3 * 2) * np.abs(each).max() * 2
+    np.testing.assert_allclose(both, each, rtol=0, atol=bound)
