@@ -84,7 +84,7 @@ class StereoRig:
         Parameters
         ----------
         eye : str
-            One of :data:`EYES`.
+            ``'left'`` or ``'right'``.
 
         Returns
         -------
@@ -99,7 +99,7 @@ class StereoRig:
         Parameters
         ----------
         eye : str
-            One of :data:`EYES`.
+            Whose buffer: one of :data:`EYES`.
 
         Returns
         -------
@@ -118,7 +118,7 @@ class StereoRig:
         Parameters
         ----------
         eye : str
-            One of :data:`EYES`.
+            The eye whose realised angles are returned, ``'left'`` or ``'right'``.
 
         Returns
         -------
@@ -141,7 +141,7 @@ class StereoRig:
         head : mi.ScalarTransform4f
             The head's to-world transform (the scene sensor's).
         eye : str
-            One of :data:`EYES`.
+            Which eye to place (``'left'``: ``+ipd/2`` along the head's local x).
 
         Returns
         -------
@@ -160,7 +160,7 @@ class StereoRig:
         head : mi.ScalarTransform4f
             The head's to-world transform.
         eye : str
-            One of :data:`EYES`.
+            The eye the sensor renders.
         spp : int, optional
             Its sampler's samples per pixel.
         rfilter : dict, optional
@@ -240,7 +240,7 @@ def eye_gaze(rig: StereoRig, head: mi.ScalarTransform4f, eye: str, point) -> tup
     head : mi.ScalarTransform4f
         The head's to-world transform.
     eye : str
-        One of :data:`EYES`.
+        The eye whose film the point is projected on.
     point : array_like
         A world-space point in front of the eye.
 
