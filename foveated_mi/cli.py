@@ -83,10 +83,7 @@ def _add_view_parser(sub) -> None:
                    "else llvm_ad_rgb; or $FOVEATED_MI_VARIANT)")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="foveated-mi", description=__doc__.splitlines()[0])
-    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-
+def _add_render_parser(sub) -> None:
     r = sub.add_parser("render", help="render one foveated frame")
     r.add_argument("scene", help="Mitsuba XML path or built-in scene "
                    "(cornell-box, voxel-city, eye-exam)")
@@ -105,7 +102,21 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also render the full frame and report PSNR, SSIM and speed-up")
     r.add_argument("--warmup", type=int, default=1,
                    help="untimed frames first, so the timed frame excludes JIT compilation")
+    r.add_argument("--stereo", action="store_true",
+                   help="render two eyes of the scene's camera (the head): each eye's frustum "
+                   "is the camera's, both fixate where the gaze ray meets the scene; the EXR "
+                   "holds layers left and right, the PNG shows them side by side")
+    r.add_argument("--ipd", type=float, default=0.063,
+                   help="with --stereo: the distance between the eyes in scene units "
+                   "(default 0.063, metres)")
     r.add_argument("--quiet", action="store_true")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="foveated-mi", description=__doc__.splitlines()[0])
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    _add_render_parser(sub)
 
     s = sub.add_parser("sequence", help="render a sequence from a TOML config")
     s.add_argument("config", help="sequence config (see configs/)")
@@ -175,6 +186,9 @@ def cmd_render(args: argparse.Namespace) -> int:
         check_int("--size H", args.size[1], 1, 16384)
     if not str(args.out).lower().endswith(".exr"):
         raise ParameterError("--out", args.out, "a path ending in .exr")
+    if args.stereo:
+        from .validate import check_range
+        check_range("--ipd", args.ipd, 0.0, lo_open=True)
     foveated_mi.set_variant(args.variant)
 
     from .render import FrameRenderer
@@ -182,6 +196,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     size = tuple(args.size) if args.size else (None, None)
     nested = None if max_depth is None else {"type": "path", "max_depth": max_depth}
     scene = load_scene(args.scene, width=size[0], height=size[1], spp=spp, integrator=nested)
+    if args.stereo:
+        return _render_stereo(args, scene, opts, spp)
     fr = FrameRenderer(scene, {**frame_options(args), "timing": True}, spp=spp)
     result = fr.render_frame(seed=args.seed, warmup=args.warmup,
                              compare_full=args.compare_full)
@@ -202,6 +218,37 @@ def cmd_render(args: argparse.Namespace) -> int:
             print(f"full render {stats['full_ms']:.2f} ms, speed-up x{stats['speedup']:.2f}, "
                   f"PSNR {stats['psnr']:.2f} dB, SSIM {stats['ssim']:.4f}")
         print(f"wrote {args.out} and {os.path.splitext(args.out)[0] + '.png'}"
+              + (f" and {args.stats}" if args.stats else ""))
+    return 0
+
+
+def _render_stereo(args: argparse.Namespace, scene, opts: dict[str, Any], spp: int) -> int:
+    """``render --stereo``: both eyes of the scene's camera, after ``--warmup`` frames."""
+    from .render import make_integrator
+    from .stereo import Stereo, StereoRig, frustum_of, write_stereo
+    head = scene.sensors()[0]
+    rig = StereoRig(frustum_of(head), ipd=args.ipd, width=int(head.film().crop_size()[0]))
+    integ = make_integrator(scene, frame_options(args))
+    stereo = Stereo(scene, integ, rig)
+    for k in range(args.warmup):
+        stereo.render(opts["gaze"], seed=args.seed + 1000 + 2 * k, spp=spp)
+    if args.warmup:
+        stereo.cut()
+    frame = stereo.render(opts["gaze"], seed=args.seed, spp=spp)
+    png = write_stereo(args.out, frame, exposure=integ.exposure, tonemap=integ.tonemap)
+    stats = {eye: stereo.views[eye].stats for eye in ("left", "right")}
+    stats.update(gazes=[list(g) for g in frame.gazes], fixation=list(map(float, frame.fixation)),
+                 ipd=args.ipd, spp=spp)
+    if args.stats:
+        from .io import atomic_write
+        with atomic_write(args.stats, "w") as f:
+            json.dump(stats, f, indent=2, default=float)
+    if not args.quiet:
+        w, h = rig.size("left")
+        print(f"{args.scene}: two eyes of {w}x{h}, ipd {args.ipd:g}, gazes "
+              + ", ".join(f"({g[0]:.3f}, {g[1]:.3f})" for g in frame.gazes)
+              + f"; fixation {'on a surface' if frame.hit else 'at 2 units (no surface)'}")
+        print(f"wrote {args.out} (layers left, right) and {png}"
               + (f" and {args.stats}" if args.stats else ""))
     return 0
 

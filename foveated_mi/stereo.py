@@ -352,3 +352,67 @@ class Stereo:
             images[eye] = mi.render(self.scene, integrator=self.integrator, sensor=sensor,
                                     seed=seed + k, spp=spp)
         return StereoFrame(images["left"], images["right"], tuple(gazes), point, hit)
+
+
+def frustum_of(sensor: mi.Sensor) -> Frustum:
+    """The frustum of a pinhole ``sensor``: the angles of the rays through the middles of its
+    film's edges, measured in its own frame (a stereo rig whose eyes see what the head sees).
+
+    Parameters
+    ----------
+    sensor : mi.Sensor
+        A perspective sensor.
+
+    Returns
+    -------
+    frustum : Frustum
+        Its left, right, up and down angles in degrees.
+    """
+    m = np.array(mi.traverse(sensor)["to_world"].matrix, dtype=np.float64).reshape(4, 4)
+    to_local = np.linalg.inv(m[:3, :3])
+    angles = []
+    for (u, v), (axis, sign) in zip(((0.0, 0.5), (1.0, 0.5), (0.5, 0.0), (0.5, 1.0)),
+                                    ((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0))):
+        ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(u, v), mi.Point2f(0.5, 0.5))
+        d = to_local @ np.array([ray.d.x[0], ray.d.y[0], ray.d.z[0]], dtype=np.float64)
+        angles.append(math.degrees(math.atan2(sign * d[axis], d[2])))
+    return Frustum(*angles)
+
+
+def write_stereo(path: str, frame: StereoFrame, *, exposure: float = 0.0,
+                 tonemap: str | None = None) -> str:
+    """Both eyes into one OpenEXR file (layers ``left`` and ``right``, each eye's gaze in its
+    header) and a PNG preview next to it, the eyes side by side.
+
+    Parameters
+    ----------
+    path : str
+        The EXR file (``.exr``).
+    frame : StereoFrame
+        What :meth:`Stereo.render` returned.
+    exposure : float, optional
+        The preview's exposure, in stops.
+    tonemap : str or None, optional
+        The preview's tone curve.
+
+    Returns
+    -------
+    png : str
+        The preview's path.
+    """
+    import json
+    import os
+    from .io import write_exr, write_png
+    left, right = (np.asarray(frame.left, dtype=np.float32),
+                   np.asarray(frame.right, dtype=np.float32))
+    if left.shape != right.shape:
+        raise ParameterError("stereo frame", (left.shape, right.shape),
+                             "two eye buffers of one size (a rig whose frusta mirror each other)")
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    write_exr(path, {"left": left, "right": right},
+              attrs={"foveated_mi_stereo": json.dumps({"gazes": frame.gazes,
+                                                       "fixation": list(map(float, frame.fixation)),
+                                                       "hit": bool(frame.hit)})})
+    png = os.path.splitext(path)[0] + ".png"
+    write_png(png, np.concatenate([left, right], axis=1), exposure=exposure, tonemap=tonemap)
+    return png

@@ -59,6 +59,7 @@ def test_render_writes_exr_layers_png_and_stats(tmp_path, capsys):
     (["--reorder", "diagonal"], "reorder = 'diagonal' is invalid"),
     (["--reconstruction", "cubic"], "reconstruction = 'cubic' is invalid"),
     (["--map-seed", "-2"], "map_seed = -2 is invalid"),
+    (["--stereo", "--ipd", "0"], "--ipd = 0.0 is invalid"),
 ])
 def test_bad_flags_one_line_exit_2(args, needle, capsys, tmp_path):
     out = tmp_path / "x.exr"
@@ -123,3 +124,26 @@ def test_render_with_the_vr_preset_writes_the_film_layers_it_has(tmp_path, capsy
     # The foveal formation reconstructs nothing on the film: no nearest-site layer, and its
     # filtered buffer lies on the polar grid, not the film.
     assert "nearest" not in layers and "filtered" not in layers
+
+
+def test_render_stereo_writes_both_eyes(tmp_path, capsys):
+    """--stereo: the EXR holds each eye as a layer, the PNG shows them side by side, the
+    stats hold each eye's stats and gaze; the eyes see the box from 6 cm apart."""
+    import imageio.v3 as iio
+    exr, stats = tmp_path / "eyes.exr", tmp_path / "eyes.json"
+    code, out, err = run(["render", "cornell-box", "--preset", "vr", "--size", "32", "24",
+                          "--stereo", "--ipd", "0.06", "--gaze", "0.45", "0.5", "--warmup", "1",
+                          "--out", str(exr), "--stats", str(stats)], capsys)
+    assert code == 0, err
+    assert "two eyes of 32x24" in out
+    layers = read_exr(exr)
+    assert layers["left"].shape == layers["right"].shape == (24, 32, 3)
+    assert np.all(np.isfinite(layers["left"])) and not np.array_equal(layers["left"],
+                                                                        layers["right"])
+    assert iio.imread(tmp_path / "eyes.png").shape[:2] == (24, 64)
+    s = json.loads(stats.read_text())
+    assert s["ipd"] == 0.06 and s["left"]["rays"] > 0 and s["right"]["rays"] > 0
+    # Both eyes fixate one point in front of them: the left eye sees it right of where the
+    # right eye does.
+    (lx, ly), (rx, ry) = s["gazes"]
+    assert lx > rx and abs(ly - ry) < 1e-6

@@ -180,3 +180,14 @@ def test_one_loss_over_both_eyes_gives_one_gradient():
     # The same terms summed in another order: the two eyes' pixels and samples.
     bound = tolerances.gamma(2 * 24 * 40 * 3 * 2) * np.abs(each).max() * 2
     np.testing.assert_allclose(both, each, rtol=0, atol=bound)
+
+
+@pytest.mark.parametrize("eye", EYES)
+def test_a_sensor_s_frustum_is_read_back_from_its_rays(eye):
+    """frustum_of measures an off-axis sensor in its own frame, whatever its pose."""
+    from foveated_mi.stereo import frustum_of
+    rig = StereoRig(QUEST3, width=48)
+    got = frustum_of(rig.sensor(_head(), eye))
+    real = rig.realised(eye)
+    for side in ("left", "right", "up", "down"):
+        assert abs(getattr(got, side) - getattr(real, side)) < 1e-3, (side, got, real)
