@@ -1,0 +1,121 @@
+"""The periphery's ceiling at the cells' resolution: what the ``vr`` buffer's warp shows once
+every cell holds a converged value, taken at the cell's centre (what a still head converges to
+today: each cell traces the pixel under its centre every frame) or averaged over the cell's
+pixels (what a history per cell would converge to if the traced pixel moved within the cell
+from frame to frame).
+
+    python benchmarks/bench_cell_prefilter.py [--scenes voxel-city staircase]
+                                              [--size 640 360] [--spp 256] [--budget 0.1]
+
+For each scene: a converged reference (``--spp``, path depth 8, a 100-degree camera), the
+``vr`` preset's log-polar grid for that film and ray budget with the gaze at the film's
+centre, each cell's value from the reference both ways, one bilinear warp to the film
+(:func:`foveated_mi.frame.foveal.warp`), and the periphery's error against the reference:
+PSNR of display values outside the full-resolution disc (and its seam), overall and in rings
+of film radius. No noise is involved: it is the best either way of filling the cells can do.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.dirname(HERE))
+
+#: The staircase from the shared scenes, as the studies name it.
+SCENES = {"voxel-city": "voxel-city",
+          "staircase": os.path.join(HERE, "..", "..", "shared", "scenes", "staircase",
+                                    "scene.xml")}
+
+
+def _psnr(a: np.ndarray, b: np.ndarray) -> float:
+    mse = float(np.mean((a - b) ** 2))
+    return math.inf if mse == 0 else 10.0 * math.log10(1.0 / mse)
+
+
+def cells_both_ways(reference: np.ndarray, grid, gaze, width: int, height: int):
+    """Each cell's value taken at its centre pixel and averaged over its pixels, and the
+    cells that hold one (device arrays)."""
+    import drjit as dr
+    import mitsuba as mi
+    from foveated_mi.frame.sampling import snapped_pixels
+    from foveated_mi.kernels.grid import Grid
+    flat = mi.Color3f(*[mi.Float(np.ascontiguousarray(reference[..., c]).ravel())
+                        for c in range(3)])
+    q, on = snapped_pixels(grid, gaze, width, height)
+    centre = dr.gather(mi.Color3f, flat, q, on)
+    film = Grid.film(width, height)
+    idx, _, _ = film.cells()
+    cell, inside = grid.cell_at(film.film_position(idx), gaze)
+    total = dr.zeros(mi.Color3f, grid.size)
+    count = dr.zeros(mi.Float, grid.size)
+    dr.scatter_reduce(dr.ReduceOp.Add, total, flat, cell, inside)
+    dr.scatter_reduce(dr.ReduceOp.Add, count, 1.0, cell, inside)
+    mean = dr.select(count > 0.0, total / dr.maximum(count, 1.0), centre)
+    return centre, mean, on | (count > 0.0)
+
+
+def measure(name: str, width: int, height: int, spp: int, budget: float) -> dict:
+    """Both warps of one scene against its reference (module docstring)."""
+    import mitsuba as mi
+    from foveated_mi.frame.foveal import SEAM, warp
+    from foveated_mi.frame.sampling import fovea_radius, foveal_grid
+    from foveated_mi.options import PRESETS
+    from foveated_mi.render import to_display
+    from foveated_mi.scenes import apply_camera, camera_of, load_scene
+    scene = load_scene(SCENES[name], width=width, height=height, spp=spp,
+                       integrator={"type": "path", "max_depth": 8})
+    apply_camera(scene, {**camera_of(scene), "fov": 100.0})
+    reference = np.array(mi.render(scene, spp=spp, seed=1), dtype=np.float32)
+    r0 = fovea_radius(width, height, PRESETS["vr"]["theta"])
+    grid = foveal_grid(width, height, budget, r0)
+    gaze = mi.Point2f(width / 2.0, height / 2.0)
+    centre, mean, valid = cells_both_ways(reference, grid, gaze, width, height)
+    yy, xx = np.mgrid[0:height, 0:width]
+    r = np.hypot(xx + 0.5 - width / 2.0, yy + 0.5 - height / 2.0)
+    periphery = r > r0 + SEAM
+    ref_d = to_display(reference)
+    out = {"scene": name, "size": [width, height], "budget": budget, "fovea_px": r0,
+           "cells": grid.size}
+    rings = [r0 + SEAM, 2 * r0, 4 * r0, math.inf]
+    for key, cells in (("centre", centre), ("mean", mean)):
+        image = np.array(warp(cells, valid, grid, gaze, width, height)).T.reshape(
+            height, width, 3)
+        shown = to_display(image)
+        out[f"psnr_{key}"] = _psnr(shown[periphery], ref_d[periphery])
+        out[f"rings_{key}"] = [_psnr(shown[(r > a) & (r <= b)], ref_d[(r > a) & (r <= b)])
+                               for a, b in zip(rings[:-1], rings[1:])]
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", nargs="+", default=["voxel-city", "staircase"],
+                    choices=sorted(SCENES))
+    ap.add_argument("--size", type=int, nargs=2, default=[640, 360])
+    ap.add_argument("--spp", type=int, default=256)
+    ap.add_argument("--budget", type=float, default=0.1)
+    args = ap.parse_args(argv)
+    import foveated_mi
+    foveated_mi.set_variant(None)
+    print("| scene | film | cells | periphery PSNR, cell centres | periphery PSNR, cell means |"
+          " rings (r0-2r0, 2r0-4r0, beyond): centres -> means |")
+    print("|---|---|---|---|---|---|")
+    for name in args.scenes:
+        if name == "staircase" and not os.path.exists(SCENES[name]):
+            print(f"| {name} | skipped: scene not found at {SCENES[name]} |")
+            continue
+        m = measure(name, *args.size, args.spp, args.budget)
+        rings = ", ".join(f"{a:.2f} -> {b:.2f}" for a, b in zip(m["rings_centre"],
+                                                                 m["rings_mean"]))
+        print(f"| {name} | {args.size[0]}x{args.size[1]}, {args.budget:g} of the rays | "
+              f"{m['cells']} | {m['psnr_centre']:.2f} dB | {m['psnr_mean']:.2f} dB | {rings} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
