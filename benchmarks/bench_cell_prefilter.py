@@ -38,8 +38,10 @@ def _psnr(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def cells_both_ways(reference: np.ndarray, grid, gaze, width: int, height: int):
-    """Each cell's value taken at its centre pixel and averaged over its pixels, and the
-    cells that hold one (device arrays)."""
+    """Each cell's value taken at its centre pixel and averaged over its pixels, each with the
+    cells that hold it (device arrays): ``(centre, centre_valid, mean, mean_valid)``. A cell
+    whose centre lies off the film holds no centre value, as in the ``vr`` buffer (its warp
+    skips it), though pixels of the film may lie in it."""
     import drjit as dr
     import mitsuba as mi
     from foveated_mi.frame.sampling import snapped_pixels
@@ -55,8 +57,9 @@ def cells_both_ways(reference: np.ndarray, grid, gaze, width: int, height: int):
     count = dr.zeros(mi.Float, grid.size)
     dr.scatter_reduce(dr.ReduceOp.Add, total, flat, cell, inside)
     dr.scatter_reduce(dr.ReduceOp.Add, count, 1.0, cell, inside)
-    mean = dr.select(count > 0.0, total / dr.maximum(count, 1.0), centre)
-    return centre, mean, on | (count > 0.0)
+    held = count > 0.0
+    mean = dr.select(held, total / dr.maximum(count, 1.0), 0.0)
+    return centre, on, mean, held
 
 
 def measure(name: str, width: int, height: int, spp: int, budget: float) -> dict:
@@ -74,7 +77,7 @@ def measure(name: str, width: int, height: int, spp: int, budget: float) -> dict
     r0 = fovea_radius(width, height, PRESETS["vr"]["theta"])
     grid = foveal_grid(width, height, budget, r0)
     gaze = mi.Point2f(width / 2.0, height / 2.0)
-    centre, mean, valid = cells_both_ways(reference, grid, gaze, width, height)
+    centre, on, mean, held = cells_both_ways(reference, grid, gaze, width, height)
     yy, xx = np.mgrid[0:height, 0:width]
     r = np.hypot(xx + 0.5 - width / 2.0, yy + 0.5 - height / 2.0)
     periphery = r > r0 + SEAM
@@ -82,7 +85,7 @@ def measure(name: str, width: int, height: int, spp: int, budget: float) -> dict
     out = {"scene": name, "size": [width, height], "budget": budget, "fovea_px": r0,
            "cells": grid.size}
     rings = [r0 + SEAM, 2 * r0, 4 * r0, math.inf]
-    for key, cells in (("centre", centre), ("mean", mean)):
+    for key, cells, valid in (("centre", centre, on), ("mean", mean, held)):
         image = np.array(warp(cells, valid, grid, gaze, width, height)).T.reshape(
             height, width, 3)
         shown = to_display(image)
