@@ -361,7 +361,7 @@ def frustum_of(sensor: mi.Sensor) -> Frustum:
     Parameters
     ----------
     sensor : mi.Sensor
-        A perspective sensor.
+        The pinhole sensor to measure, in any pose (a ``perspective`` one).
 
     Returns
     -------
