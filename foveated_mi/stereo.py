@@ -27,7 +27,7 @@ from typing import Any, NamedTuple
 import mitsuba as mi
 import numpy as np
 
-from .validate import ParameterError, check_int, check_point2, check_range
+from .validate import ParameterError, check_choice, check_int, check_point2, check_range
 
 #: The eyes, in the order :class:`Stereo` renders them.
 EYES = ("left", "right")
@@ -189,9 +189,12 @@ class StereoRig:
 
 
 def _eye(eye: str) -> str:
-    if eye not in EYES:
-        raise ParameterError("eye", eye, "'left' or 'right'")
-    return eye
+    return check_choice("eye", eye, EYES)
+
+
+def _to_world(sensor: mi.Sensor) -> np.ndarray:
+    """A sensor's to-world matrix, (4, 4) float64 (as :func:`~.scenes.camera_of` reads it)."""
+    return np.array(sensor.world_transform().matrix, dtype=np.float64).reshape(4, 4)
 
 
 def fixation(scene: mi.Scene, head: mi.Sensor, gaze, distance: float = 2.0
@@ -225,7 +228,7 @@ def fixation(scene: mi.Scene, head: mi.Sensor, gaze, distance: float = 2.0
     if bool(si.is_valid()[0]):
         return np.array([si.p.x[0], si.p.y[0], si.p.z[0]], dtype=np.float64), True
     # The distance counts from the eye's centre (the ray starts on the near clip plane).
-    centre = np.array(mi.traverse(head)["to_world"].matrix, dtype=np.float64).reshape(4, 4)[:3, 3]
+    centre = _to_world(head)[:3, 3]
     return centre + float(distance) * d, False
 
 
@@ -305,8 +308,7 @@ class Stereo:
 
     def head_pose(self) -> mi.ScalarTransform4f:
         """The head's to-world transform, as the scene's sensor has it now."""
-        m = np.array(mi.traverse(self.head)["to_world"].matrix, dtype=np.float64)
-        return mi.ScalarTransform4f(m.reshape(4, 4))
+        return mi.ScalarTransform4f(_to_world(self.head))
 
     def cut(self) -> None:
         """A camera cut: both eyes' histories start again."""
@@ -368,8 +370,7 @@ def frustum_of(sensor: mi.Sensor) -> Frustum:
     frustum : Frustum
         Its left, right, up and down angles in degrees.
     """
-    m = np.array(mi.traverse(sensor)["to_world"].matrix, dtype=np.float64).reshape(4, 4)
-    to_local = np.linalg.inv(m[:3, :3])
+    to_local = np.linalg.inv(_to_world(sensor)[:3, :3])
     angles = []
     for (u, v), (axis, sign) in zip(((0.0, 0.5), (1.0, 0.5), (0.5, 0.0), (0.5, 1.0)),
                                     ((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0))):

@@ -333,11 +333,11 @@ def test_the_preset_denoises_its_disc_where_the_frame_is_noisy():
     scene = _scene((64, 48), integrator={"type": "path", "max_depth": 4})
     reference = np.array(mi.render(scene, spp=256, seed=99))
     yy, xx = np.mgrid[0:48, 0:64]
+    assert FoveatedIntegrator(preset="vr").options["foveal_disc"] == "denoised"
     errors = {}
     for disc in ("denoised", "resolved"):
         integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", history=False,
                                    foveal_disc=disc)
-        assert FoveatedIntegrator(preset="vr").options["foveal_disc"] == "denoised"
         fovea = None
         errors[disc] = []
         for seed in range(3):
