@@ -106,9 +106,15 @@ def _add_render_parser(sub) -> None:
                    help="render two eyes of the scene's camera (the head): each eye's frustum "
                    "is the camera's, both fixate where the gaze ray meets the scene; the EXR "
                    "holds layers left and right, the PNG shows them side by side")
-    r.add_argument("--ipd", type=float, default=0.063,
+    r.add_argument("--ipd", type=float,
                    help="with --stereo: the distance between the eyes in scene units "
-                   "(default 0.063, metres)")
+                   "(default: the headset's, else 0.063, metres)")
+    r.add_argument("--headset", help="render a headset's eye buffer (foveated-mi headsets "
+                   "lists them): its frustum, off-axis, from the scene's camera (the head); "
+                   "with --stereo, both eyes")
+    r.add_argument("--eye-width", type=int, dest="eye_width",
+                   help="with --headset: the eye buffer's width in pixels (default: the "
+                   "headset's render target); its height follows from the frustum")
     r.add_argument("--quiet", action="store_true")
 
 
@@ -117,6 +123,11 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     _add_render_parser(sub)
+    hs = sub.add_parser("headsets", help="list the headset models: eye buffer, frustum, "
+                        "display and the sources of their figures (Markdown)")
+    hs.add_argument("--eye-width", type=int, dest="eye_width",
+                    help="the eye buffer's width for the buffer columns (default: each "
+                    "headset's render target)")
 
     s = sub.add_parser("sequence", help="render a sequence from a TOML config")
     s.add_argument("config", help="sequence config (see configs/)")
@@ -186,18 +197,24 @@ def cmd_render(args: argparse.Namespace) -> int:
         check_int("--size H", args.size[1], 1, 16384)
     if not str(args.out).lower().endswith(".exr"):
         raise ParameterError("--out", args.out, "a path ending in .exr")
-    if args.stereo:
+    if args.ipd is not None:
         from .validate import check_range
         check_range("--ipd", args.ipd, 0.0, lo_open=True)
+    model = _headset_arg(args)
     foveated_mi.set_variant(args.variant)
 
     from .render import FrameRenderer
     from .scenes import load_scene
     size = tuple(args.size) if args.size else (None, None)
     nested = None if max_depth is None else {"type": "path", "max_depth": max_depth}
-    scene = load_scene(args.scene, width=size[0], height=size[1], spp=spp, integrator=nested)
+    camera = None
+    if model is not None and not args.stereo:     # one eye at the head's pose
+        from .scenes import scene_camera
+        camera, size = model.eye_camera(scene_camera(args.scene), args.eye_width)
+    scene = load_scene(args.scene, width=size[0], height=size[1], spp=spp, integrator=nested,
+                       camera=camera)
     if args.stereo:
-        return _render_stereo(args, scene, opts, spp)
+        return _render_stereo(args, scene, opts, spp, model)
     fr = FrameRenderer(scene, {**frame_options(args), "timing": True}, spp=spp)
     result = fr.render_frame(seed=args.seed, warmup=args.warmup,
                              compare_full=args.compare_full)
@@ -222,12 +239,35 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
-def _render_stereo(args: argparse.Namespace, scene, opts: dict[str, Any], spp: int) -> int:
-    """``render --stereo``: both eyes of the scene's camera, after ``--warmup`` frames."""
+def _headset_arg(args: argparse.Namespace):
+    """``--headset`` (and ``--eye-width``) as a headset model, or None."""
+    from .validate import ParameterError, check_int
+    if args.headset is None:
+        if args.eye_width is not None:
+            raise ParameterError("--eye-width", args.eye_width, "a --headset to size")
+        return None
+    from .headsets import headset
+    model = headset(args.headset, "--headset")
+    if args.size is not None:
+        raise ParameterError("--size", list(args.size), "no --size with --headset (its eye "
+                             "buffer has the frustum's aspect: give --eye-width)")
+    if args.eye_width is not None:
+        check_int("--eye-width", args.eye_width, 8, 16384)
+    return model
+
+
+def _render_stereo(args: argparse.Namespace, scene, opts: dict[str, Any], spp: int,
+                   model=None) -> int:
+    """``render --stereo``: both eyes of the scene's camera (or of a headset), after
+    ``--warmup`` frames."""
     from .render import make_integrator
     from .stereo import Stereo, StereoRig, frustum_of, write_stereo
     head = scene.sensors()[0]
-    rig = StereoRig(frustum_of(head), ipd=args.ipd, width=int(head.film().crop_size()[0]))
+    if model is not None:
+        rig = model.rig(args.eye_width, args.ipd)
+    else:
+        rig = StereoRig(frustum_of(head), ipd=0.063 if args.ipd is None else args.ipd,
+                        width=int(head.film().crop_size()[0]))
     integ = make_integrator(scene, frame_options(args))
     stereo = Stereo(scene, integ, rig)
     for k in range(args.warmup):
@@ -238,14 +278,14 @@ def _render_stereo(args: argparse.Namespace, scene, opts: dict[str, Any], spp: i
     png = write_stereo(args.out, frame, exposure=integ.exposure, tonemap=integ.tonemap)
     stats = {eye: stereo.views[eye].stats for eye in ("left", "right")}
     stats.update(gazes=[list(g) for g in frame.gazes], fixation=list(map(float, frame.fixation)),
-                 ipd=args.ipd, spp=spp)
+                 ipd=rig.ipd, spp=spp)
     if args.stats:
         from .io import atomic_write
         with atomic_write(args.stats, "w") as f:
             json.dump(stats, f, indent=2, default=float)
     if not args.quiet:
         w, h = rig.size("left")
-        print(f"{args.scene}: two eyes of {w}x{h}, ipd {args.ipd:g}, gazes "
+        print(f"{args.scene}: two eyes of {w}x{h}, ipd {rig.ipd:g}, gazes "
               + ", ".join(f"({g[0]:.3f}, {g[1]:.3f})" for g in frame.gazes)
               + f"; fixation {'on a surface' if frame.hit else 'at 2 units (no surface)'}")
         print(f"wrote {args.out} (layers left, right) and {png}"
@@ -344,6 +384,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             return cmd_study(args)
         if args.command == "view":
             return cmd_view(args)
+        if args.command == "headsets":
+            from .headsets import headset_table
+            from .validate import check_int
+            width = None if args.eye_width is None else check_int("--eye-width",
+                                                                  args.eye_width, 8, 16384)
+            sys.stdout.write(headset_table(width))
+            return 0
         if args.command == "demo":
             from .demo import run_demo
             return run_demo(args.out, size=tuple(args.size) if args.size else None,

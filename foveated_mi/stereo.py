@@ -53,6 +53,22 @@ class Frustum:
         return tuple(math.tan(math.radians(a))
                      for a in (self.left, self.right, self.up, self.down))
 
+    @property
+    def fov_x(self) -> float:
+        """The whole horizontal field of view in degrees, as a ``perspective`` sensor's ``fov``
+        (``fov_axis = "x"``) with :attr:`principal_point` spans it."""
+        tl, tr, _, _ = self.tangents
+        return math.degrees(2.0 * math.atan(0.5 * (tl + tr)))
+
+    @property
+    def principal_point(self) -> tuple[float, float]:
+        """The optical axis's offset from the film's centre, in film widths and heights
+        (Mitsuba's ``principal_point_offset_x``/``_y``): Mitsuba shifts the frustum by twice
+        the offset times the half-extent, so these put the corner rays at the frustum's
+        angles."""
+        tl, tr, tu, td = self.tangents
+        return (tr - tl) / (2.0 * (tl + tr)), (td - tu) / (2.0 * (tu + td))
+
     def mirrored(self) -> Frustum:
         """The other eye's frustum: left and right swapped."""
         return Frustum(self.right, self.left, self.up, self.down)
@@ -171,18 +187,15 @@ class StereoRig:
         sensor : mi.Sensor
             A ``perspective`` sensor whose corner rays make the angles of :meth:`realised`.
         """
-        tl, tr, tu, td = self.frustum(eye).tangents
+        frustum = self.frustum(eye)
         width, height = self.size(eye)
         film = {"type": "hdrfilm", "width": width, "height": height, "pixel_format": "rgb"}
         if rfilter is not None:
             film["rfilter"] = rfilter
+        ppx, ppy = frustum.principal_point
         return mi.load_dict({
-            "type": "perspective", "fov_axis": "x",
-            "fov": math.degrees(2.0 * math.atan(0.5 * (tl + tr))),
-            # The principal point off the film's centre: Mitsuba shifts the frustum by twice
-            # the offset times the half-extent, in units of the film's width (height).
-            "principal_point_offset_x": (tr - tl) / (2.0 * (tl + tr)),
-            "principal_point_offset_y": (td - tu) / (2.0 * (tu + td)),
+            "type": "perspective", "fov_axis": "x", "fov": frustum.fov_x,
+            "principal_point_offset_x": ppx, "principal_point_offset_y": ppy,
             "to_world": self.eye_to_world(head, eye),
             "sampler": {"type": "independent", "sample_count": int(spp)},
             "film": film})

@@ -147,3 +147,46 @@ def test_render_stereo_writes_both_eyes(tmp_path, capsys):
     # right eye does.
     (lx, ly), (rx, ry) = s["gazes"]
     assert lx > rx and abs(ly - ry) < 1e-6
+
+
+def test_render_headset_one_eye_and_both(tmp_path, capsys):
+    """--headset: one eye's buffer at the scene's camera, the frustum's aspect; with --stereo,
+    both eyes at the headset's default IPD."""
+    from foveated_mi.headsets import headset
+    h = headset("quest3")
+    w, ht = h.rig(40).size("left")
+    exr = tmp_path / "eye.exr"
+    code, _, err = run(["render", "cornell-box", "--preset", "vr", "--headset", "quest3",
+                        "--eye-width", "40", "--warmup", "0", "--quiet", "--out", str(exr)],
+                       capsys)
+    assert code == 0, err
+    assert read_exr(exr)["image"].shape == (ht, w, 3)
+    stats = tmp_path / "eyes.json"
+    code, out, err = run(["render", "cornell-box", "--headset", "varjo_xr4", "--eye-width",
+                          "32", "--stereo", "--warmup", "0", "--out", str(tmp_path / "s.exr"),
+                          "--stats", str(stats)], capsys)
+    assert code == 0, err
+    w, ht = headset("varjo_xr4").rig(32).size("left")
+    assert f"two eyes of {w}x{ht}, ipd 0.063" in out
+    assert json.loads(stats.read_text())["ipd"] == headset("varjo_xr4").ipd
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--headset", "quest4"], "--headset = 'quest4' is invalid"),
+    (["--headset", "quest3", "--size", "8", "8"], "--size = [8, 8] is invalid"),
+    (["--eye-width", "64"], "--eye-width = 64 is invalid"),
+    (["--headset", "quest3", "--eye-width", "2"], "--eye-width = 2 is invalid"),
+])
+def test_bad_headset_flags_one_line_exit_2(args, needle, capsys, tmp_path):
+    out = tmp_path / "x.exr"
+    code, _, err = run(["render", "cornell-box", "--out", str(out)] + args, capsys)
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and needle in lines[0], err
+    assert not out.exists()
+
+
+def test_headsets_lists_every_model(capsys):
+    from foveated_mi.headsets import HEADSETS
+    code, out, _ = run(["headsets", "--eye-width", "640"], capsys)
+    assert code == 0 and all(f"`{name}` | 640x" in out for name in HEADSETS)

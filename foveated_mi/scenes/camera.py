@@ -34,7 +34,10 @@ def check_camera(camera: Any, name: str = "camera") -> dict[str, Any]:
     ----------
     camera : dict
         ``origin``, ``target``, ``up``: three finite numbers each (world space); ``fov``:
-        degrees along x, in (0, 180).
+        degrees along x, in (0, 180); optionally ``principal_point``: the optical axis's
+        offset from the film's centre, ``[x, y]`` in units of the film's width and height,
+        each in (-0.5, 0.5) (Mitsuba's ``principal_point_offset_x``/``_y``: an off-axis
+        frustum, as a headset's eye has).
     name : str, optional
         The camera's name, for the error message.
 
@@ -50,11 +53,20 @@ def check_camera(camera: Any, name: str = "camera") -> dict[str, Any]:
         parallel to the viewing direction.
     """
     keys = ("origin", "target", "up", "fov")
-    if not isinstance(camera, dict) or set(camera) - set(keys) or not set(keys) <= set(camera):
-        raise ParameterError(name, camera, "a dict with keys 'origin', 'target', 'up', 'fov'")
+    if not isinstance(camera, dict) or set(camera) - set(keys) - {"principal_point"} \
+            or not set(keys) <= set(camera):
+        raise ParameterError(name, camera, "a dict with keys 'origin', 'target', 'up', 'fov' "
+                                           "(and optionally 'principal_point')")
     cam = {k: _vec3(f"{name}.{k}", camera[k]) for k in ("origin", "target", "up")}
     cam["fov"] = check_range(f"{name}.fov", camera["fov"], 0.0, 180.0, lo_open=True,
                              hi_open=True)
+    if "principal_point" in camera:
+        pp = camera["principal_point"]
+        if not isinstance(pp, (list, tuple)) or len(pp) != 2:
+            raise ParameterError(f"{name}.principal_point", pp, "two numbers [x, y]")
+        cam["principal_point"] = [check_range(f"{name}.principal_point[{k}]", v, -0.5, 0.5,
+                                              lo_open=True, hi_open=True)
+                                  for k, v in enumerate(pp)]
     d = np.subtract(cam["target"], cam["origin"])
     if np.linalg.norm(d) == 0.0:
         raise ParameterError(f"{name}.target", camera["target"], "a point other than the origin")
@@ -119,10 +131,32 @@ def sensor_dict(camera: dict, *, width: int = 256, height: int = 256, spp: int =
         The sensor plugin dict.
     """
     cam = check_camera(camera)
-    return {"type": "perspective", "fov": cam["fov"], "fov_axis": "x", "to_world": look_at(cam),
-            "near_clip": 1e-2, "far_clip": 1e4,
-            "sampler": {"type": "independent", "sample_count": check_int("spp", spp, 1)},
-            "film": film_dict(width, height)}
+    out = {"type": "perspective", "fov": cam["fov"], "fov_axis": "x", "to_world": look_at(cam),
+           "near_clip": 1e-2, "far_clip": 1e4,
+           "sampler": {"type": "independent", "sample_count": check_int("spp", spp, 1)},
+           "film": film_dict(width, height)}
+    out.update(principal_point_props(cam))
+    return out
+
+
+def principal_point_props(camera: dict) -> dict:
+    """The ``perspective`` sensor's principal-point properties of a validated camera dict
+    (none when it has no ``principal_point``).
+
+    Parameters
+    ----------
+    camera : dict
+        A camera of :func:`check_camera`.
+
+    Returns
+    -------
+    props : dict
+        ``principal_point_offset_x`` and ``_y``, or empty.
+    """
+    pp = camera.get("principal_point")
+    if pp is None:
+        return {}
+    return {"principal_point_offset_x": float(pp[0]), "principal_point_offset_y": float(pp[1])}
 
 
 def _sensor_of(scene_or_sensor: Any) -> "mi.Sensor":

@@ -28,7 +28,7 @@ import warnings
 import mitsuba as mi
 
 from ..validate import ParameterError
-from .camera import film_dict, look_at
+from .camera import film_dict, look_at, principal_point_props
 
 
 def _splice_dict(state: "mi.parser.ParserState", config: "mi.parser.ParserConfig",
@@ -198,12 +198,15 @@ def _load_xml(path: str, width, height, spp, integrator, camera, params) -> "mi.
                 state.nodes[sm].props["sample_count"] = spp
         if camera is not None:
             props = state.nodes[s].props
-            for key in ("fov", "fov_axis", "focal_length"):
+            for key in ("fov", "fov_axis", "focal_length", "principal_point_offset_x",
+                        "principal_point_offset_y"):
                 if key in props:
                     del props[key]
             props["to_world"] = look_at(camera)
             props["fov"] = camera["fov"]
             props["fov_axis"] = "x"
+            for key, value in principal_point_props(camera).items():
+                props[key] = value
     if integrator is not None:
         old = _children(state, 0, mi.ObjectType.Integrator)
         if old:

@@ -49,6 +49,12 @@ Layout (every key optional except ``scenes``)::
                                 #   rendered with the gaze of that long ago; the metrics
                                 #   fixate the true gaze
     gaze_noise_deg = 0.0        #   its jitter: a Gaussian in degrees on the rendered gaze
+    headset = "quest3"          #   a headset's eye (foveated_mi.headsets.HEADSETS): its
+                                #   frustum and eye buffer replace each scene's field of view
+                                #   and film size (fov = "sensor" and its display's
+                                #   photometry follow); the scene's camera is the head
+    eye_width = 640             #   the eye buffer's width (default: the headset's render
+                                #   target); its height follows from the frustum
 
     [motion]                    # rows are sequences instead of frames of a still view
     frames = 45                 #   frames per sequence (>= 2), shown at fps
@@ -217,11 +223,16 @@ class StudySpec:
     metrics: dict = field(default_factory=lambda: dict(DEFAULT_METRICS))
     perceptual: dict = field(default_factory=lambda: dict(DEFAULT_PERCEPTUAL))
     description: str = ""
+    headset: str | None = None        # [viewer] headset: it sets each scene's frustum and film
 
     def with_size(self, size: tuple[int, int] | None) -> "StudySpec":
-        """The same study with every scene's film size replaced (None: unchanged)."""
+        """The same study with every scene's film size replaced (None: unchanged). Under a
+        headset only the width is taken: the height follows from the eye's frustum."""
         if size is None:
             return self
+        if self.headset is not None:
+            from ..headsets import headset
+            size = headset(self.headset).rig(int(size[0])).size("left")
         return replace(self, scenes=tuple(replace(s, size=tuple(size)) for s in self.scenes))
 
 
@@ -293,10 +304,8 @@ def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
               for i, s in enumerate(scenes_in)]
     if "motion" in data:
         scenes = _motion(ctx, data["motion"], scenes, base_dir, _tracker(ctx, data.get("viewer")))
-    labels = [s.label for s in scenes]
-    for i, lab in enumerate(labels):
-        if lab in labels[:i]:
-            raise ctx.error(f"scenes[{i}].label", lab, "a label no other scene uses")
+    scenes, headset = _with_headset(ctx, data.get("viewer"), scenes)
+    _check_labels(ctx, scenes)
     metrics, perceptual = _metrics(ctx, data.get("metrics", {}))
     metrics.update(_viewer(ctx, data.get("viewer"), metrics.pop("fovea_deg", None),
                            perceptual))
@@ -308,7 +317,7 @@ def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
     return StudySpec(name=name, source=source, scenes=tuple(scenes), foveated=tuple(foveated),
                      uniform=tuple(uniform), seed=seeds[0], seeds=seeds, repeats=repeats,
                      warmup=warmup, metric=metric, metrics=metrics, perceptual=perceptual,
-                     description=description)
+                     description=description, headset=headset)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -547,6 +556,48 @@ def _with_prefix(ctx: TableContext, prefix: str, parse):
         raise ctx.error(f"{prefix}.{key}", e.value, e.allowed) from None
 
 
+def _check_labels(ctx: TableContext, scenes: list) -> None:
+    labels = [s.label for s in scenes]
+    for i, lab in enumerate(labels):
+        if lab in labels[:i]:
+            raise ctx.error(f"scenes[{i}].label", lab, "a label no other scene uses")
+
+
+def _with_headset(ctx: TableContext, table: Any, scenes: list) -> tuple[list, str | None]:
+    """The scenes seen by one eye of ``[viewer] headset`` (:func:`_on_headset`), and its
+    name; the scenes as they are, and None, without one."""
+    headset = _headset(ctx, table)
+    if headset is None:
+        return scenes, None
+    return [_on_headset(s, *headset) for s in scenes], headset[0].name
+
+
+def _headset(ctx: TableContext, table: Any):
+    """``[viewer] headset`` and ``eye_width``: ``(Headset, width)``, or None without one."""
+    if table is None or "headset" not in dict(ctx.table("viewer", table)):
+        return None
+    from ..headsets import HEADSETS, headset
+    name = ctx.string("viewer.headset", table["headset"], tuple(HEADSETS))
+    model = headset(name)
+    width = ctx.integer("viewer.eye_width", table.get("eye_width", model.buffer[0]), 8, 16384)
+    return model, width
+
+
+def _on_headset(scene: SceneSpec, model, width: int) -> SceneSpec:
+    """``scene`` seen by one eye of ``model`` at the scene's camera (the head): the eye's
+    frustum and an eye buffer ``width`` pixels wide (:meth:`Headset.eye_camera`); every
+    frame of a camera path keeps the frustum."""
+    if scene.missing:
+        return scene
+    from ..scenes import scene_camera
+    camera, size = model.eye_camera(scene.camera or scene_camera(scene.source), width)
+    motion = scene.motion
+    if motion is not None and motion.get("cameras"):
+        motion = {**motion, "cameras": [model.eye_camera(c, width)[0]
+                                        for c in motion["cameras"]]}
+    return replace(scene, camera=camera, size=size, motion=motion)
+
+
 def _viewer(ctx: TableContext, table: Any, fovea_deg, perceptual: dict) -> dict:
     """The ``[viewer]`` table as metric settings (none without it, so the task ids of studies
     written before it stay the same); its ``display`` (the photometry of a FovVideoVDP
@@ -558,8 +609,15 @@ def _viewer(ctx: TableContext, table: Any, fovea_deg, perceptual: dict) -> dict:
         return {}
     table = dict(ctx.table("viewer", table))
     ctx.known("viewer", table, ("fov", "display", "monitor", "gaze_latency_ms",
-                                "gaze_noise_deg"))
+                                "gaze_noise_deg", "headset", "eye_width"))
     from ..perceptual import check_display
+    if "headset" in table:            # a headset's eye: its buffer spans the sensor's view
+        from ..headsets import headset
+        table.setdefault("fov", "sensor")
+        table.setdefault("display", headset(table["headset"]).display.photometry)
+    elif "eye_width" in table:
+        raise ctx.error("viewer.eye_width", table["eye_width"], "a [viewer] headset whose "
+                        "eye buffer it sizes")
     if "display" in table:
         try:
             perceptual["display"] = check_display("viewer.display", table["display"])
