@@ -18,7 +18,7 @@ from .frame import buffer_space as _buffer_space
 from .frame.film import FilmSettings, jfa_bound
 from .frame.formation import FORMATIONS, FormationSettings, OptionValues
 from .frame.foveal import FovealSettings
-from .frame.sampling import foveal_grid, fovea_radius
+from .frame.sampling import cell_offset, foveal_grid, fovea_radius, sensor_ppd
 from .frame.settings import (DenoiseSettings, DomainSettings, FrameSettings, HistorySettings,
                              LaunchSettings, PlanSettings, ReconstructionSettings,
                              SamplingSettings, TraceSettings)
@@ -53,7 +53,8 @@ def sampling_settings(o: Options) -> SamplingSettings:
         sigma_p=float(o["sigma_p"]), ray_budget=float(o["ray_budget"]),
         acuity_floor=float(o["acuity_floor"]), edge_threshold=float(o["edge_threshold"]),
         edge_detector=o["edge_detector"], emission_edges=bool(o["emission_edges"]),
-        map_seed=int(o["map_seed"]))
+        map_seed=int(o["map_seed"]), polar_cells=o["polar_cells"],
+        viewer_ppd=float(o["viewer_ppd"]))
 
 
 def frame_settings(o: Options) -> FrameSettings:
@@ -182,19 +183,45 @@ def foveal_settings(width: int, height: int, o: Options) -> FovealSettings:
     width, height : int
         The film's size in pixels, which sizes its buffer.
     o : dict
-        The validated options (``theta``, ``ray_budget``, ``foveal_space``, ...).
+        The validated options (``theta``, ``ray_budget``, ``polar_cells``, ``foveal_space``,
+        ...), with ``viewer_ppd`` measured for ``acuity`` cells (:func:`viewer_options`).
 
     Returns
     -------
     settings : FovealSettings
         Its settings, with the samples' layout and the buffer's grid for this film.
     """
-    lay = _buffer_space.layout(width, height, o["theta"], o["ray_budget"])
+    offset = cell_offset(sampling_settings(o))
+    lay = _buffer_space.layout(width, height, o["theta"], o["ray_budget"], offset)
     grid = lay.grid if o["foveal_space"] == "buffer" else foveal_grid(
-        width, height, float(o["ray_budget"]), fovea_radius(width, height, o["theta"]))
+        width, height, float(o["ray_budget"]), fovea_radius(width, height, o["theta"]),
+        offset)
     return FovealSettings(float(o["max_history"]), domain_settings(o), denoise_settings(o),
                           o["foveal_upsampling"], o["foveal_space"], o["foveal_disc"], lay,
                           grid)
+
+
+def viewer_options(o: Options, sensor) -> Options:
+    """The options a frame's formation reads through ``sensor``: with ``polar_cells =
+    "acuity"`` and ``viewer_ppd = 0``, ``viewer_ppd`` is the sensor's pixels per degree at the
+    film's centre (:func:`~foveated_mi.frame.sampling.sensor_ppd`, the value the plan's
+    sampling map uses), so that the formation's cells are the map's.
+
+    Parameters
+    ----------
+    o : dict
+        The validated options (a view's).
+    sensor : mi.Sensor
+        The frame's sensor.
+
+    Returns
+    -------
+    options : dict
+        ``o`` itself, or a copy with ``viewer_ppd`` measured.
+    """
+    if o["polar_cells"] != "acuity" or float(o["viewer_ppd"]) > 0.0:
+        return o
+    return {**o, "viewer_ppd": sensor_ppd(sensor)}
 
 
 def every_option(width: int, height: int, o: Options) -> OptionValues:

@@ -319,6 +319,26 @@ _SCHEMA: tuple[Option, ...] = (
            lo=0.0, hi=1.0, lo_open=True),
     Option("acuity_floor", 0.01, "float", "smallest probability of the acuity law "
            "(at most ray_budget)", lo=0.0, hi=1.0),
+    _choice("polar_cells", ("log", "acuity"), "the cells of the polar law's buffer outside "
+            "its disc: log (square, log-polar) or acuity (sized by the eye's minimum angle of "
+            "resolution at viewer_ppd)",
+            doc="The cell law of ``sampling_law = 'polar'``'s buffer outside its "
+            "full-resolution disc (:mod:`foveated_mi.kernels.polar`): ``log`` (default, and "
+            "``vr``), square cells whose size grows in proportion to the distance to the "
+            "gaze (a log-polar buffer); ``acuity``, cells whose radial size follows the "
+            "minimum angle of resolution ω(e) = 1/48° + 0.022 e (Koskela et al. 2019's "
+            "offset c = ω0/m degrees, converted to pixels by ``viewer_ppd``; across, a "
+            "cell spans its ring's circumference over the angles, in proportion to the "
+            "distance). Either way the cells are sized so that the traced pixels are "
+            "``ray_budget`` of the film. See :mod:`foveated_mi.frame.sampling`"),
+    Option("viewer_ppd", 0.0, "float", "the viewer's pixels per degree at the film's centre, "
+           "read by polar_cells = acuity (0: from the sensor's projection)", lo=0.0, hi=1000.0,
+           doc="The viewer's pixels per degree at the film's centre, which converts "
+           "``polar_cells = 'acuity'``'s offset from degrees to pixels: 0 (default) measures "
+           "it from the sensor's projection, as if the display spanned the sensor's field of "
+           "view (:func:`foveated_mi.viewer.pixels_per_degree`); a headset's lenses "
+           "concentrate pixels at the centre, so its own figure differs. Read by nothing "
+           "else"),
     Option("gaze", (0.5, 0.5), "point", "gaze in normalised film coordinates, origin top-left",
            doc="Gaze in normalised film coordinates, origin top-left; outside [0, 1]^2 is "
            "legal (the viewer looks off-screen). Mitsuba's XML ``<point>`` needs a ``z`` "
@@ -590,6 +610,9 @@ def _check_combination(out: dict[str, Any]) -> None:
     if out["sampling_law"] == "acuity" and out["acuity_floor"] > out["ray_budget"]:
         raise ParameterError("acuity_floor", out["acuity_floor"],
                              f"a number <= ray_budget ({out['ray_budget']:g})")
+    if out["polar_cells"] != "log" and out["sampling_law"] != "polar":
+        raise ParameterError("polar_cells", out["polar_cells"],
+                             "'log' unless sampling_law = 'polar' (the only law with cells)")
     if out["formation"] == "foveal":
         # Its cells are the pixels the polar law traces, and it keeps radiance throughout.
         if out["sampling_law"] != "polar":

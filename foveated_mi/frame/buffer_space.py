@@ -4,7 +4,8 @@ With ``foveal_space = "buffer"`` (the ``vr`` preset) the foveal formation keeps 
 the film but the image it warps there, so that its cost follows the rays, with the head
 moving too. Its *samples* are, in this order:
 
-- the cells of the log-polar grid (:func:`foveated_mi.frame.sampling.foveal_grid`), each at
+- the cells of the polar grid (:func:`foveated_mi.frame.sampling.foveal_grid`, with the
+  sampling map's cells, ``polar_cells``), each at
   the pixel under its centre (:func:`~foveated_mi.frame.sampling.snapped_pixels`);
 - the pixels of a square patch around the gaze, :attr:`SampleLayout.side` pixels across,
   that hold the full-resolution disc: those whose centre lies within its radius
@@ -78,7 +79,8 @@ class SampleLayout:
         return Grid(self.size, 1)
 
 
-def layout(width: int, height: int, theta: float, ray_budget: float) -> SampleLayout:
+def layout(width: int, height: int, theta: float, ray_budget: float,
+           offset: float = 0.0) -> SampleLayout:
     """The samples of a ``width`` x ``height`` film for a disc of radius ``theta``.
 
     Parameters
@@ -91,6 +93,9 @@ def layout(width: int, height: int, theta: float, ray_budget: float) -> SampleLa
     ray_budget : float
         The fraction of the film's pixels the samples' pixels number, with the gaze at the
         film's centre (:func:`~foveated_mi.frame.sampling.foveal_grid`).
+    offset : float, optional
+        The cells' offset in pixels (:func:`~foveated_mi.frame.sampling.cell_offset`; 0:
+        log-polar), the sampling map's.
 
     Returns
     -------
@@ -99,7 +104,7 @@ def layout(width: int, height: int, theta: float, ray_budget: float) -> SampleLa
     """
     r0 = fovea_radius(width, height, theta)
     # The disc's pixels are samples themselves: the grid's rings inside it would be copies.
-    grid = foveal_grid(width, height, float(ray_budget), r0).outside_fovea()
+    grid = foveal_grid(width, height, float(ray_budget), r0, float(offset)).outside_fovea()
     # Pixel centres within r0 of any gaze span at most floor(2 r0) + 1 columns.
     return SampleLayout(grid, int(math.floor(2.0 * grid.fovea)) + 2)
 

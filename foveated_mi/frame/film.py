@@ -47,7 +47,8 @@ def jfa_bound(width: int, height: int, law: SamplingSettings,
     width, height : int
         The film's size.
     law : SamplingSettings
-        The sampling law.
+        The sampling law (``acuity`` cells with their ``viewer_ppd`` given or measured:
+        :func:`foveated_mi.configure.viewer_options`).
     gaze : tuple of float
         The gaze, a normalised film position (read by ``kwon`` in film units only).
 
@@ -63,7 +64,8 @@ def jfa_bound(width: int, height: int, law: SamplingSettings,
         # The widest cell, at the rings' reach: its pixel is at most a cell diagonal from
         # any pixel it covers.
         grid = _sampling.foveal_grid(width, height, law.ray_budget,
-                                     _sampling.fovea_radius(width, height, law.theta))
+                                     _sampling.fovea_radius(width, height, law.theta),
+                                     _sampling.cell_offset(law))
         gap = 2.0 * float(grid.cell_size(grid.reach))
     elif law.theta_deg > 0:
         gap = None        # the law's smallest P needs the sensor's projection: no bound

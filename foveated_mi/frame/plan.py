@@ -167,7 +167,8 @@ class Planner:
         (:mod:`foveated_mi.frame.buffer_space`): the G-buffer at its samples only, the
         history reprojected sample to sample, the polar map and its launch."""
         ss, ls = settings.sampling, settings.launch
-        lay = _buffer_space.layout(width, height, ss.theta, ss.ray_budget)
+        lay = _buffer_space.layout(width, height, ss.theta, ss.ray_budget,
+                                   _sampling.cell_offset(ss, sensor))
         gaze = _sampling.gaze_position(gaze_at, width, height)
         gaze_key = tuple(float(v) for v in gaze_at)
         materials = settings.materials

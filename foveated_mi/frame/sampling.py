@@ -57,6 +57,19 @@ the pixel under the gaze (clamped to the film), so a frame never has an empty wa
     than the budget is traced whole, with the coarsest cells around it, and a warning says
     so. Edge rays are forced as for the other laws. The grid does not depend on the gaze,
     which enters as an opaque value, so a moving gaze compiles nothing.
+
+    **Cells** (option ``polar_cells``, :func:`cell_offset`): ``log`` (the default, and
+    ``vr``), square cells whose size is proportional to the distance to the gaze (offset
+    :math:`c = 0`); ``acuity``, Koskela et al. 2019's offset :math:`c = \omega_0 / m`
+    degrees (:data:`ACUITY_OFFSET_DEG`, about 0.95°) in pixels, so that a cell's radial size
+    :math:`s(r) \propto r + c` follows the minimum angle of resolution
+    :math:`\omega(e) = \omega_0 + m e = m\,(e + \omega_0 / m)` of the ``acuity`` law.
+    Degrees become pixels by the viewer's pixels per degree at the film's centre: the
+    option ``viewer_ppd``, or, at 0, the sensor's own (:func:`sensor_ppd`, measured once per
+    projection; the gaze plays no part, so the grid stays the same as the gaze moves). With
+    :math:`c` fixed, the bisection sizes the cells at the disc's edge to the budget as for
+    ``log``. Every pass that builds the grid (this map, the foveal buffer's samples, its
+    formation) gets the same :math:`c`.
 """
 from __future__ import annotations
 
@@ -80,6 +93,12 @@ ACUITY_OMEGA0 = 1.0 / 48.0
 ACUITY_SLOPE = 0.022
 #: Fixed-point steps that solve for the acuity law's scale (each one sum over the film).
 ACUITY_STEPS = 8
+#: :math:`\omega_0 / m`, degrees: :math:`\omega(e) = m\,(e + \omega_0/m)`, the offset of
+#: ``polar_cells = "acuity"`` (Koskela et al. 2019) before it is converted to pixels.
+ACUITY_OFFSET_DEG = ACUITY_OMEGA0 / ACUITY_SLOPE
+
+#: Cell laws of the ``polar`` law's buffer (option ``polar_cells``).
+POLAR_CELLS = ("log", "acuity")
 
 SAMPLING_LAWS = ("kwon", "acuity", "polar")
 
@@ -547,13 +566,14 @@ def fovea_radius(width: int, height: int, theta: float) -> float:
 
 
 @functools.lru_cache(maxsize=16)
-def foveal_grid(width: int, height: int, budget: float, fovea: float) -> PolarGrid:
-    """The log-polar buffer of a ``width`` x ``height`` film with a full-resolution disc and
+def foveal_grid(width: int, height: int, budget: float, fovea: float,
+                offset: float = 0.0) -> PolarGrid:
+    """The polar buffer of a ``width`` x ``height`` film with a full-resolution disc and
     cells outside it as large as the rest of the budget allows.
 
     The pixels :func:`polar_map` traces number ``budget`` of the film with the gaze at its
-    centre (host, once per film, budget and disc). A disc that alone needs more than the budget
-    is traced whole, with the coarsest cells outside it, and a warning says so once.
+    centre (host, once per film, budget, disc and offset). A disc that alone needs more than
+    the budget is traced whole, with the coarsest cells outside it, and a warning says so once.
 
     Parameters
     ----------
@@ -563,12 +583,20 @@ def foveal_grid(width: int, height: int, budget: float, fovea: float) -> PolarGr
         The traced pixels' fraction of the film.
     fovea : float
         The disc's radius (pixels, traced whole).
+    offset : float, optional
+        The cells' offset :math:`c` in pixels (:func:`cell_offset`; 0: log-polar), held fixed
+        while the bisection sizes the cells at the disc's edge.
 
     Returns
     -------
     grid : PolarGrid
         The buffer's grid (cached).
     """
+    offset = check_range("cell offset", offset, 0.0, None)
+
+    def grid(pitch: float) -> PolarGrid:
+        return polar_grid_of(width, height, fovea, pitch, offset=offset)
+
     n = width * height
     target = budget * n
     lo, hi = 0.05, math.hypot(width, height)      # the cells' size at the disc's edge
@@ -578,16 +606,91 @@ def foveal_grid(width: int, height: int, budget: float, fovea: float) -> PolarGr
         warnings.warn(f"ray_budget = {budget!r} is below the {disc / n:.4g} of the film that "
                       f"the full-resolution disc (theta) traces: the frame traces the disc "
                       f"and the coarsest cells around it", UserWarning, stacklevel=2)
-        return polar_grid_of(width, height, fovea, hi)
-    if _traced_pixels(polar_grid_of(width, height, fovea, lo), width, height) <= target:
-        return polar_grid_of(width, height, fovea, lo)
+        return grid(hi)
+    if _traced_pixels(grid(lo), width, height) <= target:
+        return grid(lo)
     for _ in range(40):       # larger cells, fewer traced pixels: bisection
         mid = (lo * hi) ** 0.5
-        if _traced_pixels(polar_grid_of(width, height, fovea, mid), width, height) > target:
+        if _traced_pixels(grid(mid), width, height) > target:
             lo = mid
         else:
             hi = mid
-    return polar_grid_of(width, height, fovea, hi)
+    return grid(hi)
+
+
+def cell_offset(law: SamplingSettings, sensor: mi.Sensor | None = None) -> float:
+    """The offset :math:`c` of the ``polar`` law's cells, in pixels (module docstring).
+
+    Parameters
+    ----------
+    law : SamplingSettings
+        The sampling law (its ``polar_cells`` and ``viewer_ppd``).
+    sensor : mi.Sensor or None, optional
+        The frame's sensor, whose pixels per degree at the film's centre convert
+        :data:`ACUITY_OFFSET_DEG` to pixels when ``viewer_ppd`` is 0.
+
+    Returns
+    -------
+    offset : float
+        0 for ``log`` cells; :data:`ACUITY_OFFSET_DEG` times the pixels per degree for
+        ``acuity`` cells.
+
+    Raises
+    ------
+    ParameterError
+        For ``acuity`` cells with ``viewer_ppd = 0`` and no sensor to measure it on.
+    """
+    from ..validate import check_choice
+    if check_choice("polar_cells", law.polar_cells, POLAR_CELLS) == "log":
+        return 0.0
+    ppd = check_range("viewer_ppd", law.viewer_ppd, 0.0, None)
+    if ppd == 0.0:
+        if sensor is None:
+            from ..validate import ParameterError
+            raise ParameterError("viewer_ppd", law.viewer_ppd, "> 0, or the frame's sensor to "
+                                 "measure it on (polar_cells = 'acuity')")
+        ppd = sensor_ppd(sensor)
+    return ACUITY_OFFSET_DEG * ppd
+
+
+#: Projection key -> (handles on its variables, pixels per degree): :func:`sensor_ppd`'s.
+_PPD_CACHE: dict = {}
+
+
+def sensor_ppd(sensor: mi.Sensor) -> float:
+    """The sensor's pixels per degree at its film's centre
+    (:func:`foveated_mi.viewer.pixels_per_degree`), measured once per projection.
+
+    The projection is the sensor, its film's size and crop, and every parameter of the
+    sensor but its pose: a moving camera or gaze reads nothing from the device, a new field of
+    view (``params.update()``) is measured anew.
+
+    Parameters
+    ----------
+    sensor : mi.Sensor
+        The sensor.
+
+    Returns
+    -------
+    ppd : float
+        Pixels per degree along the film's x axis at its centre.
+    """
+    from ..viewer import pixels_per_degree
+    from .scene_state import _own, _token
+    params = mi.traverse(sensor)
+    film = sensor.film()
+    keys = [k for k in params.keys() if not k.endswith("to_world")]
+    key = (id(sensor), tuple(film.size()), tuple(film.crop_size()), tuple(film.crop_offset()),
+           tuple((k, _token(params[k])) for k in keys))
+    hit = _PPD_CACHE.get(key)
+    if hit is None:
+        with dr.suspend_grad():
+            ppd = pixels_per_degree(sensor, (0.5, 0.5))
+        if len(_PPD_CACHE) >= 16:
+            _PPD_CACHE.pop(next(iter(_PPD_CACHE)))
+        # The handles keep the variables the key names alive: no other can take their index.
+        hit = _PPD_CACHE[key] = (tuple(_own(params[k]) for k in keys), ppd)
+    return hit[1]
 
 
 def gaze_position(gaze, width: int, height: int) -> mi.Point2f:
@@ -637,7 +740,7 @@ def snapped_pixels(grid: PolarGrid, gaze: mi.Point2f, width: int, height: int
 
 
 def polar_map(width: int, height: int, gaze, budget: float, theta: float,
-              edges: mi.Bool | None = None) -> tuple[mi.Bool, mi.Float]:
+              edges: mi.Bool | None = None, offset: float = 0.0) -> tuple[mi.Bool, mi.Float]:
     """``sampling_law = "polar"``: every pixel of the full-resolution disc of radius θ
     around the gaze, and the pixel under each cell of the log-polar buffer outside it
     (:func:`foveal_grid`: the rest of ``budget``), so that each cell has a traced pixel.
@@ -654,6 +757,8 @@ def polar_map(width: int, height: int, gaze, budget: float, theta: float,
         The disc's radius, in units of half the film's diagonal.
     edges : mi.Bool or None, optional
         Rays forced on edges (None: none).
+    offset : float, optional
+        The cells' offset in pixels (:func:`cell_offset`; 0: log-polar).
 
     Returns
     -------
@@ -662,7 +767,8 @@ def polar_map(width: int, height: int, gaze, budget: float, theta: float,
     probability : mi.Float
         1 where traced, 0 elsewhere: the map is deterministic.
     """
-    grid = foveal_grid(width, height, float(budget), fovea_radius(width, height, theta))
+    grid = foveal_grid(width, height, float(budget), fovea_radius(width, height, theta),
+                       float(offset))
     g = gaze_position(gaze, width, height)
     q, on = snapped_pixels(grid, g, width, height)
     smap = dr.zeros(mi.Bool, width * height)
@@ -725,7 +831,8 @@ def sampling_pass(gb, width: int, height: int, law: SamplingSettings,
     if emitting is not None:
         edges = emitting if edges is None else edges | emitting
     if law.law == "polar":
-        smap, prob = polar_map(width, height, gaze, law.ray_budget, law.theta, edges)
+        smap, prob = polar_map(width, height, gaze, law.ray_budget, law.theta, edges,
+                               cell_offset(law, sensor))
         return edges, smap, prob
     smap, prob = sampling_map(width, height, gaze=gaze, theta=law.theta, sigma_p=law.sigma_p,
                               seed=seed, edges=edges, probability=prob)

@@ -30,6 +30,8 @@ class SamplingSettings:
     edge_detector: str         #: ``relative`` or ``sobel``
     emission_edges: bool       #: rays forced where a footprint crosses an emitter's edge
     map_seed: int              #: the map's own seed (-1: the frame's)
+    polar_cells: str = "log"   #: the ``polar`` law's cells: ``log`` or ``acuity``
+    viewer_ppd: float = 0.0    #: pixels per degree of ``acuity`` cells (0: the sensor's)
 
     @property
     def in_degrees(self) -> bool:

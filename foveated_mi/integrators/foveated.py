@@ -54,7 +54,7 @@ from ..frame import gradient as _gradient
 from ..frame import pipeline as _pipeline
 from ..frame import trace as _trace
 from ..frame.adjoint import NestedAdjoint
-from ..configure import formation_settings, frame_settings
+from ..configure import formation_settings, frame_settings, viewer_options
 from ..frame.formation import FrozenFormation, replayable
 from ..frame.gbuffer import film_size
 from ..frame.reproject import History
@@ -211,7 +211,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
                timer: StageTimer) -> _pipeline.Frame:
         """A frame's request: its inputs and its formation's settings (compiled from the
         view's options and gaze)."""
-        fs = formation_settings(o, *film_size(sensor))
+        fs = formation_settings(viewer_options(o, sensor), *film_size(sensor))
         return _pipeline.Frame(scene, sensor, seed, spp, state, o["gaze"], fs,
                                freeze=o["freeze"],
                                replay_formation=replayable(o["freeze"], o["denoiser"], timer),
