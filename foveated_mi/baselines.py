@@ -57,8 +57,8 @@ def _aov_integrator() -> "mi.Integrator":
 class _KeepSampleCount:
     """Restore the sensor sampler's sample count that ``mi.render(spp=N)`` overwrites."""
 
-    def __init__(self, scene):
-        self.sampler = scene.sensors()[0].sampler()
+    def __init__(self, scene, sensor=None):
+        self.sampler = _sensor(scene, sensor).sampler()
 
     def __enter__(self):
         self.count = self.sampler.sample_count()
@@ -69,10 +69,21 @@ class _KeepSampleCount:
         return False
 
 
-def _timed_render(scene, integrator, spp: int, seed: int) -> tuple[np.ndarray, float]:
+def _sensor(scene, sensor=None) -> "mi.Sensor":
+    """``sensor``, or the scene's first one when None."""
+    if sensor is None:
+        return scene.sensors()[0]
+    if not isinstance(sensor, mi.Sensor):
+        raise ParameterError("sensor", sensor, "a Mitsuba sensor (or None for the scene's own)")
+    return sensor
+
+
+def _timed_render(scene, integrator, spp: int, seed: int, sensor=None
+                  ) -> tuple[np.ndarray, float]:
     dr.sync_thread()
     t0 = time.perf_counter()
-    img = mi.render(scene, integrator=integrator, spp=spp, seed=seed)
+    img = mi.render(scene, integrator=integrator, spp=spp, seed=seed,
+                    sensor=_sensor(scene, sensor))
     dr.eval(img)
     dr.sync_thread()
     ms = (time.perf_counter() - t0) * 1e3
@@ -88,8 +99,8 @@ def _check_integrator(scene, integrator):
 
 
 def render_uniform(scene: "mi.Scene", *, spp: int, seed: int = 0, denoise: bool = False,
-                   integrator: "mi.Integrator | None" = None, pixel_filter: str = "auto"
-                   ) -> tuple[np.ndarray, dict[str, Any]]:
+                   integrator: "mi.Integrator | None" = None, pixel_filter: str = "auto",
+                   sensor: "mi.Sensor | None" = None) -> tuple[np.ndarray, dict[str, Any]]:
     """One uniform frame: every pixel traced with ``spp`` samples, denoised on request.
 
     Parameters
@@ -107,6 +118,9 @@ def render_uniform(scene: "mi.Scene", *, spp: int, seed: int = 0, denoise: bool 
     pixel_filter : str, optional
         ``auto`` (``importance`` when denoised, else ``splat``), ``splat`` (``mi.render``) or
         ``importance`` (filter importance sampling, a sampling integrator only).
+    sensor : mi.Sensor or None, optional
+        The sensor to render (None: the scene's first; another one, e.g. one eye of a stereo
+        rig, sees the same scene).
 
     Returns
     -------
@@ -132,19 +146,20 @@ def render_uniform(scene: "mi.Scene", *, spp: int, seed: int = 0, denoise: bool 
         from .denoise import INSTALL_HINT, oidn_available
         if not oidn_available():
             raise ParameterError("denoise", True, f"pyoidn installed ({INSTALL_HINT})")
-    mode = _uniform_pixel_filter(scene, integ, pixel_filter, denoise)
-    with _KeepSampleCount(scene):
-        return _render_uniform(scene, integ, spp, seed, denoise, mode)
+    sensor = _sensor(scene, sensor)
+    mode = _uniform_pixel_filter(sensor, integ, pixel_filter, denoise)
+    with _KeepSampleCount(scene, sensor):
+        return _render_uniform(scene, integ, spp, seed, denoise, mode, sensor)
 
 
-def _uniform_pixel_filter(scene, integ, pixel_filter: str, denoise: bool) -> str:
+def _uniform_pixel_filter(sensor, integ, pixel_filter: str, denoise: bool) -> str:
     """The estimator a uniform frame runs: ``splat`` (``mi.render``) or ``importance``."""
     sampling = _samples_rays(integ)
     if pixel_filter == "importance" and not sampling:
         raise ParameterError("integrator", type(integ).__name__, "a sampling integrator "
                              "(such as 'path') for pixel_filter = 'importance', or "
                              "pixel_filter = 'splat'")
-    box = scene.sensors()[0].film().rfilter().is_box_filter()
+    box = sensor.film().rfilter().is_box_filter()
     if pixel_filter == "splat" and denoise and not box:
         from .options import splat_warning
         warnings.warn(splat_warning("denoise = True", "OIDN", "= 'auto'"), UserWarning,
@@ -167,14 +182,15 @@ def _samples_rays(integ) -> bool:
                                                                 for c in own)
 
 
-def _timed_importance(scene, integ, spp: int, seed: int) -> tuple[np.ndarray, float]:
+def _timed_importance(scene, integ, spp: int, seed: int, sensor=None
+                      ) -> tuple[np.ndarray, float]:
     """A uniform frame by filter importance sampling: every pixel's ``spp`` samples drawn
     from the film's filter around its centre and averaged (the foveated integrator's
     ``pixel_filter = "importance"`` estimator with every pixel traced), timed like
     :func:`_timed_render`."""
     from .frame.pixel_filter import FilterSampler
     from .frame.shading import develop_mean, trace_wavefront
-    sensor = scene.sensors()[0]
+    sensor = _sensor(scene, sensor)
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
     # Tabulating the filter reads it back to the host: set-up, like mi.render's film.
@@ -198,11 +214,11 @@ def _timed_importance(scene, integ, spp: int, seed: int) -> tuple[np.ndarray, fl
 _NO_CLAMP = float(np.finfo(np.float32).max)
 
 
-def _render_uniform(scene, integ, spp, seed, denoise, mode):
+def _render_uniform(scene, integ, spp, seed, denoise, mode, sensor=None):
     if mode == "importance":
-        color, render_ms = _timed_importance(scene, integ, spp, seed)
+        color, render_ms = _timed_importance(scene, integ, spp, seed, sensor)
     else:
-        color, render_ms = _timed_render(scene, integ, spp, seed)
+        color, render_ms = _timed_render(scene, integ, spp, seed, sensor)
     color = color[..., :3]
     stats: dict[str, Any] = {"spp": spp, "denoised": denoise, "render_ms": render_ms,
                              "pixel_filter": mode}
@@ -210,7 +226,7 @@ def _render_uniform(scene, integ, spp, seed, denoise, mode):
         stats["time_ms"] = render_ms
         return color, stats
     from .denoise import denoise as oidn
-    aux, aov_ms = _timed_render(scene, _aov_integrator(), spp, seed)
+    aux, aov_ms = _timed_render(scene, _aov_integrator(), spp, seed, sensor)
     t0 = time.perf_counter()
     image = oidn(color, aux[..., 0:3], aux[..., 3:6], hdr=True)
     denoise_ms = (time.perf_counter() - t0) * 1e3
@@ -220,7 +236,8 @@ def _render_uniform(scene, integ, spp, seed, denoise, mode):
 
 def render_reference(scene: "mi.Scene", *, spp: int, seed: int = 0,
                      integrator: "mi.Integrator | None" = None,
-                     max_samples_per_pass: int = 1 << 24) -> np.ndarray:
+                     max_samples_per_pass: int = 1 << 24,
+                     sensor: "mi.Sensor | None" = None) -> np.ndarray:
     """A converged reference: ``spp`` samples per pixel split into passes, averaged.
 
     Passes hold at most ``max_samples_per_pass`` samples (so a 1024² x 256 spp render does not
@@ -235,6 +252,8 @@ def render_reference(scene: "mi.Scene", *, spp: int, seed: int = 0,
         Seed of the first pass, in [0, 2^32).
     max_samples_per_pass : int, optional
         Largest number of samples (pixels x spp) of one pass.
+    sensor : mi.Sensor or None, optional
+        As for :func:`render_uniform`.
 
     Returns
     -------
@@ -245,14 +264,15 @@ def render_reference(scene: "mi.Scene", *, spp: int, seed: int = 0,
     seed = check_int("seed", seed, 0, 2**32 - 1)
     budget = check_int("max_samples_per_pass", max_samples_per_pass, 1)
     integ = _check_integrator(scene, integrator)
-    w, h = scene.sensors()[0].film().crop_size()
+    sensor = _sensor(scene, sensor)
+    w, h = sensor.film().crop_size()
     per_pass = max(1, min(spp, budget // max(1, w * h)))
     acc, done, k = None, 0, 0
-    with _KeepSampleCount(scene):
+    with _KeepSampleCount(scene, sensor):
         while done < spp:
             n = min(per_pass, spp - done)
-            img = np.array(mi.render(scene, integrator=integ, spp=n, seed=seed + k),
-                           dtype=np.float64)[..., :3]
+            img = np.array(mi.render(scene, integrator=integ, spp=n, seed=seed + k,
+                                     sensor=sensor), dtype=np.float64)[..., :3]
             acc = img * n if acc is None else acc + img * n
             done += n
             k += 1

@@ -283,6 +283,84 @@ class StereoFrame(NamedTuple):
     hit: bool                      #: whether the head's gaze ray met a surface
 
 
+class EyeSensors:
+    """Each eye's sensor of a rig, following the head (the scene's first sensor): built once,
+    moved by :meth:`follow` only when the head has moved (a move is what a frame's history
+    sees as a camera move).
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        The scene; its first sensor is the head.
+    rig : StereoRig
+        The eyes.
+    """
+
+    def __init__(self, scene: mi.Scene, rig: StereoRig):
+        self.scene, self.rig = scene, rig
+        self.head = scene.sensors()[0]
+        spp = self.head.sampler().sample_count()
+        pose = self.head_pose()
+        self.sensors = {eye: rig.sensor(pose, eye, spp=spp) for eye in EYES}
+        self._poses = {eye: np.array(rig.eye_to_world(pose, eye).matrix, dtype=np.float64)
+                       for eye in EYES}
+
+    def __getitem__(self, eye: str) -> mi.Sensor:
+        return self.sensors[_eye(eye)]
+
+    def head_pose(self) -> mi.ScalarTransform4f:
+        """The head's to-world transform, as the scene's sensor has it now."""
+        return mi.ScalarTransform4f(_to_world(self.head))
+
+    def follow(self) -> mi.ScalarTransform4f:
+        """Move each eye to the head's current pose (only an eye whose pose changed).
+
+        Returns
+        -------
+        head : mi.ScalarTransform4f
+            The head's pose.
+        """
+        pose = self.head_pose()
+        for eye in EYES:
+            to_world = self.rig.eye_to_world(pose, eye)
+            matrix = np.array(to_world.matrix, dtype=np.float64)
+            if not np.array_equal(self._poses[eye], matrix):
+                params = mi.traverse(self.sensors[eye])
+                params["to_world"] = to_world
+                params.update()
+                self._poses[eye] = matrix
+        return pose
+
+    def gazes(self, gaze, distance: float = 2.0):
+        """Each eye's gaze at the head's current pose: both fixate where the head's ``gaze``
+        meets the scene (:func:`fixation`); a point outside an eye's frustum puts its gaze at
+        the nearest edge of its film.
+
+        Parameters
+        ----------
+        gaze : tuple of float
+            The head's gaze, normalised on its film.
+        distance : float, optional
+            Where the point lies when the gaze ray meets nothing.
+
+        Returns
+        -------
+        gazes : tuple of tuple of float
+            The left and right eyes' gazes, normalised.
+        point : numpy.ndarray
+            The fixation point.
+        hit : bool
+            Whether the gaze ray met a surface.
+        """
+        pose = self.head_pose()
+        point, hit = fixation(self.scene, self.head, gaze, distance)
+        out = []
+        for eye in EYES:
+            g = eye_gaze(self.rig, pose, eye, point)
+            out.append((min(max(g[0], 0.0), 1.0), min(max(g[1], 0.0), 1.0)))
+        return tuple(out), point, hit
+
+
 class Stereo:
     """Renders both eyes of a rig with one foveated integrator, each eye a view of its own
     (module docstring).
@@ -310,18 +388,14 @@ class Stereo:
             raise ParameterError("views", views, "two different view indices")
         self.fixation_distance = check_range("fixation distance", fixation_distance, 0.0,
                                              lo_open=True)
-        self.head = scene.sensors()[0]
-        spp = self.head.sampler().sample_count()
-        pose = self.head_pose()
-        self.sensors = {eye: self.rig.sensor(pose, eye, spp=spp) for eye in EYES}
-        self._poses = {eye: np.array(self.rig.eye_to_world(pose, eye).matrix, dtype=np.float64)
-                       for eye in EYES}
+        self.eyes = EyeSensors(scene, self.rig)
+        self.head, self.sensors = self.eyes.head, self.eyes.sensors
         self.views = {eye: integrator.views.bind(self.sensors[eye], v)
                       for eye, v in zip(EYES, views)}
 
     def head_pose(self) -> mi.ScalarTransform4f:
         """The head's to-world transform, as the scene's sensor has it now."""
-        return mi.ScalarTransform4f(_to_world(self.head))
+        return self.eyes.head_pose()
 
     def cut(self) -> None:
         """A camera cut: both eyes' histories start again."""
@@ -346,27 +420,15 @@ class Stereo:
         frame : StereoFrame
             Both images, each eye's gaze and the fixation point.
         """
-        pose = self.head_pose()
-        point, hit = fixation(self.scene, self.head, gaze, self.fixation_distance)
-        images, gazes = {}, []
+        # Only a moved head updates the eyes: an update is a camera move to the frame.
+        self.eyes.follow()
+        gazes, point, hit = self.eyes.gazes(gaze, self.fixation_distance)
+        images = {}
         for k, eye in enumerate(EYES):
-            sensor = self.sensors[eye]
-            to_world = self.rig.eye_to_world(pose, eye)
-            matrix = np.array(to_world.matrix, dtype=np.float64)
-            if not np.array_equal(self._poses[eye], matrix):
-                # Only a moved head updates the eye: an update is a camera move to the frame.
-                params = mi.traverse(sensor)
-                params["to_world"] = to_world
-                params.update()
-                self._poses[eye] = matrix
-            g = eye_gaze(self.rig, pose, eye, point)
-            # A fixation outside an eye's frustum puts its fovea at the nearest edge.
-            g = (min(max(g[0], 0.0), 1.0), min(max(g[1], 0.0), 1.0))
-            self.views[eye].gaze = g
-            gazes.append(g)
-            images[eye] = mi.render(self.scene, integrator=self.integrator, sensor=sensor,
-                                    seed=seed + k, spp=spp)
-        return StereoFrame(images["left"], images["right"], tuple(gazes), point, hit)
+            self.views[eye].gaze = gazes[k]
+            images[eye] = mi.render(self.scene, integrator=self.integrator,
+                                    sensor=self.sensors[eye], seed=seed + k, spp=spp)
+        return StereoFrame(images["left"], images["right"], gazes, point, hit)
 
 
 def frustum_of(sensor: mi.Sensor) -> Frustum:

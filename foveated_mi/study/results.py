@@ -27,7 +27,7 @@ from typing import Any, Iterable
 from ..metrics import COMPARE_KEYS, FLICKER_KEYS
 
 __all__ = ["columns", "ResultsFile", "read_rows", "format_value", "parse_value",
-           "NUMERIC_COLUMNS", "OPTIONAL_COLUMNS"]
+           "NUMERIC_COLUMNS", "OPTIONAL_COLUMNS", "STEREO_KEYS"]
 
 _HEAD = ("task_id", "scene", "method", "seed", "theta", "sigma_p", "reconstruction", "spp",
          "frame",
@@ -67,16 +67,19 @@ def columns(extra: Iterable[str] = ()) -> list[str]:
     return [*_HEAD, *stage_columns(), *_TAIL[:i], *extra, *_TAIL[i:]]
 
 
+#: The per-eye columns of a stereo sequence's row (:mod:`foveated_mi.study.stereo`).
+STEREO_KEYS = ("psnr_left", "psnr_right", "jod_video_left", "jod_video_right", "jod_video_min")
+
 #: Columns read back as numbers by :func:`read_rows` (besides any ``*_ms`` column).
 NUMERIC_COLUMNS = frozenset(("seed", "theta", "sigma_p", "spp", "frame", "rays",
                              "ray_fraction", "samples", "time_ms", *COMPARE_KEYS, "jod", "jod_video",
-                             "jod_monitor", "jod_video_monitor", *FLICKER_KEYS,
+                             "jod_monitor", "jod_video_monitor", *FLICKER_KEYS, *STEREO_KEYS,
                              "history_hit_rate", "width", "height", "repeats"))
 
 
-#: Columns only some rows carry (a sequence row's flicker): a file gains them from the first
-#: row that brings them (:meth:`ResultsFile.append`).
-OPTIONAL_COLUMNS = frozenset(FLICKER_KEYS)
+#: Columns only some rows carry (a sequence row's flicker, a stereo row's eyes): a file gains
+#: them from the first row that brings them (:meth:`ResultsFile.append`).
+OPTIONAL_COLUMNS = frozenset((*FLICKER_KEYS, *STEREO_KEYS))
 
 
 def format_value(v: Any) -> str:

@@ -55,6 +55,11 @@ Layout (every key optional except ``scenes``)::
                                 #   photometry follow); the scene's camera is the head
     eye_width = 640             #   the eye buffer's width (default: the headset's render
                                 #   target); its height follows from the frustum
+    stereo = true               #   both eyes (with [motion]): the headset's rig, else the
+    ipd = 0.063                 #   camera's frustum at each eye, ipd apart; each eye scored
+                                #   at its own gaze (psnr_left/right, jod_video_left/right/min;
+                                #   the quality columns are the eyes' mean), the frame time
+                                #   both eyes together (foveated_mi.study.stereo)
 
     [motion]                    # rows are sequences instead of frames of a still view
     frames = 45                 #   frames per sequence (>= 2), shown at fps
@@ -304,7 +309,7 @@ def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
               for i, s in enumerate(scenes_in)]
     if "motion" in data:
         scenes = _motion(ctx, data["motion"], scenes, base_dir, _tracker(ctx, data.get("viewer")))
-    scenes, headset = _with_headset(ctx, data.get("viewer"), scenes)
+    scenes, headset = _eyes(ctx, data.get("viewer"), scenes)
     _check_labels(ctx, scenes)
     metrics, perceptual = _metrics(ctx, data.get("metrics", {}))
     metrics.update(_viewer(ctx, data.get("viewer"), metrics.pop("fovea_deg", None),
@@ -563,13 +568,40 @@ def _check_labels(ctx: TableContext, scenes: list) -> None:
             raise ctx.error(f"scenes[{i}].label", lab, "a label no other scene uses")
 
 
-def _with_headset(ctx: TableContext, table: Any, scenes: list) -> tuple[list, str | None]:
-    """The scenes seen by one eye of ``[viewer] headset`` (:func:`_on_headset`), and its
-    name; the scenes as they are, and None, without one."""
+def _eyes(ctx: TableContext, table: Any, scenes: list) -> tuple[list, str | None]:
+    """The scenes seen by one eye of ``[viewer] headset`` (:func:`_on_headset`), each with
+    ``motion["stereo"]`` under ``[viewer] stereo`` (:func:`_stereo`), and the headset's name
+    (None without one)."""
     headset = _headset(ctx, table)
-    if headset is None:
-        return scenes, None
-    return [_on_headset(s, *headset) for s in scenes], headset[0].name
+    if headset is not None:
+        scenes = [_on_headset(s, *headset) for s in scenes]
+    stereo = _stereo(ctx, table, scenes, None if headset is None else headset[0])
+    if stereo is not None:
+        scenes = [s if s.motion is None else replace(s, motion={**s.motion, "stereo": stereo})
+                  for s in scenes]
+    return scenes, None if headset is None else headset[0].name
+
+
+def _stereo(ctx: TableContext, table: Any, scenes: list, model) -> dict | None:
+    """``[viewer] stereo`` and ``ipd``: ``{"ipd", "headset"}`` for each scene's motion, or
+    None. Both eyes of a head at each scene's camera: the headset's rig, else the camera's
+    own frustum at both eyes (``ipd`` in scene units, 63 mm by default or the headset's)."""
+    table = {} if table is None else dict(table)
+    if not ctx.boolean("viewer.stereo", table.get("stereo", False)):
+        if "ipd" in table:
+            raise ctx.error("viewer.ipd", table["ipd"], "viewer.stereo = true (the distance "
+                            "between two eyes)")
+        return None
+    ipd = ctx.number("viewer.ipd", table.get("ipd", 0.063 if model is None else model.ipd),
+                     0.0, lo_open=True)
+    for i, s in enumerate(scenes):
+        if s.motion is None:
+            raise ctx.error("viewer.stereo", True, "a [motion] table (a stereo study's rows "
+                            "are sequences: a still head is a gaze path alone)")
+        if "file" in s.reference:
+            raise ctx.error(f"scenes[{i}].reference.file", s.reference["file"],
+                            "a rendered reference (each eye has its own) under viewer.stereo")
+    return {"ipd": float(ipd), "headset": None if model is None else model.name}
 
 
 def _headset(ctx: TableContext, table: Any):
@@ -609,7 +641,7 @@ def _viewer(ctx: TableContext, table: Any, fovea_deg, perceptual: dict) -> dict:
         return {}
     table = dict(ctx.table("viewer", table))
     ctx.known("viewer", table, ("fov", "display", "monitor", "gaze_latency_ms",
-                                "gaze_noise_deg", "headset", "eye_width"))
+                                "gaze_noise_deg", "headset", "eye_width", "stereo", "ipd"))
     from ..perceptual import check_display
     if "headset" in table:            # a headset's eye: its buffer spans the sensor's view
         from ..headsets import headset

@@ -117,6 +117,8 @@ def reference_key(scene, variant: str) -> str:
            "mtime": mtime}
     if scene.motion is not None and scene.motion["cameras"] is not None:
         key["cameras"] = scene.motion["cameras"]      # one reference per frame of the path
+    if scene.motion is not None and scene.motion.get("stereo") is not None:
+        key["stereo"] = scene.motion["stereo"]        # one reference per eye
     return _hash(key)
 
 
@@ -138,7 +140,8 @@ def reference_task(scene, variant: str) -> dict:
     return {"kind": "reference", "scene": scene.load_spec(), "variant": variant,
             "spp": scene.reference["spp"], "seed": scene.reference["seed"],
             "label": scene.label,
-            "cameras": None if scene.motion is None else scene.motion["cameras"]}
+            "cameras": None if scene.motion is None else scene.motion["cameras"],
+            "stereo": None if scene.motion is None else scene.motion.get("stereo")}
 
 
 def expand_tasks(spec, variant: str, *, denoise_available: bool = True) -> list[dict]:
@@ -297,6 +300,11 @@ def run_reference_task(task: dict) -> dict:
     from ..baselines import render_reference
     scene = get_scene(task["scene"], task["variant"])
     cameras = task.get("cameras")
+    if task.get("stereo"):       # (F, 2, H, W, 3): each frame's eyes (F = 1 for a still head)
+        from .stereo import stereo_reference
+        with _camera_path(scene) if cameras else contextlib.nullcontext() as move:
+            image = stereo_reference(scene, task, move(cameras) if cameras else [0])
+        return {"image": image, "rfilter": str(scene.sensors()[0].film().rfilter())}
     if cameras:           # a moving camera: (F, H, W, 3), one reference per frame
         with _camera_path(scene) as move:
             image = np.stack([render_reference(scene, spp=task["spp"], seed=task["seed"])
@@ -328,7 +336,7 @@ def _median(xs: list[float | None]) -> float | None:
     return statistics.median(xs) if xs else None
 
 
-def _viewing(scene, task: dict) -> dict:
+def _viewing(scene, task: dict, sensor=None) -> dict:
     """How quality is judged for this task's scene: ``{"ppd", "eccentricity", "fov"}`` (under
     ``[viewer] fov = "sensor"``: the pixels per degree at the gaze, the eccentricity map in
     degrees and the sensor's horizontal field of view; else the monitor's ppd)."""
@@ -336,7 +344,8 @@ def _viewing(scene, task: dict) -> dict:
     if m.get("viewer") != "sensor":
         return {"ppd": m["ppd"], "eccentricity": None, "fov": None}
     from .. import viewer
-    sensor, gaze = scene.sensors()[0], tuple(task["gaze"])
+    sensor = scene.sensors()[0] if sensor is None else sensor
+    gaze = tuple(task["gaze"])
     return {"ppd": viewer.pixels_per_degree(sensor, gaze),
             "eccentricity": viewer.eccentricity_map(sensor, gaze),
             "fov": viewer.horizontal_fov(sensor)}
@@ -393,6 +402,9 @@ def _sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = False):
     after the first, its quality the mean over frames (+ ``jod_video``). With ``keep``:
     ``(row, shown)``."""
     motion = task["motion"]
+    if motion.get("stereo"):
+        from .stereo import stereo_sequence_row
+        return stereo_sequence_row(scene, task, reference, keep)
     gazes = motion["gazes"]
     n = len(gazes)
     refs = reference if reference.ndim == 4 else np.broadcast_to(reference, (n,) + reference.shape)

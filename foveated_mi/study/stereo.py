@@ -1,0 +1,215 @@
+"""Stereo sequences of a study (``[viewer] stereo = true``): both eyes of a head at each
+frame's camera, each eye scored against its own reference at its own gaze.
+
+The scene's camera is the head; the eyes are a :class:`foveated_mi.stereo.StereoRig` (a
+headset's, else the camera's own frustum at each eye) whose sensors follow it
+(:class:`foveated_mi.stereo.EyeSensors`). Each frame both eyes fixate where the head's gaze
+meets the scene: the rendered gaze (an eye tracker's, late and jittered) for the renderer, the
+true one for the metrics.
+
+- A foveated row (and a uniform one with history) renders both eyes with one integrator, each
+  eye a view with its own plan and history (:class:`foveated_mi.stereo.Stereo`); a uniform
+  row renders each eye's sensor.
+- The right eye's seed is the left one's + 1: the eyes' noise is independent, as two cameras'
+  would be. A per-eye metric cannot see binocular rivalry.
+- The row's time is both eyes' frame time together (the median over frames after the first);
+  its rays are the eyes' mean fraction of one eye's film.
+- Its quality columns are the eyes' mean; ``psnr_left`` / ``psnr_right`` and, with the
+  perceptual extra, ``jod_video_left`` / ``jod_video_right`` / ``jod_video_min`` are each eye's
+  (:data:`STEREO_KEYS`).
+"""
+from __future__ import annotations
+
+import contextlib
+
+import numpy as np
+
+from ..stereo import EYES, EyeSensors, StereoRig, frustum_of
+from .results import STEREO_KEYS
+
+__all__ = ["STEREO_KEYS", "stereo_rig", "stereo_reference", "stereo_sequence_row"]
+
+
+def stereo_rig(scene, stereo: dict) -> StereoRig:
+    """The eyes of a stereo task: the headset's rig at the film's width, else the head
+    camera's own frustum at each eye.
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        The task's scene (its first sensor is the head).
+    stereo : dict
+        ``motion["stereo"]``: ``{"ipd", "headset"}``.
+
+    Returns
+    -------
+    rig : StereoRig
+        Both eyes, as wide as the head's film.
+    """
+    head = scene.sensors()[0]
+    width = int(head.film().crop_size()[0])
+    if stereo.get("headset"):
+        from ..headsets import headset
+        return headset(stereo["headset"]).rig(width, stereo["ipd"])
+    return StereoRig(frustum_of(head), ipd=stereo["ipd"], width=width)
+
+
+def stereo_reference(scene, task: dict, frames) -> np.ndarray:
+    """Each frame's reference of both eyes, (F, 2, H, W, 3) linear float32.
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        The scene, its head moved to each frame's camera as ``frames`` is iterated.
+    task : dict
+        A reference task (``spp``, ``seed``, ``stereo``).
+    frames : iterable
+        One item per frame, after the head is at that frame's camera.
+
+    Returns
+    -------
+    reference : numpy.ndarray
+        Both eyes per frame.
+    """
+    from ..baselines import render_reference
+    eyes = EyeSensors(scene, stereo_rig(scene, task["stereo"]))
+    out = []
+    for _ in frames:
+        eyes.follow()
+        out.append(np.stack([render_reference(scene, spp=task["spp"], seed=task["seed"],
+                                              sensor=eyes[eye]) for eye in EYES]))
+    return np.stack(out)
+
+
+def _renderer(scene, task: dict, rig: StereoRig):
+    """``(render, eyes, integrator)``: ``render(gaze)`` renders both eyes at the head's
+    current pose fixating the head's ``gaze`` and returns ``(images, time_ms, ray_fraction)``;
+    ``eyes`` the :class:`EyeSensors` the frames use."""
+    spp, seed = task["spp"], task["seed"]
+    if task["kind"] == "foveated":
+        from ..integrators.foveated import FoveatedIntegrator
+        from ..stereo import Stereo
+        integ = FoveatedIntegrator(nested=scene.integrator(), **task["options"], timing=True)
+        stereo = Stereo(scene, integ, rig)
+
+        def render_foveated(gaze):
+            frame = stereo.render(tuple(gaze), seed=seed, spp=spp)
+            images = [np.array(frame.left, dtype=np.float32),
+                      np.array(frame.right, dtype=np.float32)]
+            stats = [stereo.views[eye].stats for eye in EYES]
+            render_foveated.modes.extend(s["trace_mode"] for s in stats)
+            return (images, sum(s["timings_ms"]["total"] for s in stats),
+                    float(np.mean([s["ray_fraction"] for s in stats])))
+        render_foveated.modes = []      # each eye's trace_mode, frame by frame
+        return render_foveated, stereo.eyes, integ
+    from ..baselines import render_uniform
+    eyes = EyeSensors(scene, rig)
+    den = bool(task["options"]["denoise"])
+
+    def render_baseline(gaze):
+        eyes.follow()
+        runs = [render_uniform(scene, spp=spp, seed=seed + k, denoise=den, sensor=eyes[eye])
+                for k, eye in enumerate(EYES)]
+        return [r[0] for r in runs], sum(r[1]["time_ms"] for r in runs), 1.0
+    return render_baseline, eyes, None
+
+
+def stereo_sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = False):
+    """One stereo sequence (module docstring): each frame's head moved, both eyes rendered
+    and each scored at its own true gaze against its own reference.
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        The task's scene.
+    task : dict
+        A sequence task whose ``motion`` has ``stereo``.
+    reference : numpy.ndarray
+        (F, 2, H, W, 3) linear, F = 1 for a still head.
+    keep : bool, optional
+        Also return the frames shown (the left eye's (reference, image) pairs, for pictures).
+
+    Returns
+    -------
+    row : dict
+        The sequence's row; with ``keep``, ``(row, shown)``.
+    """
+    from .tasks import UNIFORM_MODE, _flicker, _mode, _sequence_summary
+    motion = task["motion"]
+    n = len(motion["gazes"])
+    refs = reference if reference.shape[0] == n else np.broadcast_to(
+        reference, (n,) + reference.shape[1:])
+    render, eyes, integ = _renderer(scene, task, stereo_rig(scene, motion["stereo"]))
+    times, rays, frames = _frames(scene, task, refs, render, eyes)
+    row = _sequence_summary(task, n, times, rays)
+    modes = getattr(render, "modes", None)      # the row's time: the frames after the first
+    row["trace_mode"] = _mode(modes[2:] or modes) if modes else UNIFORM_MODE
+    if integ is not None:
+        row.update(theta=task["options"]["theta"], sigma_p=task["options"]["sigma_p"],
+                   reconstruction=task["options"]["reconstruction"])
+    quality = {eye: frames[eye]["quality"] for eye in EYES}
+    for key in quality[EYES[0]][0]:             # nan (an empty region) stays nan
+        row[key] = float(np.mean([q[key] for eye in EYES for q in quality[eye]]))
+    for eye in EYES:
+        row[f"psnr_{eye}"] = float(np.mean([q["psnr"] for q in quality[eye]]))
+    flicker = [_flicker(task, frames[eye]["shown"], frames[eye]["eccs"]) for eye in EYES]
+    row.update({key: float(np.mean([f[key] for f in flicker])) for key in flicker[0]})
+    if task.get("jod"):
+        row.update(_stereo_jod(scene, task, frames, eyes))
+    return (row, frames[EYES[0]]["shown"]) if keep else row
+
+
+def _frames(scene, task: dict, refs: np.ndarray, render, eyes) -> tuple:
+    """Each frame moved, both eyes fixated, rendered (with the rendered gaze) and scored at
+    their true gazes: ``(times, rays, frames)``, ``frames[eye]`` holding the eye's ``shown``
+    (reference, image) display pairs, ``quality``, ``eccs`` and true ``gazes``."""
+    from ..render import to_display
+    from .tasks import _camera_path, _quality, _viewing, rendered_gazes
+    motion, m = task["motion"], task["metrics"]
+    gazes, cameras = motion["gazes"], motion["cameras"]
+    rendered = rendered_gazes(scene, task)
+    times, rays = [], []
+    frames = {eye: {"shown": [], "quality": [], "eccs": [], "gazes": []} for eye in EYES}
+    with _camera_path(scene) if cameras else contextlib.nullcontext() as move:
+        for k in move(cameras) if cameras else range(len(gazes)):
+            eyes.follow()
+            truth, _, _ = eyes.gazes(tuple(gazes[k]))
+            images, time_ms, ray_fraction = render(rendered[k])
+            times.append(time_ms)
+            rays.append(ray_fraction)
+            for e, eye in enumerate(EYES):
+                eye_task = dict(task, gaze=list(truth[e]))
+                viewing = _viewing(scene, eye_task, eyes[eye])
+                ref_d = to_display(refs[k][e], m["exposure"])
+                f = frames[eye]
+                f["eccs"].append(viewing["eccentricity"])
+                f["gazes"].append(list(truth[e]))
+                f["shown"].append((ref_d, to_display(images[e], m["exposure"])))
+                f["quality"].append(_quality(ref_d, images[e], dict(eye_task, jod=False),
+                                             viewing))
+    return times, rays, frames
+
+
+def _stereo_jod(scene, task: dict, frames: dict, eyes) -> dict:
+    """Each eye's video JOD fixating its own gaze, their mean and minimum (and on a monitor,
+    the eyes' mean)."""
+    from ..perceptual import jod_video
+    from .tasks import _viewing
+    motion, perceptual = task["motion"], task["perceptual"]
+    out, monitor = {}, perceptual.get("monitor")
+    monitor_scores = []
+    for eye in EYES:
+        f = frames[eye]
+        ref, test = np.stack([r for r, _ in f["shown"]]), np.stack([t for _, t in f["shown"]])
+        viewing = _viewing(scene, dict(task, gaze=f["gazes"][0]), eyes[eye])
+        out[f"jod_video_{eye}"] = jod_video(ref, test, fixations=f["gazes"], fps=motion["fps"],
+                                            ppd=viewing["ppd"], fov_horizontal=viewing["fov"],
+                                            display=perceptual["display"])
+        if monitor is not None:
+            monitor_scores.append(jod_video(ref, test, fixations=f["gazes"], fps=motion["fps"],
+                                            ppd=monitor["ppd"], display=monitor["display"]))
+    scores = [out[f"jod_video_{eye}"] for eye in EYES]
+    out.update(jod_video=float(np.mean(scores)), jod_video_min=float(min(scores)))
+    if monitor_scores:
+        out["jod_video_monitor"] = float(np.mean(monitor_scores))
+    return out
