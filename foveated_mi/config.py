@@ -24,7 +24,9 @@ Layout (every key optional except ``scene``)::
     [gaze]                        # absent: fixed at the centre
     type = "fixed"                # fixed (x, y) | keyframes (keyframes, interpolation) |
     x = 0.5                       # saccades (targets, dwell, duration, loop) |
-    y = 0.5                       # csv (path relative to this file, interpolation, relative)
+    y = 0.5                       # csv (path relative to this file, interpolation, relative) |
+                                  # binocular_csv (the same keys; a header names t, left_x,
+                                  # left_y, right_x, right_y: each eye's gaze on its own film)
     [poses]                       # instead of [camera] and [gaze]: a pose per frame, as the
     path = "walk.csv"             # live view records them (foveated_mi.live.poses); frames
                                   # defaults to its row count (at most that)
@@ -47,8 +49,8 @@ import sys
 from dataclasses import dataclass, field
 from typing import Any
 
-from .paths import (CameraPath, FixedGaze, GazeCSV, GazeKeyframes, GazePath,
-                    Saccades)
+from .paths import (BinocularGazeCSV, CameraPath, FixedGaze, GazeCSV, GazeKeyframes,
+                    GazePath, Saccades)
 from .options import OPTIONS_HELP, SCHEMA, validate_options
 from .validate import ParameterError, TableContext
 
@@ -61,7 +63,7 @@ __all__ = ["SequenceConfig", "OutputConfig", "load_config", "parse_config", "VID
            "FOVEATED_KEYS"]
 
 VIDEO_FORMATS = ("mp4", "gif", "none")
-GAZE_TYPES = ("fixed", "keyframes", "saccades", "csv")
+GAZE_TYPES = ("fixed", "keyframes", "saccades", "csv", "binocular_csv")
 
 #: Options of the ``foveated`` integrator a config may set, with their TOML types, from the
 #: option schema (the gaze comes from ``[gaze]``; value ranges are checked by the
@@ -286,7 +288,8 @@ def _gaze(ctx: TableContext, table: Any, base_dir: str) -> GazePath:
     kind = ctx.string("gaze.type", table.pop("type", "fixed"), GAZE_TYPES)
     keys = {"fixed": ("x", "y"), "keyframes": ("keyframes", "interpolation"),
             "saccades": ("targets", "dwell", "duration", "loop"),
-            "csv": ("path", "interpolation", "relative")}[kind]
+            "csv": ("path", "interpolation", "relative"),
+            "binocular_csv": ("path", "interpolation", "relative")}[kind]
     ctx.known("gaze", table, ("type",) + keys)
     try:
         if kind == "fixed":
@@ -306,7 +309,8 @@ def _gaze(ctx: TableContext, table: Any, base_dir: str) -> GazePath:
         if not os.path.isfile(full):
             raise ctx.error("gaze.path", path, "an existing CSV file (relative to the config "
                             "file)")
-        return GazeCSV(full, table.get("interpolation", "linear"),
+        kind_of = GazeCSV if kind == "csv" else BinocularGazeCSV
+        return kind_of(full, table.get("interpolation", "linear"),
                        relative=table.get("relative", False), name="gaze")
     except ParameterError as e:
         if getattr(e, "key", None) is not None or e.name.startswith(ctx.source):

@@ -279,7 +279,7 @@ class StereoFrame(NamedTuple):
     left: Any                      #: the left eye's image, (H, W, 3)
     right: Any                     #: the right eye's image
     gazes: tuple[tuple[float, float], tuple[float, float]]   #: each eye's gaze (normalised)
-    fixation: np.ndarray           #: the point both eyes look at
+    fixation: np.ndarray | None    #: the point both eyes look at (None: given per eye)
     hit: bool                      #: whether the head's gaze ray met a surface
 
 
@@ -402,13 +402,18 @@ class Stereo:
         for view in self.views.values():
             view.reset()
 
-    def render(self, gaze=(0.5, 0.5), *, seed: int = 0, spp: int = 0) -> StereoFrame:
-        """Both eyes at the head's current pose, looking at the head's gaze.
+    def render(self, gaze=(0.5, 0.5), *, seed: int = 0, spp: int = 0,
+               eye_gazes=None) -> StereoFrame:
+        """Both eyes at the head's current pose, looking at the head's gaze (or each at its
+        own).
 
         Parameters
         ----------
         gaze : tuple of float, optional
             The gaze on the head's film, normalised (origin top-left).
+        eye_gazes : pair of tuple of float, optional
+            Each eye's gaze on its own film (a binocular eye tracker's): ``gaze`` and the
+            fixation are then not used (the frame's ``fixation`` is None).
         seed : int, optional
             The frame's seed (the right eye's is ``seed`` + 1, so the eyes' noise is
             independent).
@@ -422,7 +427,13 @@ class Stereo:
         """
         # Only a moved head updates the eyes: an update is a camera move to the frame.
         self.eyes.follow()
-        gazes, point, hit = self.eyes.gazes(gaze, self.fixation_distance)
+        if eye_gazes is None:
+            gazes, point, hit = self.eyes.gazes(gaze, self.fixation_distance)
+        else:
+            gazes = tuple(check_point2(f"eye_gazes[{k}]", g) for k, g in enumerate(eye_gazes))
+            if len(gazes) != 2:
+                raise ParameterError("eye_gazes", eye_gazes, "two gazes, left and right")
+            point, hit = None, False
         images = {}
         for k, eye in enumerate(EYES):
             self.views[eye].gaze = gazes[k]

@@ -131,3 +131,76 @@ def test_a_still_head_converges_in_both_eyes():
     for eye in ("left", "right"):
         assert last[eye] < 0.5 * first[eye], (eye, first, last)
     del mi
+
+
+BINOCULAR = "t,left_x,left_y,right_x,right_y\n0.0,0.6,0.5,0.4,0.5\n0.1,0.7,0.45,0.5,0.45\n"
+
+
+def test_a_binocular_gaze_csv_gives_each_eye_its_own_gaze(tmp_path):
+    from foveated_mi.paths import BinocularGazeCSV
+    path = tmp_path / "eyes.csv"
+    path.write_text("# a tracker's log\n" + BINOCULAR.replace("t,left_x", "t,extra,left_x")
+                    .replace("0.0,0.6", "0.0,9,0.6").replace("0.1,0.7", "0.1,9,0.7"))
+    gaze = BinocularGazeCSV(str(path))
+    assert gaze.eyes_at(0.05) == (pytest.approx((0.65, 0.475)), pytest.approx((0.45, 0.475)))
+    assert gaze.at(0.0) == pytest.approx((0.5, 0.5))          # a single view: the mean
+    bad = tmp_path / "mono.csv"
+    bad.write_text("t,x,y\n0.0,0.5,0.5\n")
+    with pytest.raises(ParameterError, match=r"mono.csv:1.*left_x,left_y,right_x,right_y") as e:
+        BinocularGazeCSV(str(bad))
+    assert "\n" not in str(e.value)
+
+
+def test_a_stereo_study_renders_and_scores_each_eye_at_its_own_gaze(tmp_path, monkeypatch):
+    """[motion.gaze] binocular_csv under [viewer] stereo: the renderer is given each eye's
+    gaze one frame late (gaze_latency_ms), the metrics score each eye at its own true one."""
+    from foveated_mi.study import stereo as S
+    from foveated_mi.study import tasks
+    (tmp_path / "eyes.csv").write_text(BINOCULAR)
+    given, scored = [], []
+    real_renderer, real_viewing = S._renderer, tasks._viewing
+
+    def renderer(scene, task, rig):
+        render, eyes, integ = real_renderer(scene, task, rig)
+
+        def spy(gaze, eye_gazes=None):
+            if integ is not None:
+                given.append([list(g) for g in eye_gazes])
+            return render(gaze, eye_gazes)
+        spy.modes = getattr(render, "modes", None)
+        return spy, eyes, integ
+
+    def viewing(scene, task, sensor=None):
+        if task["kind"] == "foveated" and sensor is not None:
+            scored.append(list(task["gaze"]))
+        return real_viewing(scene, task, sensor)
+    monkeypatch.setattr(S, "_renderer", renderer)
+    monkeypatch.setattr(tasks, "_viewing", viewing)
+    text = textwrap.dedent(STUDY).replace(
+        "[motion]\nframes = 3\n", "[motion]\nframes = 3\nfps = 20\n[motion.gaze]\n"
+        "type = \"binocular_csv\"\npath = \"eyes.csv\"\n").replace(
+        "stereo = true\n", "stereo = true\ngaze_latency_ms = 50.0\n").replace(
+        "[uniform]\nspp = [1]\n", "")
+    (tmp_path / "s.toml").write_text(text)
+    result = run_study(str(tmp_path / "s.toml"), out=str(tmp_path / "out"), progress=False,
+                       echo=None)
+    assert not result.failed
+    motion = load_study(str(tmp_path / "s.toml")).scenes[0].motion
+    truth = motion["eye_gazes"]
+    assert truth[0] == [[0.6, 0.5], [0.4, 0.5]] and truth[2] == [[0.7, 0.45], [0.5, 0.45]]
+    assert given == [truth[0], truth[0], truth[1]]            # one frame (50 ms at 20 fps) late
+    jod = "jod_video" in read_rows(str(tmp_path / "out" / "results.csv"))[0]
+    per_frame = [g for frame in truth for g in frame]
+    assert scored[:len(per_frame)] == per_frame and len(scored) == len(per_frame) + 2 * jod
+
+
+def test_a_binocular_gaze_path_with_tracker_noise_is_one_line(tmp_path):
+    (tmp_path / "eyes.csv").write_text(BINOCULAR)
+    with pytest.raises(ParameterError, match=r"viewer\.gaze_noise_deg") as e:
+        parse_study({"size": [24, 24], "scenes": [{"scene": "cornell-box"}],
+                     "uniform": {"spp": [1]},
+                     "viewer": {"fov": "sensor", "stereo": True, "gaze_noise_deg": 1.0},
+                     "motion": {"frames": 2, "gaze": {"type": "binocular_csv",
+                                                      "path": "eyes.csv"}}},
+                    base_dir=str(tmp_path))
+    assert "\n" not in str(e.value)

@@ -545,7 +545,30 @@ def _motion(ctx: TableContext, table: Any, scenes: list, base_dir: str,
             motion["rendered_gazes"] = _delayed(gaze, gazes, fps, tracker[0])
         if tracker[1] > 0.0:
             motion["gaze_noise_deg"] = tracker[1]
-        out.append(replace(scene, motion=motion))
+        out.append(replace(scene, motion={**motion, **_eye_gazes(ctx, gaze, frames, fps,
+                                                                   tracker)}))
+    return out
+
+
+def _eye_gazes(ctx: TableContext, gaze, frames: int, fps: float,
+               tracker: tuple[float, float]) -> dict:
+    """A binocular gaze path's ``eye_gazes`` (each frame's ``[left, right]``) and, late by
+    the tracker's latency, ``rendered_eye_gazes``; nothing for any other gaze path."""
+    from ..paths import BinocularGazeCSV
+    if not isinstance(gaze, BinocularGazeCSV):
+        return {}
+    if tracker[1] > 0.0:
+        raise ctx.error("viewer.gaze_noise_deg", tracker[1], "0 with a binocular gaze path "
+                        "(its samples are each eye's own: add the tracker's noise to them)")
+    eyes = [[list(g) for g in gaze.eyes_at(k / fps)] for k in range(frames)]
+    out = {"eye_gazes": eyes}
+    if tracker[0] > 0.0:
+        shift = tracker[0] * fps / 1000.0
+        out["rendered_eye_gazes"] = (
+            [eyes[max(k - round(shift), 0)] for k in range(frames)]
+            if abs(shift - round(shift)) < 1e-9 else
+            [[list(g) for g in gaze.eyes_at(max(k / fps - tracker[0] / 1000.0, 0.0))]
+             for k in range(frames)])
     return out
 
 

@@ -4,7 +4,8 @@ frame's camera, each eye scored against its own reference at its own gaze.
 The scene's camera is the head; the eyes are a :class:`foveated_mi.stereo.StereoRig` (a
 headset's, else the camera's own frustum at each eye) whose sensors follow it
 (:class:`foveated_mi.stereo.EyeSensors`). Each frame both eyes fixate where the head's gaze
-meets the scene: the rendered gaze (an eye tracker's, late and jittered) for the renderer, the
+meets the scene, or, with a binocular gaze path (``binocular_csv``), each looks where its
+own column says: the rendered gaze (an eye tracker's, late and jittered) for the renderer, the
 true one for the metrics.
 
 - A foveated row (and a uniform one with history) renders both eyes with one integrator, each
@@ -92,8 +93,8 @@ def _renderer(scene, task: dict, rig: StereoRig):
         integ = FoveatedIntegrator(nested=scene.integrator(), **task["options"], timing=True)
         stereo = Stereo(scene, integ, rig)
 
-        def render_foveated(gaze):
-            frame = stereo.render(tuple(gaze), seed=seed, spp=spp)
+        def render_foveated(gaze, eye_gazes=None):
+            frame = stereo.render(tuple(gaze), seed=seed, spp=spp, eye_gazes=eye_gazes)
             images = [np.array(frame.left, dtype=np.float32),
                       np.array(frame.right, dtype=np.float32)]
             stats = [stereo.views[eye].stats for eye in EYES]
@@ -106,7 +107,7 @@ def _renderer(scene, task: dict, rig: StereoRig):
     eyes = EyeSensors(scene, rig)
     den = bool(task["options"]["denoise"])
 
-    def render_baseline(gaze):
+    def render_baseline(gaze, eye_gazes=None):
         eyes.follow()
         runs = [render_uniform(scene, spp=spp, seed=seed + k, denoise=den, sensor=eyes[eye])
                 for k, eye in enumerate(EYES)]
@@ -168,13 +169,17 @@ def _frames(scene, task: dict, refs: np.ndarray, render, eyes) -> tuple:
     motion, m = task["motion"], task["metrics"]
     gazes, cameras = motion["gazes"], motion["cameras"]
     rendered = rendered_gazes(scene, task)
+    # A binocular gaze path: each eye's own gazes, true and (late) rendered.
+    true_eyes = motion.get("eye_gazes")
+    rendered_eyes = motion.get("rendered_eye_gazes", true_eyes)
     times, rays = [], []
     frames = {eye: {"shown": [], "quality": [], "eccs": [], "gazes": []} for eye in EYES}
     with _camera_path(scene) if cameras else contextlib.nullcontext() as move:
         for k in move(cameras) if cameras else range(len(gazes)):
             eyes.follow()
-            truth, _, _ = eyes.gazes(tuple(gazes[k]))
-            images, time_ms, ray_fraction = render(rendered[k])
+            truth = true_eyes[k] if true_eyes else eyes.gazes(tuple(gazes[k]))[0]
+            images, time_ms, ray_fraction = render(
+                rendered[k], rendered_eyes[k] if rendered_eyes else None)
             times.append(time_ms)
             rays.append(ray_fraction)
             for e, eye in enumerate(EYES):
