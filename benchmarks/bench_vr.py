@@ -15,7 +15,8 @@ Then it writes, to ``--results`` (default ``docs/results/``):
 * ``vr.md``: every cell (mean ± standard deviation over the seeds) and, per condition and
   scene, the **speed-up at equal video JOD** of each foveated configuration against each
   uniform family (uniform, + OIDN, + the same history, + the same history and OIDN; 1, 2 and 4
-  spp): the time the family needs to reach the configuration's ``jod_video``, read along its
+  spp), and against all of them at once (``every uniform family``: their lower envelope):
+  the time the family needs to reach the configuration's ``jod_video``, read along its
   best-so-far curve in log time (:func:`foveated_mi.study.equal_time.speedup`), over the
   configuration's time; ``>`` where the family never reaches it, ``<`` where its fastest
   cell already does. Per seed, then mean ± standard deviation over seeds;
@@ -38,6 +39,13 @@ frames after the first, on this machine, comparable within one run only.
     python benchmarks/bench_vr.py [--size 1152 648] [--frames 54] [--seeds 0 1 2]
                                   [--scenes voxel-city staircase] [--out out/vr]
                                   [--study configs/studies/vr_10ppd.toml]
+
+``--headset quest3 [--eye-width W]`` puts a headset's eye on the study (its frustum, eye
+buffer and photometry: ``foveated-mi headsets``); with a stereo study
+(``configs/studies/vr_stereo.toml``, or ``--stereo``) both eyes render, the time is both eyes'
+and the headset condition judges the worse eye (``jod_video_min``); ``--one-eye`` runs its
+left eye alone, for two eyes against one. ``--latency-ms`` and ``--noise-deg`` set the eye
+tracker (``[viewer] gaze_latency_ms``, ``gaze_noise_deg``).
 
 ``--study`` runs another study file of the same shape (``configs/studies/vr_10ppd.toml``: the
 study's own 1152x648 trimmed to what a 2-core CPU renders in about an hour).
@@ -68,6 +76,9 @@ RESULTS = os.path.join(HERE, "..", "docs", "results")
 CONDITIONS = {"headset": "jod_video", "monitor": "jod_video_monitor"}
 #: The uniform families a foveated configuration is measured against.
 FAMILIES = ("uniform", "uniform+oidn", "uniform+history", "uniform+history+oidn")
+#: Every uniform row of any family: their lower envelope in time and quality (the best
+#: quality any uniform frame reaches within a time), read as one more family.
+ENVELOPE = "every uniform family"
 RING_DEG = 5.0
 
 
@@ -80,6 +91,22 @@ def overridden(data: dict, a) -> dict:
         d["motion"]["frames"] = a.frames
     if a.seeds:
         d["seeds"] = list(a.seeds)
+    viewer = d.setdefault("viewer", {})
+    flag = lambda name: getattr(a, name, None)      # noqa: E731 (flags a caller may lack)
+    if flag("headset"):         # the headset's eye: its frustum, buffer and photometry
+        viewer["headset"] = a.headset
+        viewer.pop("display", None)
+    if flag("eye_width"):
+        viewer["eye_width"] = a.eye_width
+    if flag("stereo"):
+        viewer["stereo"] = True
+    if flag("one_eye"):         # the left eye alone, for two eyes against one
+        viewer.pop("stereo", None)
+        viewer.pop("ipd", None)
+    if flag("latency_ms") is not None:
+        viewer["gaze_latency_ms"] = a.latency_ms
+    if flag("noise_deg") is not None:
+        viewer["gaze_noise_deg"] = a.noise_deg
     if a.scenes:
         keep = [s for s in d["scenes"] if _scene_name(s) in a.scenes]
         if not keep:
@@ -113,8 +140,9 @@ def speedups(rows: list[dict], column: str) -> list[dict]:
     for scene in sorted({r["scene"] for r in rows}):
         cells = aggregate([r for r in rows if r["scene"] == scene])
         for cell in (c for c in cells if c["method"] == "foveated"):
-            for fam in FAMILIES:
-                family = [c for c in cells if c["method"] == fam]
+            for fam in (*FAMILIES, ENVELOPE):
+                family = [c for c in cells if c["method"] == fam
+                          or (fam == ENVELOPE and c["method"] != "foveated")]
                 if family:
                     s = speedup_over_seeds(cell, family, column)
                     out.append({"scene": scene, "configuration": label(cell), "family": fam,
@@ -170,7 +198,7 @@ def flicker_table(rows: list[dict]) -> list[str]:
 
 
 def speedup_table(sps: list[dict]) -> list[str]:
-    fams = [f for f in FAMILIES if any(s["family"] == f for s in sps)]
+    fams = [f for f in (*FAMILIES, ENVELOPE) if any(s["family"] == f for s in sps)]
     out = ["| scene | configuration | time ms | " + " | ".join(fams) + " |",
            "|---|---|---|" + "---|" * len(fams)]
     keys = list(dict.fromkeys((s["scene"], s["configuration"]) for s in sps))
@@ -291,6 +319,18 @@ def main(argv=None) -> int:
     ap.add_argument("--results", default=RESULTS, help="where the tables and pictures go")
     ap.add_argument("--variant", default=None, help="Mitsuba variant (default: as the package "
                     "chooses)")
+    ap.add_argument("--headset", default=None, help="a headset's eye (foveated-mi headsets): "
+                    "its frustum, eye buffer and display replace the study's camera and film")
+    ap.add_argument("--eye-width", type=int, default=None, dest="eye_width",
+                    help="with a headset: the eye buffer's width")
+    ap.add_argument("--stereo", action="store_true", help="both eyes: the headset condition "
+                    "judges the worse eye's video JOD (jod_video_min), the time is both eyes'")
+    ap.add_argument("--noise-deg", type=float, default=None, dest="noise_deg",
+                    help="the eye tracker's jitter in degrees (viewer.gaze_noise_deg)")
+    ap.add_argument("--one-eye", action="store_true", dest="one_eye",
+                    help="a stereo study's left eye alone (two eyes against one)")
+    ap.add_argument("--latency-ms", type=float, default=None, dest="latency_ms",
+                    help="the eye tracker's latency (viewer.gaze_latency_ms)")
     ap.add_argument("--no-pictures", action="store_true")
     ap.add_argument("--no-progress", action="store_true")
     a = ap.parse_args(argv)
@@ -303,7 +343,10 @@ def main(argv=None) -> int:
 
     t0 = time.perf_counter()
     data = overridden(read_toml("study", a.study)[0], a)
+    stereo = bool(data.get("viewer", {}).get("stereo"))
     conditions = dict(CONDITIONS) if perceptual.available() else {"headset": "psnr_fovea"}
+    if stereo and perceptual.available():      # equal quality: the worse eye's
+        conditions["headset"] = "jod_video_min"
     os.makedirs(a.results, exist_ok=True)
     report = {"machine": {"processor": platform.processor() or platform.machine(),
                           "cores": os.cpu_count(), "variant": mi.variant()},
@@ -313,15 +356,23 @@ def main(argv=None) -> int:
     cmd = "python benchmarks/bench_vr.py" + "".join(
         f" --{k} {' '.join(map(str, v)) if isinstance(v, list) else v}"
         for k, v in (("size", a.size), ("frames", a.frames), ("seeds", a.seeds),
-                     ("scenes", a.scenes),
+                     ("scenes", a.scenes), ("headset", a.headset), ("eye-width", a.eye_width),
+                     ("latency-ms", a.latency_ms), ("noise-deg", a.noise_deg),
                      ("study", None if a.study == STUDY else os.path.relpath(a.study))) if v)
+    cmd += (" --stereo" if a.stereo else "") + (" --one-eye" if a.one_eye else "")
+    viewer = data.get("viewer", {})
+    camera = (f"the {viewer['headset']} headset's {'eyes' if stereo else 'left eye'} "
+              f"({viewer.get('eye_width', 'render-target')} px wide)"
+              if viewer.get("headset") else f"a {data['camera']['fov']:g}° camera")
     lines = [f"# The VR study ({data['size'][0]}x{data['size'][1]}, {mi.variant()})", "",
              f"Command: `{cmd}`  ",
              f"Machine: {report['machine']['processor']}, {os.cpu_count()} cores, "
              f"{mi.variant()}; date {report['date']}.  ",
              f"Each row: a sequence of {data['motion']['frames']} frames at "
-             f"{data['motion']['fps']} Hz (the head turning at 30°/s, a saccade every 300 ms, "
-             f"a {data['camera']['fov']:g}° camera), time the median frame after the first, "
+             f"{data['motion']['fps']} Hz (the head turning, saccades, "
+             f"{camera}, a gaze latency of {viewer.get('gaze_latency_ms', 0.0):g} ms and "
+             f"noise of {viewer.get('gaze_noise_deg', 0.0):g}°), "
+             f"time the median frame after the first{' (both eyes)' if stereo else ''}, "
              f"quality against a {data['reference']['spp']}-spp reference per frame; "
              f"mean ± standard deviation over seeds {data['seeds']}. Quality: "
              + ", ".join(f"`{c}` ({k})" for k, c in conditions.items())
@@ -337,7 +388,9 @@ def main(argv=None) -> int:
                   "Speed-up at equal " + column + " against each uniform family (mean over "
                   "seeds; ± the spread of the per-seed ratios; per seed in brackets):", "",
                   *speedup_table(sps), ""]
-    lines += ["## Every cell", "", *cells_table(res.rows, list(conditions.values())), "",
+    eyes = ["jod_video", "jod_video_left", "jod_video_right", "psnr_left", "psnr_right"] \
+        if stereo else []
+    lines += ["## Every cell", "", *cells_table(res.rows, list(conditions.values()) + eyes), "",
               "## Temporal instability", "",
               "Flicker of each cell (display values; the root mean square over frames and "
               "pixels of the change of its error from frame to frame, against a reference "
@@ -348,7 +401,7 @@ def main(argv=None) -> int:
     if res.warnings:
         lines += ["## Warnings", "", *[f"* {w}" for w in res.warnings], ""]
     failed = res.failed
-    if not a.no_pictures:
+    if not a.no_pictures and not stereo:        # the pictures are one eye's
         report["pictures"] = pictures(spec, a.out, a.results, mi.variant())
         lines += ["## Pictures", "", "![error and flicker against eccentricity]"
                   "(vr_eccentricity.png)", "",

@@ -168,7 +168,7 @@ class StereoRig:
         return head @ mi.ScalarTransform4f().translate([side, 0.0, 0.0])
 
     def sensor(self, head: mi.ScalarTransform4f, eye: str, *, spp: int = 1,
-               rfilter: dict | None = None) -> mi.Sensor:
+               rfilter=None) -> mi.Sensor:
         """A perspective sensor for ``eye``: its pose, its off-axis frustum, its eye buffer.
 
         Parameters
@@ -179,8 +179,9 @@ class StereoRig:
             The eye the sensor renders.
         spp : int, optional
             Its sampler's samples per pixel.
-        rfilter : dict, optional
-            Its film's reconstruction filter (Mitsuba's default, ``gaussian``, when None).
+        rfilter : dict or mi.ReconstructionFilter, optional
+            Its film's reconstruction filter, as a plugin dict or an instance (Mitsuba's
+            default, ``gaussian``, when None).
 
         Returns
         -------
@@ -301,7 +302,10 @@ class EyeSensors:
         self.head = scene.sensors()[0]
         spp = self.head.sampler().sample_count()
         pose = self.head_pose()
-        self.sensors = {eye: rig.sensor(pose, eye, spp=spp) for eye in EYES}
+        # The eyes' films filter as the head's does (the scene's film filter, not Mitsuba's
+        # default Gaussian).
+        rfilter = self.head.film().rfilter()
+        self.sensors = {eye: rig.sensor(pose, eye, spp=spp, rfilter=rfilter) for eye in EYES}
         self._poses = {eye: np.array(rig.eye_to_world(pose, eye).matrix, dtype=np.float64)
                        for eye in EYES}
 

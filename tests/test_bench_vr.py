@@ -117,3 +117,26 @@ def test_the_tables_carry_the_flicker_per_ring(bench):
     uni = next(line for line in table if "| uniform 1 spp |" in line)
     assert vr.count("0.0300 ± 0.0141") == 6 and vr.endswith("| - |")
     assert uni.count("0.0150 ± 0.0071") == 6
+
+
+def test_a_headset_stereo_and_tracker_come_from_the_command_line(bench):
+    """--headset replaces the study's display by the headset's; --one-eye drops a stereo
+    study's second eye; --latency-ms and --noise-deg set the tracker; the study parses."""
+    from foveated_mi.config import read_toml
+    from foveated_mi.study import parse_study
+    stereo = os.path.join(BENCH, "..", "configs", "studies", "vr_stereo.toml")
+    data = read_toml("study", stereo)[0]
+    args = type("A", (), {"size": None, "frames": 2, "seeds": None, "scenes": None,
+                          "headset": "htc_vive_pro", "eye_width": 40, "stereo": False,
+                          "one_eye": False, "latency_ms": 20.0, "noise_deg": 0.5})
+    d = bench.overridden(data, args)
+    assert d["viewer"]["headset"] == "htc_vive_pro" and d["viewer"]["eye_width"] == 40
+    spec = parse_study(d, base_dir=os.path.dirname(stereo))
+    assert spec.perceptual["display"] == "htc_vive_pro"
+    motion = spec.scenes[0].motion
+    assert motion["stereo"] == {"ipd": 0.063, "headset": "htc_vive_pro"}
+    assert motion["gaze_noise_deg"] == 0.5 and "rendered_gazes" in motion
+    args.one_eye = True
+    one = parse_study(bench.overridden(data, args), base_dir=os.path.dirname(stereo))
+    assert "stereo" not in one.scenes[0].motion and one.headset == "htc_vive_pro"
+    assert data["viewer"]["stereo"] is True         # the study's own table is left as it was

@@ -111,7 +111,8 @@ def test_each_eye_keeps_its_own_history_as_two_integrators_would():
     one = FoveatedIntegrator(preset="vr", nested=scene.integrator())
     stereo = Stereo(scene, one, rig)
     alone = {eye: FoveatedIntegrator(preset="vr", nested=scene.integrator()) for eye in EYES}
-    sensors = {eye: rig.sensor(stereo.head_pose(), eye) for eye in EYES}
+    rfilter = scene.sensors()[0].film().rfilter()
+    sensors = {eye: rig.sensor(stereo.head_pose(), eye, rfilter=rfilter) for eye in EYES}
     for frame, gaze in enumerate([(0.5, 0.5), (0.5, 0.5), (0.35, 0.6)]):
         both = stereo.render(gaze, seed=10 * frame)
         for k, eye in enumerate(EYES):
@@ -191,3 +192,18 @@ def test_a_sensor_s_frustum_is_read_back_from_its_rays(eye):
     real = rig.realised(eye)
     for side in ("left", "right", "up", "down"):
         assert abs(getattr(got, side) - getattr(real, side)) < 1e-3, (side, got, real)
+
+
+@pytest.mark.parametrize("rfilter", [{"type": "box"}, {"type": "tent"}])
+def test_the_eyes_filter_as_the_head_s_film_does(rfilter):
+    """Each eye's film keeps the scene's film filter (a box here, not Mitsuba's default
+    Gaussian, which would smooth the eyes' noise and no other row's)."""
+    from foveated_mi.stereo import EyeSensors
+    scene = mi.load_dict({"type": "scene", "shape": {"type": "sphere"},
+                          "sensor": {"type": "perspective",
+                                     "film": {"type": "hdrfilm", "width": 16, "height": 16,
+                                              "rfilter": rfilter}}})
+    eyes = EyeSensors(scene, StereoRig(QUEST3, width=16))
+    head = type(scene.sensors()[0].film().rfilter()).__name__
+    for eye in EYES:
+        assert type(eyes[eye].film().rfilter()).__name__ == head
