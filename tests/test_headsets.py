@@ -165,3 +165,15 @@ def test_a_study_s_bad_headset_gets_one_line(viewer, match):
     with pytest.raises(ParameterError, match=match) as e:
         parse_study(_study(viewer))
     assert "\n" not in str(e.value)
+
+
+def test_a_headset_study_sizes_acuity_cells_at_what_the_viewer_resolves():
+    data = _study({"headset": "quest3", "eye_width": 64})
+    data["foveated"] = {"configs": [
+        {"preset": "vr", "polar_cells": "acuity"},
+        {"preset": "vr", "polar_cells": "acuity", "viewer_ppd": 30.0},
+        {"preset": "vr"}]}
+    acuity, given, log = parse_study(data).foveated
+    assert acuity["options"]["viewer_ppd"] == pytest.approx(headset("quest3").viewer_ppd(64),
+                                                            abs=1e-6)
+    assert given["options"]["viewer_ppd"] == 30.0 and log["options"]["viewer_ppd"] == 0.0

@@ -314,7 +314,7 @@ def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
     metrics, perceptual = _metrics(ctx, data.get("metrics", {}))
     metrics.update(_viewer(ctx, data.get("viewer"), metrics.pop("fovea_deg", None),
                            perceptual))
-    foveated = _foveated(ctx, data.get("foveated", {}))
+    foveated = _acuity_ppd(_foveated(ctx, data.get("foveated", {})), headset, scenes)
     uniform = _uniform(ctx, data.get("uniform", {}), foveated)
     if not foveated and not uniform:
         raise ctx.error("foveated", None, "at least one configuration ([foveated.grid], "
@@ -625,6 +625,19 @@ def _stereo(ctx: TableContext, table: Any, scenes: list, model) -> dict | None:
             raise ctx.error(f"scenes[{i}].reference.file", s.reference["file"],
                             "a rendered reference (each eye has its own) under viewer.stereo")
     return {"ipd": float(ipd), "headset": None if model is None else model.name}
+
+
+def _acuity_ppd(configs: list[dict], name: str | None, scenes: list) -> list[dict]:
+    """Under a headset, each configuration with ``polar_cells = "acuity"`` and no
+    ``viewer_ppd`` of its own sizes its cells at what the viewer resolves at the lens's axis
+    (:meth:`foveated_mi.headsets.Headset.viewer_ppd` at the study's eye width), not at the
+    film's centre, which an off-axis frustum moves away from the axis."""
+    if name is None or not scenes:
+        return configs
+    from ..headsets import headset
+    ppd = round(headset(name).viewer_ppd(scenes[0].size[0]), 6)
+    return [c if c["options"].get("polar_cells") != "acuity" or c["options"].get("viewer_ppd")
+            else {**c, "options": {**c["options"], "viewer_ppd": ppd}} for c in configs]
 
 
 def _headset(ctx: TableContext, table: Any):
