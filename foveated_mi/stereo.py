@@ -446,6 +446,56 @@ class Stereo:
         return StereoFrame(images["left"], images["right"], gazes, point, hit)
 
 
+def crescent(eyes: EyeSensors, eye: str = "right") -> np.ndarray:
+    """What ``eye`` sees that the other eye does not: its pixels whose surface point (the
+    pixel centre's primary hit) lies outside the other eye's frustum or behind something
+    from the other eye. No sample of the other eye can stand for these (a reuse between the
+    eyes would have to trace them); the sky, seen by both, is not part of it.
+
+    Parameters
+    ----------
+    eyes : EyeSensors
+        Both eyes, at the head's current pose (:meth:`EyeSensors.follow` first).
+    eye : str, optional
+        The eye whose pixels are classified.
+
+    Returns
+    -------
+    mask : numpy.ndarray
+        (H, W) bool, True where only ``eye`` sees the point.
+    """
+    from .kernels import film_size, pixel_coords, primary_rays
+    other_eye = "left" if _eye(eye) == "right" else "right"
+    sensor, other = eyes[eye], eyes[other_eye]
+    width, height = film_size(sensor)
+    _, x, y = pixel_coords(width, height)
+    si = eyes.scene.ray_intersect(primary_rays(sensor, x, y, width, height))
+    hit = si.is_valid()
+    # The other eye's view of each point: inside its frustum (its film's [0, 1]^2 through the
+    # sensor's own inverse projection) and not occluded on the way (a shadow ray).
+    to_local = np.linalg.inv(_to_world(other))
+    p = np.stack([np.asarray(si.p.x), np.asarray(si.p.y), np.asarray(si.p.z)], axis=1)
+    local = p @ to_local[:3, :3].T + to_local[:3, 3]
+    tl, tr, tu, td = eyes.rig.realised(other_eye).tangents
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = (tl - local[:, 0] / local[:, 2]) / (tl + tr)
+        v = (tu - local[:, 1] / local[:, 2]) / (tu + td)
+    inside = (local[:, 2] > 0) & (u >= 0) & (u <= 1) & (v >= 0) & (v <= 1)
+    origin = _to_world(other)[:3, 3]
+    d = p - origin
+    dist = np.linalg.norm(d, axis=1)
+    ok = np.isfinite(dist) & (dist > 0)
+    d = np.where(ok[:, None], d / np.where(ok, dist, 1.0)[:, None], [0.0, 0.0, 1.0])
+    # Stop short of the point by a relative margin (float32 positions).
+    tmax = np.where(ok, dist * (1.0 - 1e-4), 0.0)
+    ray = mi.Ray3f(mi.Point3f(*[mi.Float(np.full(len(dist), c)) for c in origin]),
+                   mi.Vector3f(*[mi.Float(d[:, k]) for k in range(3)]))
+    ray.maxt = mi.Float(tmax)
+    blocked = np.asarray(eyes.scene.ray_test(ray))
+    seen = inside & ok & ~blocked
+    return (np.asarray(hit) & ~seen).reshape(height, width)
+
+
 def frustum_of(sensor: mi.Sensor) -> Frustum:
     """The frustum of a pinhole ``sensor``: the angles of the rays through the middles of its
     film's edges, measured in its own frame (a stereo rig whose eyes see what the head sees).

@@ -207,3 +207,51 @@ def test_the_eyes_filter_as_the_head_s_film_does(rfilter):
     head = type(scene.sensors()[0].film().rfilter()).__name__
     for eye in EYES:
         assert type(eyes[eye].film().rfilter()).__name__ == head
+
+
+def test_the_crescent_is_what_the_other_eye_cannot_see():
+    """A wall 5 m ahead and a thin card 1 m in front of the left eye only: the right eye's
+    crescent is exactly the wall behind the card as the left eye sees it, plus what lies
+    outside the left eye's frustum (checked by analytic geometry, pixel by pixel)."""
+    from foveated_mi.stereo import EyeSensors, crescent
+    ipd = 1.0
+    scene = mi.load_dict({
+        "type": "scene",
+        "wall": {"type": "rectangle", "to_world":
+                 mi.ScalarTransform4f().translate([0, 0, 5]).scale([20, 20, 1])},
+        "card": {"type": "rectangle", "to_world":
+                 mi.ScalarTransform4f().translate([0.5, 0, 1]).scale([0.2, 0.2, 1])},
+        "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 64,
+                                                   "height": 64, "rfilter": {"type": "box"}}}})
+    rig = StereoRig(QUEST3, ipd=ipd, width=64)
+    eyes = EyeSensors(scene, rig)
+    mask = crescent(eyes, "right")
+    h, w = mask.shape
+    assert mask.any() and not mask.all()
+    # Each right-eye pixel's ray, all at once (pixel centres, row-major as the mask).
+    jj, ii = np.mgrid[0:h, 0:w]
+    ray, _ = eyes["right"].sample_ray(0.0, 0.5, mi.Point2f(mi.Float((ii.ravel() + 0.5) / w),
+                                                           mi.Float((jj.ravel() + 0.5) / h)),
+                                      mi.Point2f(0.5, 0.5))
+    o = np.stack([np.asarray(c) for c in (ray.o.x, ray.o.y, ray.o.z)], axis=1).astype(float)
+    d = np.stack([np.asarray(c) for c in (ray.d.x, ray.d.y, ray.d.z)], axis=1).astype(float)
+    tl, tr, tu, td = rig.realised("left").tangents
+    t_card = (1.0 - o[:, 2]) / d[:, 2]
+    cx, cy = o[:, 0] + t_card * d[:, 0] - 0.5, o[:, 1] + t_card * d[:, 1]
+    on_card = (t_card > 0) & (np.abs(cx) <= 0.2) & (np.abs(cy) <= 0.2)
+    p = o + ((5.0 - o[:, 2]) / d[:, 2])[:, None] * d          # the wall point
+    x1, y1 = (p[:, 0] - 0.5) / 5.0, p[:, 1] / 5.0            # the left eye's ray at the card
+    behind = (np.abs(x1) < 0.2) & (np.abs(y1) < 0.2)
+    u, v = (tl - x1) / (tl + tr), (tu - y1) / (tu + td)         # on the left eye's film
+    outside = ~((u >= 0) & (u <= 1) & (v >= 0) & (v <= 1))
+    # The card itself: the left eye, right behind it, sees it.
+    want = np.where(on_card, False, behind | outside)
+    margin = np.where(on_card, np.minimum(np.abs(np.abs(cx) - 0.2), np.abs(np.abs(cy) - 0.2)),
+                      np.min(np.stack([np.abs(np.abs(x1) - 0.2), np.abs(np.abs(y1) - 0.2),
+                                       np.abs(u), np.abs(u - 1), np.abs(v), np.abs(v - 1)]),
+                             axis=0))
+    decided = margin > 1e-3      # float32 rays: the edges themselves are not decided here
+    assert np.array_equal(mask.ravel()[decided], want[decided])
+    assert behind[decided & ~on_card].any() and outside[decided & ~on_card].any()
+    agree = int(decided.sum())
+    assert agree > 0.9 * h * w
