@@ -369,7 +369,8 @@ def main(argv=None) -> int:
              f"Machine: {report['machine']['processor']}, {os.cpu_count()} cores, "
              f"{mi.variant()}; date {report['date']}.  ",
              f"Each row: a sequence of {data['motion']['frames']} frames at "
-             f"{data['motion']['fps']} Hz (the head turning, saccades, "
+             f"{data['motion']['fps']} Hz (the head turning and the eyes moving as the study "
+             f"file says, "
              f"{camera}, a gaze latency of {viewer.get('gaze_latency_ms', 0.0):g} ms and "
              f"noise of {viewer.get('gaze_noise_deg', 0.0):g}°), "
              f"time the median frame after the first{' (both eyes)' if stereo else ''}, "
