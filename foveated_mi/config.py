@@ -30,6 +30,10 @@ Layout (every key optional except ``scene``)::
     [poses]                       # instead of [camera] and [gaze]: a pose per frame, as the
     path = "walk.csv"             # live view records them (foveated_mi.live.poses); frames
                                   # defaults to its row count (at most that)
+    [stereo]                      # both eyes of the camera (the head), each with its own
+    headset = "quest3"            # history: a headset's rig (foveated-mi headsets), else the
+    eye_width = 320               # camera's own frustum at each eye; eye_width (default: the
+    ipd = 0.063                   # film's width); a binocular_csv gaze gives each eye its own
     [output]
     dir = "out/seq"               # relative to the working directory; default out/<stem>
     video = "mp4"                 # mp4 | gif | none
@@ -72,7 +76,7 @@ FOVEATED_KEYS: dict[str, tuple[type, ...]] = {
     name: opt.toml_types() for name, opt in SCHEMA.items() if opt.kind != "point"}
 
 _TOP_KEYS = ("scene", "description", "frames", "fps", "size", "spp", "seed", "scene_params",
-             "integrator", "foveated", "camera", "gaze", "poses", "output")
+             "integrator", "foveated", "camera", "gaze", "poses", "output", "stereo")
 
 
 @dataclass(frozen=True)
@@ -102,6 +106,8 @@ class SequenceConfig:
     description: str = ""
     source: str | None = None               # the TOML file
     poses: Any = None                       # a PoseTrack: camera, gaze and cut per frame
+    #: ``[stereo]``: ``{"headset", "eye_width", "ipd"}``, or None for one view
+    stereo: dict | None = None
 
     @property
     def width(self) -> int:
@@ -211,7 +217,25 @@ def parse_config(data: dict, *, base_dir: str = ".", source: str = "<config>",
     return SequenceConfig(scene=scene, frames=frames, fps=fps, size=size, spp=spp, seed=seed,
                           scene_params=scene_params, integrator=integrator, foveated=foveated,
                           camera=camera, gaze=gaze, output=output, description=description,
-                          source=source, poses=poses)
+                          source=source, poses=poses, stereo=_stereo(ctx, data.get("stereo")))
+
+
+def _stereo(ctx: TableContext, table: Any) -> dict | None:
+    """The ``[stereo]`` table: a headset (or None), the eye buffer's width (None: the film's)
+    and the IPD (the headset's, else 63 mm)."""
+    if table is None:
+        return None
+    table = dict(ctx.table("stereo", table))
+    ctx.known("stereo", table, ("headset", "eye_width", "ipd"))
+    name = None
+    if "headset" in table:
+        from .headsets import HEADSETS, headset
+        name = ctx.string("stereo.headset", table["headset"], tuple(HEADSETS))
+    ipd = table.get("ipd", 0.063 if name is None else headset(name).ipd)
+    width = table.get("eye_width")
+    return {"headset": name, "ipd": ctx.number("stereo.ipd", ipd, 0.0, lo_open=True),
+            "eye_width": None if width is None else ctx.integer("stereo.eye_width", width, 8,
+                                                                16384)}
 
 
 def _foveated(ctx: TableContext, table: Any) -> dict:

@@ -46,15 +46,21 @@ def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
 
 def run_sequence(cfg: SequenceConfig, *, out_dir: str | None = None, compare_full: bool = False,
                  progress: bool = True) -> list[dict[str, Any]]:
-    """Render ``cfg`` and return the per-frame stats. Ctrl-C keeps what is written."""
+    """Render ``cfg`` and return the per-frame stats. Ctrl-C keeps what is written. With
+    ``[stereo]`` each frame is both eyes (:func:`_render_eyes`)."""
     from .render import FrameRenderer
     from .scenes import load_scene
 
+    if cfg.stereo is not None and compare_full:
+        from .validate import ParameterError
+        raise ParameterError("--compare-full", True, "a config without [stereo] (each eye "
+                             "would need its own full render)")
     out_dir = out_dir or cfg.output.dir
     os.makedirs(out_dir, exist_ok=True)
     scene = load_scene(cfg.scene, width=cfg.width, height=cfg.height, spp=cfg.spp,
                        integrator=cfg.integrator, camera=cfg.camera_at(0), **cfg.scene_params)
     fr = FrameRenderer(scene, {**cfg.foveated, "timing": True}, spp=cfg.spp)
+    render = _render_frame if cfg.stereo is None else _eyes_renderer(cfg, scene, fr)
     stats_path = os.path.join(out_dir, "stats.jsonl")
     tmp_stats = stats_path + ".partial"
     video, all_stats = [], []
@@ -66,13 +72,12 @@ def run_sequence(cfg: SequenceConfig, *, out_dir: str | None = None, compare_ful
     try:
         with open(tmp_stats, "w") as log:
             for i in range(cfg.frames):
-                stats = _render_frame(cfg, i, scene, fr, out_dir, compare_full, video)
+                stats = render(cfg, i, scene, fr, out_dir, compare_full, video)
                 log.write(json.dumps(stats) + "\n")
                 log.flush()
                 all_stats.append(stats)
                 if bar is not None:
-                    bar.set_postfix(ms=f"{stats['timings_ms']['total']:.0f}",
-                                    hit=f"{stats['history_hit_rate']:.2f}")
+                    bar.set_postfix(ms=f"{stats['timings_ms']['total']:.0f}")
                     bar.update(1)
     except KeyboardInterrupt:
         interrupted = True
@@ -133,3 +138,61 @@ def _write_exr_only(res, name: str) -> None:
     if res.full is not None:
         layers["full"] = res.full
     write_exr(name + ".exr", layers)
+
+
+def _eyes_renderer(cfg: SequenceConfig, scene, fr):
+    """``render(cfg, i, scene, fr, out_dir, compare_full, video)`` for ``[stereo]``: both
+    eyes of the scene's camera (the head) with one integrator, each eye a view with its own
+    history (:class:`foveated_mi.stereo.Stereo`); a cut resets both. Each frame writes the
+    eyes as the layers ``left`` and ``right`` of ``frame_NNNN.exr`` and side by side in its
+    PNG and the video; its stats hold each eye's."""
+    from .paths import BinocularGazeCSV
+    from .stereo import EYES, Stereo, StereoRig, frustum_of
+    st = cfg.stereo
+    head = scene.sensors()[0]
+    width = st["eye_width"] or cfg.width
+    if st["headset"] is not None:
+        from .headsets import headset
+        rig = headset(st["headset"]).rig(width, st["ipd"])
+    else:
+        rig = StereoRig(frustum_of(head), ipd=st["ipd"], width=width)
+    stereo = Stereo(scene, fr.integrator, rig)
+
+    def render(cfg, i, scene, fr, out_dir, compare_full, video):
+        from .io import encode_srgb8, write_png
+        from .scenes import apply_camera
+        from .stereo import write_stereo
+        cam = cfg.camera_at(i)
+        if cam is not None and i > 0:
+            apply_camera(scene, cam)
+        if cfg.cut_before(i):
+            stereo.cut()
+        eye_gazes = cfg.gaze.eyes_at(cfg.time(i)) \
+            if cfg.poses is None and isinstance(cfg.gaze, BinocularGazeCSV) else None
+        t0 = time.perf_counter()
+        frame = stereo.render(cfg.gaze_at(i), seed=cfg.seed, spp=cfg.spp, eye_gazes=eye_gazes)
+        integ = fr.integrator
+        eyes = {eye: stereo.views[eye].stats for eye in EYES}
+        stats = {"frame": i, "time_s": cfg.time(i), "gazes": [list(g) for g in frame.gazes],
+                 "timings_ms": {"total": sum(e["timings_ms"]["total"] for e in eyes.values())},
+                 **{eye: {"rays": e["rays"], "ray_fraction": e["ray_fraction"],
+                          "history_hit_rate": e.get("history_hit_rate"),
+                          "timings_ms": e["timings_ms"]} for eye, e in eyes.items()}}
+        if frame.fixation is not None:
+            stats.update(fixation=list(map(float, frame.fixation)), hit=bool(frame.hit))
+        if cam is not None:
+            stats["camera"] = cam
+        stats["wall_ms"] = (time.perf_counter() - t0) * 1e3
+        name = os.path.join(out_dir, f"frame_{i:04d}")
+        both = np.concatenate([np.asarray(frame.left), np.asarray(frame.right)], axis=1)
+        if cfg.output.exr:
+            png = write_stereo(name + ".exr", frame, exposure=integ.exposure,
+                               tonemap=integ.tonemap)
+            if not cfg.output.png:
+                os.remove(png)
+        elif cfg.output.png:
+            write_png(name + ".png", both, exposure=integ.exposure, tonemap=integ.tonemap)
+        if cfg.output.video != "none":
+            video.append(encode_srgb8(both, exposure=integ.exposure, tonemap=integ.tonemap))
+        return stats
+    return render

@@ -552,7 +552,8 @@ def write_stereo(path: str, frame: StereoFrame, *, exposure: float = 0.0,
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     write_exr(path, {"left": left, "right": right},
               attrs={"foveated_mi_stereo": json.dumps({"gazes": frame.gazes,
-                                                       "fixation": list(map(float, frame.fixation)),
+                                                       "fixation": None if frame.fixation is None
+                                                       else list(map(float, frame.fixation)),
                                                        "hit": bool(frame.hit)})})
     png = os.path.splitext(path)[0] + ".png"
     write_png(png, np.concatenate([left, right], axis=1), exposure=exposure, tonemap=tonemap)

@@ -3,6 +3,7 @@ camera cut resets the history so the next frame equals a fresh first frame."""
 import json
 
 import numpy as np
+import pytest
 
 from foveated_mi.cli import main
 from foveated_mi.config import load_config
@@ -162,3 +163,48 @@ def test_mp4_video_reads_back(tmp_path):
         got = [f for f in r]
     assert len(got) == 5 and got[0].shape[:2] == (24, 32)   # padded to even size
     assert abs(float(got[4].mean()) - 160) < 8
+
+
+def test_a_stereo_sequence_writes_both_eyes_and_a_cut_resets_both(tmp_path, capsys):
+    """[stereo]: each frame's EXR holds the eyes as layers, its PNG and the video show them
+    side by side; each eye gets its own column of a binocular gaze file; the cut resets both
+    eyes' histories."""
+    from foveated_mi.headsets import headset
+    (tmp_path / "eyes.csv").write_text("t,left_x,left_y,right_x,right_y\n"
+                                       "0.0,0.6,0.5,0.4,0.5\n1.0,0.7,0.4,0.5,0.4\n")
+    text = CONFIG.replace('[gaze]\ntype = "saccades"\ntargets = [[0.3, 0.3], [0.7, 0.6]]\n'
+                          'dwell = 0.1\nduration = 0.05\n',
+                          '[gaze]\ntype = "binocular_csv"\npath = "eyes.csv"\n'
+                          '[stereo]\nheadset = "quest3"\neye_width = 24\n')
+    assert "binocular_csv" in text
+    cfg_path = tmp_path / "eyes.toml"
+    cfg_path.write_text(text)
+    out = tmp_path / "out"
+    code = main(["sequence", str(cfg_path), "--out", str(out), "--no-progress"])
+    assert code == 0, capsys.readouterr().err
+    w, h = headset("quest3").rig(24).size("left")
+    frames = sorted(out.glob("frame_*.exr"))
+    assert len(frames) == 5
+    layers = read_exr(frames[1])
+    assert layers["left"].shape == layers["right"].shape == (h, w, 3)
+    assert not np.array_equal(layers["left"], layers["right"])
+    import imageio.v3 as iio
+    assert iio.imread(out / "frame_0001.png").shape[:2] == (h, 2 * w)
+    assert iio.imread(out / "sequence.gif", index=0).shape[:2] == (h, 2 * w)
+    stats = [json.loads(line) for line in (out / "stats.jsonl").read_text().splitlines()]
+    assert stats[0]["gazes"] == [[0.6, 0.5], [0.4, 0.5]]
+    assert stats[1]["gazes"] == [[pytest.approx(0.61), pytest.approx(0.49)],
+                                 [pytest.approx(0.41), pytest.approx(0.49)]]
+    for eye in ("left", "right"):
+        # The head moved a little: history holds where the eye sees the city (under a
+        # 94-degree frustum most of this small film is sky, which holds none).
+        assert stats[2][eye]["history_hit_rate"] > 0.0
+        assert stats[3][eye]["history_hit_rate"] == 0.0        # the cut
+        assert stats[3][eye]["rays"] > 0
+    assert stats[3]["timings_ms"]["total"] == pytest.approx(
+        stats[3]["left"]["timings_ms"]["total"] + stats[3]["right"]["timings_ms"]["total"])
+    # --compare-full would need a full render per eye: refused in one line.
+    code = main(["sequence", str(cfg_path), "--out", str(tmp_path / "x"), "--no-progress",
+                 "--compare-full"])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "--compare-full" in err
