@@ -110,11 +110,10 @@ def test_bad_stereo_tables_are_one_line(extra, key):
 def test_a_still_head_converges_in_both_eyes():
     """A still head and gaze: both eyes' error against their converged references falls as
     their histories accumulate (each eye's own)."""
-    import mitsuba as mi
     from foveated_mi.baselines import render_reference
     from foveated_mi.integrators.foveated import FoveatedIntegrator
     from foveated_mi.scenes import load_scene
-    from foveated_mi.stereo import Stereo, StereoRig, Frustum
+    from foveated_mi.stereo import Frustum, Stereo, StereoRig
     scene = load_scene("cornell-box", width=32, height=32, spp=1,
                        integrator={"type": "path", "max_depth": 3})
     integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
@@ -130,7 +129,6 @@ def test_a_still_head_converges_in_both_eyes():
         last = error(eyes.render((0.5, 0.5), seed=k))
     for eye in ("left", "right"):
         assert last[eye] < 0.5 * first[eye], (eye, first, last)
-    del mi
 
 
 BINOCULAR = "t,left_x,left_y,right_x,right_y\n0.0,0.6,0.5,0.4,0.5\n0.1,0.7,0.45,0.5,0.45\n"
