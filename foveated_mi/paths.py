@@ -378,82 +378,6 @@ class Saccades(GazePath):
         return (float(a[0] + w * (b[0] - a[0])), float(a[1] + w * (b[1] - a[1])))
 
 
-class BinocularGazeCSV(GazePath):
-    """Each eye's gaze from a CSV file whose header names the columns ``t``, ``left_x``,
-    ``left_y``, ``right_x`` and ``right_y`` (any order; other columns are ignored): seconds,
-    and each eye's gaze in normalised coordinates of that eye's film.
-
-    :meth:`eyes_at` gives both eyes' gazes; :meth:`at`, their mean (the gaze of a single
-    view between the eyes, for a study of one eye). Timestamps must increase strictly and
-    every value be finite; between samples the gazes are interpolated (``"linear"`` or
-    ``"step"``); before the first and after the last they hold.
-    """
-
-    COLUMNS = ("t", "left_x", "left_y", "right_x", "right_y")
-
-    def __init__(self, path: str | os.PathLike, interpolation: str = "linear", *,
-                 relative: bool = False, name: str = "gaze"):
-        self.interpolation = check_choice(f"{name}.interpolation", interpolation,
-                                          ("linear", "step"))
-        self.relative = _check_bool(f"{name}.relative", relative)
-        if not isinstance(path, (str, os.PathLike)) or not os.path.isfile(path):
-            raise ParameterError(f"{name}.path", path if isinstance(path, str) else str(path),
-                                 "an existing CSV file with columns " + ",".join(self.COLUMNS))
-        self.path = os.fspath(path)
-        t, v = self._read()
-        self.times = t - t[0] if self.relative else t
-        self.samples = v
-        self._keys = _Keyframes(self.times, v, np.zeros(len(t), dtype=bool), self.interpolation)
-
-    def _read(self) -> tuple[np.ndarray, np.ndarray]:
-        import csv
-        try:
-            with open(self.path, encoding="utf-8-sig", newline="") as f:
-                lines = [(n, row) for n, row in enumerate(csv.reader(f), start=1)
-                         if row and not row[0].strip().startswith("#")]
-        except (OSError, UnicodeDecodeError, csv.Error) as e:
-            raise ParameterError(self.path, type(e).__name__, "a readable UTF-8 CSV file with "
-                                 "columns " + ",".join(self.COLUMNS)) from None
-        header = [c.strip() for c in lines[0][1]] if lines else []
-        missing = [c for c in self.COLUMNS if c not in header]
-        if missing:
-            raise ParameterError(f"{self.path}:{lines[0][0] if lines else 1}",
-                                 ",".join(header)[:60], "a header naming the columns "
-                                 + ",".join(self.COLUMNS) + " (a binocular gaze: each eye's)")
-        index = [header.index(c) for c in self.COLUMNS]
-        rows = []
-        for n, row in lines[1:]:
-            try:
-                values = [float(row[i]) for i in index]
-            except (ValueError, IndexError):
-                values = None
-            if values is None or not all(math.isfinite(x) for x in values):
-                raise ParameterError(f"{self.path}:{n}", ",".join(row), "finite numbers in "
-                                     "the columns " + ",".join(self.COLUMNS))
-            if rows and values[0] <= rows[-1][0]:
-                raise ParameterError(f"{self.path}:{n}", ",".join(row), f"a timestamp > "
-                                     f"{rows[-1][0]:g}: timestamps must increase")
-            rows.append(values)
-        if not rows:
-            raise ParameterError(self.path, "no samples", "at least one line of "
-                                 + ",".join(self.COLUMNS))
-        a = np.array(rows, dtype=np.float64)
-        return a[:, 0], a[:, 1:]
-
-    @property
-    def duration(self) -> float:
-        return float(self.times[-1])
-
-    def eyes_at(self, t: float) -> tuple[tuple[float, float], tuple[float, float]]:
-        """Both eyes' gazes at ``t`` seconds: ``((left_x, left_y), (right_x, right_y))``."""
-        v = self._keys(_check_time("t", t))
-        return (float(v[0]), float(v[1])), (float(v[2]), float(v[3]))
-
-    def at(self, t: float) -> tuple[float, float]:
-        (lx, ly), (rx, ry) = self.eyes_at(t)
-        return 0.5 * (lx + rx), 0.5 * (ly + ry)
-
-
 class GazeCSV(GazePath):
     """Gaze samples from a CSV file of ``t,x,y`` lines (seconds, normalised film coordinates).
 
@@ -466,6 +390,8 @@ class GazeCSV(GazePath):
     """
 
     ALLOWED_LINE = "a line 't,x,y' of three comma-separated finite numbers"
+    #: What the file must be, for the error of a missing one.
+    FILE = "an existing CSV file of t,x,y lines"
 
     def __init__(self, path: str | os.PathLike, interpolation: str = "linear", *,
                  relative: bool = False, name: str = "gaze"):
@@ -474,7 +400,7 @@ class GazeCSV(GazePath):
         self.relative = _check_bool(f"{name}.relative", relative)
         if not isinstance(path, (str, os.PathLike)) or not os.path.isfile(path):
             raise ParameterError(f"{name}.path", path if isinstance(path, str) else str(path),
-                                 "an existing CSV file of t,x,y lines")
+                                 self.FILE)
         self.path = os.fspath(path)
         rows, lines = self._read()
         t = np.array([r[0] for r in rows], dtype=np.float64)
@@ -537,3 +463,61 @@ class GazeCSV(GazePath):
     def at(self, t: float) -> tuple[float, float]:
         v = self._keys(_check_time("t", t))
         return (float(v[0]), float(v[1]))
+
+
+class BinocularGazeCSV(GazeCSV):
+    """Each eye's gaze from a CSV file whose header names the columns ``t``, ``left_x``,
+    ``left_y``, ``right_x`` and ``right_y`` (any order; other columns are ignored): seconds,
+    and each eye's gaze in normalised coordinates of that eye's film.
+
+    :meth:`eyes_at` gives both eyes' gazes; :meth:`at`, their mean (the gaze of a single
+    view between the eyes, for a study of one eye). Timestamps, finiteness, ``relative`` and
+    the interpolation are as :class:`GazeCSV`'s.
+    """
+
+    COLUMNS = ("t", "left_x", "left_y", "right_x", "right_y")
+    FILE = "an existing CSV file with columns " + ",".join(COLUMNS)
+
+    def _read(self) -> tuple[list[list[float]], list[int]]:
+        import csv
+        try:
+            with open(self.path, encoding="utf-8-sig", newline="") as f:
+                lines = [(n, row) for n, row in enumerate(csv.reader(f), start=1)
+                         if row and not row[0].strip().startswith("#")]
+        except (OSError, UnicodeDecodeError, csv.Error) as e:
+            raise ParameterError(self.path, type(e).__name__, "a readable UTF-8 CSV file with "
+                                 "columns " + ",".join(self.COLUMNS)) from None
+        header = [c.strip() for c in lines[0][1]] if lines else []
+        missing = [c for c in self.COLUMNS if c not in header]
+        if missing:
+            raise ParameterError(f"{self.path}:{lines[0][0] if lines else 1}",
+                                 ",".join(header)[:60], "a header naming the columns "
+                                 + ",".join(self.COLUMNS) + " (a binocular gaze: each eye's)")
+        index = [header.index(c) for c in self.COLUMNS]
+        rows, numbers = [], []
+        for n, row in lines[1:]:
+            try:
+                values = [float(row[i]) for i in index]
+            except (ValueError, IndexError):
+                values = None
+            if values is None or not all(math.isfinite(x) for x in values):
+                raise ParameterError(f"{self.path}:{n}", ",".join(row), "finite numbers in "
+                                     "the columns " + ",".join(self.COLUMNS))
+            if rows and values[0] <= rows[-1][0]:
+                raise ParameterError(f"{self.path}:{n}", ",".join(row), f"a timestamp > "
+                                     f"{rows[-1][0]:g}: timestamps must increase")
+            rows.append(values)
+            numbers.append(n)
+        if not rows:
+            raise ParameterError(self.path, "no samples", "at least one line of "
+                                 + ",".join(self.COLUMNS))
+        return rows, numbers
+
+    def eyes_at(self, t: float) -> tuple[tuple[float, float], tuple[float, float]]:
+        """Both eyes' gazes at ``t`` seconds: ``((left_x, left_y), (right_x, right_y))``."""
+        v = self._keys(_check_time("t", t))
+        return (float(v[0]), float(v[1])), (float(v[2]), float(v[3]))
+
+    def at(self, t: float) -> tuple[float, float]:
+        (lx, ly), (rx, ry) = self.eyes_at(t)
+        return 0.5 * (lx + rx), 0.5 * (ly + ry)

@@ -153,10 +153,9 @@ def test_a_stereo_study_renders_and_scores_each_eye_at_its_own_gaze(tmp_path, mo
     """[motion.gaze] binocular_csv under [viewer] stereo: the renderer is given each eye's
     gaze one frame late (gaze_latency_ms), the metrics score each eye at its own true one."""
     from foveated_mi.study import stereo as S
-    from foveated_mi.study import tasks
     (tmp_path / "eyes.csv").write_text(BINOCULAR)
     given, scored = [], []
-    real_renderer, real_viewing = S._renderer, tasks._viewing
+    real_renderer, real_viewing = S._renderer, S._viewing
 
     def renderer(scene, task, rig):
         render, eyes, integ = real_renderer(scene, task, rig)
@@ -173,7 +172,7 @@ def test_a_stereo_study_renders_and_scores_each_eye_at_its_own_gaze(tmp_path, mo
             scored.append(list(task["gaze"]))
         return real_viewing(scene, task, sensor)
     monkeypatch.setattr(S, "_renderer", renderer)
-    monkeypatch.setattr(tasks, "_viewing", viewing)
+    monkeypatch.setattr(S, "_viewing", viewing)
     text = textwrap.dedent(STUDY).replace(
         "[motion]\nframes = 3\n", "[motion]\nframes = 3\nfps = 20\n[motion.gaze]\n"
         "type = \"binocular_csv\"\npath = \"eyes.csv\"\n").replace(

@@ -27,6 +27,8 @@ import numpy as np
 
 from ..stereo import EYES, EyeSensors, StereoRig, frustum_of
 from .results import STEREO_KEYS
+from .scoring import (UNIFORM_MODE, _camera_path, _flicker, _mode, _quality, _sequence_summary,
+                      _viewing, rendered_gazes)
 
 __all__ = ["STEREO_KEYS", "stereo_rig", "stereo_reference", "stereo_sequence_row"]
 
@@ -136,7 +138,6 @@ def stereo_sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = F
     row : dict
         The sequence's row; with ``keep``, ``(row, shown)``.
     """
-    from .tasks import UNIFORM_MODE, _flicker, _mode, _sequence_summary
     motion = task["motion"]
     n = len(motion["gazes"])
     refs = reference if reference.shape[0] == n else np.broadcast_to(
@@ -166,7 +167,6 @@ def _frames(scene, task: dict, refs: np.ndarray, render, eyes) -> tuple:
     their true gazes: ``(times, rays, frames)``, ``frames[eye]`` holding the eye's ``shown``
     (reference, image) display pairs, ``quality``, ``eccs`` and true ``gazes``."""
     from ..render import to_display
-    from .tasks import _camera_path, _quality, _viewing, rendered_gazes
     motion, m = task["motion"], task["metrics"]
     gazes, cameras = motion["gazes"], motion["cameras"]
     rendered = rendered_gazes(scene, task)
@@ -200,7 +200,6 @@ def _stereo_jod(scene, task: dict, frames: dict, eyes) -> dict:
     """Each eye's video JOD fixating its own gaze, their mean and minimum (and on a monitor,
     the eyes' mean)."""
     from ..perceptual import jod_video
-    from .tasks import _viewing
     motion, perceptual = task["motion"], task["perceptual"]
     out, monitor = {}, perceptual.get("monitor")
     monitor_scores = []

@@ -35,10 +35,12 @@ import contextlib
 import hashlib
 import json
 import os
-import statistics
 from typing import Any
 
 import numpy as np
+
+from .scoring import (UNIFORM_MODE, _camera_path, _flicker, _median, _mode, _quality,
+                      _sequence_summary, _viewing, rendered_gazes)
 
 __all__ = ["expand_tasks", "reference_task", "reference_key", "run_task", "run_reference_task",
            "run_sequence_task", "task_frame", "get_scene", "scene_cache_info",
@@ -314,65 +316,6 @@ def run_reference_task(task: dict) -> dict:
     return {"image": image, "rfilter": str(scene.sensors()[0].film().rfilter())}
 
 
-@contextlib.contextmanager
-def _camera_path(scene):
-    """``move(cameras)``: yields each frame's index after moving the scene's camera there;
-    the camera goes back where it was afterwards (the scene is cached for later tasks)."""
-    from ..scenes import apply_camera, camera_of
-    home = camera_of(scene)
-
-    def move(cameras):
-        for k, cam in enumerate(cameras):
-            apply_camera(scene, cam)
-            yield k
-    try:
-        yield move
-    finally:
-        apply_camera(scene, home)
-
-
-def _median(xs: list[float | None]) -> float | None:
-    xs = [x for x in xs if x is not None]
-    return statistics.median(xs) if xs else None
-
-
-def _viewing(scene, task: dict, sensor=None) -> dict:
-    """How quality is judged for this task's scene: ``{"ppd", "eccentricity", "fov"}`` (under
-    ``[viewer] fov = "sensor"``: the pixels per degree at the gaze, the eccentricity map in
-    degrees and the sensor's horizontal field of view; else the monitor's ppd)."""
-    m = task["metrics"]
-    if m.get("viewer") != "sensor":
-        return {"ppd": m["ppd"], "eccentricity": None, "fov": None}
-    from .. import viewer
-    sensor = scene.sensors()[0] if sensor is None else sensor
-    gaze = tuple(task["gaze"])
-    return {"ppd": viewer.pixels_per_degree(sensor, gaze),
-            "eccentricity": viewer.eccentricity_map(sensor, gaze),
-            "fov": viewer.horizontal_fov(sensor)}
-
-
-def _quality(reference_display: np.ndarray, image: np.ndarray, task: dict,
-             viewing: dict | None = None) -> dict:
-    from ..metrics import compare
-    from ..render import to_display
-    m = task["metrics"]
-    viewing = viewing or {"ppd": m["ppd"], "eccentricity": None, "fov": None}
-    test = to_display(image, m["exposure"])
-    out = compare(reference_display, test, gaze=tuple(task["gaze"]), theta=m["theta"],
-                  sigma_p=m["sigma_p"], data_range=1.0, flip=m["flip"], ppd=viewing["ppd"],
-                  eccentricity=viewing["eccentricity"], fovea_deg=m.get("fovea_deg", 5.0))
-    if task.get("jod"):                   # the client checked the extra is installed
-        from ..perceptual import jod
-        out["jod"] = jod(reference_display, test, gaze=tuple(task["gaze"]),
-                         ppd=viewing["ppd"], fov_horizontal=viewing["fov"],
-                         display=task["perceptual"]["display"])
-        monitor = task["perceptual"].get("monitor")
-        if monitor is not None:           # the same frame on a monitor
-            out["jod_monitor"] = jod(reference_display, test, gaze=tuple(task["gaze"]),
-                                     ppd=monitor["ppd"], display=monitor["display"])
-    return out
-
-
 def run_sequence_task(task: dict, reference: np.ndarray) -> tuple[dict, list]:
     """One ``[motion]`` task, as :func:`run_task` runs it, with the frames it showed.
 
@@ -436,20 +379,6 @@ def _sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = False):
     return (row, shown) if keep else row
 
 
-def _flicker(task: dict, shown: list, eccs: list) -> dict:
-    """The row's flicker columns: :func:`foveated_mi.metrics.temporal_instability` of the
-    frames shown (display values) against their references, in the rings of
-    :data:`foveated_mi.metrics.FLICKER_RINGS_DEG` of each frame's eccentricity from its gaze
-    (the viewing geometry of the fovea columns, :func:`_viewing`), the periphery outside
-    ``fovea_deg``. Without ``[viewer] fov = "sensor"`` there are no degrees: only the whole
-    frame's ``flicker``, the ring and periphery columns nan."""
-    from ..metrics import FLICKER_RINGS_DEG, temporal_instability
-    degrees = eccs[0] is not None
-    return temporal_instability([t for _, t in shown], [r for r, _ in shown],
-                                eccs if degrees else None, FLICKER_RINGS_DEG,
-                                fovea_deg=task["metrics"].get("fovea_deg", 5.0)).columns()
-
-
 def _sequence_renderer(scene, task: dict, gaze):
     """``(render, integrator)`` for the frames of a sequence: ``render(gaze)`` renders one
     frame and returns ``(image, time_ms, ray_fraction)``; ``integrator`` is the foveated
@@ -480,44 +409,6 @@ def _sequence_renderer(scene, task: dict, gaze):
     return render_baseline, None
 
 
-def rendered_gazes(scene, task: dict) -> list:
-    """The gazes a sequence's frames are rendered with: the eye tracker's, late by
-    ``[viewer] gaze_latency_ms`` (``motion["rendered_gazes"]``) and jittered by a Gaussian of
-    ``gaze_noise_deg`` degrees (converted at each gaze's pixels per degree, seeded by the
-    task's seed, kept on the film); the true gazes without a tracker. The metrics always
-    fixate the true gazes.
-
-    Parameters
-    ----------
-    scene : mi.Scene
-        The task's scene (its sensor converts degrees to pixels).
-    task : dict
-        A sequence task (``task["motion"]``).
-
-    Returns
-    -------
-    gazes : list of list of float
-        One normalised film position per frame.
-    """
-    motion = task["motion"]
-    gazes = motion.get("rendered_gazes", motion["gazes"])
-    sigma = motion.get("gaze_noise_deg", 0.0)
-    if sigma <= 0.0:
-        return gazes
-    from ..viewer import pixels_per_degree
-    sensor = scene.sensors()[0]
-    w, h = task["scene"]["width"], task["scene"]["height"]
-    rng = np.random.default_rng([int(task["seed"]), 0x6A5E])
-    out, ppd = [], {}
-    for g in gazes:
-        key = tuple(g)
-        if key not in ppd:                      # a fixation holds one gaze for many frames
-            ppd[key] = pixels_per_degree(sensor, key)
-        dx, dy = rng.normal(0.0, sigma * ppd[key], 2)
-        out.append([min(max(g[0] + dx / w, 0.0), 1.0), min(max(g[1] + dy / h, 0.0), 1.0)])
-    return out
-
-
 def _sequence_frames(scene, task: dict, refs: np.ndarray, render, rendered: list) -> tuple:
     """Each frame of the sequence moved, fixated, rendered (``render``, see
     :func:`_sequence_renderer`, with the gaze of ``rendered``) and scored against ``refs[k]``
@@ -541,29 +432,6 @@ def _sequence_frames(scene, task: dict, refs: np.ndarray, render, rendered: list
             shown.append((ref_d, to_display(image, m["exposure"])))
             quality.append(_quality(ref_d, image, dict(frame_task, jod=False), viewing))
     return times, rays, shown, quality, eccs
-
-
-def _sequence_summary(task: dict, n: int, times: list, rays: list) -> dict:
-    """The row's identity, rays and time (the median frame time after the first)."""
-    spp, seed = task["spp"], task["seed"]
-    w, h = task["scene"]["width"], task["scene"]["height"]
-    return {"task_id": task["task_id"], "scene": task["label"], "method": task["method"],
-            "seed": seed, "spp": spp, "width": w, "height": h, "repeats": 1,
-            "variant": task["variant"], "config": task["config"], "frame": n,
-            "rays": float(np.mean(rays)) * w * h, "ray_fraction": float(np.mean(rays)),
-            "samples": float(np.mean(rays)) * w * h * spp,
-            "time_ms": _median(times[1:])}
-
-
-#: How a uniform row's frames run: ``mi.render`` of the nested integrator, traced by Python
-#: and Mitsuba every frame (:func:`foveated_mi.frame.outputs.trace_mode`).
-UNIFORM_MODE = "traced"
-
-
-def _mode(modes) -> str:
-    """A row's ``trace_mode``: its timed frames' common mode, or ``mixed``."""
-    modes = set(modes)
-    return modes.pop() if len(modes) == 1 else "mixed"
 
 
 def _foveated_frames(scene, task: dict, record: list[int]):
