@@ -5,6 +5,7 @@ import math
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+import pytest
 
 import tolerances
 from foveated_mi.frame import sampling
@@ -25,6 +26,21 @@ def small_cornell(w=40, h=32):
 
 def test_reprojection_roundtrip_within_1e3_px():
     scene = small_cornell(48, 36)
+    sensor = scene.sensors()[0]
+    gb = render_gbuffer(scene, sensor)
+    err = roundtrip_error(sensor, 48, 36, gb.position, gb.hit).numpy()
+    assert gb.hit.numpy().sum() > 1000
+    assert err.max() < 1e-3
+
+
+@pytest.mark.parametrize("ppx,ppy", [(0.12, 0.0), (-0.1, 0.07)])
+def test_reprojection_roundtrip_with_an_off_centre_principal_point(ppx, ppy):
+    """A headset eye's frustum is off-axis: the camera the history projects with must shift
+    the film as the sensor's rays do (Mitsuba's projection_transform() alone does not)."""
+    d = mi.cornell_box()
+    d["sensor"]["film"].update(width=48, height=36)
+    d["sensor"].update(principal_point_offset_x=ppx, principal_point_offset_y=ppy)
+    scene = mi.load_dict(d)
     sensor = scene.sensors()[0]
     gb = render_gbuffer(scene, sensor)
     err = roundtrip_error(sensor, 48, 36, gb.position, gb.hit).numpy()

@@ -107,9 +107,20 @@ def camera_state(sensor: mi.Sensor) -> CameraState:
         Its world -> film matrix and its centre.
     """
     world = sensor.world_transform().matrix
-    matrix = sensor.projection_transform().matrix @ dr.rcp(world)
+    matrix = mi.Matrix4f(sensor.projection_transform().matrix @ dr.rcp(world))
     origin = mi.Point3f(world[0][3], world[1][3], world[2][3])
-    matrix, origin = mi.Matrix4f(matrix), mi.Point3f(origin)
+    # Mitsuba's projection_transform() leaves out the film's shift by a principal point
+    # (an eye's off-axis frustum): read it off the sensor's own ray through the film's
+    # centre, and add it (zero, bit for bit, for a centred sensor).
+    ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(0.5, 0.5), mi.Point2f(0.5, 0.5))
+    p = ray.o + ray.d
+    q = matrix @ mi.Vector4f(p.x, p.y, p.z, 1.0)
+    shift = mi.Point2f(0.5 - q.x / q.w, 0.5 - q.y / q.w)
+    shift = dr.select(dr.abs(shift) > 1e-6, shift, 0.0)
+    rows = [[matrix[i][j] for j in range(4)] for i in range(4)]
+    for i, t in ((0, shift.x), (1, shift.y)):
+        rows[i] = [rows[i][j] + t * rows[3][j] for j in range(4)]
+    matrix, origin = mi.Matrix4f(rows), mi.Point3f(origin)
     dr.make_opaque(matrix, origin)
     return CameraState(matrix=matrix, origin=origin)
 
