@@ -16,6 +16,17 @@ own film (:func:`eye_gaze`), so the two foveae fall on the same surface.
 :class:`Stereo` renders both eyes of one head pose with one call. Each eye is a view of the
 integrator of its own (:class:`foveated_mi.frame.view.Views`): its own gaze, plan and history,
 as two integrators would keep them. A cut resets both histories (:meth:`Stereo.cut`).
+
+**Reuse between the eyes** (``reuse=True``, the default; a formation on the foveal buffer's
+samples, as the ``vr`` preset's). The first eye renders its frame; the second reprojects the
+first eye's samples of that frame into its own, by its history's rules (the plane test, so no
+disoccluded point; exclusive reads), and traces only the rest
+(:func:`foveated_mi.frame.buffer_space.partner_map`): what the first eye did not see (the
+crescents, :func:`crescent`), the sky, and surfaces whose BSDF has a glossy or delta lobe,
+whose radiance differs between the eyes. Where a sample is reused, both eyes show the same
+estimate: their noise there is shared, not independent, which a per-eye metric cannot tell
+from independent noise (neither sees binocular rivalry). Reused values are constants to a
+gradient pass, as history is. Without reuse, or on the film's pixels, the eyes share nothing.
 Scene units are taken to be metres (the IPD's default, 63 mm, and the 2 m fixation).
 """
 from __future__ import annotations
@@ -202,6 +213,10 @@ class StereoRig:
             "film": film})
 
 
+def _other(eye: str) -> str:
+    return "right" if eye == "left" else "left"
+
+
 def _eye(eye: str) -> str:
     return check_choice("eye", eye, EYES)
 
@@ -382,20 +397,35 @@ class Stereo:
         sensor's).
     fixation_distance : float, optional
         Where the eyes converge when the head's gaze ray meets nothing.
+    reuse : bool, optional
+        The second eye reuses the first eye's samples where it sees the same diffuse surface
+        (module docstring).
+    first : str, optional
+        The eye rendered first, whose samples the other reuses: ``"left"`` or ``"right"``.
     """
 
     def __init__(self, scene: mi.Scene, integrator, rig: StereoRig | None = None,
-                 views: tuple[int, int] = (1, 2), fixation_distance: float = 2.0):
+                 views: tuple[int, int] = (1, 2), fixation_distance: float = 2.0,
+                 reuse: bool = True, first: str = "left"):
         self.scene, self.integrator = scene, integrator
         self.rig = rig if rig is not None else StereoRig()
         if len(views) != 2 or views[0] == views[1]:
             raise ParameterError("views", views, "two different view indices")
         self.fixation_distance = check_range("fixation distance", fixation_distance, 0.0,
                                              lo_open=True)
+        self.first = check_choice("first eye", first, EYES)
+        if not isinstance(reuse, bool):
+            raise ParameterError("reuse", reuse, "True or False")
+        self.reuse = reuse
         self.eyes = EyeSensors(scene, self.rig)
         self.head, self.sensors = self.eyes.head, self.eyes.sensors
         self.views = {eye: integrator.views.bind(self.sensors[eye], v)
                       for eye, v in zip(EYES, views)}
+        self.order = (self.first, _other(self.first))
+        second = self.views[self.order[1]].planner
+        second.partner = self.views[self.first].planner if reuse else None
+        self.views[self.first].planner.partner = None
+        self.views[self.first].planner.lends, second.lends = reuse, False
 
     def head_pose(self) -> mi.ScalarTransform4f:
         """The head's to-world transform, as the scene's sensor has it now."""
@@ -439,7 +469,8 @@ class Stereo:
                 raise ParameterError("eye_gazes", eye_gazes, "two gazes, left and right")
             point, hit = None, False
         images = {}
-        for k, eye in enumerate(EYES):
+        for eye in self.order:
+            k = EYES.index(eye)
             self.views[eye].gaze = gazes[k]
             images[eye] = mi.render(self.scene, integrator=self.integrator,
                                     sensor=self.sensors[eye], seed=seed + k, spp=spp)
@@ -465,7 +496,7 @@ def crescent(eyes: EyeSensors, eye: str = "right") -> np.ndarray:
         (H, W) bool, True where only ``eye`` sees the point.
     """
     from .kernels import film_size, pixel_coords, primary_rays
-    other_eye = "left" if _eye(eye) == "right" else "right"
+    other_eye = _other(_eye(eye))
     sensor, other = eyes[eye], eyes[other_eye]
     width, height = film_size(sensor)
     _, x, y = pixel_coords(width, height)

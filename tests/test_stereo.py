@@ -109,7 +109,7 @@ def test_each_eye_keeps_its_own_history_as_two_integrators_would():
     scene = _scene()
     rig = StereoRig(QUEST3, width=40)
     one = FoveatedIntegrator(preset="vr", nested=scene.integrator())
-    stereo = Stereo(scene, one, rig)
+    stereo = Stereo(scene, one, rig, reuse=False)
     alone = {eye: FoveatedIntegrator(preset="vr", nested=scene.integrator()) for eye in EYES}
     rfilter = scene.sensors()[0].film().rfilter()
     sensors = {eye: rig.sensor(stereo.head_pose(), eye, rfilter=rfilter) for eye in EYES}

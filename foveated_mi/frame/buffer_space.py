@@ -42,6 +42,7 @@ A still camera over an unchanged scene with the gaze still maps every sample ont
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -51,7 +52,7 @@ import mitsuba as mi
 from ..kernels.buffers import GBuffer
 from ..kernels.grid import Grid
 from ..kernels.polar import PolarGrid
-from .reproject import History, ReprojectionMap, nearest_claim
+from .reproject import CameraState, History, ReprojectionMap, nearest_claim
 from .sampling import foveal_grid, fovea_radius
 
 #: Smallest cosine between a sample's normal and its previous sample's for one surface.
@@ -336,17 +337,12 @@ def reprojection_map(gb: GBuffer, on: mi.Bool, history: History | None, lay: Sam
         (uv.y >= 0) & (uv.x < width) & (uv.y < height)
     j, in_grid, centre = sample_at(lay, uv, history.gaze)
     inside &= in_grid
-    prev_depth = dr.gather(mi.Float, history.depth, j, inside)
-    prev_x = dr.gather(mi.Point3f, history.position, j, inside)
-    prev_n = mi.Vector3f(dr.gather(mi.Normal3f, history.normal, j, inside))
-    prev_count = dr.gather(mi.Float, history.count, j, inside)
-    dist = dr.norm(x - history.camera.origin)
-    tol = dr.opaque(mi.Float, tolerance)
-    same_surface = hit & dr.isfinite(prev_depth) & \
-        (dr.abs(dr.dot(prev_n, x - prev_x)) <= tol * dist) & \
-        (dr.dot(prev_n, mi.Vector3f(gb.normal)) >= NORMAL_AGREEMENT)
-    same_background = ~hit & ~dr.isfinite(prev_depth)
-    agree = inside & (same_surface | same_background)
+    if history.pixels is not None:
+        # The previous sample's own pixel: a cell's need not be its centre's (:func:`toward`).
+        pj = dr.gather(mi.UInt32, history.pixels, j, inside)
+        row = pj // width
+        centre = mi.Point2f(mi.Float(pj - row * width) + 0.5, mi.Float(row) + 0.5)
+    agree, prev_count = _agrees(gb, history, j, inside, tolerance)
     hits = agree & (prev_count > 0)
     # A disc pixel's history is a pixel's: it reads a previous sample only when it lands in
     # that sample's pixel, never a coarser cell's value from a pixel beside it.
@@ -359,3 +355,186 @@ def reprojection_map(gb: GBuffer, on: mi.Bool, history: History | None, lay: Sam
         hits &= nearest_claim(uv, centre, j + part, hits, 2 * n)
     return ReprojectionMap(uv, hits, j, agree)
 
+
+
+def _agrees(gb: GBuffer, history: History, j: mi.UInt32, inside: mi.Bool, tolerance: float
+            ) -> tuple[mi.Bool, mi.Float]:
+    """Whether each sample sees what ``history``'s sample ``j`` saw (where ``inside``): the
+    plane test on a surface, a miss on a miss (module docstring); and ``j``'s count."""
+    prev_depth = dr.gather(mi.Float, history.depth, j, inside)
+    prev_x = dr.gather(mi.Point3f, history.position, j, inside)
+    prev_n = mi.Vector3f(dr.gather(mi.Normal3f, history.normal, j, inside))
+    prev_count = dr.gather(mi.Float, history.count, j, inside)
+    x = gb.position
+    dist = dr.norm(x - history.camera.origin)
+    tol = dr.opaque(mi.Float, tolerance)
+    same_surface = gb.hit & dr.isfinite(prev_depth) & \
+        (dr.abs(dr.dot(prev_n, x - prev_x)) <= tol * dist) & \
+        (dr.dot(prev_n, mi.Vector3f(gb.normal)) >= NORMAL_AGREEMENT)
+    same_background = ~gb.hit & ~dr.isfinite(prev_depth)
+    return inside & (same_surface | same_background), prev_count
+
+
+def toward(lay: SampleLayout, pixels: mi.UInt32, partner: History, camera: CameraState,
+           gaze: mi.Point2f, width: int, height: int
+           ) -> tuple[mi.UInt32, mi.Bool, mi.UInt32]:
+    """The cells' pixels moved onto the other eye's samples (reuse between the eyes): each of
+    the other eye's samples that hit a surface is projected into this view, and the cell it
+    lands in (outside the disc) takes the pixel it lands on, the one landing nearest the
+    cell's centre winning. A cell's sample is one point of the cell, its centre pixel or
+    another: where it is the other eye's point, that sample can stand for it
+    (:func:`partner_map`), where the cell's centre would lie on another voxel face than the
+    other eye's sample as often as not, and the other eye's sample of the same place is a
+    point of another cell. A cell that no sample lands in keeps its centre; the disc's
+    pixels keep theirs.
+
+    Parameters
+    ----------
+    lay : SampleLayout
+        The samples (the other eye's are on an equal layout).
+    pixels : mi.UInt32
+        Each sample's film pixel (:func:`sample_pixels`).
+    partner : History
+        The other eye's history after its frame.
+    camera : CameraState
+        This view's camera.
+    gaze : mi.Point2f
+        This view's gaze, in pixels.
+    width, height : int
+        The film's size.
+
+    Returns
+    -------
+    pixels : mi.UInt32
+        ``pixels``, the cells' moved where a sample of the other eye landed.
+    claimed : mi.Bool
+        The cells that took a sample's point (False for the disc's pixels).
+    source : mi.UInt32
+        The other eye's sample whose point each claimed cell took.
+    """
+    x = partner.position
+    q = camera.matrix @ mi.Vector4f(x.x, x.y, x.z, 1.0)
+    inv_w = dr.rcp(q.w)
+    uv = mi.Point2f(q.x * inv_w * width, q.y * inv_w * height)
+    grid = lay.grid
+    c = grid.coords_at(uv, gaze)
+    cell, in_grid = grid.cell_at(uv, gaze)
+    claims = dr.isfinite(partner.depth) & (partner.count > 0) & (q.w > 0) & in_grid & \
+        (c.y >= 0) & (uv.x >= 0) & (uv.y >= 0) & (uv.x < width) & (uv.y < height)
+    centre = grid.film_position(cell, gaze)
+    wins = nearest_claim(uv, mi.Point2f(dr.floor(centre.x) + 0.5, dr.floor(centre.y) + 0.5),
+                         cell, claims, lay.cells)
+    moved = dr.copy(pixels)
+    dr.scatter(moved, mi.UInt32(dr.floor(uv.y)) * width + mi.UInt32(dr.floor(uv.x)), cell,
+               wins)
+    claimed = dr.zeros(mi.Bool, lay.size)
+    dr.scatter(claimed, True, cell, wins)
+    source = dr.zeros(mi.UInt32, lay.size)
+    dr.scatter(source, dr.arange(mi.UInt32, dr.width(wins)), cell, wins)
+    return moved, claimed, source
+
+
+def partner_map(gb: GBuffer, on: mi.Bool, partner: History, lay: SampleLayout, width: int,
+                height: int, *, claimed: tuple[mi.Bool, mi.UInt32] | None = None,
+                tolerance: float = 0.02, mode: str = "exclusive") -> ReprojectionMap:
+    r"""The other eye's samples of this frame that stand for these samples (reuse between the
+    eyes of :class:`foveated_mi.stereo.Stereo`): its history, reprojected by the rules of a
+    frame's own (:func:`reprojection_map`: the plane test, so no disoccluded point, and
+    exclusive reads). A cell reads only the sample whose point it ``claimed``
+    (:func:`toward`), where its own ray through that point sees the same surface: what it
+    reads is a point of its own area, seen by both eyes. A disc pixel reads the other eye's
+    sample whose pixel it lands in, as from its own history.
+
+    Only a surface seen by both is reused, and only where its BSDF has neither a glossy nor a
+    delta lobe (``gb.view_dependent``): a diffuse surface's radiance is the same from both
+    eyes, a glossy one's is not. The sky is traced again: a sky sample next to a silhouette
+    holds part of it (its film filter's footprint), and the silhouette lies elsewhere from
+    the other eye; a sky sample costs a ray that escapes.
+
+    Parameters
+    ----------
+    gb, on : GBuffer, mi.Bool
+        These samples' G-buffer (with ``view_dependent``: cast with ``lobes=True``) and which
+        are on.
+    claimed : tuple of mi.Bool and mi.UInt32, optional
+        The cells that took one of the other eye's points, and whose (:func:`toward`); None:
+        every cell reads the sample it lands in, as from its history.
+    partner : History
+        The other eye's history after its frame (its camera, gaze, samples), on a layout
+        equal to ``lay``.
+    lay : SampleLayout
+    width, height : int
+        The samples, and the film's size.
+    tolerance, mode : float, str
+        As :func:`reprojection_map`'s.
+
+    Returns
+    -------
+    map : ReprojectionMap
+        Per sample: ``hit`` where the other eye's sample ``index`` stands for it.
+    """
+    keep = on & gb.hit
+    if gb.view_dependent is not None:
+        keep &= ~gb.view_dependent
+    if claimed is None:
+        m = reprojection_map(gb, keep, partner, lay, width, height, tolerance=tolerance,
+                             mode=mode)
+    else:
+        is_cell = dr.arange(mi.UInt32, lay.size) < lay.cells
+        m = reprojection_map(gb, keep & ~is_cell, partner, lay, width, height,
+                             tolerance=tolerance, mode=mode)
+        took, source = claimed
+        agree, count = _agrees(gb, partner, source, keep & is_cell & took, tolerance)
+        m = ReprojectionMap(m.coords, dr.select(is_cell, agree & (count > 0), m.hit),
+                            dr.select(is_cell, source, m.index),
+                            dr.select(is_cell, agree, m.agree))
+    if partner.mixed is not None:
+        # A value that mixes surfaces stands for no point this view sees.
+        m = m._replace(hit=m.hit & ~dr.gather(mi.Bool, partner.mixed, m.index, m.hit))
+    return m
+
+
+def borrow(own: ReprojectionMap, history: History | None, other: ReprojectionMap,
+           partner: History) -> tuple[ReprojectionMap, History]:
+    """A frame's reprojection map and history with the other eye's samples in them: where
+    ``other`` hits, the sample reads the other eye's value, count and second moment (as a
+    sample reads its history: a resample where it is not traced); elsewhere its own history
+    as ``own`` maps it. The result is one history on these samples, read one to one.
+
+    The borrowed values are constants, as a history's are: the gradient of a loss at a
+    borrowed sample does not reach the other eye's trace.
+
+    Parameters
+    ----------
+    own : ReprojectionMap
+        The frame's map into its own history.
+    history : History or None
+        Its own history (None: none).
+    other : ReprojectionMap
+        :func:`partner_map`'s.
+    partner : History
+        The other eye's history.
+
+    Returns
+    -------
+    map : ReprojectionMap
+        Each sample onto its own entry of ``merged``; ``agree`` is ``own``'s (what a cut is
+        judged by).
+    merged : History
+        ``history`` (or ``partner``) with ``mean``, ``count`` and ``moment2`` replaced by
+        each sample's read.
+    """
+    take = other.hit
+    keep = own.hit & ~take if history is not None else dr.zeros(mi.Bool, dr.width(take))
+
+    def read(name: str, kind):
+        mine = dr.gather(kind, getattr(partner, name), other.index, take)
+        if history is None:
+            return mine
+        return dr.select(keep, dr.gather(kind, getattr(history, name), own.index, keep), mine)
+    base = history if history is not None else partner
+    merged = dataclasses.replace(base, mean=read("mean", mi.Color3f),
+                                 count=read("count", mi.Float), moment2=read("moment2", mi.Float))
+    n = dr.width(take)
+    return ReprojectionMap(dr.select(take, other.coords, own.coords), take | keep,
+                           dr.arange(mi.UInt32, n), own.agree), merged

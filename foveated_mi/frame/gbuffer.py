@@ -48,8 +48,8 @@ def render_gbuffer(scene: mi.Scene, sensor: mi.Sensor, *, materials: bool = Fals
 
 
 def gbuffer_at(scene: mi.Scene, sensor: mi.Sensor, x: mi.UInt32, y: mi.UInt32, width: int,
-               height: int, active: mi.Bool | bool = True, *, materials: bool = False
-               ) -> GBuffer:
+               height: int, active: mi.Bool | bool = True, *, materials: bool = False,
+               lobes: bool = False) -> GBuffer:
     """The G-buffer of the pixel centres ``(x, y)`` only: what a formation that keeps nothing
     on the film casts at its samples.
 
@@ -67,11 +67,15 @@ def gbuffer_at(scene: mi.Scene, sensor: mi.Sensor, x: mi.UInt32, y: mi.UInt32, w
         The lanes that cast a ray; the others are a miss.
     materials : bool, optional
         Also evaluate the albedo and the emission at the primary hits.
+    lobes : bool, optional
+        Also note where the BSDF at the hit has a glossy or delta lobe
+        (``view_dependent``): radiance that another eye sees otherwise.
 
     Returns
     -------
     gb : GBuffer
-        One entry per lane (``albedo`` and ``emission`` None without ``materials``).
+        One entry per lane (``albedo`` and ``emission`` None without ``materials``,
+        ``view_dependent`` None without ``lobes``).
     """
     with dr.suspend_grad():
         ray = primary_rays(sensor, x, y, width, height)
@@ -85,11 +89,62 @@ def gbuffer_at(scene: mi.Scene, sensor: mi.Sensor, x: mi.UInt32, y: mi.UInt32, w
         world = sensor.world_transform().matrix
         centre = mi.Point3f(world[0][3], world[1][3], world[2][3])
         depth = dr.select(hit, dr.norm(si.p - centre), dr.inf)
-        albedo = emission = None
+        albedo = emission = view_dependent = None
         if materials:
             albedo, emission = surface_radiometry(scene, si, hit)
+        if lobes:
+            flags = si.bsdf().flags()
+            view_dependent = hit & (mi.has_flag(flags, mi.BSDFFlags.Glossy) |
+                                    mi.has_flag(flags, mi.BSDFFlags.Delta))
     return GBuffer(position=position, normal=normal, depth=depth, hit=hit,
-                   direction=mi.Vector3f(ray.d), albedo=albedo, emission=emission)
+                   direction=mi.Vector3f(ray.d), albedo=albedo, emission=emission,
+                   view_dependent=view_dependent)
+
+
+def footprint_edges(scene: mi.Scene, sensor: mi.Sensor, x: mi.UInt32, y: mi.UInt32,
+                    width: int, height: int, gb: GBuffer, active: mi.Bool, *,
+                    tolerance: float = 0.02) -> mi.Bool:
+    """The pixels whose traced value mixes surfaces: a ray through a corner of the film
+    filter's footprint about the pixel's centre (a square of half-width its radius, at most 1
+    pixel: a Gaussian's tails beyond two standard deviations weigh little) sees another
+    surface than the centre's ray: another plane (``tolerance`` of the distance), or the sky
+    where the centre sees a surface, or the converse. Such a value, part one surface and
+    part another, stands for no point that another view could reuse: where the silhouette
+    lies elsewhere (another eye), its colour would bleed across.
+
+    Parameters
+    ----------
+    scene, sensor : mi.Scene, mi.Sensor
+        The scene and the frame's sensor.
+    x, y : mi.UInt32
+        Pixel coordinates, one pair per lane.
+    width, height : int
+        The film's size.
+    gb : GBuffer
+        The G-buffer of those pixels' centres (:func:`gbuffer_at`).
+    active : mi.Bool
+        The lanes to test; the others are False.
+    tolerance : float, optional
+        The plane test's, as the reprojection's.
+
+    Returns
+    -------
+    edges : mi.Bool
+        True where the footprint straddles an edge, one entry per lane.
+    """
+    r = min(float(sensor.film().rfilter().radius()), 1.0)
+    tol = dr.opaque(mi.Float, tolerance)
+    found = mi.Bool(False)
+    with dr.suspend_grad():
+        for sx, sy in ((-r, -r), (r, -r), (-r, r), (r, r)):
+            pos = mi.Point2f((mi.Float(x) + 0.5 + sx) / width, (mi.Float(y) + 0.5 + sy) / height)
+            ray, _ = sensor.sample_ray(sensor.shutter_open(), 0.0, pos, mi.Point2f(0.5))
+            si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.Minimal, coherent=True,
+                                     active=active)
+            hit = si.is_valid() & active
+            off = dr.abs(dr.dot(mi.Vector3f(gb.normal), si.p - gb.position)) > tol * gb.depth
+            found |= (hit != gb.hit) | (hit & off)
+    return active & found
 
 
 def surface_radiometry(scene: mi.Scene, si: mi.SurfaceInteraction3f, hit: mi.Bool

@@ -74,6 +74,20 @@ class FramePlan:
     space: FilmSpace | BufferSpace | None = None
 
 
+@dataclass(eq=False)
+class _Samples:
+    """A foveal buffer's samples as one frame made them, kept while they hold."""
+    key: tuple
+    partner: Any                   #: the other eye's sample positions they follow (or None)
+    pixels: mi.UInt32
+    on: mi.Bool
+    gb: GBuffer
+    claimed: tuple | None = None             #: the cells at the other eye's points, whose
+    mixed: mi.Bool | None = None             #: samples whose value mixes surfaces (lent)
+    other: ReprojectionMap | None = None     #: the other eye's samples standing for them
+    launch: tuple | None = None              #: (reordered, sampling map, each sample's ray)
+
+
 class Planner:
     """Plans each frame (:meth:`plan`) and carries the history between frames (module
     docstring)."""
@@ -89,7 +103,13 @@ class Planner:
         self._emission_cache: tuple | None = None
         self._filter_samplers: dict[tuple, FilterSampler] = {}
         self._gaze = None                      # the last frame's gaze (options' tuple)
-        self._samples_cache: tuple | None = None
+        self._samples_cache: _Samples | None = None
+        #: Another view's planner whose samples of the same frame this one's reuse, where
+        #: they saw the same diffuse surface (the second eye of a headset:
+        #: :class:`foveated_mi.stereo.Stereo`); its frame comes first. Foveal buffer only.
+        self.partner: Planner | None = None
+        #: Another view reuses this one's samples: they note which mix surfaces.
+        self.lends = False
 
     def reset(self) -> None:
         """Forget the history (next frame starts fresh, as frame 0)."""
@@ -165,59 +185,104 @@ class Planner:
                       width: int, height: int) -> FramePlan:
         """The plan of a foveal buffer that keeps nothing on the film
         (:mod:`foveated_mi.frame.buffer_space`): the G-buffer at its samples only, the
-        history reprojected sample to sample, the polar map and its launch."""
-        ss, ls = settings.sampling, settings.launch
+        history reprojected sample to sample (and the other eye's samples, with a
+        :attr:`partner`), the polar map and its launch."""
+        ss, hs = settings.sampling, settings.history
         lay = _buffer_space.layout(width, height, ss.theta, ss.ray_budget,
                                    _sampling.cell_offset(ss, sensor))
         gaze = _sampling.gaze_position(gaze_at, width, height)
         gaze_key = tuple(float(v) for v in gaze_at)
-        materials = settings.materials
+        partner = self._partner_history(lay, settings)
         with dr.suspend_grad():
-            # A still camera and gaze over an unchanged scene reuse the samples' G-buffer,
-            # and their launch.
-            key = (state.camera, state.scene, gaze_key, lay, materials, width, height,
-                   ls.reorder, ls.block_height)
-            cached = self._samples_cache
-            reused = cached is not None and cached[0] == key
-            if reused:
-                pixels, on, gb, launch = cached[1]
-            else:
-                pixels, on = _buffer_space.sample_pixels(lay, gaze, width, height)
-                y = pixels // width
-                gb = _gbuffer.gbuffer_at(scene, sensor, pixels - y * width, y, width, height,
-                                         on, materials=materials)
-                launch = None
-            timer.mark("gbuffer", pixels, on, gb.position, gb.normal, gb.depth, gb.hit,
-                       gb.direction, gb.albedo, gb.emission)
-            space = BufferSpace(width, height, lay, pixels, on, None)
-            history = self.history if settings.history.keep else None
+            # A still camera and gaze over an unchanged scene (and a still other eye) reuse
+            # the samples' G-buffer, and their launch.
+            sm, reused = self._samples(scene, sensor, lay, gaze, gaze_key, partner, settings,
+                                       state, width, height)
+            gb = sm.gb
+            timer.mark("gbuffer", sm.pixels, sm.on, gb.position, gb.normal, gb.depth, gb.hit,
+                       gb.direction, gb.albedo, gb.emission, gb.view_dependent)
+            space = BufferSpace(width, height, lay, sm.pixels, sm.on, None)
+            history = self.history if hs.keep else None
             if history is not None and history.layout != lay:
                 history = None        # kept on the film, or on another buffer's samples
             # Still while the samples, the camera and the gaze hold.
-            reproj, cut = self._reprojection(gb, history, space, sensor, settings.history,
+            reproj, cut = self._reprojection(gb, history, space, sensor, hs,
                                              reused and self._gaze == gaze_key)
             self._gaze = gaze_key
-            frame_seed = self._frame_seed(seed, cut, settings.history.keep)
-            map_seed = ss.map_seed if ss.map_seed >= 0 else frame_seed
-            timer.mark("sampling", reproj.hit, reproj.index)
-            # The launch of the samples' pixels, the sampling map they make, and each
-            # sample's ray in it.
-            if launch is None:
-                ro, smap = _reorder.launch_of_pixels(pixels, on, width, height, ls.reorder,
-                                                     ls.block_height)
-                rays = _buffer_space.sample_rays(pixels, on, ro.wavefront, ro.active,
-                                                 width * height)
-                launch = (ro, smap, rays)
-                self._samples_cache = (key, (pixels, on, gb, launch))
-            ro, smap, rays = launch
-            prob = dr.select(smap, 1.0, 0.0)
+            frame_seed = self._frame_seed(seed, cut, hs.keep)
+            traced = sm.on
+            if partner is not None:
+                # The other eye's samples of this frame stand for those it saw alike; only
+                # the rest is traced.
+                if sm.other is None:
+                    sm.other = _buffer_space.partner_map(
+                        gb, sm.on, partner, lay, width, height, claimed=sm.claimed,
+                        tolerance=hs.tolerance, mode=hs.reprojection)
+                reproj, history = _buffer_space.borrow(reproj, history, sm.other, partner)
+                traced = sm.on & ~sm.other.hit
+            timer.mark("sampling", reproj.hit, reproj.index, traced)
+            if sm.launch is None:
+                sm.launch = self._launch(sm.pixels, traced, width, height, settings.launch)
+            ro, smap, rays = sm.launch
             timer.mark("reorder", ro.wavefront, rays)
         return FramePlan(sensor=sensor, width=width, height=height, spp=spp, seed=frame_seed,
-                         map_seed=map_seed, gbuffer=gb, edges=None, sampling_map=smap,
-                         probability=prob, reprojection=reproj, reordered=ro, history=history,
+                         map_seed=ss.map_seed if ss.map_seed >= 0 else frame_seed,
+                         gbuffer=gb._replace(view_dependent=None), edges=None,
+                         sampling_map=smap, probability=dr.select(smap, 1.0, 0.0),
+                         reprojection=reproj, reordered=ro, history=history,
                          filter_sampler=self._filter_sampler(sensor, settings.pixel_filter),
-                         gbuffer_reused=reused, fill_seed=seed, emission_edges=None,
-                         gaze=gaze, space=dataclasses.replace(space, rays=rays))
+                         gbuffer_reused=reused, fill_seed=seed, emission_edges=None, gaze=gaze,
+                         space=dataclasses.replace(space, rays=rays, traced=traced,
+                                                   mixed=sm.mixed))
+
+    def _samples(self, scene, sensor, lay, gaze: mi.Point2f, gaze_key: tuple,
+                 partner: History | None, settings: PlanSettings, state: SceneState,
+                 width: int, height: int) -> tuple[_Samples, bool]:
+        """The samples' pixels and G-buffer, made again unless the camera, the scene, the
+        gaze and the other eye's samples are those of the last frame; and whether reused."""
+        ls = settings.launch
+        key = (state.camera, state.scene, gaze_key, lay, settings.materials, width, height,
+               ls.reorder, ls.block_height, partner is not None, self.lends)
+        mark = None if partner is None else partner.position
+        cached = self._samples_cache
+        if cached is not None and cached.key == key and cached.partner is mark:
+            return cached, True
+        pixels, on = _buffer_space.sample_pixels(lay, gaze, width, height)
+        claimed = None
+        if partner is not None:
+            # The cells sample where the other eye's samples lie.
+            pixels, took, source = _buffer_space.toward(lay, pixels, partner,
+                                                        _reproject.camera_state(sensor), gaze,
+                                                        width, height)
+            claimed = (took, source)
+        y = pixels // width
+        x = pixels - y * width
+        gb = _gbuffer.gbuffer_at(scene, sensor, x, y, width, height, on,
+                                 materials=settings.materials, lobes=partner is not None)
+        # What another view reuses must stand for one point (footprint_edges).
+        mixed = _gbuffer.footprint_edges(scene, sensor, x, y, width, height, gb, on,
+                                         tolerance=settings.history.tolerance) \
+            if self.lends else None
+        self._samples_cache = _Samples(key, mark, pixels, on, gb, claimed, mixed)
+        return self._samples_cache, False
+
+    @staticmethod
+    def _launch(pixels: mi.UInt32, traced: mi.Bool, width: int, height: int, ls) -> tuple:
+        """The launch of the ``traced`` samples' pixels, the sampling map they make, and each
+        sample's ray in it."""
+        ro, smap = _reorder.launch_of_pixels(pixels, traced, width, height, ls.reorder,
+                                             ls.block_height)
+        rays = _buffer_space.sample_rays(pixels, traced, ro.wavefront, ro.active,
+                                         width * height)
+        return ro, smap, rays
+
+    def _partner_history(self, lay, settings: PlanSettings) -> History | None:
+        """The other eye's history to reuse this frame (:attr:`partner`), or None: no
+        partner, no history kept, none yet, or on other samples."""
+        other = self.partner
+        if other is None or not settings.history.keep or other.history is None:
+            return None
+        return other.history if other.history.layout == lay else None
 
     def commit(self, plan: FramePlan, history: dict[str, Any] | None) -> None:
         """After a primal frame: its history becomes the next frame's, and the frame is counted.
@@ -239,7 +304,9 @@ class Planner:
                                    layout=plan.space.layout,
                                    position=gb.position if in_buffer else None,
                                    normal=gb.normal if in_buffer else None,
-                                   gaze=plan.gaze if in_buffer else None)
+                                   gaze=plan.gaze if in_buffer else None,
+                                   pixels=plan.space.pixels if in_buffer else None,
+                                   mixed=plan.space.mixed if in_buffer else None)
         self.index += 1
 
     def _check_reset(self, scene: mi.Scene, state: SceneState, width: int, height: int) -> None:

@@ -52,7 +52,7 @@ class SampleSpace:
 
     def develop_at(self) -> tuple[mi.UInt32, mi.Bool] | None:
         """Where the trace pass develops the rays' estimates: each sample's ray and whether it
-        is on, or None for the film's pixels in launch order."""
+        is traced, or None for the film's pixels in launch order."""
         raise NotImplementedError
 
     def traced_pixels(self, traced: mi.Bool) -> mi.Bool:
@@ -199,13 +199,17 @@ class FilmSpace(SampleSpace):
 @dataclass(frozen=True, eq=False)
 class BufferSpace(SampleSpace):
     """The foveal buffer's samples (:mod:`.buffer_space`): each one's film ``pixel``, whether
-    it is ``on`` (on the film; a patch pixel inside the disc), and its ``ray`` in the launch."""
+    it is ``on`` (on the film; a patch pixel inside the disc), and its ``ray`` in the launch;
+    ``traced``: the samples the launch traces, where not all that are on (another eye's
+    samples stand for the rest)."""
     width: int
     height: int
     layout: _buffer_space.SampleLayout
     pixels: mi.UInt32
     on: mi.Bool
     rays: mi.UInt32
+    traced: mi.Bool | None = None
+    mixed: mi.Bool | None = None     #: samples whose value mixes surfaces (another view's)
     kind = "buffer"
 
     @property
@@ -213,7 +217,7 @@ class BufferSpace(SampleSpace):
         return self.layout.size
 
     def develop_at(self) -> tuple[mi.UInt32, mi.Bool]:
-        return self.rays, self.on
+        return self.rays, self.on if self.traced is None else self.traced
 
     def traced_pixels(self, traced: mi.Bool) -> mi.Bool:
         mask = dr.zeros(mi.Bool, self.width * self.height)

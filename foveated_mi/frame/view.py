@@ -5,7 +5,9 @@ A scene may hold several sensors; the foveated integrator renders each as a view
 history, the frame count, the G-buffer and sampling caches) and its last frame (the outputs,
 and the primal frame a gradient pass differentiates). Views never read each other's state, so
 two views rendered by one integrator, frames alternating, each give what an integrator of its
-own would give, bit for bit (``tests/test_views.py``). The recordings of the replayed passes
+own would give, bit for bit (``tests/test_views.py``), unless one is told to reuse the
+other's samples (its planner's ``partner``: the second eye of
+:class:`foveated_mi.stereo.Stereo`). The recordings of the replayed passes
 (:mod:`.trace`, :mod:`.formation`) are shared: they key on the configuration and the film
 size, never on a view.
 

@@ -20,6 +20,9 @@ class GBuffer(NamedTuple):
     direction: mi.Vector3f  #: unit direction of the primary ray (reprojects the background)
     albedo: mi.Color3f | None = None    #: diffuse albedo at the hit (0 on a miss)
     emission: mi.Color3f | None = None  #: emitted radiance towards the camera
+    #: the BSDF at the hit has a glossy or delta lobe: its radiance depends on where it is
+    #: seen from (None unless asked for: another eye's samples reused only where False)
+    view_dependent: mi.Bool | None = None
 
 
 class Resolved(NamedTuple):

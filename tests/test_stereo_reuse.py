@@ -1,0 +1,211 @@
+"""Reuse between the eyes: the second eye's samples that the first eye's stand for are exact
+where the nested integrator is deterministic, never disoccluded (a thin card in front of one
+eye), never glossy, and the second eye traces only the rest."""
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from foveated_mi.integrators.foveated import FoveatedIntegrator
+from foveated_mi.stereo import EYES, Frustum, Stereo, StereoRig, crescent
+from foveated_mi.validate import ParameterError
+
+FRUSTUM = Frustum(45.0, 35.0, 40.0, 40.0)
+WIDTH = 64
+
+
+class Albedo(mi.SamplingIntegrator):
+    """The diffuse albedo at the primary hit (0 on a miss): a deterministic radiance, the same
+    from every eye, for every sample that lands on one face."""
+
+    def sample(self, scene, sampler, ray, medium=None, active=True):
+        si = scene.ray_intersect(mi.Ray3f(ray), active)
+        ok = si.is_valid() & active
+        value = si.bsdf().eval_diffuse_reflectance(si, ok)
+        return dr.select(ok, mi.Spectrum(value), 0.0), mi.Bool(True), []
+
+    def to_string(self):
+        return "Albedo"
+
+
+mi.register_integrator("test_albedo", lambda props: Albedo(props))
+
+
+def _diffuse(rgb):
+    return {"type": "diffuse", "reflectance": {"type": "rgb", "value": rgb}}
+
+
+def _scene(glossy: bool = False):
+    """A wall of flat-coloured tiles and a floor, seen by a head at the origin looking down
+    +z, a thin card 0.25 in front of the left eye (0.0315 to its side), which hides from
+    the left eye part of the wall the right eye sees, and another 0.4 in front of the right
+    eye, lower, which does the converse. Every face looks at the eyes: only the plane test
+    tells a card from the wall behind it. The tiles stand at depths 0.12 or more
+    apart, more than the plane test's tolerance there (0.02 of the distance): no two
+    neighbours share a plane."""
+    d = {"type": "scene", "integrator": {"type": "test_albedo"},
+         "sensor": {"type": "perspective", "fov": 80,
+                    "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 0],
+                                                               target=[0, 0, 1], up=[0, 1, 0]),
+                    "film": {"type": "hdrfilm", "width": WIDTH, "height": WIDTH,
+                             "rfilter": {"type": "box"}},
+                    "sampler": {"type": "independent", "sample_count": 1}},
+         "card": {"type": "rectangle", "bsdf": _diffuse([0.9, 0.1, 0.1]),
+                  "to_world": mi.ScalarTransform4f().translate([0.0315, 0.0, 0.25])
+                  .scale([0.012, 0.2, 1.0]).rotate([0, 1, 0], 180)},
+         "low_card": {"type": "rectangle", "bsdf": _diffuse([0.1, 0.8, 0.8]),
+                      "to_world": mi.ScalarTransform4f().translate([-0.0315, -0.12, 0.4])
+                      .scale([0.015, 0.1, 1.0]).rotate([0, 1, 0], 180)}}
+    colours = [[0.2, 0.5, 0.3], [0.6, 0.6, 0.2], [0.3, 0.3, 0.7], [0.7, 0.4, 0.5]]
+    for i in range(4):
+        for j in range(4):
+            shiny = glossy and i < 2
+            bsdf = {"type": "roughconductor", "alpha": 0.2} if shiny else \
+                _diffuse(colours[(i + j) % 4])
+            d[f"wall_{i}_{j}"] = {"type": "rectangle", "bsdf": bsdf,
+                                  "to_world": mi.ScalarTransform4f()
+                                  .translate([-3.0 + 2.0 * i, -3.0 + 2.0 * j,
+                                              3.0 + 0.5 * i + 0.12 * j])
+                                  .scale([1.0, 1.0, 1.0]).rotate([0, 1, 0], 180)}
+    d["floor"] = {"type": "rectangle", "bsdf": _diffuse([0.45, 0.35, 0.25]),
+                  "to_world": mi.ScalarTransform4f().translate([0.0, -1.0, 1.5])
+                  .rotate([1, 0, 0], -90).scale([4.0, 1.5, 1.0])}
+    return mi.load_dict(d)
+
+
+def _rendered(scene, first="left", reuse=True):
+    integ = FoveatedIntegrator(preset="vr", nested=scene.integrator())
+    stereo = Stereo(scene, integ, StereoRig(FRUSTUM, ipd=0.063, width=WIDTH), reuse=reuse,
+                    first=first)
+    stereo.render((0.45, 0.5), seed=3)
+    return stereo
+
+
+def _borrowed(stereo, eye):
+    """The eye's samples that took their value from the other eye (its first frame: no
+    history of its own), their film pixels and values."""
+    view = stereo.views[eye]
+    b = view.buffers
+    on = np.array(b["sample_on"], dtype=bool)
+    took = on & np.array(b["resampled"], dtype=bool)
+    pixels = np.array(b["sample_pixel"], dtype=np.int64)
+    values = np.array(b["shading"], dtype=np.float64).reshape(3, -1).T
+    return took, pixels, values, on
+
+
+def _seen(stereo, eye, px, py, du=0.5, dv=0.5):
+    """What film points ``(px + du, py + dv)`` of ``eye`` see: the albedo (-1 on a miss), the
+    hit and the point."""
+    sensor = stereo.sensors[eye]
+    w, h = (int(v) for v in sensor.film().crop_size())
+    pos = mi.Point2f(mi.Float((px + du) / w), mi.Float((py + dv) / h))
+    ray, _ = sensor.sample_ray(0.0, 0.5, pos, mi.Point2f(0.5, 0.5))
+    si = stereo.scene.ray_intersect(ray)
+    ok = si.is_valid()
+    a = si.bsdf().eval_diffuse_reflectance(si, ok)
+    a = np.array(dr.select(ok, mi.Color3f(a), -1.0), dtype=np.float64).reshape(3, -1).T
+    p = np.array(si.p, dtype=np.float64).reshape(3, -1).T
+    return a, np.array(ok, dtype=bool), p
+
+
+def _interior(stereo, eye, px, py):
+    """Whether each pixel sees one face across its whole box (its four corners and centre
+    agree), and the albedo at its centre."""
+    centre, _, _ = _seen(stereo, eye, px, py)
+    inside = np.ones(len(px), dtype=bool)
+    for du, dv in ((0.01, 0.01), (0.99, 0.01), (0.01, 0.99), (0.99, 0.99)):
+        corner, hit, _ = _seen(stereo, eye, px, py, du, dv)
+        inside &= hit & np.all(corner == centre, axis=1)
+    return inside, centre
+
+
+@pytest.mark.parametrize("first", EYES)
+def test_a_reused_sample_holds_what_tracing_it_gives(first, monkeypatch):
+    """Deterministic radiance (the albedo at the hit): a sample whose whole pixel sees one
+    face traces that face's albedo, wherever its ray falls in the pixel. A borrowed sample
+    whose pixel, and the first eye's sample's pixel, each see one face holds exactly what
+    tracing it gives: the plane test never lends it another face's value."""
+    from foveated_mi.frame import buffer_space
+    lent = {}
+    borrow = buffer_space.borrow
+
+    def spy(own, history, other, partner):
+        lent.update(index=np.array(other.index, dtype=np.int64),
+                    pixels=np.array(partner.pixels, dtype=np.int64))
+        return borrow(own, history, other, partner)
+    monkeypatch.setattr(buffer_space, "borrow", spy)
+    stereo = _rendered(_scene(), first)
+    second = "right" if first == "left" else "left"
+    took, pixels, values, on = _borrowed(stereo, second)
+    w = WIDTH
+    inside, centre = _interior(stereo, second, pixels % w, pixels // w)
+    source = lent["pixels"][lent["index"]]
+    there, _ = _interior(stereo, first, source % w, source // w)
+    check = took & inside & there
+    # Enough of them to tell: a third of the second eye's samples inside a face, and more
+    # (the rest lie at a silhouette in the first eye, or in its crescent).
+    assert check.sum() > max(100, (on & inside).sum() / 3), (check.sum(), (on & inside).sum())
+    np.testing.assert_array_equal(values[check], centre[check])
+
+
+@pytest.mark.parametrize("first", EYES)
+def test_a_point_the_first_eye_did_not_see_is_traced_not_reused(first):
+    """The card hides part of the wall from the left eye only: the right eye's pixels there
+    (its crescent) are never borrowed, whichever eye goes first; the left eye's crescent
+    behind the card, seen from the right eye, likewise."""
+    stereo = _rendered(_scene(), first)
+    second = "right" if first == "left" else "left"
+    hidden = crescent(stereo.eyes, second).ravel()
+    took, pixels, _, on = _borrowed(stereo, second)
+    assert hidden[pixels[on]].sum() >= 5, "the card must hide a part of the wall"
+    assert not hidden[pixels[took]].any()
+    # What the second eye traced covers every one of its crescent's samples.
+    traced = np.array(stereo.views[second].buffers["traced"], dtype=bool)
+    assert traced[on & hidden[pixels]].all()
+
+
+def test_a_glossy_surface_is_traced_by_both_eyes():
+    """A rough conductor's radiance differs between the eyes: none of its samples is reused,
+    and the diffuse ones beside it are."""
+    stereo = _rendered(_scene(glossy=True))
+    took, pixels, _, on = _borrowed(stereo, "right")
+    w = WIDTH
+    _, hit, p = _seen(stereo, "right", pixels % w, pixels // w)
+    # The wall's left half (x < 0, z >= 3) is a rough conductor.
+    glossy = hit & (p[:, 0] < 0) & (p[:, 2] > 2.99)
+    assert (on & glossy).sum() > 40
+    assert not (took & glossy).any()
+    assert (took & ~glossy).sum() > 100
+
+
+def test_the_second_eye_traces_only_what_it_does_not_borrow():
+    stereo = _rendered(_scene())
+    alone = _rendered(_scene(), reuse=False)
+    fraction = {k: s.views["right"].stats["ray_fraction"] for k, s in
+                (("reuse", stereo), ("alone", alone))}
+    assert fraction["reuse"] < 0.75 * fraction["alone"], fraction
+    assert stereo.views["left"].stats["ray_fraction"] == alone.views["left"].stats["ray_fraction"]
+    took, _, _, _ = _borrowed(stereo, "right")
+    traced = np.array(stereo.views["right"].buffers["traced"], dtype=bool)
+    # A borrowed sample is traced only where it shares its pixel with a traced one.
+    assert (took & traced).sum() <= 0.05 * took.sum()
+
+
+def test_the_first_eye_is_rendered_as_without_reuse():
+    a, b = _rendered(_scene()), _rendered(_scene(), reuse=False)
+    for s in (a, b):
+        dr.sync_thread()
+    np.testing.assert_array_equal(np.array(a.views["left"].buffers["image"]),
+                                  np.array(b.views["left"].buffers["image"]))
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    (dict(first="middle"), r"first eye = 'middle' is invalid"),
+    (dict(reuse="yes"), r"reuse = 'yes' is invalid"),
+])
+def test_bad_input_gets_one_line(kwargs, match):
+    scene = _scene()
+    with pytest.raises(ParameterError, match=match) as e:
+        Stereo(scene, FoveatedIntegrator(preset="vr", nested=scene.integrator()),
+               StereoRig(FRUSTUM, width=32), **kwargs)
+    assert "\n" not in str(e.value)
