@@ -43,8 +43,9 @@ frames after the first, on this machine, comparable within one run only.
 ``--headset quest3 [--eye-width W]`` puts a headset's eye on the study (its frustum, eye
 buffer and photometry: ``foveated-mi headsets``); with a stereo study
 (``configs/studies/vr_stereo.toml``, or ``--stereo``) both eyes render, the time is both eyes'
-and the headset condition judges the worse eye (``jod_video_min``); ``--one-eye`` runs its
-left eye alone, for two eyes against one. ``--latency-ms`` and ``--noise-deg`` set the eye
+and the headset condition judges the worse eye (``jod_video_min``); the second eye reuses the
+first eye's samples (``--no-reuse``: each eye traces all of its own; ``--first-eye right``:
+the right eye goes first); ``--one-eye`` runs its left eye alone, for two eyes against one. ``--latency-ms`` and ``--noise-deg`` set the eye
 tracker (``[viewer] gaze_latency_ms``, ``gaze_noise_deg``).
 
 ``--study`` runs another study file of the same shape (``configs/studies/vr_10ppd.toml``: the
@@ -100,9 +101,13 @@ def overridden(data: dict, a) -> dict:
         viewer["eye_width"] = a.eye_width
     if flag("stereo"):
         viewer["stereo"] = True
+    if flag("no_reuse"):        # each eye traces all of its samples
+        viewer["reuse"] = False
+    if flag("first_eye"):
+        viewer["first_eye"] = a.first_eye
     if flag("one_eye"):         # the left eye alone, for two eyes against one
-        viewer.pop("stereo", None)
-        viewer.pop("ipd", None)
+        for key in ("stereo", "ipd", "reuse", "first_eye"):
+            viewer.pop(key, None)
     if flag("latency_ms") is not None:
         viewer["gaze_latency_ms"] = a.latency_ms
     if flag("noise_deg") is not None:
@@ -327,6 +332,10 @@ def main(argv=None) -> int:
                     "judges the worse eye's video JOD (jod_video_min), the time is both eyes'")
     ap.add_argument("--noise-deg", type=float, default=None, dest="noise_deg",
                     help="the eye tracker's jitter in degrees (viewer.gaze_noise_deg)")
+    ap.add_argument("--no-reuse", action="store_true", dest="no_reuse",
+                    help="a stereo study's second eye traces all of its samples")
+    ap.add_argument("--first-eye", choices=("left", "right"), default=None, dest="first_eye",
+                    help="the eye rendered first, whose samples the other reuses")
     ap.add_argument("--one-eye", action="store_true", dest="one_eye",
                     help="a stereo study's left eye alone (two eyes against one)")
     ap.add_argument("--latency-ms", type=float, default=None, dest="latency_ms",
@@ -359,7 +368,9 @@ def main(argv=None) -> int:
                      ("scenes", a.scenes), ("headset", a.headset), ("eye-width", a.eye_width),
                      ("latency-ms", a.latency_ms), ("noise-deg", a.noise_deg),
                      ("study", None if a.study == STUDY else os.path.relpath(a.study))) if v)
-    cmd += (" --stereo" if a.stereo else "") + (" --one-eye" if a.one_eye else "")
+    cmd += (" --stereo" if a.stereo else "") + (" --one-eye" if a.one_eye else "") + \
+        (" --no-reuse" if a.no_reuse else "") + \
+        (f" --first-eye {a.first_eye}" if a.first_eye else "")
     viewer = data.get("viewer", {})
     camera = (f"the {viewer['headset']} headset's {'eyes' if stereo else 'left eye'} "
               f"({viewer.get('eye_width', 'render-target')} px wide)"

@@ -34,6 +34,8 @@ Layout (every key optional except ``scene``)::
     headset = "quest3"            # history: a headset's rig (foveated-mi headsets), else the
     eye_width = 320               # camera's own frustum at each eye; eye_width (default: the
     ipd = 0.063                   # film's width); a binocular_csv gaze gives each eye its own
+    reuse = true                  # the second eye reuses the first's samples (vr preset)
+    first_eye = "left"            # the eye rendered first
     [output]
     dir = "out/seq"               # relative to the working directory; default out/<stem>
     video = "mp4"                 # mp4 | gif | none
@@ -106,7 +108,8 @@ class SequenceConfig:
     description: str = ""
     source: str | None = None               # the TOML file
     poses: Any = None                       # a PoseTrack: camera, gaze and cut per frame
-    #: ``[stereo]``: ``{"headset", "eye_width", "ipd"}``, or None for one view
+    #: ``[stereo]``: ``{"headset", "eye_width", "ipd", "reuse", "first"}``, or None for one
+    #: view
     stereo: dict | None = None
 
     @property
@@ -221,12 +224,13 @@ def parse_config(data: dict, *, base_dir: str = ".", source: str = "<config>",
 
 
 def _stereo(ctx: TableContext, table: Any) -> dict | None:
-    """The ``[stereo]`` table: a headset (or None), the eye buffer's width (None: the film's)
-    and the IPD (the headset's, else 63 mm)."""
+    """The ``[stereo]`` table: a headset (or None), the eye buffer's width (None: the film's),
+    the IPD (the headset's, else 63 mm), whether the second eye reuses the first's samples
+    and which eye goes first."""
     if table is None:
         return None
     table = dict(ctx.table("stereo", table))
-    ctx.known("stereo", table, ("headset", "eye_width", "ipd"))
+    ctx.known("stereo", table, ("headset", "eye_width", "ipd", "reuse", "first_eye"))
     name = None
     if "headset" in table:
         from .headsets import HEADSETS, headset
@@ -235,7 +239,10 @@ def _stereo(ctx: TableContext, table: Any) -> dict | None:
     width = table.get("eye_width")
     return {"headset": name, "ipd": ctx.number("stereo.ipd", ipd, 0.0, lo_open=True),
             "eye_width": None if width is None else ctx.integer("stereo.eye_width", width, 8,
-                                                                16384)}
+                                                                16384),
+            "reuse": ctx.boolean("stereo.reuse", table.get("reuse", True)),
+            "first": ctx.string("stereo.first_eye", table.get("first_eye", "left"),
+                                ("left", "right"))}
 
 
 def _foveated(ctx: TableContext, table: Any) -> dict:

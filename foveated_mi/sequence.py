@@ -156,7 +156,8 @@ def _eyes_renderer(cfg: SequenceConfig, scene, fr):
         rig = headset(st["headset"]).rig(width, st["ipd"])
     else:
         rig = StereoRig(frustum_of(head), ipd=st["ipd"], width=width)
-    stereo = Stereo(scene, fr.integrator, rig)
+    stereo = Stereo(scene, fr.integrator, rig, reuse=st.get("reuse", True),
+                    first=st.get("first", "left"))
 
     def render(cfg, i, scene, fr, out_dir, compare_full, video):
         from .io import encode_srgb8, write_png

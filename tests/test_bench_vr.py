@@ -120,8 +120,9 @@ def test_the_tables_carry_the_flicker_per_ring(bench):
 
 
 def test_a_headset_stereo_and_tracker_come_from_the_command_line(bench):
-    """--headset replaces the study's display by the headset's; --one-eye drops a stereo
-    study's second eye; --latency-ms and --noise-deg set the tracker; the study parses."""
+    """--headset replaces the study's display by the headset's; --no-reuse and --first-eye
+    say how the eyes render; --one-eye drops a stereo study's second eye; --latency-ms and
+    --noise-deg set the tracker; the study parses."""
     from foveated_mi.config import read_toml
     from foveated_mi.study import parse_study
     stereo = os.path.join(BENCH, "..", "configs", "studies", "vr_stereo.toml")
@@ -134,8 +135,13 @@ def test_a_headset_stereo_and_tracker_come_from_the_command_line(bench):
     spec = parse_study(d, base_dir=os.path.dirname(stereo))
     assert spec.perceptual["display"] == "htc_vive_pro"
     motion = spec.scenes[0].motion
-    assert motion["stereo"] == {"ipd": 0.063, "headset": "htc_vive_pro"}
+    assert motion["stereo"] == {"ipd": 0.063, "headset": "htc_vive_pro", "reuse": True,
+                                "first": "left"}
     assert motion["gaze_noise_deg"] == 0.5 and "rendered_gazes" in motion
+    args.no_reuse, args.first_eye = True, "right"
+    how = parse_study(bench.overridden(data, args), base_dir=os.path.dirname(stereo))
+    assert how.scenes[0].motion["stereo"]["reuse"] is False
+    assert how.scenes[0].motion["stereo"]["first"] == "right"
     args.one_eye = True
     one = parse_study(bench.overridden(data, args), base_dir=os.path.dirname(stereo))
     assert "stereo" not in one.scenes[0].motion and one.headset == "htc_vive_pro"

@@ -208,3 +208,13 @@ def test_a_stereo_sequence_writes_both_eyes_and_a_cut_resets_both(tmp_path, caps
                  "--compare-full"])
     err = capsys.readouterr().err
     assert code == 2 and len(err.strip().splitlines()) == 1 and "--compare-full" in err
+
+
+@pytest.mark.parametrize("line, key", [('reuse = "yes"', "stereo.reuse"),
+                                       ('first_eye = "middle"', "stereo.first_eye")])
+def test_bad_stereo_reuse_settings_are_one_line(tmp_path, capsys, line, key):
+    cfg_path = tmp_path / "eyes.toml"
+    cfg_path.write_text(CONFIG + f'\n[stereo]\neye_width = 24\n{line}\n')
+    code = main(["sequence", str(cfg_path), "--out", str(tmp_path / "out"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and key in err, err

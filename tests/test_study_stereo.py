@@ -86,9 +86,12 @@ def test_stereo_settings_reach_each_scene_s_motion():
     base = {"size": [24, 24], "scenes": [{"scene": "cornell-box"}], "uniform": {"spp": [1]},
             "motion": {"frames": 2}}
     spec = parse_study({**base, "viewer": {"fov": "sensor", "stereo": True, "ipd": 0.07}})
-    assert spec.scenes[0].motion["stereo"] == {"ipd": 0.07, "headset": None}
-    spec = parse_study({**base, "viewer": {"headset": "varjo_xr4", "stereo": True}})
-    assert spec.scenes[0].motion["stereo"] == {"ipd": 0.063, "headset": "varjo_xr4"}
+    assert spec.scenes[0].motion["stereo"] == {"ipd": 0.07, "headset": None, "reuse": True,
+                                               "first": "left"}
+    spec = parse_study({**base, "viewer": {"headset": "varjo_xr4", "stereo": True,
+                                           "reuse": False, "first_eye": "right"}})
+    assert spec.scenes[0].motion["stereo"] == {"ipd": 0.063, "headset": "varjo_xr4",
+                                               "reuse": False, "first": "right"}
     mono = parse_study({**base, "viewer": {"headset": "varjo_xr4"}})
     assert "stereo" not in mono.scenes[0].motion
 
@@ -99,6 +102,11 @@ def test_stereo_settings_reach_each_scene_s_motion():
     ({"viewer": {"fov": "sensor", "stereo": True, "ipd": 0.0}, "motion": {"frames": 2}},
      "viewer.ipd"),
     ({"viewer": {"fov": "sensor", "stereo": "yes"}, "motion": {"frames": 2}}, "viewer.stereo"),
+    ({"viewer": {"fov": "sensor", "reuse": False}, "motion": {"frames": 2}}, "viewer.reuse"),
+    ({"viewer": {"fov": "sensor", "stereo": True, "reuse": "no"}, "motion": {"frames": 2}},
+     "viewer.reuse"),
+    ({"viewer": {"fov": "sensor", "stereo": True, "first_eye": "middle"},
+      "motion": {"frames": 2}}, "viewer.first_eye"),
 ])
 def test_bad_stereo_tables_are_one_line(extra, key):
     with pytest.raises(ParameterError, match=key.replace(".", r"\.")) as e:

@@ -60,6 +60,8 @@ Layout (every key optional except ``scenes``)::
                                 #   at its own gaze (psnr_left/right, jod_video_left/right/min;
                                 #   the quality columns are the eyes' mean), the frame time
                                 #   both eyes together (foveated_mi.study.stereo)
+    reuse = true                #   the second eye reuses the first eye's samples (a foveal
+    first_eye = "left"          #   buffer's: the vr preset) and traces the rest
 
     [motion]                    # rows are sequences instead of frames of a still view
     frames = 45                 #   frames per sequence (>= 2), shown at fps
@@ -611,10 +613,15 @@ def _stereo(ctx: TableContext, table: Any, scenes: list, model) -> dict | None:
     own frustum at both eyes (``ipd`` in scene units, 63 mm by default or the headset's)."""
     table = {} if table is None else dict(table)
     if not ctx.boolean("viewer.stereo", table.get("stereo", False)):
-        if "ipd" in table:
-            raise ctx.error("viewer.ipd", table["ipd"], "viewer.stereo = true (the distance "
-                            "between two eyes)")
+        for key in ("ipd", "reuse", "first_eye"):
+            if key in table:
+                raise ctx.error(f"viewer.{key}", table[key], "viewer.stereo = true (it sets "
+                                "two eyes)")
         return None
+    reuse = ctx.boolean("viewer.reuse", table.get("reuse", True))
+    first = table.get("first_eye", "left")
+    if first not in ("left", "right"):
+        raise ctx.error("viewer.first_eye", first, "'left' or 'right'")
     ipd = ctx.number("viewer.ipd", table.get("ipd", 0.063 if model is None else model.ipd),
                      0.0, lo_open=True)
     for i, s in enumerate(scenes):
@@ -624,7 +631,8 @@ def _stereo(ctx: TableContext, table: Any, scenes: list, model) -> dict | None:
         if "file" in s.reference:
             raise ctx.error(f"scenes[{i}].reference.file", s.reference["file"],
                             "a rendered reference (each eye has its own) under viewer.stereo")
-    return {"ipd": float(ipd), "headset": None if model is None else model.name}
+    return {"ipd": float(ipd), "headset": None if model is None else model.name,
+            "reuse": reuse, "first": first}
 
 
 def _acuity_ppd(configs: list[dict], name: str | None, scenes: list) -> list[dict]:
@@ -677,7 +685,8 @@ def _viewer(ctx: TableContext, table: Any, fovea_deg, perceptual: dict) -> dict:
         return {}
     table = dict(ctx.table("viewer", table))
     ctx.known("viewer", table, ("fov", "display", "monitor", "gaze_latency_ms",
-                                "gaze_noise_deg", "headset", "eye_width", "stereo", "ipd"))
+                                "gaze_noise_deg", "headset", "eye_width", "stereo", "ipd",
+                                "reuse", "first_eye"))
     from ..perceptual import check_display
     if "headset" in table:            # a headset's eye: its buffer spans the sensor's view
         from ..headsets import headset

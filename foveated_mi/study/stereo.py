@@ -42,7 +42,7 @@ def stereo_rig(scene, stereo: dict) -> StereoRig:
     scene : mi.Scene
         The task's scene (its first sensor is the head).
     stereo : dict
-        ``motion["stereo"]``: ``{"ipd", "headset"}``.
+        ``motion["stereo"]``: ``{"ipd", "headset", "reuse", "first"}``.
 
     Returns
     -------
@@ -94,7 +94,9 @@ def _renderer(scene, task: dict, rig: StereoRig):
         from ..integrators.foveated import FoveatedIntegrator
         from ..stereo import Stereo
         integ = FoveatedIntegrator(nested=scene.integrator(), **task["options"], timing=True)
-        stereo = Stereo(scene, integ, rig)
+        how = task["motion"]["stereo"]
+        stereo = Stereo(scene, integ, rig, reuse=how.get("reuse", True),
+                        first=how.get("first", "left"))
 
         def render_foveated(gaze, eye_gazes=None):
             frame = stereo.render(tuple(gaze), seed=seed, spp=spp, eye_gazes=eye_gazes)

@@ -120,7 +120,9 @@ def reference_key(scene, variant: str) -> str:
     if scene.motion is not None and scene.motion["cameras"] is not None:
         key["cameras"] = scene.motion["cameras"]      # one reference per frame of the path
     if scene.motion is not None and scene.motion.get("stereo") is not None:
-        key["stereo"] = scene.motion["stereo"]        # one reference per eye
+        # One reference per eye (how the rows render both eyes changes none).
+        key["stereo"] = {k: v for k, v in scene.motion["stereo"].items()
+                         if k in ("ipd", "headset")}
     return _hash(key)
 
 
