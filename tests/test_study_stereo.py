@@ -209,3 +209,21 @@ def test_a_binocular_gaze_path_with_tracker_noise_is_one_line(tmp_path):
                                                       "path": "eyes.csv"}}},
                     base_dir=str(tmp_path))
     assert "\n" not in str(e.value)
+
+
+def test_how_the_eyes_share_samples_changes_only_the_foveated_rows_ids():
+    """A uniform row renders each eye alone: a study with reuse off resumes its rows from one
+    with reuse on; the foveated rows are new ones."""
+    from foveated_mi.study.tasks import expand_tasks
+    base = {"size": [24, 24], "scenes": [{"scene": "cornell-box"}], "motion": {"frames": 2},
+            "uniform": {"spp": [1], "denoise": [False], "history": [False, True]},
+            "foveated": {"configs": [{"preset": "vr"}]}}
+    ids = {}
+    for reuse in (True, False):
+        spec = parse_study({**base, "viewer": {"fov": "sensor", "stereo": True,
+                                               "reuse": reuse}})
+        ids[reuse] = {t["method"]: t["task_id"] for t in expand_tasks(spec, "llvm_ad_rgb")}
+    assert set(ids[True]) == {"foveated", "uniform", "uniform+history"}
+    assert ids[True]["foveated"] != ids[False]["foveated"]
+    for method in ("uniform", "uniform+history"):
+        assert ids[True][method] == ids[False][method]

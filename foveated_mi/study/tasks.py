@@ -148,6 +148,16 @@ def reference_task(scene, variant: str) -> dict:
             "stereo": None if scene.motion is None else scene.motion.get("stereo")}
 
 
+def _eyes_apart(ident: dict) -> dict:
+    """A scene's identity without how a stereo study's foveated rows share the eyes' samples
+    (``reuse``, ``first``): a uniform row's results do not depend on it."""
+    stereo = (ident.get("motion") or {}).get("stereo")
+    if not stereo:
+        return ident
+    kept = {k: v for k, v in stereo.items() if k not in ("reuse", "first")}
+    return {**ident, "motion": {**ident["motion"], "stereo": kept}}
+
+
 def expand_tasks(spec, variant: str, *, denoise_available: bool = True) -> list[dict]:
     """Every (scene, configuration, seed) of the study as a task dict, scene by scene,
     foveated configurations first (in TOML order), then the uniform baselines, each
@@ -163,6 +173,8 @@ def expand_tasks(spec, variant: str, *, denoise_available: bool = True) -> list[
                 "variant": variant, "repeats": spec.repeats, "warmup": spec.warmup,
                 "metrics": dict(spec.metrics), "perceptual": _perceptual(spec)}
         ident = scene.identity()
+        # A uniform row renders each eye alone, however the foveated rows share them.
+        uident = _eyes_apart(ident)
         hashed = _hashed_metrics(spec)
         for c in spec.foveated:
             config = {"method": "foveated", "options": c["given"], "spp": c["spp"],
@@ -182,7 +194,8 @@ def expand_tasks(spec, variant: str, *, denoise_available: bool = True) -> list[
                           "options": u["given"], "frames": u["frames"],
                           "full_options": u["options"], "integrator": scene.integrator}
                 for seed in seeds:
-                    tid = task_id(ident, method, u["options"], u["spp"], seed, variant, hashed)
+                    tid = task_id(uident, method, u["options"], u["spp"], seed, variant,
+                                  hashed)
                     tasks.append({**base, "kind": "foveated", "task_id": tid, "seed": seed,
                                   "method": method, "options": u["options"], "spp": u["spp"],
                                   "frames": u["frames"],
@@ -194,7 +207,7 @@ def expand_tasks(spec, variant: str, *, denoise_available: bool = True) -> list[
             config = {"method": method, "spp": u["spp"], "denoise": u["denoise"],
                       "integrator": scene.integrator}
             for seed in seeds:
-                tid = task_id(ident, method, {"denoise": u["denoise"]}, u["spp"], seed,
+                tid = task_id(uident, method, {"denoise": u["denoise"]}, u["spp"], seed,
                               variant, hashed)
                 tasks.append({**base, "kind": "uniform", "task_id": tid, "seed": seed,
                               "method": method, "options": {"denoise": u["denoise"]},
