@@ -424,8 +424,8 @@ class Stereo:
         self.order = (self.first, _other(self.first))
         second = self.views[self.order[1]].planner
         second.partner = self.views[self.first].planner if reuse else None
+        second.partner_sensor = self.sensors[self.first] if reuse else None
         self.views[self.first].planner.partner = None
-        self.views[self.first].planner.lends, second.lends = reuse, False
 
     def head_pose(self) -> mi.ScalarTransform4f:
         """The head's to-world transform, as the scene's sensor has it now."""

@@ -83,7 +83,7 @@ class _Samples:
     on: mi.Bool
     gb: GBuffer
     claimed: tuple | None = None             #: the cells at the other eye's points, whose
-    mixed: mi.Bool | None = None             #: samples whose value mixes surfaces (lent)
+    mixed: mi.Bool | None = None             #: the other eye's samples that mix surfaces
     other: ReprojectionMap | None = None     #: the other eye's samples standing for them
     launch: tuple | None = None              #: (reordered, sampling map, each sample's ray)
 
@@ -106,10 +106,10 @@ class Planner:
         self._samples_cache: _Samples | None = None
         #: Another view's planner whose samples of the same frame this one's reuse, where
         #: they saw the same diffuse surface (the second eye of a headset:
-        #: :class:`foveated_mi.stereo.Stereo`); its frame comes first. Foveal buffer only.
+        #: :class:`foveated_mi.stereo.Stereo`), and that view's sensor; its frame comes
+        #: first, and is rendered as it would be alone. Foveal buffer only.
         self.partner: Planner | None = None
-        #: Another view reuses this one's samples: they note which mix surfaces.
-        self.lends = False
+        self.partner_sensor: mi.Sensor | None = None
 
     def reset(self) -> None:
         """Forget the history (next frame starts fresh, as frame 0)."""
@@ -217,7 +217,7 @@ class Planner:
                 if sm.other is None:
                     sm.other = _buffer_space.partner_map(
                         gb, sm.on, partner, lay, width, height, claimed=sm.claimed,
-                        tolerance=hs.tolerance, mode=hs.reprojection)
+                        mixed=sm.mixed, tolerance=hs.tolerance, mode=hs.reprojection)
                 reproj, history = _buffer_space.borrow(reproj, history, sm.other, partner)
                 traced = sm.on & ~sm.other.hit
             timer.mark("sampling", reproj.hit, reproj.index, traced)
@@ -232,8 +232,7 @@ class Planner:
                          reprojection=reproj, reordered=ro, history=history,
                          filter_sampler=self._filter_sampler(sensor, settings.pixel_filter),
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=None, gaze=gaze,
-                         space=dataclasses.replace(space, rays=rays, traced=traced,
-                                                   mixed=sm.mixed))
+                         space=dataclasses.replace(space, rays=rays, traced=traced))
 
     def _samples(self, scene, sensor, lay, gaze: mi.Point2f, gaze_key: tuple,
                  partner: History | None, settings: PlanSettings, state: SceneState,
@@ -242,27 +241,25 @@ class Planner:
         gaze and the other eye's samples are those of the last frame; and whether reused."""
         ls = settings.launch
         key = (state.camera, state.scene, gaze_key, lay, settings.materials, width, height,
-               ls.reorder, ls.block_height, partner is not None, self.lends)
+               ls.reorder, ls.block_height, partner is not None)
         mark = None if partner is None else partner.position
         cached = self._samples_cache
         if cached is not None and cached.key == key and cached.partner is mark:
             return cached, True
         pixels, on = _buffer_space.sample_pixels(lay, gaze, width, height)
-        claimed = None
+        claimed = mixed = None
         if partner is not None:
-            # The cells sample where the other eye's samples lie.
+            # The cells sample where the other eye's samples lie, and none reads one whose
+            # value mixes surfaces.
             pixels, took, source = _buffer_space.toward(lay, pixels, partner,
                                                         _reproject.camera_state(sensor), gaze,
                                                         width, height)
             claimed = (took, source)
+            mixed = _buffer_space.mixed_samples(scene, self.partner_sensor, partner, width,
+                                                height, settings.history.tolerance)
         y = pixels // width
-        x = pixels - y * width
-        gb = _gbuffer.gbuffer_at(scene, sensor, x, y, width, height, on,
+        gb = _gbuffer.gbuffer_at(scene, sensor, pixels - y * width, y, width, height, on,
                                  materials=settings.materials, lobes=partner is not None)
-        # What another view reuses must stand for one point (footprint_edges).
-        mixed = _gbuffer.footprint_edges(scene, sensor, x, y, width, height, gb, on,
-                                         tolerance=settings.history.tolerance) \
-            if self.lends else None
         self._samples_cache = _Samples(key, mark, pixels, on, gb, claimed, mixed)
         return self._samples_cache, False
 
@@ -280,7 +277,8 @@ class Planner:
         """The other eye's history to reuse this frame (:attr:`partner`), or None: no
         partner, no history kept, none yet, or on other samples."""
         other = self.partner
-        if other is None or not settings.history.keep or other.history is None:
+        if other is None or self.partner_sensor is None or not settings.history.keep \
+                or other.history is None:
             return None
         return other.history if other.history.layout == lay else None
 
@@ -305,8 +303,7 @@ class Planner:
                                    position=gb.position if in_buffer else None,
                                    normal=gb.normal if in_buffer else None,
                                    gaze=plan.gaze if in_buffer else None,
-                                   pixels=plan.space.pixels if in_buffer else None,
-                                   mixed=plan.space.mixed if in_buffer else None)
+                                   pixels=plan.space.pixels if in_buffer else None)
         self.index += 1
 
     def _check_reset(self, scene: mi.Scene, state: SceneState, width: int, height: int) -> None:

@@ -82,9 +82,6 @@ class History:
     gaze: mi.Point2f | None = None
     #: each sample's film pixel (foveal buffer samples; None: kept on the film's pixels)
     pixels: mi.UInt32 | None = None
-    #: samples whose value mixes surfaces, which another view must not reuse (None: not
-    #: lent; :func:`~foveated_mi.frame.gbuffer.footprint_edges`)
-    mixed: mi.Bool | None = None
 
 
 class ReprojectionMap(NamedTuple):

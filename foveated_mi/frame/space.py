@@ -209,7 +209,6 @@ class BufferSpace(SampleSpace):
     on: mi.Bool
     rays: mi.UInt32
     traced: mi.Bool | None = None
-    mixed: mi.Bool | None = None     #: samples whose value mixes surfaces (another view's)
     kind = "buffer"
 
     @property

@@ -27,8 +27,8 @@ import numpy as np
 
 from ..stereo import EYES, EyeSensors, StereoRig, frustum_of
 from .results import STEREO_KEYS
-from .scoring import (UNIFORM_MODE, _camera_path, _flicker, _mode, _quality, _sequence_summary,
-                      _viewing, rendered_gazes)
+from .scoring import (UNIFORM_MODE, _camera_path, _flicker, _median, _mode, _quality,
+                      _sequence_summary, _viewing, rendered_gazes)
 
 __all__ = ["STEREO_KEYS", "stereo_rig", "stereo_reference", "stereo_sequence_row"]
 
@@ -87,7 +87,7 @@ def stereo_reference(scene, task: dict, frames) -> np.ndarray:
 def _renderer(scene, task: dict, rig: StereoRig):
     """``(render, eyes, integrator)``: ``render(gaze, eye_gazes=None)`` renders both eyes at
     the head's current pose, fixating the head's ``gaze`` (or each at its own of
-    ``eye_gazes``), and returns ``(images, time_ms, ray_fraction)``; ``eyes`` the
+    ``eye_gazes``), and returns ``(images, time_ms, ray_fraction, each eye's time_ms)``; ``eyes`` the
     :class:`EyeSensors` the frames use; ``integrator`` None for a uniform row."""
     spp, seed = task["spp"], task["seed"]
     if task["kind"] == "foveated":
@@ -104,8 +104,8 @@ def _renderer(scene, task: dict, rig: StereoRig):
                       np.array(frame.right, dtype=np.float32)]
             stats = [stereo.views[eye].stats for eye in EYES]
             render_foveated.modes.extend(s["trace_mode"] for s in stats)
-            return (images, sum(s["timings_ms"]["total"] for s in stats),
-                    float(np.mean([s["ray_fraction"] for s in stats])))
+            each = [s["timings_ms"]["total"] for s in stats]
+            return images, sum(each), float(np.mean([s["ray_fraction"] for s in stats])), each
         render_foveated.modes = []      # each eye's trace_mode, frame by frame
         return render_foveated, stereo.eyes, integ
     from ..baselines import render_uniform
@@ -116,7 +116,8 @@ def _renderer(scene, task: dict, rig: StereoRig):
         eyes.follow()
         runs = [render_uniform(scene, spp=spp, seed=seed + k, denoise=den, sensor=eyes[eye])
                 for k, eye in enumerate(EYES)]
-        return [r[0] for r in runs], sum(r[1]["time_ms"] for r in runs), 1.0
+        each = [r[1]["time_ms"] for r in runs]
+        return [r[0] for r in runs], sum(each), 1.0, each
     return render_baseline, eyes, None
 
 
@@ -146,7 +147,9 @@ def stereo_sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = F
         reference, (n,) + reference.shape[1:])
     render, eyes, integ = _renderer(scene, task, stereo_rig(scene, motion["stereo"]))
     times, rays, frames = _frames(scene, task, refs, render, eyes)
-    row = _sequence_summary(task, n, times, rays)
+    row = _sequence_summary(task, n, [t for t, _ in times], rays)
+    for e, eye in enumerate(EYES):         # each eye's own share (the first eye's: one alone)
+        row[f"time_{eye}_ms"] = _median([each[e] for _, each in times[1:]])
     modes = getattr(render, "modes", None)      # the row's time: the frames after the first
     row["trace_mode"] = _mode(modes[2:] or modes) if modes else UNIFORM_MODE
     if integ is not None:
@@ -166,7 +169,8 @@ def stereo_sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = F
 
 def _frames(scene, task: dict, refs: np.ndarray, render, eyes) -> tuple:
     """Each frame moved, both eyes fixated, rendered (with the rendered gaze) and scored at
-    their true gazes: ``(times, rays, frames)``, ``frames[eye]`` holding the eye's ``shown``
+    their true gazes: ``(times, rays, frames)``, ``times`` each frame's ``(both eyes, each
+    eye's)`` times, ``frames[eye]`` holding the eye's ``shown``
     (reference, image) display pairs, ``quality``, ``eccs`` and true ``gazes``."""
     from ..render import to_display
     motion, m = task["motion"], task["metrics"]
@@ -181,9 +185,9 @@ def _frames(scene, task: dict, refs: np.ndarray, render, eyes) -> tuple:
         for k in move(cameras) if cameras else range(len(gazes)):
             eyes.follow()
             truth = true_eyes[k] if true_eyes else eyes.gazes(tuple(gazes[k]))[0]
-            images, time_ms, ray_fraction = render(
+            images, time_ms, ray_fraction, each = render(
                 rendered[k], rendered_eyes[k] if rendered_eyes else None)
-            times.append(time_ms)
+            times.append((time_ms, each))
             rays.append(ray_fraction)
             for e, eye in enumerate(EYES):
                 eye_task = dict(task, gaze=list(truth[e]))
