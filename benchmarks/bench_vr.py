@@ -215,6 +215,36 @@ def speedup_table(sps: list[dict]) -> list[str]:
     return out
 
 
+def eyes_table(rows: list[dict], first: str, worse: str, alone: str) -> list[str]:
+    """Two eyes against one: each foveated row's both-eye time against the time its first eye
+    took, which renders its frame as it would alone (the other eye reuses its samples, never
+    the converse). The ratio is at equal per-eye quality: the one-eye curve (the first eye's
+    time and ``alone`` quality over the scene's foveated rows) read in log time at the row's
+    worse eye's ``worse``; a row outside that curve's range gives a bound."""
+    from foveated_mi.study.aggregate import aggregate
+    from foveated_mi.study.equal_time import speedup_over_seeds
+    fov = [r for r in rows if r["method"] == "foveated"
+           and math.isfinite(r.get(f"time_{first}_ms", math.nan))]
+    one = [dict(r, method="one eye", time_ms=r[f"time_{first}_ms"], **{worse: r[alone]})
+           for r in fov]
+    flip = {"=": "", ">": "≤", "<": "≥", "≠": "≠"}    # a speed-up's bound, the cost's converse
+    out = [f"| scene | configuration | both eyes ms | {first} eye alone ms | {worse} | "
+           f"{alone} | two eyes / one eye at equal quality |", "|---|---|---|---|---|---|---|"]
+    for scene in sorted({r["scene"] for r in fov}):
+        ones = aggregate([r for r in one if r["scene"] == scene])
+        for cell in aggregate([r for r in fov if r["scene"] == scene]):
+            sp = speedup_over_seeds(cell, ones, worse)
+            cost = [1.0 / x for x, _ in sp.per_seed if math.isfinite(x) and x > 0]
+            text = "-" if not cost else (
+                f"{flip[sp.relation]}×{np.mean(cost):.2f}"
+                + (f" ± {np.std(cost, ddof=1):.2f}" if len(cost) > 1 else "")
+                + f" ({', '.join(flip[r] + f'{1 / x:.2f}' for x, r in sp.per_seed if x > 0)})")
+            out.append(f"| {scene} | {label(cell)} | {_pm(cell, 'time_ms', '.0f')} | "
+                       f"{_pm(cell, f'time_{first}_ms', '.0f')} | {_pm(cell, worse)} | "
+                       f"{_pm(cell, alone)} | {text} |")
+    return out
+
+
 # ---------------------------------------------------------------------------------------------
 # pictures: seed 0 under the headset, the first scene
 # ---------------------------------------------------------------------------------------------
@@ -400,8 +430,21 @@ def main(argv=None) -> int:
                   "Speed-up at equal " + column + " against each uniform family (mean over "
                   "seeds; ± the spread of the per-seed ratios; per seed in brackets):", "",
                   *speedup_table(sps), ""]
-    eyes = ["jod_video", "jod_video_left", "jod_video_right", "psnr_left", "psnr_right"] \
-        if stereo else []
+    eyes = ["jod_video", "jod_video_left", "jod_video_right", "psnr_left", "psnr_right",
+            "time_left_ms", "time_right_ms"] if stereo else []
+    if stereo:
+        first = viewer.get("first_eye", "left")
+        worse, alone = ("jod_video_min", f"jod_video_{first}") if perceptual.available() \
+            else ("psnr_worse", f"psnr_{first}")
+        rows = [dict(r, psnr_worse=min(r["psnr_left"], r["psnr_right"])) for r in res.rows
+                if "psnr_left" in r]
+        lines += ["## Two eyes against one", "",
+                  f"Both eyes' time against the {first} eye's own (it renders first, as it "
+                  "would alone; the other eye "
+                  + ("reuses its samples" if viewer.get("reuse", True) else "traces its own")
+                  + "), at equal per-eye quality: the one-eye curve read at the worse eye's "
+                  f"`{worse}` (mean over seeds; per seed in brackets):", "",
+                  *eyes_table(rows, first, worse, alone), ""]
     lines += ["## Every cell", "", *cells_table(res.rows, list(conditions.values()) + eyes), "",
               "## Temporal instability", "",
               "Flicker of each cell (display values; the root mean square over frames and "

@@ -146,3 +146,24 @@ def test_a_headset_stereo_and_tracker_come_from_the_command_line(bench):
     one = parse_study(bench.overridden(data, args), base_dir=os.path.dirname(stereo))
     assert "stereo" not in one.scenes[0].motion and one.headset == "htc_vive_pro"
     assert data["viewer"]["stereo"] is True         # the study's own table is left as it was
+
+
+def test_two_eyes_are_read_against_the_first_eye_alone_at_equal_quality(bench):
+    """The one-eye curve is the first eye's time and quality over the foveated rows, read in
+    log time at the row's worse eye: a row whose worse eye matches a one-eye point costs
+    both eyes' time over that point's; one whose worse eye falls below the curve is a bound."""
+    def row(seed, spp, both, left, worse, alone):
+        return {"scene": "city", "method": "foveated", "seed": seed, "spp": spp, "frame": 16,
+                "config": json.dumps({"options": {"preset": "vr"}, "spp": spp}),
+                "time_ms": both, "time_left_ms": left, "time_right_ms": both - left,
+                "jod_video_min": worse, "jod_video_left": alone, "ray_fraction": 0.1,
+                "trace_mode": "traced"}
+    rows = [row(s, 1, 30.0, 17.0, 7.3, 7.3) for s in (0, 1)] + \
+        [row(s, 4, 50.0, 28.0, 8.1, 8.1) for s in (0, 1)] + \
+        [row(s, 2, 40.0, 22.0, 7.0, 7.7) for s in (0, 1)]
+    table = bench.eyes_table(rows, "left", "jod_video_min", "jod_video_left")
+    got = {line.split(" | ")[1]: line.split(" | ")[-1] for line in table[2:]}
+    assert got["vr 1 spp"].startswith(f"×{30 / 17:.2f} ± 0.00")
+    assert got["vr 4 spp"].startswith(f"×{50 / 28:.2f}")
+    # 7.0 lies below every one-eye point: one eye reaches it in at most 17 ms.
+    assert got["vr 2 spp"].startswith(f"≥×{40 / 17:.2f}")
