@@ -431,7 +431,8 @@ def main(argv=None) -> int:
                   "seeds; ± the spread of the per-seed ratios; per seed in brackets):", "",
                   *speedup_table(sps), ""]
     eyes = ["jod_video", "jod_video_left", "jod_video_right", "psnr_left", "psnr_right",
-            "time_left_ms", "time_right_ms"] if stereo else []
+            "psnr_fovea_left", "psnr_fovea_right", "psnr_periphery_left",
+            "psnr_periphery_right", "time_left_ms", "time_right_ms"] if stereo else []
     if stereo:
         first = viewer.get("first_eye", "left")
         worse, alone = ("jod_video_min", f"jod_video_{first}") if perceptual.available() \

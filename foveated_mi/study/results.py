@@ -68,8 +68,9 @@ def columns(extra: Iterable[str] = ()) -> list[str]:
 
 
 #: The per-eye columns of a stereo sequence's row (:mod:`foveated_mi.study.stereo`).
-STEREO_KEYS = ("psnr_left", "psnr_right", "jod_video_left", "jod_video_right", "jod_video_min",
-               "time_left_ms", "time_right_ms")
+STEREO_KEYS = ("psnr_left", "psnr_right", "psnr_fovea_left", "psnr_fovea_right",
+               "psnr_periphery_left", "psnr_periphery_right", "jod_video_left",
+               "jod_video_right", "jod_video_min", "time_left_ms", "time_right_ms")
 
 #: Columns read back as numbers by :func:`read_rows` (besides any ``*_ms`` column).
 NUMERIC_COLUMNS = frozenset(("seed", "theta", "sigma_p", "spp", "frame", "rays",

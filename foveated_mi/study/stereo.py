@@ -11,13 +11,17 @@ true one for the metrics.
 - A foveated row (and a uniform one with history) renders both eyes with one integrator, each
   eye a view with its own plan and history (:class:`foveated_mi.stereo.Stereo`); a uniform
   row renders each eye's sensor.
-- The right eye's seed is the left one's + 1: the eyes' noise is independent, as two cameras'
-  would be. A per-eye metric cannot see binocular rivalry.
+- The right eye's seed is the left one's + 1: where each eye traces its own rays, their
+  noise is independent, as two cameras' would be; where the second eye reuses the first's
+  samples (``[viewer] reuse``, the default), it is the same. A per-eye metric cannot see
+  binocular rivalry.
 - The row's time is both eyes' frame time together (the median over frames after the first);
   its rays are the eyes' mean fraction of one eye's film.
-- Its quality columns are the eyes' mean; ``psnr_left`` / ``psnr_right`` and, with the
-  perceptual extra, ``jod_video_left`` / ``jod_video_right`` / ``jod_video_min`` are each eye's
-  (:data:`STEREO_KEYS`).
+- Its quality columns are the eyes' mean; ``psnr_left`` / ``psnr_right`` (and their fovea
+  and periphery, ``psnr_fovea_left``, ...) and, with the perceptual extra,
+  ``jod_video_left`` / ``jod_video_right`` / ``jod_video_min`` are each eye's, as are
+  ``time_left_ms`` / ``time_right_ms`` (:data:`STEREO_KEYS`). The first eye renders as it
+  would alone (the other reuses its samples), so its time and scores are one eye's.
 """
 from __future__ import annotations
 
@@ -159,7 +163,8 @@ def stereo_sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = F
     for key in quality[EYES[0]][0]:             # nan (an empty region) stays nan
         row[key] = float(np.mean([q[key] for eye in EYES for q in quality[eye]]))
     for eye in EYES:
-        row[f"psnr_{eye}"] = float(np.mean([q["psnr"] for q in quality[eye]]))
+        for key in ("psnr", "psnr_fovea", "psnr_periphery"):
+            row[f"{key}_{eye}"] = float(np.mean([q[key] for q in quality[eye]]))
     flicker = [_flicker(task, frames[eye]["shown"], frames[eye]["eccs"]) for eye in EYES]
     row.update({key: float(np.mean([f[key] for f in flicker])) for key in flicker[0]})
     if task.get("jod"):
