@@ -21,9 +21,10 @@ as two integrators would keep them. A cut resets both histories (:meth:`Stereo.c
 samples, as the ``vr`` preset's). The first eye renders its frame; the second reprojects the
 first eye's samples of that frame into its own, by its history's rules (the plane test, so no
 disoccluded point; exclusive reads), and traces only the rest
-(:func:`foveated_mi.frame.buffer_space.partner_map`): what the first eye did not see (the
-crescents, :func:`crescent`), the sky, and surfaces whose BSDF has a glossy or delta lobe,
-whose radiance differs between the eyes. Where a sample is reused, both eyes show the same
+(:func:`foveated_mi.frame.buffer_space.partner_map`), where the first eye saw the very point
+(a shadow ray to its centre): it traces what the first eye did not see (the crescents,
+:func:`crescent`), the sky, and surfaces whose BSDF has a glossy or delta lobe, whose
+radiance differs between the eyes. Where a sample is reused, both eyes show the same
 estimate: their noise there is shared, not independent, which a per-eye metric cannot tell
 from independent noise (neither sees binocular rivalry). Reused values are constants to a
 gradient pass, as history is. Without reuse, or on the film's pixels, the eyes share nothing.
@@ -424,7 +425,6 @@ class Stereo:
         self.order = (self.first, _other(self.first))
         second = self.views[self.order[1]].planner
         second.partner = self.views[self.first].planner if reuse else None
-        second.partner_sensor = self.sensors[self.first] if reuse else None
         self.views[self.first].planner.partner = None
 
     def head_pose(self) -> mi.ScalarTransform4f:

@@ -436,8 +436,7 @@ def toward(lay: SampleLayout, pixels: mi.UInt32, partner: History, camera: Camer
 
 def partner_map(gb: GBuffer, on: mi.Bool, partner: History, lay: SampleLayout, width: int,
                 height: int, *, claimed: tuple[mi.Bool, mi.UInt32] | None = None,
-                mixed: mi.Bool | None = None, tolerance: float = 0.02,
-                mode: str = "exclusive") -> ReprojectionMap:
+                tolerance: float = 0.02, mode: str = "exclusive") -> ReprojectionMap:
     r"""The other eye's samples of this frame that stand for these samples (reuse between the
     eyes of :class:`foveated_mi.stereo.Stereo`): its history, reprojected by the rules of a
     frame's own (:func:`reprojection_map`: the plane test, so no disoccluded point, and
@@ -460,9 +459,6 @@ def partner_map(gb: GBuffer, on: mi.Bool, partner: History, lay: SampleLayout, w
     claimed : tuple of mi.Bool and mi.UInt32, optional
         The cells that took one of the other eye's points, and whose (:func:`toward`); None:
         every cell reads the sample it lands in, as from its history.
-    mixed : mi.Bool, optional
-        The other eye's samples whose value mixes surfaces (:func:`mixed_samples`): read by
-        none.
     partner : History
         The other eye's history after its frame (its camera, gaze, samples), on a layout
         equal to ``lay``.
@@ -492,46 +488,7 @@ def partner_map(gb: GBuffer, on: mi.Bool, partner: History, lay: SampleLayout, w
         m = ReprojectionMap(m.coords, dr.select(is_cell, agree & (count > 0), m.hit),
                             dr.select(is_cell, source, m.index),
                             dr.select(is_cell, agree, m.agree))
-    if mixed is not None:
-        # A value that mixes surfaces stands for no point this view sees.
-        m = m._replace(hit=m.hit & ~dr.gather(mi.Bool, mixed, m.index, m.hit))
     return m
-
-
-def mixed_samples(scene: mi.Scene, sensor: mi.Sensor, partner: History, width: int,
-                  height: int, tolerance: float) -> mi.Bool:
-    """The other eye's samples whose value mixes surfaces: their film filter's footprint, as
-    that eye saw it, straddles a silhouette
-    (:func:`~foveated_mi.frame.gbuffer.footprint_edges`, from ``sensor``, the other eye's).
-    Part one surface and part another, such a value stands for no point of this view: where
-    the silhouette lies elsewhere, its colour would bleed across. Cast here, by the eye that
-    reuses, so that the other eye's frame is what it would be alone.
-
-    Parameters
-    ----------
-    scene : mi.Scene
-        The scene.
-    sensor : mi.Sensor
-        The other eye's sensor, at this frame's pose.
-    partner : History
-        The other eye's history after its frame (its samples' pixels and G-buffer).
-    width, height : int
-        The film's size.
-    tolerance : float
-        The plane test's.
-
-    Returns
-    -------
-    mixed : mi.Bool
-        One entry per sample of the other eye.
-    """
-    from .gbuffer import footprint_edges
-    hit = dr.isfinite(partner.depth)
-    gb = GBuffer(partner.position, partner.normal, partner.depth, hit, None)
-    y = partner.pixels // width
-    on = partner.count > 0
-    return footprint_edges(scene, sensor, partner.pixels - y * width, y, width, height, gb, on,
-                           tolerance=tolerance)
 
 
 def borrow(own: ReprojectionMap, history: History | None, other: ReprojectionMap,

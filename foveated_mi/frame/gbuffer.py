@@ -101,50 +101,36 @@ def gbuffer_at(scene: mi.Scene, sensor: mi.Sensor, x: mi.UInt32, y: mi.UInt32, w
                    view_dependent=view_dependent)
 
 
-def footprint_edges(scene: mi.Scene, sensor: mi.Sensor, x: mi.UInt32, y: mi.UInt32,
-                    width: int, height: int, gb: GBuffer, active: mi.Bool, *,
-                    tolerance: float = 0.02) -> mi.Bool:
-    """The pixels whose traced value mixes surfaces: a ray through a corner of the film
-    filter's footprint about the pixel's centre (a square of half-width its radius, at most 1
-    pixel: a Gaussian's tails beyond two standard deviations weigh little) sees another
-    surface than the centre's ray: another plane (``tolerance`` of the distance), or the sky
-    where the centre sees a surface, or the converse. Such a value, part one surface and
-    part another, stands for no point that another view could reuse: where the silhouette
-    lies elsewhere (another eye), its colour would bleed across.
+def seen_from(scene: mi.Scene, points: mi.Point3f, origin: mi.Point3f, active: mi.Bool
+              ) -> mi.Bool:
+    """Whether each point is seen from ``origin`` (another eye's centre): nothing lies on the
+    segment between them, short of the point by a relative margin (float32 positions). A
+    plane test says that a point lies on the surface another view's sample lies on; this says
+    that the other view saw that point, not only its surface: at a silhouette the two differ
+    by a pixel.
 
     Parameters
     ----------
-    scene, sensor : mi.Scene, mi.Sensor
-        The scene and the frame's sensor.
-    x, y : mi.UInt32
-        Pixel coordinates, one pair per lane.
-    width, height : int
-        The film's size.
-    gb : GBuffer
-        The G-buffer of those pixels' centres (:func:`gbuffer_at`).
+    scene : mi.Scene
+        The scene.
+    points : mi.Point3f
+        Surface points.
+    origin : mi.Point3f
+        The other view's centre (one entry).
     active : mi.Bool
-        The lanes to test; the others are False.
-    tolerance : float, optional
-        The plane test's, as the reprojection's.
+        The points to test; the others are False.
 
     Returns
     -------
-    edges : mi.Bool
-        True where the footprint straddles an edge, one entry per lane.
+    seen : mi.Bool
+        One entry per point.
     """
-    r = min(float(sensor.film().rfilter().radius()), 1.0)
-    tol = dr.opaque(mi.Float, tolerance)
-    found = mi.Bool(False)
     with dr.suspend_grad():
-        for sx, sy in ((-r, -r), (r, -r), (-r, r), (r, r)):
-            pos = mi.Point2f((mi.Float(x) + 0.5 + sx) / width, (mi.Float(y) + 0.5 + sy) / height)
-            ray, _ = sensor.sample_ray(sensor.shutter_open(), 0.0, pos, mi.Point2f(0.5))
-            si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.Minimal, coherent=True,
-                                     active=active)
-            hit = si.is_valid() & active
-            off = dr.abs(dr.dot(mi.Vector3f(gb.normal), si.p - gb.position)) > tol * gb.depth
-            found |= (hit != gb.hit) | (hit & off)
-    return active & found
+        d = points - origin
+        dist = dr.norm(d)
+        ray = mi.Ray3f(origin + dr.zeros(mi.Point3f, dr.width(points)), d / dist)
+        ray.maxt = dist * (1.0 - 1e-4)
+        return active & ~scene.ray_test(ray, active)
 
 
 def surface_radiometry(scene: mi.Scene, si: mi.SurfaceInteraction3f, hit: mi.Bool

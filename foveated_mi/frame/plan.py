@@ -83,7 +83,6 @@ class _Samples:
     on: mi.Bool
     gb: GBuffer
     claimed: tuple | None = None             #: the cells at the other eye's points, whose
-    mixed: mi.Bool | None = None             #: the other eye's samples that mix surfaces
     other: ReprojectionMap | None = None     #: the other eye's samples standing for them
     launch: tuple | None = None              #: (reordered, sampling map, each sample's ray)
 
@@ -106,10 +105,9 @@ class Planner:
         self._samples_cache: _Samples | None = None
         #: Another view's planner whose samples of the same frame this one's reuse, where
         #: they saw the same diffuse surface (the second eye of a headset:
-        #: :class:`foveated_mi.stereo.Stereo`), and that view's sensor; its frame comes
-        #: first, and is rendered as it would be alone. Foveal buffer only.
+        #: :class:`foveated_mi.stereo.Stereo`); its frame comes first, and is rendered as it
+        #: would be alone. Foveal buffer only.
         self.partner: Planner | None = None
-        self.partner_sensor: mi.Sensor | None = None
 
     def reset(self) -> None:
         """Forget the history (next frame starts fresh, as frame 0)."""
@@ -215,9 +213,12 @@ class Planner:
                 # The other eye's samples of this frame stand for those it saw alike; only
                 # the rest is traced.
                 if sm.other is None:
-                    sm.other = _buffer_space.partner_map(
+                    other = _buffer_space.partner_map(
                         gb, sm.on, partner, lay, width, height, claimed=sm.claimed,
-                        mixed=sm.mixed, tolerance=hs.tolerance, mode=hs.reprojection)
+                        tolerance=hs.tolerance, mode=hs.reprojection)
+                    # On the surface the other eye saw is not enough: it saw the point.
+                    sm.other = other._replace(hit=_gbuffer.seen_from(
+                        scene, gb.position, partner.camera.origin, other.hit))
                 reproj, history = _buffer_space.borrow(reproj, history, sm.other, partner)
                 traced = sm.on & ~sm.other.hit
             timer.mark("sampling", reproj.hit, reproj.index, traced)
@@ -247,20 +248,17 @@ class Planner:
         if cached is not None and cached.key == key and cached.partner is mark:
             return cached, True
         pixels, on = _buffer_space.sample_pixels(lay, gaze, width, height)
-        claimed = mixed = None
+        claimed = None
         if partner is not None:
-            # The cells sample where the other eye's samples lie, and none reads one whose
-            # value mixes surfaces.
+            # The cells sample where the other eye's samples lie.
             pixels, took, source = _buffer_space.toward(lay, pixels, partner,
                                                         _reproject.camera_state(sensor), gaze,
                                                         width, height)
             claimed = (took, source)
-            mixed = _buffer_space.mixed_samples(scene, self.partner_sensor, partner, width,
-                                                height, settings.history.tolerance)
         y = pixels // width
         gb = _gbuffer.gbuffer_at(scene, sensor, pixels - y * width, y, width, height, on,
                                  materials=settings.materials, lobes=partner is not None)
-        self._samples_cache = _Samples(key, mark, pixels, on, gb, claimed, mixed)
+        self._samples_cache = _Samples(key, mark, pixels, on, gb, claimed)
         return self._samples_cache, False
 
     @staticmethod
@@ -277,8 +275,7 @@ class Planner:
         """The other eye's history to reuse this frame (:attr:`partner`), or None: no
         partner, no history kept, none yet, or on other samples."""
         other = self.partner
-        if other is None or self.partner_sensor is None or not settings.history.keep \
-                or other.history is None:
+        if other is None or not settings.history.keep or other.history is None:
             return None
         return other.history if other.history.layout == lay else None
 
