@@ -44,8 +44,8 @@ frames after the first, on this machine, comparable within one run only.
 buffer and photometry: ``foveated-mi headsets``); with a stereo study
 (``configs/studies/vr_stereo.toml``, or ``--stereo``) both eyes render, the time is both eyes'
 and the headset condition judges the worse eye (``jod_video_min``); the second eye reuses the
-first eye's samples (``--no-reuse``: each eye traces all of its own; ``--first-eye right``:
-the right eye goes first); ``--one-eye`` runs its left eye alone, for two eyes against one. ``--latency-ms`` and ``--noise-deg`` set the eye
+first eye's samples (``--reuse periphery``: its disc traced; ``--reuse none``: each eye
+traces all of its own; ``--first-eye right``: the right eye goes first); ``--one-eye`` runs its left eye alone, for two eyes against one. ``--latency-ms`` and ``--noise-deg`` set the eye
 tracker (``[viewer] gaze_latency_ms``, ``gaze_noise_deg``).
 
 ``--study`` runs another study file of the same shape (``configs/studies/vr_10ppd.toml``: the
@@ -101,8 +101,8 @@ def overridden(data: dict, a) -> dict:
         viewer["eye_width"] = a.eye_width
     if flag("stereo"):
         viewer["stereo"] = True
-    if flag("no_reuse"):        # each eye traces all of its samples
-        viewer["reuse"] = False
+    if flag("reuse"):           # how the second eye reuses the first eye's samples
+        viewer["reuse"] = {"all": True, "periphery": "periphery", "none": False}[a.reuse]
     if flag("first_eye"):
         viewer["first_eye"] = a.first_eye
     if flag("one_eye"):         # the left eye alone, for two eyes against one
@@ -362,8 +362,9 @@ def main(argv=None) -> int:
                     "judges the worse eye's video JOD (jod_video_min), the time is both eyes'")
     ap.add_argument("--noise-deg", type=float, default=None, dest="noise_deg",
                     help="the eye tracker's jitter in degrees (viewer.gaze_noise_deg)")
-    ap.add_argument("--no-reuse", action="store_true", dest="no_reuse",
-                    help="a stereo study's second eye traces all of its samples")
+    ap.add_argument("--reuse", choices=("all", "periphery", "none"), default=None,
+                    help="what a stereo study's second eye reuses of the first eye's samples "
+                    "(default all; periphery: its disc traced; none: it traces every sample)")
     ap.add_argument("--first-eye", choices=("left", "right"), default=None, dest="first_eye",
                     help="the eye rendered first, whose samples the other reuses")
     ap.add_argument("--one-eye", action="store_true", dest="one_eye",
@@ -399,7 +400,7 @@ def main(argv=None) -> int:
                      ("latency-ms", a.latency_ms), ("noise-deg", a.noise_deg),
                      ("study", None if a.study == STUDY else os.path.relpath(a.study))) if v)
     cmd += (" --stereo" if a.stereo else "") + (" --one-eye" if a.one_eye else "") + \
-        (" --no-reuse" if a.no_reuse else "") + \
+        (f" --reuse {a.reuse}" if a.reuse else "") + \
         (f" --first-eye {a.first_eye}" if a.first_eye else "")
     viewer = data.get("viewer", {})
     camera = (f"the {viewer['headset']} headset's {'eyes' if stereo else 'left eye'} "
@@ -442,7 +443,8 @@ def main(argv=None) -> int:
         lines += ["## Two eyes against one", "",
                   f"Both eyes' time against the {first} eye's own (it renders first, as it "
                   "would alone; the other eye "
-                  + ("reuses its samples" if viewer.get("reuse", True) else "traces its own")
+                  + {True: "reuses its samples", "periphery": "reuses its samples outside "
+                     "its own disc", False: "traces its own"}[viewer.get("reuse", True)]
                   + "), at equal per-eye quality: the one-eye curve read at the worse eye's "
                   f"`{worse}` (mean over seeds; per seed in brackets):", "",
                   *eyes_table(rows, first, worse, alone), ""]

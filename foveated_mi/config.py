@@ -34,7 +34,8 @@ Layout (every key optional except ``scene``)::
     headset = "quest3"            # history: a headset's rig (foveated-mi headsets), else the
     eye_width = 320               # camera's own frustum at each eye; eye_width (default: the
     ipd = 0.063                   # film's width); a binocular_csv gaze gives each eye its own
-    reuse = true                  # the second eye reuses the first's samples (vr preset)
+    reuse = true                  # the second eye reuses the first's samples (vr preset;
+                                  # "periphery": its disc traced)
     first_eye = "left"            # the eye rendered first
     [output]
     dir = "out/seq"               # relative to the working directory; default out/<stem>
@@ -240,9 +241,15 @@ def _stereo(ctx: TableContext, table: Any) -> dict | None:
     return {"headset": name, "ipd": ctx.number("stereo.ipd", ipd, 0.0, lo_open=True),
             "eye_width": None if width is None else ctx.integer("stereo.eye_width", width, 8,
                                                                 16384),
-            "reuse": ctx.boolean("stereo.reuse", table.get("reuse", True)),
+            "reuse": _reuse(ctx, table.get("reuse", True)),
             "first": ctx.string("stereo.first_eye", table.get("first_eye", "left"),
                                 ("left", "right"))}
+
+
+def _reuse(ctx: TableContext, value: Any) -> bool | str:
+    if isinstance(value, bool) or value == "periphery":
+        return value
+    raise ctx.error("stereo.reuse", value, "true, false or \"periphery\"")
 
 
 def _foveated(ctx: TableContext, table: Any) -> dict:

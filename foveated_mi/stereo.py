@@ -24,7 +24,10 @@ disoccluded point; exclusive reads), and traces only the rest
 (:func:`foveated_mi.frame.buffer_space.partner_map`), where the first eye saw the very point
 (a shadow ray to its centre): it traces what the first eye did not see (the crescents,
 :func:`crescent`), the sky, and surfaces whose BSDF has a glossy or delta lobe, whose
-radiance differs between the eyes. Where a sample is reused, both eyes show the same
+radiance differs between the eyes. With ``reuse="periphery"`` the second eye traces its
+own disc too: a reused disc pixel is the first eye's value of a point a sub-pixel off its
+own (measured: ``docs/results.md#two-eyes-in-a-headset``). Where a sample is reused, both
+eyes show the same
 estimate: their noise there is shared, not independent, which a per-eye metric cannot tell
 from independent noise (neither sees binocular rivalry). Reused values are constants to a
 gradient pass, as history is. Without reuse, or on the film's pixels, the eyes share nothing.
@@ -398,9 +401,10 @@ class Stereo:
         sensor's).
     fixation_distance : float, optional
         Where the eyes converge when the head's gaze ray meets nothing.
-    reuse : bool, optional
+    reuse : bool or str, optional
         The second eye reuses the first eye's samples where it sees the same diffuse surface
-        (module docstring).
+        (module docstring): True, or ``"periphery"`` (its disc traced: reused disc pixels are
+        the first eye's, resampled a sub-pixel off), or False.
     first : str, optional
         The eye rendered first, whose samples the other reuses: ``"left"`` or ``"right"``.
     """
@@ -415,8 +419,8 @@ class Stereo:
         self.fixation_distance = check_range("fixation distance", fixation_distance, 0.0,
                                              lo_open=True)
         self.first = check_choice("first eye", first, EYES)
-        if not isinstance(reuse, bool):
-            raise ParameterError("reuse", reuse, "True or False")
+        if not (isinstance(reuse, bool) or reuse == "periphery"):
+            raise ParameterError("reuse", reuse, "True, False or 'periphery'")
         self.reuse = reuse
         self.eyes = EyeSensors(scene, self.rig)
         self.head, self.sensors = self.eyes.head, self.eyes.sensors
@@ -425,6 +429,7 @@ class Stereo:
         self.order = (self.first, _other(self.first))
         second = self.views[self.order[1]].planner
         second.partner = self.views[self.first].planner if reuse else None
+        second.partner_disc = reuse is True
         self.views[self.first].planner.partner = None
 
     def head_pose(self) -> mi.ScalarTransform4f:

@@ -120,7 +120,7 @@ def test_the_tables_carry_the_flicker_per_ring(bench):
 
 
 def test_a_headset_stereo_and_tracker_come_from_the_command_line(bench):
-    """--headset replaces the study's display by the headset's; --no-reuse and --first-eye
+    """--headset replaces the study's display by the headset's; --reuse and --first-eye
     say how the eyes render; --one-eye drops a stereo study's second eye; --latency-ms and
     --noise-deg set the tracker; the study parses."""
     from foveated_mi.config import read_toml
@@ -138,9 +138,9 @@ def test_a_headset_stereo_and_tracker_come_from_the_command_line(bench):
     assert motion["stereo"] == {"ipd": 0.063, "headset": "htc_vive_pro", "reuse": True,
                                 "first": "left"}
     assert motion["gaze_noise_deg"] == 0.5 and "rendered_gazes" in motion
-    args.no_reuse, args.first_eye = True, "right"
+    args.reuse, args.first_eye = "periphery", "right"
     how = parse_study(bench.overridden(data, args), base_dir=os.path.dirname(stereo))
-    assert how.scenes[0].motion["stereo"]["reuse"] is False
+    assert how.scenes[0].motion["stereo"]["reuse"] == "periphery"
     assert how.scenes[0].motion["stereo"]["first"] == "right"
     args.one_eye = True
     one = parse_study(bench.overridden(data, args), base_dir=os.path.dirname(stereo))

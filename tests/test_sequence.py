@@ -210,7 +210,7 @@ def test_a_stereo_sequence_writes_both_eyes_and_a_cut_resets_both(tmp_path, caps
     assert code == 2 and len(err.strip().splitlines()) == 1 and "--compare-full" in err
 
 
-@pytest.mark.parametrize("line, key", [('reuse = "yes"', "stereo.reuse"),
+@pytest.mark.parametrize("line, key", [('reuse = "fovea"', "stereo.reuse"),
                                        ('first_eye = "middle"', "stereo.first_eye")])
 def test_bad_stereo_reuse_settings_are_one_line(tmp_path, capsys, line, key):
     cfg_path = tmp_path / "eyes.toml"

@@ -191,6 +191,18 @@ def test_the_second_eye_traces_only_what_it_does_not_borrow():
     assert (took & traced).sum() <= 0.05 * took.sum()
 
 
+def test_reuse_in_the_periphery_traces_the_second_eye_s_disc():
+    stereo = _rendered(_scene())
+    outside = _rendered(_scene(), reuse="periphery")
+    cells = stereo.views["right"].history.layout.cells
+    for s, disc_borrowed in ((stereo, True), (outside, False)):
+        took, _, _, on = _borrowed(s, "right")
+        assert took[:cells].sum() > 100
+        assert took[cells:].sum() > 20 if disc_borrowed else not took[cells:].any()
+        traced = np.array(s.views["right"].buffers["traced"], dtype=bool)
+        assert traced[cells:][on[cells:]].all() != disc_borrowed
+
+
 def test_the_first_eye_is_rendered_as_without_reuse():
     a, b = _rendered(_scene()), _rendered(_scene(), reuse=False)
     for s in (a, b):
@@ -201,7 +213,7 @@ def test_the_first_eye_is_rendered_as_without_reuse():
 
 @pytest.mark.parametrize("kwargs,match", [
     (dict(first="middle"), r"first eye = 'middle' is invalid"),
-    (dict(reuse="yes"), r"reuse = 'yes' is invalid"),
+    (dict(reuse="fovea"), r"reuse = 'fovea' is invalid"),
 ])
 def test_bad_input_gets_one_line(kwargs, match):
     scene = _scene()

@@ -103,7 +103,7 @@ def test_stereo_settings_reach_each_scene_s_motion():
      "viewer.ipd"),
     ({"viewer": {"fov": "sensor", "stereo": "yes"}, "motion": {"frames": 2}}, "viewer.stereo"),
     ({"viewer": {"fov": "sensor", "reuse": False}, "motion": {"frames": 2}}, "viewer.reuse"),
-    ({"viewer": {"fov": "sensor", "stereo": True, "reuse": "no"}, "motion": {"frames": 2}},
+    ({"viewer": {"fov": "sensor", "stereo": True, "reuse": "fovea"}, "motion": {"frames": 2}},
      "viewer.reuse"),
     ({"viewer": {"fov": "sensor", "stereo": True, "first_eye": "middle"},
       "motion": {"frames": 2}}, "viewer.first_eye"),

@@ -436,7 +436,8 @@ def toward(lay: SampleLayout, pixels: mi.UInt32, partner: History, camera: Camer
 
 def partner_map(gb: GBuffer, on: mi.Bool, partner: History, lay: SampleLayout, width: int,
                 height: int, *, claimed: tuple[mi.Bool, mi.UInt32] | None = None,
-                tolerance: float = 0.02, mode: str = "exclusive") -> ReprojectionMap:
+                disc: bool = True, tolerance: float = 0.02, mode: str = "exclusive"
+                ) -> ReprojectionMap:
     r"""The other eye's samples of this frame that stand for these samples (reuse between the
     eyes of :class:`foveated_mi.stereo.Stereo`): its history, reprojected by the rules of a
     frame's own (:func:`reprojection_map`: the plane test, so no disoccluded point, and
@@ -459,6 +460,8 @@ def partner_map(gb: GBuffer, on: mi.Bool, partner: History, lay: SampleLayout, w
     claimed : tuple of mi.Bool and mi.UInt32, optional
         The cells that took one of the other eye's points, and whose (:func:`toward`); None:
         every cell reads the sample it lands in, as from its history.
+    disc : bool, optional
+        Whether the disc's pixels read one too (else they are traced).
     partner : History
         The other eye's history after its frame (its camera, gaze, samples), on a layout
         equal to ``lay``.
@@ -476,6 +479,8 @@ def partner_map(gb: GBuffer, on: mi.Bool, partner: History, lay: SampleLayout, w
     keep = on & gb.hit
     if gb.view_dependent is not None:
         keep &= ~gb.view_dependent
+    if not disc:
+        keep &= dr.arange(mi.UInt32, lay.size) < lay.cells
     if claimed is None:
         m = reprojection_map(gb, keep, partner, lay, width, height, tolerance=tolerance,
                              mode=mode)

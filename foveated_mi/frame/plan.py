@@ -108,6 +108,8 @@ class Planner:
         #: :class:`foveated_mi.stereo.Stereo`); its frame comes first, and is rendered as it
         #: would be alone. Foveal buffer only.
         self.partner: Planner | None = None
+        #: The disc's pixels reuse the partner's too (else only the cells do).
+        self.partner_disc = True
 
     def reset(self) -> None:
         """Forget the history (next frame starts fresh, as frame 0)."""
@@ -215,7 +217,8 @@ class Planner:
                 if sm.other is None:
                     other = _buffer_space.partner_map(
                         gb, sm.on, partner, lay, width, height, claimed=sm.claimed,
-                        tolerance=hs.tolerance, mode=hs.reprojection)
+                        disc=self.partner_disc, tolerance=hs.tolerance,
+                        mode=hs.reprojection)
                     # On the surface the other eye saw is not enough: it saw the point.
                     sm.other = other._replace(hit=_gbuffer.seen_from(
                         scene, gb.position, partner.camera.origin, other.hit))

@@ -61,7 +61,8 @@ Layout (every key optional except ``scenes``)::
                                 #   the quality columns are the eyes' mean), the frame time
                                 #   both eyes together (foveated_mi.study.stereo)
     reuse = true                #   the second eye reuses the first eye's samples (a foveal
-    first_eye = "left"          #   buffer's: the vr preset) and traces the rest
+    first_eye = "left"          #   buffer's: the vr preset) and traces the rest; "periphery":
+                                #   its disc traced
 
     [motion]                    # rows are sequences instead of frames of a still view
     frames = 45                 #   frames per sequence (>= 2), shown at fps
@@ -618,7 +619,9 @@ def _stereo(ctx: TableContext, table: Any, scenes: list, model) -> dict | None:
                 raise ctx.error(f"viewer.{key}", table[key], "viewer.stereo = true (it sets "
                                 "two eyes)")
         return None
-    reuse = ctx.boolean("viewer.reuse", table.get("reuse", True))
+    reuse = table.get("reuse", True)
+    if not (isinstance(reuse, bool) or reuse == "periphery"):
+        raise ctx.error("viewer.reuse", reuse, "true, false or \"periphery\"")
     first = table.get("first_eye", "left")
     if first not in ("left", "right"):
         raise ctx.error("viewer.first_eye", first, "'left' or 'right'")
