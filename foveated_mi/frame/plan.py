@@ -245,7 +245,7 @@ class Planner:
         gaze and the other eye's samples are those of the last frame; and whether reused."""
         ls = settings.launch
         key = (state.camera, state.scene, gaze_key, lay, settings.materials, width, height,
-               ls.reorder, ls.block_height, partner is not None)
+               ls.reorder, ls.block_height, partner is not None, self.partner_disc)
         mark = None if partner is None else partner.position
         cached = self._samples_cache
         if cached is not None and cached.key == key and cached.partner is mark:
