@@ -15,22 +15,23 @@ own film (:func:`eye_gaze`), so the two foveae fall on the same surface.
 
 :class:`Stereo` renders both eyes of one head pose with one call. Each eye is a view of the
 integrator of its own (:class:`foveated_mi.frame.view.Views`): its own gaze, plan and history,
-as two integrators would keep them. A cut resets both histories (:meth:`Stereo.cut`).
+as two integrators would keep them (unless the second reuses the first one's samples,
+below). A cut resets both histories (:meth:`Stereo.cut`).
 
 **Reuse between the eyes** (``reuse=True``, the default; a formation on the foveal buffer's
-samples, as the ``vr`` preset's). The first eye renders its frame; the second reprojects the
-first eye's samples of that frame into its own, by its history's rules (the plane test, so no
-disoccluded point; exclusive reads), and traces only the rest
-(:func:`foveated_mi.frame.buffer_space.partner_map`), where the first eye saw the very point
-(a shadow ray to its centre): it traces what the first eye did not see (the crescents,
-:func:`crescent`), the sky, and surfaces whose BSDF has a glossy or delta lobe, whose
-radiance differs between the eyes. With ``reuse="periphery"`` the second eye traces its
-own disc too: a reused disc pixel is the first eye's value of a point a sub-pixel off its
-own (measured: ``docs/results.md#two-eyes-in-a-headset``). Where a sample is reused, both
-eyes show the same
-estimate: their noise there is shared, not independent, which a per-eye metric cannot tell
-from independent noise (neither sees binocular rivalry). Reused values are constants to a
-gradient pass, as history is. Without reuse, or on the film's pixels, the eyes share nothing.
+samples, as the ``vr`` preset's). The first eye renders its frame as it would alone. The
+second reprojects the first eye's samples of that frame into its own, by its history's rules
+(the plane test, exclusive reads), reads them only where a shadow ray says the first eye saw
+the very point (:func:`foveated_mi.frame.buffer_space.partner_map`), and traces the rest:
+what the first eye did not see (the crescents, :func:`crescent`), the sky, and surfaces whose
+BSDF has a glossy or delta lobe, whose radiance differs between the eyes. With
+``reuse="periphery"`` it traces its own disc too: a reused disc pixel is the first eye's
+value of a point a sub-pixel off its own (measured: ``docs/results.md#two-eyes-in-a-headset``).
+Where a sample is reused, both eyes show the same estimate: their noise there is shared, not
+independent, which a per-eye metric cannot tell from independent noise (neither sees
+binocular rivalry). Reused values are constants to a gradient pass, as history is. Without
+reuse, or on the film's pixels, the eyes share nothing.
+
 Scene units are taken to be metres (the IPD's default, 63 mm, and the 2 m fixation).
 """
 from __future__ import annotations
