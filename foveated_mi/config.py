@@ -241,15 +241,18 @@ def _stereo(ctx: TableContext, table: Any) -> dict | None:
     return {"headset": name, "ipd": ctx.number("stereo.ipd", ipd, 0.0, lo_open=True),
             "eye_width": None if width is None else ctx.integer("stereo.eye_width", width, 8,
                                                                 16384),
-            "reuse": _reuse(ctx, table.get("reuse", True)),
+            "reuse": _reuse(ctx, "stereo.reuse", table.get("reuse", True)),
             "first": ctx.string("stereo.first_eye", table.get("first_eye", "left"),
                                 ("left", "right"))}
 
 
-def _reuse(ctx: TableContext, value: Any) -> bool | str:
-    if isinstance(value, bool) or value == "periphery":
-        return value
-    raise ctx.error("stereo.reuse", value, "true, false or \"periphery\"")
+def _reuse(ctx: TableContext, key: str, value: Any) -> bool | str:
+    """:func:`foveated_mi.stereo.check_reuse` under the file's name."""
+    from .stereo import check_reuse
+    try:
+        return check_reuse(key, value)
+    except ParameterError as e:
+        raise ctx.rename(e) from None
 
 
 def _foveated(ctx: TableContext, table: Any) -> dict:

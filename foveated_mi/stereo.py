@@ -45,8 +45,32 @@ import numpy as np
 
 from .validate import ParameterError, check_choice, check_int, check_point2, check_range
 
-#: The eyes, in the order :class:`Stereo` renders them.
+#: The eyes, in the order :class:`Stereo` renders them by default.
 EYES = ("left", "right")
+
+#: What the second eye may reuse of the first eye's samples (:class:`Stereo`'s ``reuse``):
+#: all it can, the cells outside its disc only, or nothing.
+REUSE = (True, "periphery", False)
+
+
+def check_reuse(name: str, value) -> bool | str:
+    """``value`` if it is one of :data:`REUSE`, else one line naming ``name``.
+
+    Parameters
+    ----------
+    name : str
+        The input's name in the message.
+    value : object
+        The value given.
+
+    Returns
+    -------
+    reuse : bool or str
+        ``value``.
+    """
+    if isinstance(value, bool) or value == "periphery":
+        return value
+    raise ParameterError(name, value, "true, false or 'periphery'")
 
 
 @dataclass(frozen=True)
@@ -420,9 +444,7 @@ class Stereo:
         self.fixation_distance = check_range("fixation distance", fixation_distance, 0.0,
                                              lo_open=True)
         self.first = check_choice("first eye", first, EYES)
-        if not (isinstance(reuse, bool) or reuse == "periphery"):
-            raise ParameterError("reuse", reuse, "True, False or 'periphery'")
-        self.reuse = reuse
+        self.reuse = check_reuse("reuse", reuse)
         self.eyes = EyeSensors(scene, self.rig)
         self.head, self.sensors = self.eyes.head, self.eyes.sensors
         self.views = {eye: integrator.views.bind(self.sensors[eye], v)

@@ -205,8 +205,6 @@ def test_reuse_in_the_periphery_traces_the_second_eye_s_disc():
 
 def test_the_first_eye_is_rendered_as_without_reuse():
     a, b = _rendered(_scene()), _rendered(_scene(), reuse=False)
-    for s in (a, b):
-        dr.sync_thread()
     np.testing.assert_array_equal(np.array(a.views["left"].buffers["image"]),
                                   np.array(b.views["left"].buffers["image"]))
 

@@ -356,7 +356,6 @@ def reprojection_map(gb: GBuffer, on: mi.Bool, history: History | None, lay: Sam
     return ReprojectionMap(uv, hits, j, agree)
 
 
-
 def _agrees(gb: GBuffer, history: History, j: mi.UInt32, inside: mi.Bool, tolerance: float
             ) -> tuple[mi.Bool, mi.Float]:
     """Whether each sample sees what ``history``'s sample ``j`` saw (where ``inside``): the
@@ -435,9 +434,8 @@ def toward(lay: SampleLayout, pixels: mi.UInt32, partner: History, camera: Camer
 
 
 def partner_map(gb: GBuffer, on: mi.Bool, partner: History, lay: SampleLayout, width: int,
-                height: int, *, claimed: tuple[mi.Bool, mi.UInt32] | None = None,
-                disc: bool = True, tolerance: float = 0.02, mode: str = "exclusive"
-                ) -> ReprojectionMap:
+                height: int, claimed: tuple[mi.Bool, mi.UInt32], *, disc: bool = True,
+                tolerance: float = 0.02, mode: str = "exclusive") -> ReprojectionMap:
     r"""The other eye's samples of this frame that stand for these samples (reuse between the
     eyes of :class:`foveated_mi.stereo.Stereo`): its history, reprojected by the rules of a
     frame's own (:func:`reprojection_map`: the plane test, so no disoccluded point, and
@@ -457,9 +455,8 @@ def partner_map(gb: GBuffer, on: mi.Bool, partner: History, lay: SampleLayout, w
     gb, on : GBuffer, mi.Bool
         These samples' G-buffer (with ``view_dependent``: cast with ``lobes=True``) and which
         are on.
-    claimed : tuple of mi.Bool and mi.UInt32, optional
-        The cells that took one of the other eye's points, and whose (:func:`toward`); None:
-        every cell reads the sample it lands in, as from its history.
+    claimed : tuple of mi.Bool and mi.UInt32
+        The cells that took one of the other eye's points, and whose (:func:`toward`).
     disc : bool, optional
         Whether the disc's pixels read one too (else they are traced).
     partner : History
@@ -479,21 +476,14 @@ def partner_map(gb: GBuffer, on: mi.Bool, partner: History, lay: SampleLayout, w
     keep = on & gb.hit
     if gb.view_dependent is not None:
         keep &= ~gb.view_dependent
-    if not disc:
-        keep &= dr.arange(mi.UInt32, lay.size) < lay.cells
-    if claimed is None:
-        m = reprojection_map(gb, keep, partner, lay, width, height, tolerance=tolerance,
-                             mode=mode)
-    else:
-        is_cell = dr.arange(mi.UInt32, lay.size) < lay.cells
-        m = reprojection_map(gb, keep & ~is_cell, partner, lay, width, height,
-                             tolerance=tolerance, mode=mode)
-        took, source = claimed
-        agree, count = _agrees(gb, partner, source, keep & is_cell & took, tolerance)
-        m = ReprojectionMap(m.coords, dr.select(is_cell, agree & (count > 0), m.hit),
-                            dr.select(is_cell, source, m.index),
-                            dr.select(is_cell, agree, m.agree))
-    return m
+    is_cell = dr.arange(mi.UInt32, lay.size) < lay.cells
+    # The disc's pixels by the history's rules (none without ``disc``), the cells by claim.
+    m = reprojection_map(gb, keep & ~is_cell if disc else mi.Bool(False), partner, lay, width,
+                         height, tolerance=tolerance, mode=mode)
+    took, source = claimed
+    agree, count = _agrees(gb, partner, source, keep & is_cell & took, tolerance)
+    return ReprojectionMap(m.coords, dr.select(is_cell, agree & (count > 0), m.hit),
+                           dr.select(is_cell, source, m.index), dr.select(is_cell, agree, m.agree))
 
 
 def borrow(own: ReprojectionMap, history: History | None, other: ReprojectionMap,

@@ -216,7 +216,7 @@ class Planner:
                 # the rest is traced.
                 if sm.other is None:
                     other = _buffer_space.partner_map(
-                        gb, sm.on, partner, lay, width, height, claimed=sm.claimed,
+                        gb, sm.on, partner, lay, width, height, sm.claimed,
                         disc=self.partner_disc, tolerance=hs.tolerance,
                         mode=hs.reprojection)
                     # On the surface the other eye saw is not enough: it saw the point.

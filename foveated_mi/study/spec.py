@@ -619,9 +619,11 @@ def _stereo(ctx: TableContext, table: Any, scenes: list, model) -> dict | None:
                 raise ctx.error(f"viewer.{key}", table[key], "viewer.stereo = true (it sets "
                                 "two eyes)")
         return None
-    reuse = table.get("reuse", True)
-    if not (isinstance(reuse, bool) or reuse == "periphery"):
-        raise ctx.error("viewer.reuse", reuse, "true, false or \"periphery\"")
+    from ..stereo import check_reuse
+    try:
+        reuse = check_reuse("viewer.reuse", table.get("reuse", True))
+    except ParameterError as e:
+        raise ctx.rename(e) from None
     first = table.get("first_eye", "left")
     if first not in ("left", "right"):
         raise ctx.error("viewer.first_eye", first, "'left' or 'right'")

@@ -91,8 +91,8 @@ def stereo_reference(scene, task: dict, frames) -> np.ndarray:
 def _renderer(scene, task: dict, rig: StereoRig):
     """``(render, eyes, integrator)``: ``render(gaze, eye_gazes=None)`` renders both eyes at
     the head's current pose, fixating the head's ``gaze`` (or each at its own of
-    ``eye_gazes``), and returns ``(images, time_ms, ray_fraction, each eye's time_ms)``; ``eyes`` the
-    :class:`EyeSensors` the frames use; ``integrator`` None for a uniform row."""
+    ``eye_gazes``), and returns ``(images, time_ms, ray_fraction, each eye's time_ms)``;
+    ``eyes`` the :class:`EyeSensors` the frames use; ``integrator`` None for a uniform row."""
     spp, seed = task["spp"], task["seed"]
     if task["kind"] == "foveated":
         from ..integrators.foveated import FoveatedIntegrator
