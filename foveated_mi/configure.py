@@ -35,6 +35,23 @@ def _frozen(v: Any) -> Any:
 
 # -- the passes before the trace, and the trace ------------------------------------------------
 
+def interleave_of(o: Options) -> int:
+    """``foveal_interleave``, which needs a history: a cell shows its history between its
+    turns. Without one, every cell is traced each frame (1).
+
+    Parameters
+    ----------
+    o : dict
+        The validated options.
+
+    Returns
+    -------
+    n : int
+        The interleave the plan and the formation use.
+    """
+    return int(o["foveal_interleave"]) if o["history"] else 1
+
+
 def sampling_settings(o: Options) -> SamplingSettings:
     """The sampling law's settings of validated options ``o``.
 
@@ -54,7 +71,7 @@ def sampling_settings(o: Options) -> SamplingSettings:
         acuity_floor=float(o["acuity_floor"]), edge_threshold=float(o["edge_threshold"]),
         edge_detector=o["edge_detector"], emission_edges=bool(o["emission_edges"]),
         map_seed=int(o["map_seed"]), polar_cells=o["polar_cells"],
-        viewer_ppd=float(o["viewer_ppd"]))
+        viewer_ppd=float(o["viewer_ppd"]), interleave=interleave_of(o))
 
 
 def frame_settings(o: Options) -> FrameSettings:
@@ -192,13 +209,14 @@ def foveal_settings(width: int, height: int, o: Options) -> FovealSettings:
         Its settings, with the samples' layout and the buffer's grid for this film.
     """
     offset = cell_offset(sampling_settings(o))
-    lay = _buffer_space.layout(width, height, o["theta"], o["ray_budget"], offset)
+    lay = _buffer_space.layout(width, height, o["theta"], o["ray_budget"], offset,
+                               interleave_of(o))
     grid = lay.grid if o["foveal_space"] == "buffer" else foveal_grid(
         width, height, float(o["ray_budget"]), fovea_radius(width, height, o["theta"]),
         offset)
     return FovealSettings(float(o["max_history"]), domain_settings(o), denoise_settings(o),
                           o["foveal_upsampling"], o["foveal_space"], o["foveal_disc"], lay,
-                          grid)
+                          grid, float(o["foveal_taa"]))
 
 
 def viewer_options(o: Options, sensor) -> Options:

@@ -402,6 +402,26 @@ _SCHEMA: tuple[Option, ...] = (
             "history's variance says a pixel is noisy, and it raised the fovea's PSNR by 2.0 dB "
             "on voxel-city and 3.9 dB on a path-traced interior at 1 spp, "
             "``docs/results.md#the-disc-around-the-gaze-denoised``)"),
+    Option("foveal_interleave", 1, "int", "n: the foveal buffer holds n x n times the cells "
+           "and a frame traces one in each n x n block of them, in turn (1: every cell)",
+           lo=1, hi=4,
+           doc="With ``formation = 'foveal'`` in ``foveal_space = 'buffer'``: the buffer "
+           "holds ``n * n`` times the cells that ``ray_budget`` leaves outside the disc, and "
+           "each frame traces one cell in each ``n`` x ``n`` block of them, in the order of "
+           "an ordered dither, so that a frame's rays still number ``ray_budget`` "
+           "(:func:`foveated_mi.frame.buffer_space.interleaved`). A cell not traced shows "
+           "its history; one without history (the first frames, a disocclusion) its "
+           "neighbours' values. A still view converges to the finer cells in ``n * n`` "
+           "frames; a moving one keeps what its history holds"),
+    Option("foveal_taa", 1.0, "float", "this frame's weight in what each cell of the foveal "
+           "buffer shows: 1 shows its denoised value; below 1, blended with what it showed "
+           "last frame, clamped to its neighbours' range", lo=0.0, hi=1.0, lo_open=True,
+           doc="With ``formation = 'foveal'`` in ``foveal_space = 'buffer'`` and ``history``: "
+           "each cell shows its denoised value blended with what it showed in the last frame "
+           "(reprojected, and clamped to the range of its 3 x 3 neighbours this frame, as "
+           "temporal anti-aliasing does), this frame weighing ``foveal_taa``, so that the "
+           "periphery's noise flickers less (:func:`foveated_mi.frame.foveal.stabilize`); 1 "
+           "shows the denoised value as it is"),
     Option("reconstruction", "sibson", "string", "interpolation of the sparse shading buffer "
            "(§3.4)", choices=lambda: reconstructions(),
            doc="Interpolation of the sparse shading buffer (§3.4); ``guided`` and "
@@ -613,6 +633,14 @@ def _check_combination(out: dict[str, Any]) -> None:
     if out["polar_cells"] != "log" and out["sampling_law"] != "polar":
         raise ParameterError("polar_cells", out["polar_cells"],
                              "'log' unless sampling_law = 'polar' (the only law with cells)")
+    if out["foveal_interleave"] > 1 and (out["formation"] != "foveal"
+                                         or out["foveal_space"] != "buffer"):
+        raise ParameterError("foveal_interleave", out["foveal_interleave"],
+                             "1 unless formation = 'foveal' and foveal_space = 'buffer'")
+    if out["foveal_taa"] < 1.0 and (out["formation"] != "foveal"
+                                    or out["foveal_space"] != "buffer"):
+        raise ParameterError("foveal_taa", out["foveal_taa"],
+                             "1 unless formation = 'foveal' and foveal_space = 'buffer'")
     if out["formation"] == "foveal":
         # Its cells are the pixels the polar law traces, and it keeps radiance throughout.
         if out["sampling_law"] != "polar":

@@ -159,14 +159,17 @@ def _look(origin):
     return mi.ScalarTransform4f().look_at(origin=origin, target=[0, 0, 0], up=[0, 1, 0])
 
 
-def test_a_moving_head_keeps_its_history_and_the_frame_is_no_worse_than_a_fresh_one():
+@pytest.mark.parametrize("interleave", [1, 2])
+def test_a_moving_head_keeps_its_history_and_the_frame_is_no_worse_than_a_fresh_one(interleave):
     """A camera orbiting 0.6 degrees a frame with the gaze drifting: the samples find their
     surfaces again (most read history), and the frame is no worse than a fresh integrator's
-    first frame of the same view (the history never costs quality)."""
+    first frame of the same view (the history never costs quality), with the cells traced
+    in turn too."""
     size = 64
     scene = _scene((size, size))
     params = mi.traverse(scene)
-    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr",
+                               foveal_interleave=interleave)
     for k in range(10):
         a = np.radians(0.6 * k)
         params["sensor.to_world"] = _look([3.9 * np.sin(a), 0.0, 3.9 * np.cos(a)])
@@ -176,7 +179,8 @@ def test_a_moving_head_keeps_its_history_and_the_frame_is_no_worse_than_a_fresh_
     hits = integ.stats["history_hits"]
     on = integ.buffer("sample_on")[0].astype(bool)
     assert hits > 0.6 * on.sum(), (hits, on.sum())
-    fresh = FoveatedIntegrator(nested=scene.integrator(), preset="vr", gaze=integ.gaze)
+    fresh = FoveatedIntegrator(nested=scene.integrator(), preset="vr", gaze=integ.gaze,
+                               foveal_interleave=interleave)
     first = np.array(mi.render(scene, integrator=fresh, seed=9))
     ref = to_display(np.array(mi.render(scene, integrator=scene.integrator(), spp=256,
                                         seed=99)))
@@ -184,10 +188,12 @@ def test_a_moving_head_keeps_its_history_and_the_frame_is_no_worse_than_a_fresh_
     assert gain > 0.0, gain
 
 
-def test_a_camera_cut_reads_no_history():
+@pytest.mark.parametrize("interleave", [1, 2])
+def test_a_camera_cut_reads_no_history(interleave):
     scene = _scene()
     params = mi.traverse(scene)
-    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr",
+                               foveal_interleave=interleave)
     for k in range(3):
         mi.render(scene, integrator=integ, seed=k)
     params["sensor.to_world"] = mi.ScalarTransform4f().look_at(

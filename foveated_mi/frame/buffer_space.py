@@ -19,6 +19,14 @@ straight onto the samples; the history lives on them, and it is reprojected samp
 sample (:func:`reprojection_map`). Neither the geometry, the traced values nor the history
 costs a film-sized pass.
 
+**Cells in turn.** With ``foveal_interleave = n`` the grid's cells are ``n`` times finer each
+way than the budget's, and a frame traces one cell in each ``n`` x ``n`` block of them
+(:func:`interleaved`), so its rays are spaced as the budget's cells; the others show their
+history, or their neighbours' values where they have none
+(:func:`foveated_mi.frame.foveal.fill_cells`). A still view resolves the finer cells after
+``n * n`` frames, each cell holding fewer samples; the G-buffer and the passes in the buffer
+cover every cell each frame.
+
 **Reprojection in the buffer.** A sample's primary hit :math:`x` (its direction on a miss)
 is projected with the previous camera to film position :math:`p'`. The previous sample that
 holds :math:`p'` (:func:`sample_at`: the previous disc's pixel when that pixel's centre lies
@@ -51,7 +59,7 @@ import mitsuba as mi
 
 from ..kernels.buffers import GBuffer
 from ..kernels.grid import Grid
-from ..kernels.polar import PolarGrid
+from ..kernels.polar import PolarGrid, polar_grid_of
 from .reproject import CameraState, History, ReprojectionMap, nearest_claim
 from .sampling import foveal_grid, fovea_radius
 
@@ -59,11 +67,30 @@ from .sampling import foveal_grid, fovea_radius
 NORMAL_AGREEMENT = 0.9
 
 
+#: The order in which ``foveal_interleave = n`` traces the cells of each ``n`` x ``n``
+#: block (angle, ring): ordered dither matrices, so that each frame's cells spread evenly
+#: and any run of frames covers the block evenly (Bayer's for 2 and 4).
+INTERLEAVE_ORDER = {
+    1: ((0,),),
+    2: ((0, 2), (3, 1)),
+    3: ((0, 7, 3), (6, 5, 2), (4, 1, 8)),
+    4: ((0, 8, 2, 10), (12, 4, 14, 6), (3, 11, 1, 9), (15, 7, 13, 5)),
+}
+
+
 @dataclass(frozen=True)
 class SampleLayout:
     """The samples of a film and its options: the grid's cells, then the disc's patch."""
     grid: PolarGrid
     side: int                  #: pixels across the square patch that holds the disc
+    #: ``n``: each frame traces one cell in each ``n`` x ``n`` block of the grid
+    #: (``foveal_interleave``); 1: every cell
+    interleave: int = 1
+
+    @property
+    def phases(self) -> int:
+        """Frames that trace every cell once (``interleave`` squared)."""
+        return self.interleave * self.interleave
 
     @property
     def cells(self) -> int:
@@ -81,7 +108,7 @@ class SampleLayout:
 
 
 def layout(width: int, height: int, theta: float, ray_budget: float,
-           offset: float = 0.0) -> SampleLayout:
+           offset: float = 0.0, interleave: int = 1) -> SampleLayout:
     """The samples of a ``width`` x ``height`` film for a disc of radius ``theta``.
 
     Parameters
@@ -97,6 +124,11 @@ def layout(width: int, height: int, theta: float, ray_budget: float,
     offset : float, optional
         The cells' offset in pixels (:func:`~foveated_mi.frame.sampling.cell_offset`; 0:
         log-polar), the sampling map's.
+    interleave : int, optional
+        ``n`` (``foveal_interleave``): the grid's cells are ``n`` times finer each way than
+        the budget's, and a frame traces one in each ``n`` x ``n`` block of them
+        (:func:`interleaved`), spaced as the budget's cells, so that a frame's rays still
+        number about ``ray_budget``.
 
     Returns
     -------
@@ -104,10 +136,47 @@ def layout(width: int, height: int, theta: float, ray_budget: float,
         The grid's cells outside the disc, then a square patch wide enough to hold the disc.
     """
     r0 = fovea_radius(width, height, theta)
+    grid = foveal_grid(width, height, float(ray_budget), r0, float(offset))
+    if interleave > 1:
+        # Cells n times finer each way: one turn of them is spaced as the budget's cells.
+        grid = polar_grid_of(width, height, r0, grid.pitch / interleave, offset=float(offset))
     # The disc's pixels are samples themselves: the grid's rings inside it would be copies.
-    grid = foveal_grid(width, height, float(ray_budget), r0, float(offset)).outside_fovea()
+    grid = grid.outside_fovea()
+    if grid.width % interleave:
+        # Angles in whole blocks, so that the blocks keep their order across angle 0.
+        grid = dataclasses.replace(grid, width=grid.width + interleave - grid.width % interleave)
     # Pixel centres within r0 of any gaze span at most floor(2 r0) + 1 columns.
-    return SampleLayout(grid, int(math.floor(2.0 * grid.fovea)) + 2)
+    return SampleLayout(grid, int(math.floor(2.0 * grid.fovea)) + 2, int(interleave))
+
+
+def interleaved(lay: SampleLayout, index: int) -> mi.Bool | None:
+    """The samples that frame ``index`` traces with ``foveal_interleave``: every disc pixel,
+    and the cells of the grid whose place in their ``n`` x ``n`` block
+    (:data:`INTERLEAVE_ORDER`) is the frame's turn. A cell not traced shows its history, or
+    its neighbours' value where it has none (:func:`foveated_mi.frame.foveal.fill_cells`).
+
+    Parameters
+    ----------
+    lay : SampleLayout
+        The samples.
+    index : int
+        The frame's index (its turn is ``index`` modulo ``n * n``).
+
+    Returns
+    -------
+    traced : mi.Bool or None
+        Per sample; None where ``n`` is 1 (all).
+    """
+    n = lay.interleave
+    if n == 1:
+        return None
+    order = mi.UInt32([v for row in INTERLEAVE_ORDER[n] for v in row])
+    idx = dr.arange(mi.UInt32, lay.size)
+    ring = idx // lay.grid.width
+    col = idx - ring * lay.grid.width
+    rank = dr.gather(mi.UInt32, order, (ring % n) * n + col % n)
+    turn = dr.opaque(mi.UInt32, index % lay.phases)
+    return (idx >= lay.cells) | (rank == turn)
 
 
 def _patch_origin(lay: SampleLayout, gaze: mi.Point2f) -> tuple[mi.Int32, mi.Int32]:
@@ -525,8 +594,12 @@ def borrow(own: ReprojectionMap, history: History | None, other: ReprojectionMap
             return mine
         return dr.select(keep, dr.gather(kind, getattr(history, name), own.index, keep), mine)
     base = history if history is not None else partner
+    shown = None
+    if partner.shown is not None and (history is None or history.shown is not None):
+        shown = read("shown", mi.Color3f)
     merged = dataclasses.replace(base, mean=read("mean", mi.Color3f),
-                                 count=read("count", mi.Float), moment2=read("moment2", mi.Float))
+                                 count=read("count", mi.Float), moment2=read("moment2", mi.Float),
+                                 shown=shown)
     n = dr.width(take)
     return ReprojectionMap(dr.select(take, other.coords, own.coords), take | keep,
                            dr.arange(mi.UInt32, n), own.agree), merged

@@ -227,7 +227,7 @@ def _form_frame(arrays: dict, key: dict) -> dict:
     h = arrays["history"]
     history = None if h is None else _reproject.History(
         mean=h["mean"], count=h["count"], moment2=h["moment2"], depth=None, camera=None,
-        width=key["width"], height=key["height"])
+        width=key["width"], height=key["height"], shown=h["shown"])
     inp = FormationInput(GBuffer(**arrays["gbuffer"]),
                          _reproject.ReprojectionMap(**arrays["reprojection"]), history,
                          key["width"], key["height"], key["spp"], arrays["fill_seed"],
@@ -284,7 +284,7 @@ class FrozenFormation:
             "shading": _fields(shading), "gbuffer": _fields(inp.gbuffer),
             "reprojection": _fields(inp.reprojection),
             "history": None if h is None else {"mean": h.mean, "count": h.count,
-                                               "moment2": h.moment2},
+                                               "moment2": h.moment2, "shown": h.shown},
             "fill_seed": _sampling.opaque_seed(inp.fill_seed),
             "emission_edges": inp.emission_edges, "gaze": inp.gaze,
             "space": inp.space.arrays(),

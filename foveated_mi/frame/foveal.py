@@ -88,6 +88,8 @@ class FovealSettings:
     layout: _buffer_space.SampleLayout
     #: the buffer's grid (without the rings inside the disc in ``buffer`` space)
     grid: PolarGrid
+    #: ``foveal_taa``: this frame's weight in what a cell shows (1: its denoised value)
+    taa: float = 1.0
 
 
 def foveal_buffer_grid(width: int, height: int, s: FovealSettings) -> PolarGrid:
@@ -184,6 +186,106 @@ def _disc_patch(resolved: Resolved, gb: GBuffer, index: mi.UInt32, on: mi.Bool, 
     res = Resolved(value, has, pr.count, dr.zeros(mi.Bool, side * side), pr.moment2)
     out = _denoise(res, pgb, Grid(side, side), s, grad_pass, on)
     return domain.to_radiance(out.image, pgb, s.domain, clamp=True)
+
+
+def fill_cells(res: Resolved, grid: Grid, radius: int, targets: mi.Bool | bool = True
+               ) -> Resolved:
+    r"""Each cell without a value given its neighbours' (``foveal_interleave``: a cell whose
+    turn it was not, with no history yet), before the denoiser, so that the denoiser sees a
+    whole grid: the tent-weighted mean of the values (and of the second moments) of the cells
+    that hold one within ``radius`` cells each way (wrapping in angle), counted as the
+    samples behind that mean, :math:`(\sum w n)^2 / \sum w^2 n`. Linear in the values, with
+    constant weights: a filled cell's gradient goes to the cells it read.
+
+    Parameters
+    ----------
+    res : Resolved
+        The cells: values (non-finite where none), mask, counts, second moments.
+    grid : Grid
+        The buffer's grid.
+    radius : int
+        Cells each way (an ``n`` x ``n`` interleave needs ``n // 2`` for every block of
+        ``2 * (n // 2) + 1`` cells to hold a cell of each turn).
+    targets : mi.Bool or bool, optional
+        The cells that may be filled (those on the film).
+
+    Returns
+    -------
+    res : Resolved
+        The cells with the holes filled (``resampled`` marks them).
+    """
+    idx = dr.arange(mi.UInt32, grid.size)
+    y = mi.Int32(idx // grid.width)
+    x = mi.Int32(idx) - y * grid.width
+    acc = dr.zeros(mi.Color3f, grid.size)
+    m2 = dr.zeros(mi.Float, grid.size)
+    wsum, wn, w2n = (dr.zeros(mi.Float, grid.size) for _ in range(3))
+    for dy in range(-radius, radius + 1):
+        for dx in range(-radius, radius + 1):
+            if dx == 0 and dy == 0:
+                continue
+            q, inside = grid.neighbour(x + dx, y + dy)
+            ok = inside & dr.gather(mi.Bool, res.mask, q, inside)
+            w = (1.0 - abs(dx) / (radius + 1.0)) * (1.0 - abs(dy) / (radius + 1.0))
+            n = dr.gather(mi.Float, res.count, q, ok)
+            acc += dr.select(ok, dr.gather(mi.Color3f, res.shading, q, ok) * w, 0.0)
+            m2 += dr.select(ok, dr.gather(mi.Float, res.moment2, q, ok) * w, 0.0)
+            wsum += dr.select(ok, w, 0.0)
+            wn += dr.select(ok, w * n, 0.0)
+            w2n += dr.select(ok, w * w * n, 0.0)
+    fill = ~res.mask & targets & (wsum > 0.0)
+    inv = dr.rcp(dr.select(fill, wsum, 1.0))
+    return Resolved(dr.select(fill, acc * inv, res.shading), res.mask | fill,
+                    dr.select(fill, wn * wn / dr.select(fill, w2n, 1.0), res.count),
+                    res.resampled | fill, dr.select(fill, m2 * inv, res.moment2))
+
+
+def stabilize(cells: mi.Color3f, valid: mi.Bool, grid: Grid, previous: mi.Color3f,
+              alpha: float) -> mi.Color3f:
+    """What each cell shows with ``foveal_taa``: its denoised value blended with what it
+    showed in the last frame (``previous``, reprojected; non-finite where none), that clamped
+    to the range of this frame's values in the cell's 3 x 3 neighbourhood, as temporal
+    anti-aliasing clamps its history (Karis 2014), so that a surface newly seen or newly lit
+    does not keep the old value. A cell changes by ``alpha`` of its new value a frame, so
+    its noise flickers less. Linear in ``cells`` with the clamp's bounds held: the gradient
+    of a loss reaches this frame's cells with weight ``alpha``, and not the last frame's
+    (a history, a constant).
+
+    Parameters
+    ----------
+    cells, valid : mi.Color3f, mi.Bool
+        The denoised cells, and those that hold a value.
+    grid : Grid
+        The buffer's grid.
+    previous : mi.Color3f
+        Each cell's reprojected shown value of the last frame.
+    alpha : float
+        This frame's weight, in ``(0, 1]``.
+
+    Returns
+    -------
+    shown : mi.Color3f
+        The cells as shown.
+    """
+    idx = dr.arange(mi.UInt32, grid.size)
+    y = mi.Int32(idx // grid.width)
+    x = mi.Int32(idx) - y * grid.width
+    here = dr.detach(cells)
+    lo, hi = mi.Color3f(here), mi.Color3f(here)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            if dx == 0 and dy == 0:
+                continue
+            q, inside = grid.neighbour(x + dx, y + dy)
+            cq = dr.gather(mi.Color3f, here, q, inside)
+            ok = inside & dr.gather(mi.Bool, valid, q, inside) & dr.isfinite(cq.x) & \
+                dr.isfinite(cq.y) & dr.isfinite(cq.z)
+            lo = dr.select(ok, dr.minimum(lo, cq), lo)
+            hi = dr.select(ok, dr.maximum(hi, cq), hi)
+    prev = dr.detach(previous)
+    use = valid & dr.isfinite(prev.x) & dr.isfinite(prev.y) & dr.isfinite(prev.z)
+    prev = dr.clip(dr.select(use, prev, 0.0), lo, hi)
+    return dr.select(use, dr.lerp(prev, cells, alpha), cells)
 
 
 def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, width: int,
@@ -309,6 +411,39 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
     return Formed(image, buffers, history)
 
 
+def _last_shown(inp: FormationInput, c: mi.UInt32) -> mi.Color3f | None:
+    """What each cell ``c`` showed in the last frame where it reads its history (non-finite
+    elsewhere; ``foveal_taa``); None without a history that kept it."""
+    h, rp = inp.history, inp.reprojection
+    if h is None or h.shown is None:
+        return None
+    hit = dr.gather(mi.Bool, rp.hit, c)
+    return dr.select(hit, dr.gather(mi.Color3f, h.shown, dr.gather(mi.UInt32, rp.index, c),
+                                    hit), dr.nan)
+
+
+def _disc_samples(resolved: Resolved, inp: FormationInput, s: FovealSettings,
+                  grad_pass: bool) -> tuple[mi.Bool, mi.Color3f, mi.Float]:
+    """Where each film pixel shows its own disc sample, that sample's value (denoised on
+    its square patch with ``foveal_disc = "denoised"``), and its weight across the seam."""
+    lay, on = s.layout, inp.space.on
+    nc = lay.cells
+    film = Grid.film(inp.width, inp.height)
+    idx, x, y = film.cells()
+    p = film.film_position(idx)
+    t = dr.clip((lay.grid.fovea - dr.norm(p - inp.gaze)) / SEAM, 0.0, 1.0)
+    k, in_disc = _buffer_space.disc_sample(lay, mi.Int32(x), mi.Int32(y), inp.gaze)
+    own = in_disc & (t > 0.0)
+    own &= dr.gather(mi.Bool, resolved.mask, k, own)
+    if s.disc == "denoised":
+        # The disc's samples through the denoiser, on their square patch.
+        patch = nc + dr.arange(mi.UInt32, lay.side * lay.side)
+        disc = _disc_patch(resolved, inp.gbuffer, patch, dr.gather(mi.Bool, on, patch),
+                           lay.side, s, grad_pass)
+        return own, dr.gather(mi.Color3f, disc, k - nc, own), t
+    return own, dr.gather(mi.Color3f, resolved.shading, k, own), t
+
+
 def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
                      timer: StageTimer, grad_pass: bool) -> Formed:
     """``foveal_space = "buffer"``: the history resolve on the buffer's samples, denoising
@@ -332,28 +467,22 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
     cgb = cgb._replace(hit=cgb.hit & has)
     cells = dr.select(has, domain.to_irradiance(cr.shading, cgb, d), dr.nan)
     res = Resolved(cells, has, cr.count, dr.zeros(mi.Bool, nc), cr.moment2)
+    if lay.interleave > 1:
+        # The cells not traced this frame and without history: their neighbours' values.
+        res = fill_cells(res, grid, lay.interleave // 2, dr.gather(mi.Bool, on, c))
+        has = res.mask
     timer.mark("reconstruct", res.shading, res.count, cgb.normal, cgb.position)
     # Denoising in the buffer (§3.5); each cell's albedo multiplied back before the warp:
     # there is no full-resolution albedo to take it from.
     out = _denoise(res, cgb, grid, s, grad_pass, dr.gather(mi.Bool, on, c))
     radiance = domain.to_radiance(out.image, cgb, d, clamp=True)
+    previous = _last_shown(inp, c) if s.taa < 1.0 else None
+    if previous is not None:
+        # What each cell showed last frame, blended in where it reads its history.
+        radiance = stabilize(radiance, has, grid, previous, s.taa)
     warped = warp(radiance, has, grid, inp.gaze, width, height)
     # The disc shows its own samples, blended into the warp across the seam.
-    film = Grid.film(width, height)
-    idx, x, y = film.cells()
-    p = film.film_position(idx)
-    t = dr.clip((grid.fovea - dr.norm(p - inp.gaze)) / SEAM, 0.0, 1.0)
-    k, in_disc = _buffer_space.disc_sample(lay, mi.Int32(x), mi.Int32(y), inp.gaze)
-    own = in_disc & (t > 0.0)
-    own &= dr.gather(mi.Bool, resolved.mask, k, own)
-    if s.disc == "denoised":
-        # The disc's samples through the denoiser, on their square patch.
-        patch = nc + dr.arange(mi.UInt32, lay.side * lay.side)
-        disc = _disc_patch(resolved, gb, patch, dr.gather(mi.Bool, on, patch), lay.side, s,
-                           grad_pass)
-        mine = dr.gather(mi.Color3f, disc, k - nc, own)
-    else:
-        mine = dr.gather(mi.Color3f, resolved.shading, k, own)
+    own, mine, t = _disc_samples(resolved, inp, s, grad_pass)
     image = dr.select(own, dr.lerp(warped, mine, t), warped)
     timer.mark("post", image)
     buffers = {"traced": shading.mask, "shading": resolved.shading,
@@ -363,6 +492,11 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
                "cell_mask": has, "filtered": out.filtered, "tonemapped": out.tonemapped,
                "image": image}
     history = {"mean": resolved.shading, "count": resolved.count, "moment2": resolved.moment2}
+    if s.taa < 1.0:
+        # The cells as shown (the disc's samples: their resolved values).
+        shown = mi.Color3f(dr.detach(resolved.shading))
+        dr.scatter(shown, dr.detach(radiance), c, has)
+        history["shown"] = shown
     return Formed(image, buffers, history)
 
 

@@ -84,7 +84,8 @@ class _Samples:
     gb: GBuffer
     claimed: tuple | None = None             #: the cells at the other eye's points, whose
     other: ReprojectionMap | None = None     #: the other eye's samples standing for them
-    launch: tuple | None = None              #: (reordered, sampling map, each sample's ray)
+    #: per turn of the interleave: (reordered, sampling map, each sample's ray)
+    launch: dict = dataclasses.field(default_factory=dict)
 
 
 class Planner:
@@ -189,7 +190,7 @@ class Planner:
         :attr:`partner`), the polar map and its launch."""
         ss, hs = settings.sampling, settings.history
         lay = _buffer_space.layout(width, height, ss.theta, ss.ray_budget,
-                                   _sampling.cell_offset(ss, sensor))
+                                   _sampling.cell_offset(ss, sensor), ss.interleave)
         gaze = _sampling.gaze_position(gaze_at, width, height)
         gaze_key = tuple(float(v) for v in gaze_at)
         partner = self._partner_history(lay, settings)
@@ -211,23 +212,22 @@ class Planner:
             self._gaze = gaze_key
             frame_seed = self._frame_seed(seed, cut, hs.keep)
             traced = sm.on
+            # With interleave, this frame's turn of the cells (the rest show their history).
+            turn = self.index % lay.phases
+            phase = _buffer_space.interleaved(lay, turn)
+            if phase is not None:
+                traced = traced & phase
             if partner is not None:
                 # The other eye's samples of this frame stand for those it saw alike; only
                 # the rest is traced.
-                if sm.other is None:
-                    other = _buffer_space.partner_map(
-                        gb, sm.on, partner, lay, width, height, sm.claimed,
-                        disc=self.partner_disc, tolerance=hs.tolerance,
-                        mode=hs.reprojection)
-                    # On the surface the other eye saw is not enough: it saw the point.
-                    sm.other = other._replace(hit=_gbuffer.seen_from(
-                        scene, gb.position, partner.camera.origin, other.hit))
-                reproj, history = _buffer_space.borrow(reproj, history, sm.other, partner)
-                traced = sm.on & ~sm.other.hit
+                reproj, history = self._borrow(scene, sm, partner, lay, hs, reproj, history,
+                                               width, height)
+                traced = traced & ~sm.other.hit
             timer.mark("sampling", reproj.hit, reproj.index, traced)
-            if sm.launch is None:
-                sm.launch = self._launch(sm.pixels, traced, width, height, settings.launch)
-            ro, smap, rays = sm.launch
+            if turn not in sm.launch:
+                sm.launch[turn] = self._launch(sm.pixels, traced, width, height,
+                                               settings.launch)
+            ro, smap, rays = sm.launch[turn]
             timer.mark("reorder", ro.wavefront, rays)
         return FramePlan(sensor=sensor, width=width, height=height, spp=spp, seed=frame_seed,
                          map_seed=ss.map_seed if ss.map_seed >= 0 else frame_seed,
@@ -237,6 +237,20 @@ class Planner:
                          filter_sampler=self._filter_sampler(sensor, settings.pixel_filter),
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=None, gaze=gaze,
                          space=dataclasses.replace(space, rays=rays, traced=traced))
+
+    def _borrow(self, scene, sm: _Samples, partner: History, lay, hs, reproj, history,
+                width: int, height: int):
+        """The frame's map and history with the other eye's samples that stand for these
+        (:func:`~.buffer_space.borrow`); which they are is kept with the samples."""
+        if sm.other is None:
+            gb = sm.gb
+            other = _buffer_space.partner_map(gb, sm.on, partner, lay, width, height,
+                                              sm.claimed, disc=self.partner_disc,
+                                              tolerance=hs.tolerance, mode=hs.reprojection)
+            # On the surface the other eye saw is not enough: it saw the point.
+            sm.other = other._replace(hit=_gbuffer.seen_from(
+                scene, gb.position, partner.camera.origin, other.hit))
+        return _buffer_space.borrow(reproj, history, sm.other, partner)
 
     def _samples(self, scene, sensor, lay, gaze: mi.Point2f, gaze_key: tuple,
                  partner: History | None, settings: PlanSettings, state: SceneState,

@@ -82,6 +82,8 @@ class History:
     gaze: mi.Point2f | None = None
     #: each sample's film pixel (foveal buffer samples; None: kept on the film's pixels)
     pixels: mi.UInt32 | None = None
+    #: what each sample showed, after the denoiser (``foveal_taa``; None: not kept)
+    shown: mi.Color3f | None = None
 
 
 class ReprojectionMap(NamedTuple):

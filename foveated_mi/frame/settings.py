@@ -32,6 +32,7 @@ class SamplingSettings:
     map_seed: int              #: the map's own seed (-1: the frame's)
     polar_cells: str = "log"   #: the ``polar`` law's cells: ``log`` or ``acuity``
     viewer_ppd: float = 0.0    #: pixels per degree of ``acuity`` cells (0: the sensor's)
+    interleave: int = 1        #: a frame traces one cell in each n x n block of the buffer
 
     @property
     def in_degrees(self) -> bool:
