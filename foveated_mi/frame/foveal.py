@@ -422,26 +422,38 @@ def _last_shown(inp: FormationInput, c: mi.UInt32) -> mi.Color3f | None:
                                     hit), dr.nan)
 
 
-def _disc_samples(resolved: Resolved, inp: FormationInput, s: FovealSettings,
-                  grad_pass: bool) -> tuple[mi.Bool, mi.Color3f, mi.Float]:
-    """Where each film pixel shows its own disc sample, that sample's value (denoised on
-    its square patch with ``foveal_disc = "denoised"``), and its weight across the seam."""
-    lay, on = s.layout, inp.space.on
-    nc = lay.cells
+def _disc_values(resolved: Resolved, inp: FormationInput, s: FovealSettings,
+                 grad_pass: bool) -> tuple[mi.Color3f, mi.Bool]:
+    """Each sample of the disc's square patch as the disc shows it: resolved, or through the
+    denoiser on the patch (``foveal_disc = "denoised"``), and with ``foveal_taa`` blended
+    with what it showed last frame; and which hold a value."""
+    lay = s.layout
+    patch = lay.cells + dr.arange(mi.UInt32, lay.side * lay.side)
+    on = dr.gather(mi.Bool, inp.space.on, patch)
+    if s.disc == "denoised":
+        values = _disc_patch(resolved, inp.gbuffer, patch, on, lay.side, s, grad_pass)
+    else:
+        values = dr.gather(mi.Color3f, resolved.shading, patch)
+    held = on & dr.gather(mi.Bool, resolved.mask, patch)
+    previous = _last_shown(inp, patch) if s.taa < 1.0 else None
+    if previous is not None:
+        values = stabilize(values, held, Grid(lay.side, lay.side), previous, s.taa)
+    return values, held
+
+
+def _disc_samples(values: mi.Color3f, held: mi.Bool, inp: FormationInput, s: FovealSettings
+                  ) -> tuple[mi.Bool, mi.Color3f, mi.Float]:
+    """Where each film pixel shows its own disc sample (one that ``held`` a value), that
+    sample's value (``values``, the patch's), and its weight across the seam."""
+    lay = s.layout
     film = Grid.film(inp.width, inp.height)
     idx, x, y = film.cells()
     p = film.film_position(idx)
     t = dr.clip((lay.grid.fovea - dr.norm(p - inp.gaze)) / SEAM, 0.0, 1.0)
     k, in_disc = _buffer_space.disc_sample(lay, mi.Int32(x), mi.Int32(y), inp.gaze)
     own = in_disc & (t > 0.0)
-    own &= dr.gather(mi.Bool, resolved.mask, k, own)
-    if s.disc == "denoised":
-        # The disc's samples through the denoiser, on their square patch.
-        patch = nc + dr.arange(mi.UInt32, lay.side * lay.side)
-        disc = _disc_patch(resolved, inp.gbuffer, patch, dr.gather(mi.Bool, on, patch),
-                           lay.side, s, grad_pass)
-        return own, dr.gather(mi.Color3f, disc, k - nc, own), t
-    return own, dr.gather(mi.Color3f, resolved.shading, k, own), t
+    own &= dr.gather(mi.Bool, held, k - lay.cells, own)
+    return own, dr.gather(mi.Color3f, values, k - lay.cells, own), t
 
 
 def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
@@ -482,7 +494,8 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
         radiance = stabilize(radiance, has, grid, previous, s.taa)
     warped = warp(radiance, has, grid, inp.gaze, width, height)
     # The disc shows its own samples, blended into the warp across the seam.
-    own, mine, t = _disc_samples(resolved, inp, s, grad_pass)
+    disc, held = _disc_values(resolved, inp, s, grad_pass)
+    own, mine, t = _disc_samples(disc, held, inp, s)
     image = dr.select(own, dr.lerp(warped, mine, t), warped)
     timer.mark("post", image)
     buffers = {"traced": shading.mask, "shading": resolved.shading,
@@ -493,9 +506,11 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
                "image": image}
     history = {"mean": resolved.shading, "count": resolved.count, "moment2": resolved.moment2}
     if s.taa < 1.0:
-        # The cells as shown (the disc's samples: their resolved values).
+        # What every sample showed: the cells after the denoiser, the disc's patch as shown.
         shown = mi.Color3f(dr.detach(resolved.shading))
         dr.scatter(shown, dr.detach(radiance), c, has)
+        dr.scatter(shown, dr.detach(disc), nc + dr.arange(mi.UInt32, lay.side * lay.side),
+                   held)
         history["shown"] = shown
     return Formed(image, buffers, history)
 
