@@ -6,6 +6,7 @@ from frame to frame).
 
     python benchmarks/bench_cell_prefilter.py [--scenes voxel-city staircase]
                                               [--size 640 360] [--spp 256] [--budget 0.1]
+                                              [--jod]
 
 For each scene: a converged reference (``--spp``, path depth 8, a 100-degree camera), the
 ``vr`` preset's log-polar grid for that film and ray budget with the gaze at the film's
@@ -13,6 +14,11 @@ centre, each cell's value from the reference both ways, one bilinear warp to the
 (:func:`foveated_mi.frame.foveal.warp`), and the periphery's error against the reference:
 PSNR of display values outside the full-resolution disc (and its seam), overall and in rings
 of film radius. No noise is involved: it is the best either way of filling the cells can do.
+
+``--jod`` (the ``perceptual`` extra) adds each warp's video JOD in a headset: FovVideoVDP on
+24 identical frames at 90 Hz against the reference's, fixated at the gaze, the film spanning
+the camera's 100 degrees on ``standard_hmd``, as a study's headset condition scores a still
+head: the most that the warp of these cells can score once noise is gone.
 """
 from __future__ import annotations
 
@@ -62,7 +68,22 @@ def cells_both_ways(reference: np.ndarray, grid, gaze, width: int, height: int):
     return centre, on, mean, held
 
 
-def measure(name: str, width: int, height: int, spp: int, budget: float) -> dict:
+#: Frames and rate of the still video ``--jod`` scores.
+JOD_FRAMES, JOD_FPS = 24, 90.0
+
+
+def video_jod(reference: np.ndarray, image: np.ndarray) -> float:
+    """The video JOD of ``image`` held still against ``reference`` (display values), in a
+    headset with the film across 100 degrees, fixated at the film's centre."""
+    from foveated_mi.perceptual import jod_video
+    ref = np.broadcast_to(reference, (JOD_FRAMES, *reference.shape))
+    test = np.broadcast_to(image, (JOD_FRAMES, *image.shape))
+    return jod_video(ref, test, fixations=(0.5, 0.5), fps=JOD_FPS, ppd=None,
+                     fov_horizontal=100.0, display="standard_hmd")
+
+
+def measure(name: str, width: int, height: int, spp: int, budget: float,
+            jod: bool = False) -> dict:
     """Both warps of one scene against its reference (module docstring)."""
     import mitsuba as mi
     from foveated_mi.frame.foveal import SEAM, warp
@@ -90,6 +111,8 @@ def measure(name: str, width: int, height: int, spp: int, budget: float) -> dict
             height, width, 3)
         shown = to_display(image)
         out[f"psnr_{key}"] = _psnr(shown[periphery], ref_d[periphery])
+        if jod:
+            out[f"jod_{key}"] = video_jod(ref_d, shown)
         out[f"rings_{key}"] = [_psnr(shown[(r > a) & (r <= b)], ref_d[(r > a) & (r <= b)])
                                for a, b in zip(rings[:-1], rings[1:])]
     return out
@@ -101,22 +124,32 @@ def main(argv=None) -> int:
                     choices=sorted(SCENES))
     ap.add_argument("--size", type=int, nargs=2, default=[640, 360])
     ap.add_argument("--spp", type=int, default=256)
-    ap.add_argument("--budget", type=float, default=0.1)
+    ap.add_argument("--budget", type=float, nargs="+", default=[0.1])
+    ap.add_argument("--jod", action="store_true",
+                    help="add each warp's still-video JOD in a headset (perceptual extra)")
     args = ap.parse_args(argv)
     import foveated_mi
+    from foveated_mi.perceptual import INSTALL_HINT, available
     foveated_mi.set_variant(None)
+    if args.jod and not available():
+        print(f"--jod needs the perceptual extra ({INSTALL_HINT})", file=sys.stderr)
+        return 2
+    jod_cols = " | JOD, centres | JOD, means" if args.jod else ""
     print("| scene | film | cells | periphery PSNR, cell centres | periphery PSNR, cell means |"
-          " rings (r0-2r0, 2r0-4r0, beyond): centres -> means |")
-    print("|---|---|---|---|---|---|")
+          f" rings (r0-2r0, 2r0-4r0, beyond): centres -> means{jod_cols} |")
+    print("|---|---|---|---|---|---|" + ("---|---|" if args.jod else ""))
     for name in args.scenes:
         if name == "staircase" and not os.path.exists(SCENES[name]):
             print(f"| {name} | skipped: scene not found at {SCENES[name]} |")
             continue
-        m = measure(name, *args.size, args.spp, args.budget)
-        rings = ", ".join(f"{a:.2f} -> {b:.2f}" for a, b in zip(m["rings_centre"],
-                                                                 m["rings_mean"]))
-        print(f"| {name} | {args.size[0]}x{args.size[1]}, {args.budget:g} of the rays | "
-              f"{m['cells']} | {m['psnr_centre']:.2f} dB | {m['psnr_mean']:.2f} dB | {rings} |")
+        for budget in args.budget:
+            m = measure(name, *args.size, args.spp, budget, args.jod)
+            rings = ", ".join(f"{a:.2f} -> {b:.2f}" for a, b in zip(m["rings_centre"],
+                                                                     m["rings_mean"]))
+            jods = f" | {m['jod_centre']:.2f} | {m['jod_mean']:.2f}" if args.jod else ""
+            print(f"| {name} | {args.size[0]}x{args.size[1]}, {budget:g} of the rays | "
+                  f"{m['cells']} | {m['psnr_centre']:.2f} dB | {m['psnr_mean']:.2f} dB | "
+                  f"{rings}{jods} |")
     return 0
 
 

@@ -57,3 +57,21 @@ def test_a_cell_s_mean_is_the_mean_of_the_pixels_it_holds(bench):
     np.testing.assert_allclose(got[held], sums[held] / counts[held],
                                atol=1e-6 * w * counts.max())
     assert np.array(valid)[held].all() and held.sum() > 100
+
+
+def test_jod_without_the_extra_says_so_in_one_line(bench, monkeypatch, capsys):
+    import foveated_mi.perceptual as perceptual
+    monkeypatch.setattr(perceptual, "available", lambda: False)
+    assert bench.main(["--scenes", "voxel-city", "--jod"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("--jod needs the perceptual extra") and "\n" not in err
+
+
+@pytest.mark.skipif(not __import__("foveated_mi.perceptual", fromlist=["x"]).available(),
+                    reason="needs the perceptual extra")
+def test_a_still_video_of_the_reference_scores_ten_and_a_blurred_one_less(bench):
+    rng = np.random.default_rng(0)
+    ref = rng.uniform(0.2, 0.8, (48, 64, 3)).astype(np.float32)
+    blurred = (ref + np.roll(ref, 1, axis=1) + np.roll(ref, 1, axis=0)) / 3.0
+    assert bench.video_jod(ref, ref) == pytest.approx(10.0, abs=1e-3)
+    assert bench.video_jod(ref, blurred) < 9.5
