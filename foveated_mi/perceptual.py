@@ -38,8 +38,8 @@ import numpy as np
 
 from .validate import ParameterError, check_point2, check_range
 
-__all__ = ["available", "display_names", "jod", "jod_video", "INSTALL_HINT", "DEFAULT_DISPLAY",
-           "COLUMNS", "columns"]
+__all__ = ["available", "axis_geometry", "display_names", "jod", "jod_video", "INSTALL_HINT",
+           "DEFAULT_DISPLAY", "COLUMNS", "columns"]
 
 INSTALL_HINT = "pip install -e '.[perceptual]'"
 DEFAULT_DISPLAY = "standard_fhd"
@@ -140,12 +140,50 @@ def _fov(width: int, ppd: float | None, fov_horizontal: float | None) -> float:
     return 2.0 * math.degrees(math.atan(width * math.tan(math.radians(0.5 / ppd))))
 
 
+def axis_geometry(width: int, height: int, fov: float, axis: tuple[float, float]):
+    """FovVideoVDP's flat display geometry of a ``width`` x ``height`` image ``fov`` degrees
+    across, with the view's optical axis at ``axis`` (normalised film position) rather than
+    the image's centre: each pixel's direction is measured from the axis, as through a
+    headset's off-axis eye buffer.
+
+    Parameters
+    ----------
+    width, height : int
+        The image's size.
+    fov : float
+        Degrees across the image.
+    axis : tuple of float
+        Where the optical axis meets the image.
+
+    Returns
+    -------
+    geometry : pyfvvdp.fvvdp_display_model.fvvdp_display_geometry
+        A geometry whose ``pix2view_direction`` is measured from the axis.
+    """
+    import torch
+    from pyfvvdp.fvvdp_display_model import fvvdp_display_geometry
+    ax, ay = check_point2("axis", axis)
+
+    class AxisGeometry(fvvdp_display_geometry):
+        def pix2view_direction(self, resolution_pix, x_pix, y_pix):
+            # The base class's flat projection, measured from the axis.
+            res = torch.as_tensor(resolution_pix, dtype=torch.float32)
+            x_m = (x_pix - res[0] * ax) * self.display_size_m[0] / res[0]
+            y_m = -(y_pix - res[1] * ay) * self.display_size_m[1] / res[1]
+            return torch.stack((torch.rad2deg(torch.atan(x_m / self.distance_m)),
+                                torch.rad2deg(torch.atan(y_m / self.distance_m))), dim=0)
+
+    return AxisGeometry((width, height), fov_horizontal=fov)
+
+
 @lru_cache(maxsize=8)
-def _metric(width: int, height: int, fov: float, display: str):
+def _metric(width: int, height: int, fov: float, display: str,
+            axis: tuple[float, float] = (0.5, 0.5)):
     import torch
     import pyfvvdp
     from pyfvvdp.fvvdp_display_model import fvvdp_display_geometry
-    geometry = fvvdp_display_geometry((width, height), fov_horizontal=fov)
+    geometry = fvvdp_display_geometry((width, height), fov_horizontal=fov) \
+        if tuple(axis) == (0.5, 0.5) else axis_geometry(width, height, fov, axis)
     return pyfvvdp.fvvdp(display_name=display, display_geometry=geometry, foveated=True,
                          quiet=True, device=torch.device("cpu")), torch
 
@@ -201,9 +239,29 @@ def jod(reference: np.ndarray, test: np.ndarray, *, gaze: tuple[float, float] = 
     return float(q)
 
 
+def _video_inputs(reference, test, fixations) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`jod_video`'s videos as float32 and its fixations one pair a frame, checked."""
+    ref = np.asarray(reference, dtype=np.float32)
+    tst = np.asarray(test, dtype=np.float32)
+    if ref.ndim != 4 or ref.shape[3] != 3 or ref.shape[0] < 2:
+        raise ParameterError("reference", ref.shape, "an (F, H, W, 3) video of at least 2 "
+                             "frames")
+    if tst.shape != ref.shape:
+        raise ParameterError("test", tst.shape, f"a video of the reference's shape {ref.shape}")
+    n = ref.shape[0]
+    fix = np.asarray(fixations, dtype=np.float64)
+    if fix.shape == (2,):
+        fix = np.tile(fix, (n, 1))
+    if fix.shape != (n, 2) or not np.all(np.isfinite(fix)):
+        raise ParameterError("fixations", f"<array of shape {fix.shape}>",
+                             f"finite (x, y) per frame, shape ({n}, 2)")
+    return ref, tst, fix
+
+
 def jod_video(reference: np.ndarray, test: np.ndarray, *, fixations, fps: float,
               ppd: float | None = 67.0, fov_horizontal: float | None = None,
-              display: str = DEFAULT_DISPLAY) -> float:
+              display: str = DEFAULT_DISPLAY, axis: tuple[float, float] = (0.5, 0.5)
+              ) -> float:
     """FovVideoVDP's JOD of the video ``test`` against ``reference``.
 
     Bad input, or a missing extra, raises :class:`ParameterError`.
@@ -222,6 +280,11 @@ def jod_video(reference: np.ndarray, test: np.ndarray, *, fixations, fps: float,
         centre.
     display : str, optional
         A pyfvvdp display model.
+    axis : tuple of float, optional
+        Where the view's optical axis meets the film (normalised film position): FovVideoVDP
+        measures each pixel's direction from it. The image's centre by default, as
+        FovVideoVDP places it; a headset's eye buffer has its axis off centre
+        (:attr:`foveated_mi.stereo.Frustum.axis`).
 
     Returns
     -------
@@ -231,26 +294,15 @@ def jod_video(reference: np.ndarray, test: np.ndarray, *, fixations, fps: float,
     if not available():
         raise ParameterError("jod_video", "pyfvvdp", f"pyfvvdp and torch installed "
                              f"({INSTALL_HINT})")
-    ref = np.asarray(reference, dtype=np.float32)
-    tst = np.asarray(test, dtype=np.float32)
-    if ref.ndim != 4 or ref.shape[3] != 3 or ref.shape[0] < 2:
-        raise ParameterError("reference", ref.shape, "an (F, H, W, 3) video of at least 2 "
-                             "frames")
-    if tst.shape != ref.shape:
-        raise ParameterError("test", tst.shape, f"a video of the reference's shape {ref.shape}")
+    ref, tst, fix = _video_inputs(reference, test, fixations)
     fps = check_range("fps", fps, 0.0, 1000.0, lo_open=True)
-    n, h, w = ref.shape[:3]
-    fix = np.asarray(fixations, dtype=np.float64)
-    if fix.shape == (2,):
-        fix = np.tile(fix, (n, 1))
-    if fix.shape != (n, 2) or not np.all(np.isfinite(fix)):
-        raise ParameterError("fixations", f"<array of shape {fix.shape}>",
-                             f"finite (x, y) per frame, shape ({n}, 2)")
+    h, w = ref.shape[1:3]
     display = check_display("display", display)
+    ax, ay = check_point2("axis", axis)
     fov = _fov(w, ppd, fov_horizontal)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
-        metric, torch = _metric(w, h, float(fov), display)
+        metric, torch = _metric(w, h, float(fov), display, (ax, ay))
     px = np.stack([np.clip(fix[:, 0] * w, 0.0, w - 1.0), np.clip(fix[:, 1] * h, 0.0, h - 1.0)],
                   -1)
     with torch.no_grad(), warnings.catch_warnings():

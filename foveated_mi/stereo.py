@@ -109,6 +109,14 @@ class Frustum:
         tl, tr, tu, td = self.tangents
         return (tr - tl) / (2.0 * (tl + tr)), (td - tu) / (2.0 * (tu + td))
 
+    @property
+    def axis(self) -> tuple[float, float]:
+        """Where the optical axis meets the eye buffer, as a normalised film position
+        (x from the left edge, y from the top): ``tan(left) / (tan(left) + tan(right))``
+        across, ``tan(up) / (tan(up) + tan(down))`` down."""
+        tl, tr, tu, td = self.tangents
+        return tl / (tl + tr), tu / (tu + td)
+
     def mirrored(self) -> Frustum:
         """The other eye's frustum: left and right swapped."""
         return Frustum(self.right, self.left, self.up, self.down)

@@ -75,3 +75,13 @@ def test_a_still_video_of_the_reference_scores_ten_and_a_blurred_one_less(bench)
     blurred = (ref + np.roll(ref, 1, axis=1) + np.roll(ref, 1, axis=0)) / 3.0
     assert bench.video_jod(ref, ref) == pytest.approx(10.0, abs=1e-3)
     assert bench.video_jod(ref, blurred) < 9.5
+
+
+def test_the_axis_bench_without_the_extra_says_so_in_one_line(monkeypatch, capsys):
+    monkeypatch.syspath_prepend(BENCH)
+    import bench_metric_axis
+    import foveated_mi.perceptual as perceptual
+    monkeypatch.setattr(perceptual, "available", lambda: False)
+    assert bench_metric_axis.main([]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("bench_metric_axis needs the perceptual extra") and "\n" not in err

@@ -102,3 +102,41 @@ def test_jod_video_as_the_pareto_axis_needs_motion(tmp_path):
         run_study(str(p), out=str(tmp_path / "o"), progress=False, echo=None)
     assert e.value.name == "metric" and "\n" not in str(e.value)
     assert ("[motion]" in str(e.value)) == perceptual.available()
+
+
+@needs_extra
+def test_the_axis_geometry_is_the_flat_one_at_the_centre_and_measures_from_its_axis():
+    import torch
+    from pyfvvdp.fvvdp_display_model import fvvdp_display_geometry
+    w, h, fov = 64, 48, 90.0
+    xx, yy = torch.meshgrid(torch.linspace(0.5, w - 0.5, w), torch.linspace(0.5, h - 0.5, h),
+                            indexing="xy")
+    res = torch.tensor((w, h))
+    base = fvvdp_display_geometry((w, h), fov_horizontal=fov).pix2view_direction(res, xx, yy)
+    centred = perceptual.axis_geometry(w, h, fov, (0.5, 0.5)).pix2view_direction(res, xx, yy)
+    # The same float32 arithmetic, in another order: a few roundings of angles below 45 deg.
+    np.testing.assert_allclose(centred.numpy(), base.numpy(), rtol=0, atol=45 * 1e-6)
+    off = perceptual.axis_geometry(w, h, fov, (0.625, 0.375))
+    at_axis = off.pix2view_direction(res, torch.tensor(0.625 * w), torch.tensor(0.375 * h))
+    np.testing.assert_array_equal(at_axis.numpy(), 0.0)
+    # A pixel as far left of the off-centre axis as one is of the centre sees as far.
+    d_off = off.pix2view_direction(res, torch.tensor(0.625 * w - 10), torch.tensor(0.375 * h))
+    d_base = fvvdp_display_geometry((w, h), fov_horizontal=fov).pix2view_direction(
+        res, torch.tensor(0.5 * w - 10), torch.tensor(0.5 * h))
+    np.testing.assert_allclose(d_off.numpy(), d_base.numpy(), rtol=0, atol=45 * 1e-6)
+
+
+def test_a_frustum_s_axis_sits_where_its_tangents_put_it():
+    from foveated_mi.stereo import Frustum
+    assert Frustum(40.0, 40.0, 30.0, 30.0).axis == pytest.approx((0.5, 0.5))
+    t = np.tan(np.radians([50.0, 30.0, 40.0, 45.0]))
+    assert Frustum(50.0, 30.0, 40.0, 45.0).axis == pytest.approx(
+        (t[0] / (t[0] + t[1]), t[2] / (t[2] + t[3])))
+
+
+@needs_extra
+def test_a_bad_axis_is_one_line():
+    ref = np.zeros((2, 8, 8, 3), np.float32)
+    with pytest.raises(ParameterError, match="axis") as e:
+        perceptual.jod_video(ref, ref, fixations=(0.5, 0.5), fps=30.0, axis=(np.nan, 0.5))
+    assert "\n" not in str(e.value)
