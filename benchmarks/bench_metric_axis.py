@@ -32,13 +32,11 @@ def measure(headset: str, width: int, frames: int, ref_spp: int, fps: float = 90
     from foveated_mi.integrators.foveated import FoveatedIntegrator
     from foveated_mi.perceptual import jod_video
     from foveated_mi.render import to_display
-    from foveated_mi.scenes import apply_camera, camera_of, load_scene
+    from foveated_mi.scenes import load_scene, scene_camera
     hs = get_headset(headset)
-    scene = load_scene("voxel-city", spp=1, integrator={"type": "path", "max_depth": 8})
-    camera, (w, h) = hs.eye_camera(camera_of(scene), width)
+    camera, (w, h) = hs.eye_camera(scene_camera("voxel-city"), width)
     scene = load_scene("voxel-city", width=w, height=h, spp=1,
-                       integrator={"type": "path", "max_depth": 8})
-    apply_camera(scene, camera)
+                       integrator={"type": "path", "max_depth": 8}, camera=camera)
     reference = to_display(np.array(mi.render(scene, spp=ref_spp, seed=1), dtype=np.float32))
     axis = hs.frustum.axis
     rows = []

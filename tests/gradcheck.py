@@ -174,3 +174,20 @@ def agreement(rev, fd) -> tuple[bool, str]:
     msg = (f"reverse {rev.mean():.5g} vs FD {fd.mean():.5g}: {diff / fd.mean() * 100:+.2f} %, "
            f"{abs(diff) / se if se > 0 else float('inf'):.2f} SE (SE {se / abs(fd.mean()) * 100:.2f} %)")
     return bool(ok), msg
+
+
+def forward_and_reverse(fn, x0: np.ndarray, dx: np.ndarray, g: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """``(J dx, J^T g)`` of a map ``fn`` of one ``mi.Color3f`` at ``x0`` (each a (3, n)
+    array): forward mode from tangent ``dx``, reverse mode from the loss ``<fn(x), g>``, for
+    a dot-product test of a linear step (``tolerances.transpose_bound``)."""
+    x = mi.Color3f(x0)
+    dr.enable_grad(x)
+    y = fn(x)
+    dr.set_grad(x, mi.Color3f(dx))
+    dr.forward_to(y)
+    jdx = np.array(dr.grad(y))
+    x = mi.Color3f(x0)
+    dr.enable_grad(x)
+    dr.backward_from(fn(x) * mi.Color3f(g))
+    return jdx, np.array(dr.grad(x))

@@ -188,21 +188,30 @@ def test_a_moving_head_keeps_its_history_and_the_frame_is_no_worse_than_a_fresh_
     assert gain > 0.0, gain
 
 
-@pytest.mark.parametrize("interleave", [1, 2])
-def test_a_camera_cut_reads_no_history(interleave):
+def _cut_frame(**options):
+    """Three frames of a still view, then the frame after a camera cut: its image and the
+    integrator."""
     scene = _scene()
     params = mi.traverse(scene)
-    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr",
-                               foveal_interleave=interleave)
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", **options)
     for k in range(3):
         mi.render(scene, integrator=integ, seed=k)
     params["sensor.to_world"] = mi.ScalarTransform4f().look_at(
         origin=[0, 0, 3.9], target=[0, 0, 10], up=[0, 1, 0])
     params.update()
-    mi.render(scene, integrator=integ, seed=5)
+    return np.array(mi.render(scene, integrator=integ, seed=5)), integ
+
+
+@pytest.mark.parametrize("interleave", [1, 2])
+def test_a_camera_cut_reads_no_history(interleave):
+    image, integ = _cut_frame(foveal_interleave=interleave)
     assert integ.stats["history_hits"] == 0
     on = integ.buffer("sample_on")[0].astype(bool)
     assert (integ.buffer("history_count")[0][on] <= 1.0).all()
+    # Nor does it show what the samples showed before the cut (foveal_taa).
+    blended, integ = _cut_frame(foveal_interleave=interleave, foveal_taa=0.3)
+    assert integ.stats["history_hits"] == 0
+    np.testing.assert_array_equal(blended, image)
 
 
 @pytest.mark.parametrize("bad,match", [

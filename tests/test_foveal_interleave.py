@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import tolerances
+from gradcheck import forward_and_reverse
 
 from foveated_mi.frame import buffer_space
 from foveated_mi.frame.foveal import SEAM, fill_cells
@@ -118,17 +119,7 @@ def test_the_fill_reverse_mode_is_the_transpose_of_its_forward_mode():
                        dr.zeros(mi.Bool, n), dr.zeros(mi.Float, n))
         return fill_cells(res, grid, 1).shading
 
-    x = mi.Color3f(x0)
-    dr.enable_grad(x)
-    y = run(x)
-    dr.set_grad(x, mi.Color3f(dx))
-    dr.forward_to(y)
-    jdx = np.array(dr.grad(y))
-    x = mi.Color3f(x0)
-    dr.enable_grad(x)
-    y = run(x)
-    dr.backward_from(y * mi.Color3f(g))
-    jtg = np.array(dr.grad(x))
+    jdx, jtg = forward_and_reverse(run, x0, dx, g)
     # Eight weighted terms, their sum and a product with the inverse weight sum.
     depth = 8 + 2
     lhs, rhs = tolerances.dot(jdx, g), tolerances.dot(dx, jtg)

@@ -51,6 +51,7 @@ A still camera over an unchanged scene with the gaze still maps every sample ont
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 
@@ -149,6 +150,13 @@ def layout(width: int, height: int, theta: float, ray_budget: float,
     return SampleLayout(grid, int(math.floor(2.0 * grid.fovea)) + 2, int(interleave))
 
 
+@functools.lru_cache(maxsize=None)
+def _interleave_order(n: int, variant: str) -> mi.UInt32:
+    """:data:`INTERLEAVE_ORDER`'s ``n`` x ``n`` block on the device, row by row (uploaded
+    once per variant, not every frame)."""
+    return mi.UInt32([v for row in INTERLEAVE_ORDER[n] for v in row])
+
+
 def interleaved(lay: SampleLayout, index: int) -> mi.Bool | None:
     """The samples that frame ``index`` traces with ``foveal_interleave``: every disc pixel,
     and the cells of the grid whose place in their ``n`` x ``n`` block
@@ -170,7 +178,7 @@ def interleaved(lay: SampleLayout, index: int) -> mi.Bool | None:
     n = lay.interleave
     if n == 1:
         return None
-    order = mi.UInt32([v for row in INTERLEAVE_ORDER[n] for v in row])
+    order = _interleave_order(n, mi.variant())
     idx = dr.arange(mi.UInt32, lay.size)
     ring = idx // lay.grid.width
     col = idx - ring * lay.grid.width

@@ -84,7 +84,9 @@ class _Samples:
     gb: GBuffer
     claimed: tuple | None = None             #: the cells at the other eye's points, whose
     other: ReprojectionMap | None = None     #: the other eye's samples standing for them
-    #: per turn of the interleave: (reordered, sampling map, each sample's ray)
+    #: per turn of the interleave: the samples traced, and their launch (reordered,
+    #: sampling map, each sample's ray)
+    traced: dict = dataclasses.field(default_factory=dict)
     launch: dict = dataclasses.field(default_factory=dict)
 
 
@@ -211,18 +213,15 @@ class Planner:
                                              reused and self._gaze == gaze_key)
             self._gaze = gaze_key
             frame_seed = self._frame_seed(seed, cut, hs.keep)
-            traced = sm.on
-            # With interleave, this frame's turn of the cells (the rest show their history).
-            turn = self.index % lay.phases
-            phase = _buffer_space.interleaved(lay, turn)
-            if phase is not None:
-                traced = traced & phase
             if partner is not None:
                 # The other eye's samples of this frame stand for those it saw alike; only
                 # the rest is traced.
                 reproj, history = self._borrow(scene, sm, partner, lay, hs, reproj, history,
                                                width, height)
-                traced = traced & ~sm.other.hit
+            turn = self.index % lay.phases
+            if turn not in sm.traced:
+                sm.traced[turn] = self._traced(sm, lay, turn, partner is not None)
+            traced = sm.traced[turn]
             timer.mark("sampling", reproj.hit, reproj.index, traced)
             if turn not in sm.launch:
                 sm.launch[turn] = self._launch(sm.pixels, traced, width, height,
@@ -237,6 +236,16 @@ class Planner:
                          filter_sampler=self._filter_sampler(sensor, settings.pixel_filter),
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=None, gaze=gaze,
                          space=dataclasses.replace(space, rays=rays, traced=traced))
+
+    @staticmethod
+    def _traced(sm: _Samples, lay, turn: int, borrowing: bool) -> mi.Bool:
+        """The samples a frame traces: those on, with interleave only this ``turn``'s cells
+        (the rest show their history), and none that the other eye's samples stand for."""
+        traced = sm.on
+        phase = _buffer_space.interleaved(lay, turn)
+        if phase is not None:
+            traced = traced & phase
+        return traced & ~sm.other.hit if borrowing else traced
 
     def _borrow(self, scene, sm: _Samples, partner: History, lay, hs, reproj, history,
                 width: int, height: int):

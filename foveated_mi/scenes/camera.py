@@ -173,15 +173,17 @@ def _sensor_of(scene_or_sensor: Any) -> "mi.Sensor":
 def apply_camera(scene_or_sensor: Any, camera: dict) -> None:
     """Move a perspective sensor (the scene's first) to ``camera`` in place.
 
-    Updates ``to_world`` and ``x_fov`` through :func:`mi.traverse`, so the scene, its
-    acceleration structure and compiled kernels are kept.
+    Updates ``to_world``, ``x_fov`` and, when the camera has one, the principal point through
+    :func:`mi.traverse`, so the scene, its acceleration structure and compiled kernels are
+    kept.
 
     Parameters
     ----------
     scene_or_sensor : mi.Scene or mi.Sensor
         The scene (its first sensor is moved) or the sensor.
     camera : dict
-        ``{origin, target, up, fov}``.
+        ``{origin, target, up, fov}``, optionally ``principal_point`` (else the sensor's is
+        kept).
     """
     cam = check_camera(camera)
     params = mi.traverse(_sensor_of(scene_or_sensor))
@@ -189,6 +191,8 @@ def apply_camera(scene_or_sensor: Any, camera: dict) -> None:
         raise ParameterError("sensor", scene_or_sensor, "a perspective sensor")
     params["to_world"] = look_at(cam)
     params["x_fov"] = cam["fov"]
+    for key, value in principal_point_props(cam).items():
+        params[key] = value
     params.update()
 
 
