@@ -11,9 +11,9 @@ presets, the foveated integrator at ``sigma_p = 1``, at frames 1 and 16) and the
 * ``equal_time.md``: every cell as mean ± standard deviation over the seeds (time per frame,
   rays, PSNR / SSIM / FLIP over the full frame, inside the fovea θ = 0.1 and in the periphery,
   FovVideoVDP JOD with the perceptual extra) and the targets, checked against the cheapest
-  denoised uniform frame (1 spp + OIDN): at a frame time no higher than it, the default
-  preset's fovea PSNR at least the baseline's at frame 1 and 3 dB above it at frame 16, its
-  full-frame PSNR no more than 3 dB below the baseline's at frame 1, and, against the
+  denoised uniform frame (1 spp + OIDN): at a frame time no higher than it, the film-space
+  preset's (``oidn``, or ``guided`` without ``pyoidn``; the study has no ``vr`` rows) fovea
+  PSNR at least the baseline's at frame 1 and 3 dB above it at frame 16, its full-frame PSNR no more than 3 dB below the baseline's at frame 1, and, against the
   stronger baseline (uniform 1 spp with the same history and denoiser, frame 16), its fovea
   PSNR at least that baseline's; a margin within its spread over seeds is a tie. Speed-ups at
   equal JOD (and fovea PSNR) against each uniform family follow;
@@ -96,7 +96,7 @@ def main(argv=None) -> int:
 
     import foveated_mi  # noqa: F401
     import mitsuba as mi
-    from foveated_mi.options import resolve_preset
+    from foveated_mi.demo import film_preset
     from foveated_mi.study import run_study
     from foveated_mi.study.equal_time import equal_time_verdicts, verdict_lines, verdict_sentence
     from foveated_mi.study.pareto import plot_pareto
@@ -112,7 +112,7 @@ def main(argv=None) -> int:
         png, svg = plot_pareto(rows, metric, d, title=f"Equal time: {metric} against time per frame")
         shutil.copy(png, os.path.join(a.results, f"equal_time_pareto_{name}.png"))
         shutil.copy(svg, os.path.join(a.results, f"equal_time_pareto_{name}.svg"))
-    default = resolve_preset("auto")
+    default = film_preset()
     verdicts = equal_time_verdicts(rows, default)
     size = f"{rows[0]['width']:.0f}x{rows[0]['height']:.0f}" if rows else "?"
     lines = [f"# Equal-time comparison ({size}, {mi.variant()})", "",
@@ -120,7 +120,7 @@ def main(argv=None) -> int:
              f"{' --size ' + ' '.join(map(str, a.size)) if a.size else ''}`  ",
              f"Machine: {platform.processor() or platform.machine()}, "
              f"{os.cpu_count()} cores, {mi.variant()}; "
-             f"date {time.strftime('%Y-%m-%d')}; default preset here: `{default}`.  ",
+             f"date {time.strftime('%Y-%m-%d')}; judged preset here: `{default}`.  ",
              "Reference: 1024 spp of the scene's own integrator (path, max_depth 8). Fovea: "
              "distance to the gaze < θ = 0.1 (half-diagonal units). Cells: mean ± standard "
              "deviation over the seeds; a margin within its spread is a tie. JOD: "

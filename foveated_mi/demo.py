@@ -2,11 +2,13 @@
 equal time, scored against a converged reference.
 
 The demo is a small study (:mod:`foveated_mi.study`) on the built-in ``voxel-city`` scene
-(path tracing, max_depth 8): the default preset at 1 and 2 spp, at frame 1 and at frame 16
-with a still gaze, against two baselines at 1 and 2 spp: uniform frames without history (raw,
-and denoised by Intel OIDN when ``pyoidn`` is installed), and the stronger one, uniform frames
-with the same reprojection history and the same denoiser as the preset (the foveated
-integrator at ``sigma_p = 1``: every pixel traced), at the same frames. Quality is
+(path tracing, max_depth 8): the default preset (what ``auto`` resolves to: ``vr``) at 1 and
+2 spp, at frame 1 and at frame 16 with a still gaze, against two baselines at 1 and 2 spp:
+uniform frames without history (raw, and denoised by Intel OIDN when ``pyoidn`` is
+installed), and the stronger one, uniform frames with the same reprojection history and the
+same denoiser as the preset (the foveated integrator at ``sigma_p = 1``: every pixel traced;
+for ``vr``, whose buffer ignores ``sigma_p``, its film-space counterpart ``guided``, SVGF
+too), at the same frames. Quality is
 display-referred PSNR against a 256-spp reference of the same scene, rendered once and cached
 under ``--out`` (never against a full render at the same spp, whose own noise would make PSNR
 meaningless), over the whole frame, inside the fovea and in the periphery, plus FovVideoVDP's
@@ -19,7 +21,8 @@ film lies within the parafovea.
 Then the same comparison **in a headset** (:data:`HEADSET`): the camera spans 100 degrees and
 the film spans the camera's field of view (FovVideoVDP's ``standard_hmd``), the fovea columns
 within 5 degrees of the gaze ray. The ``vr`` preset (denoising in a log-polar buffer, one warp)
-and the default preset run against the same uniform baselines, and the demo reports the
+and the film-space preset (``oidn``, or ``guided`` without ``pyoidn``) run against the same
+uniform baselines (with that preset's history and denoiser), and the demo reports the
 speed-up at equal JOD (full-frame PSNR without the perceptual extra, the fovea's PSNR beside
 it) at frame 16 against uniform rendering with the same history and denoiser, seed by seed.
 It writes what that sentence compares as a picture, ``headset/side_by_side.png``: the
@@ -55,15 +58,14 @@ STUDY = {
 
 #: The headset part: a 100-degree camera whose film spans its field of view.
 HEADSET = {
-    **STUDY, "description": "make demo: in a headset (a 100-degree film), vr and the default "
+    **STUDY, "description": "make demo: in a headset (a 100-degree film), vr and the film-space "
                             "preset against uniform (+ history, + OIDN) at equal time",
     "camera": {"fov": 100.0},
     "metrics": {"theta": 0.1, "sigma_p": 0.8, "fovea_deg": 5.0},
     "viewer": {"fov": "sensor", "display": "standard_hmd"},
     "foveated": {"defaults": {"frames": [1, 16]},
-                 "configs": [{"preset": "vr", "spp": 1}, {"preset": "vr", "spp": 4},
-                             {"preset": "auto", "spp": 1}]},
-}
+                 "configs": [{"preset": "vr", "spp": 1}, {"preset": "vr", "spp": 4}]},
+}   # + the film-space preset at 1 spp (film_preset)
 
 
 def run_demo(out: str = os.path.join("out", "demo"), *, size: tuple[int, int] | None = None,
@@ -119,24 +121,30 @@ def run_demo(out: str = os.path.join("out", "demo"), *, size: tuple[int, int] | 
         print("\n".join(line.replace("**", "") for line in verdict_lines(v)))
         print()
         print(verdict_sentence(v))
-    head, picture = _run_headset(out, size, preset, progress)
+    head, picture = _run_headset(out, size, film_preset(), progress)
     print(f"\nResults: {res.results_path}, {head.results_path}; plots: {res.png}, {head.png}"
           + (f"; picture: {picture}" if picture else "")
           + f"; {time.perf_counter() - t0:.0f} s.")
     return 1 if res.failed or head.failed or not verdicts else 0
 
 
+def film_preset() -> str:
+    """The film-space preset the headset part sets beside ``vr``: ``oidn``, or ``guided``
+    without ``pyoidn``."""
+    from .denoise import oidn_available
+    return "oidn" if oidn_available() else "guided"
+
+
 def _run_headset(out: str, size, preset: str, progress: bool):
-    """The headset part (module docstring): its table, speed-ups, sentence and picture:
-    ``(result, the picture's path or None)``."""
+    """The headset part (module docstring) with the film-space ``preset``: its table,
+    speed-ups, sentence and picture: ``(result, the picture's path or None)``."""
     import mitsuba as mi
     from . import perceptual, viewer
     from .study import parse_study, run_study
     from .study.aggregate import SPREAD, aggregate
     from .study.tasks import get_scene
     data = {**HEADSET, "foveated": {**HEADSET["foveated"], "configs": [
-        {**c, "preset": preset if c["preset"] == "auto" else c["preset"]}
-        for c in HEADSET["foveated"]["configs"]]},
+        *HEADSET["foveated"]["configs"], {"preset": preset, "spp": 1}]},
         "uniform": {**HEADSET["uniform"], "presets": [preset]}}
     spec = parse_study(data, name="demo_headset", source="foveated_mi.demo.HEADSET")
     res = run_study(spec, out=os.path.join(out, "headset"), size=size, progress=progress,

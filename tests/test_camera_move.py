@@ -15,7 +15,7 @@ FIRST_MARGIN_DB = 0.5
 
 
 @pytest.mark.parametrize("still", [1, 4, 32])
-@pytest.mark.parametrize("preset", ["guided", "oidn", "auto"])
+@pytest.mark.parametrize("preset", ["guided", "oidn", "vr"])
 def test_history_after_a_camera_move_helps_or_steps_aside(preset, still):
     if preset == "oidn":
         pytest.importorskip("pyoidn")

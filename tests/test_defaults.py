@@ -17,7 +17,7 @@ from gradcheck import Probe, agreement
 from test_gradients import HELD
 
 HAS_OIDN = importlib.util.find_spec("pyoidn") is not None
-PRESETS = ["paper", "guided", "auto"] + (["oidn"] if HAS_OIDN else [])
+PRESETS = ["paper", "guided", "auto"] + (["oidn"] if HAS_OIDN else [])   # auto: vr
 
 
 # -- gradients ------------------------------------------------------------------------------
@@ -86,7 +86,7 @@ def _look(target):
 
 
 @pytest.mark.parametrize("change", ["cut", "parameter", "size"])
-@pytest.mark.parametrize("preset", PRESETS + ["vr"])
+@pytest.mark.parametrize("preset", PRESETS)
 def test_no_ghost_after_a_change(preset, change):
     """After 8 still frames, a camera cut (the camera turns around: no pixel finds its
     history), a scene parameter change (a wall's colour) or a new film size gives a frame

@@ -151,6 +151,20 @@ def test_frame_16_is_compared_against_uniform_with_the_same_history_and_denoiser
     assert "gained 1.0 dB of fovea PSNR" in s
 
 
+def test_vr_is_compared_against_its_uniform_counterpart_guided():
+    """vr's buffer ignores sigma_p, so its uniform rows with history run guided (the same
+    history, SVGF); a row labelled vr is not uniform and never the baseline."""
+    rows = BASE + [
+        _row("foveated", 1, 1, 20.0, 25.0, 32.0, "vr"), _row("foveated", 1, 16, 20.0, 28.0, 35.0, "vr"),
+        _hist(1, 1, 60.0, 30.0, denoiser="svgf", preset="guided"),
+        _hist(1, 16, 60.0, 33.0, denoiser="svgf", preset="guided"),
+        _hist(1, 16, 60.0, 20.0, denoiser="svgf", preset="vr")]
+    (v,) = equal_time_verdicts(rows, "vr")
+    assert v.history[16]["psnr_fovea"] == 33.0 and v.chosen_spp == 1.0
+    d = {name: delta for name, delta, _ in v.deltas()}
+    assert d["fovea PSNR at frame 16 >= uniform with the same history"] == pytest.approx(2.0)
+
+
 def test_seed_means_spreads_and_ties():
     from foveated_mi.study.aggregate import aggregate, margin
     fov = [_row("foveated", 2, f, 90.0, 30.0, 35.0, "oidn") for f in (1, 16)]

@@ -173,7 +173,7 @@ def test_a_nested_integrator_returning_constants_replays_at_every_launch_width()
                                                              up=[0, 1, 0]),
                    "film": {"type": "hdrfilm", "width": 64, "height": 64}},
         "plane": {"type": "rectangle"}, "light": {"type": "constant"}})
-    opts = {"theta": 0.1, "sigma_p": 0.8}
+    opts = {"preset": "guided", "theta": 0.1, "sigma_p": 0.8}   # a ray count of each seed
     a = FoveatedIntegrator(nested=_Constant(), **opts)
     b = FoveatedIntegrator(nested=_Constant(), freeze=False, **opts)
     rays = set()

@@ -324,15 +324,34 @@ def test_oidn_without_pyoidn_is_one_line(monkeypatch):
     with pytest.raises(ParameterError, match=r"denoiser = 'oidn'.*" + hint) as e:
         FoveatedIntegrator(denoiser="oidn")
     assert "\n" not in str(e.value)
-    assert FoveatedIntegrator().options["preset"] == "guided"     # auto falls back
+    assert FoveatedIntegrator().options["preset"] == "vr"     # auto needs no OIDN
 
 
 # ----------------------------------------------------------------------------- presets
+@pytest.mark.parametrize("oidn", [True, False])
+def test_auto_is_vr_and_guided_for_gradients_with_or_without_oidn(monkeypatch, oidn):
+    monkeypatch.setattr(denoise_mod, "oidn_available", lambda: oidn)
+    assert opts_mod.resolve_preset("auto") == "vr"
+    assert opts_mod.resolve_preset("auto", gradients=True) == "guided"
+    assert opts_mod.resolve_preset("oidn", gradients=True) == "oidn"     # named: kept
+
+
+def test_a_uniform_frame_shares_a_film_space_preset_s_history_and_denoiser():
+    """vr's buffer ignores sigma_p: a uniform frame with its history and denoiser (SVGF) is
+    guided at sigma_p = 1; every film-space preset is its own counterpart."""
+    counterpart = opts_mod.uniform_counterpart
+    assert [counterpart(p) for p in ("paper", "guided", "oidn", "vr", "auto")] == \
+        ["paper", "guided", "oidn", "guided", "guided"]
+    vr, guided = (opts_mod.validate_options({"preset": p}) for p in ("vr", "guided"))
+    assert vr["denoiser"] == guided["denoiser"] and guided["formation"] == "film"
+
+
 def test_presets_fill_defaults_and_explicit_options_win(monkeypatch):
     monkeypatch.setattr(denoise_mod, "oidn_available", lambda: True)
     auto = FoveatedIntegrator()
-    assert auto.options["preset"] == "oidn" and auto.denoiser == "oidn"
-    assert auto.theta == opts_mod.PRESETS["oidn"]["theta"]
+    assert auto.options["preset"] == "vr" and auto.denoiser == "svgf"
+    assert auto.theta == opts_mod.PRESETS["vr"]["theta"]
+    assert auto.options["formation"] == "foveal" and auto.options["ray_budget"] == 0.1
     paper = FoveatedIntegrator(preset="paper")
     assert (paper.reconstruction, paper.denoiser, paper.demodulate) == ("sibson", "atrous", False)
     mixed = FoveatedIntegrator(preset="oidn", theta=0.3)

@@ -342,6 +342,36 @@ def test_uniform_history_rows_and_seeds_expand(tmp_path):
         == ["uniform+history+svgf"]
 
 
+def test_a_vr_study_s_uniform_history_rows_trace_every_pixel(tmp_path):
+    """vr's cells take ray_budget of the pixels whatever sigma_p says: its uniform rows with
+    history run guided (the same history and SVGF) at sigma_p = 1, which traces them all."""
+    import mitsuba as mi
+    from foveated_mi.integrators.foveated import FoveatedIntegrator
+    spec = load_study(write(tmp_path, """
+        [[scenes]]
+        scene = "cornell-box"
+        [[foveated.configs]]
+        preset = "vr"
+        [[foveated.configs]]
+        preset = "auto"
+        [uniform]
+        denoise = [false, true]
+        history = [true]
+    """))
+    assert [(u["preset"], u["denoiser"]) for u in spec.uniform] == [("guided", "none"),
+                                                                   ("guided", "svgf")]
+    d = mi.cornell_box()
+    d["sensor"]["film"].update(width=32, height=32)
+    sc = mi.load_dict(d)
+    fractions = {}
+    for name, opts in (("row", spec.uniform[1]["options"]),
+                       ("vr", {"preset": "vr", "sigma_p": 1.0})):
+        integ = FoveatedIntegrator(**{k: v for k, v in opts.items() if k != "gaze"})
+        mi.render(sc, integrator=integ, spp=1)
+        fractions[name] = integ.stats["ray_fraction"]
+    assert fractions["row"] == 1.0 and fractions["vr"] < 0.9, fractions
+
+
 def test_one_seed_keeps_the_task_ids_of_studies_without_seeds():
     spec = load_study(QUICK)
     import dataclasses

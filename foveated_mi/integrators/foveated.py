@@ -188,7 +188,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             self._prepare_gradients()
         o, timer = self._view_options(view), StageTimer(self._options["timing"])
         # The graph is kept when mi.render will differentiate the frame.
-        record = state.differentiated and gradient_refusal(self._given, o) is None
+        record = state.differentiated and gradient_refusal(o) is None
         frame = self._frame(scene, sensor, seed, spp, state, o, record, timer)
         stats = {k: (list(v) if k == "gaze" else v) for k, v in o.items() if k != "timing"}
         # Plan, trace, form, commit (foveated_mi.frame.pipeline).
@@ -256,7 +256,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         call, or another scene / sensor), the frame this integrator would render next with
         ``seed``, without committing it (no history update). Refuses a configuration whose
         gradient would not be the shown image's."""
-        refusal = gradient_refusal(self._given, self._options)
+        refusal = gradient_refusal(self._options)
         if refusal is not None:
             raise refusal
         sensor = scene.sensors()[sensor] if isinstance(sensor, int) else sensor

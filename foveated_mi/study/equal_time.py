@@ -113,6 +113,7 @@ def equal_time_verdicts(rows: list[dict[str, Any]], preset: str) -> list[Verdict
         In the order the scenes first appear; a scene without a uniform 1-spp baseline (with or
         without history) has none.
     """
+    from ..options import uniform_counterpart
     out = []
     cells = aggregate(rows)
     for scene in dict.fromkeys(r["scene"] for r in cells):
@@ -126,8 +127,10 @@ def equal_time_verdicts(rows: list[dict[str, Any]], preset: str) -> list[Verdict
                 cands.setdefault(r["spp"], {})[int(r["frame"])] = r
         den = _denoiser(preset, cands)
         method = "uniform+history" + (f"+{den}" if den != "none" else "")
+        # the uniform rows of a foveal-buffer preset ran its film-space counterpart
+        counterpart = uniform_counterpart(preset)
         hist_cells = [r for r in sr if r["method"] == method
-                      and _config(r).get("preset") == preset]
+                      and _config(r).get("preset") == counterpart]
         history = {int(r["frame"]): r for r in hist_cells if r["spp"] == 1}
         if not uni and 1 not in history:
             continue

@@ -920,11 +920,14 @@ def _uniform_history_of(ctx: TableContext, table: dict, foveated: list[dict]
 def _uniform_history_rows(ctx: TableContext, s: int, d: bool, presets: list[str],
                           frames: list[int]) -> list[dict]:
     """The uniform history rows of ``spp = s`` and ``denoise = d``, one per preset (a preset
-    that resolves to the same options as an earlier one runs once)."""
-    from ..options import DEFAULTS, PRESETS, resolve_pixel_filter
+    that resolves to the same options as an earlier one runs once). A foveal-buffer preset's
+    rows run its film-space counterpart, which sigma_p = 1 makes uniform
+    (:func:`foveated_mi.options.uniform_counterpart`: ``vr`` -> ``guided``)."""
+    from ..options import DEFAULTS, PRESETS, resolve_pixel_filter, uniform_counterpart
     out, seen = [], set()
     for i, p in enumerate(presets):
-        given = {"preset": p, "sigma_p": 1.0, "history": True, "denoiser": "none"}
+        given = {"preset": uniform_counterpart(p), "sigma_p": 1.0, "history": True,
+                 "denoiser": "none"}
         where = {k: f"uniform.presets[{i}]" for k in given}
         # validated without the denoiser (OIDN may be missing here: the row is then
         # skipped with a note, like uniform+oidn), which is then the preset's own
