@@ -233,6 +233,16 @@ def test_per_frame_scalars_compile_nothing_new(preset):
     assert not new, f"{len(new)} new kernels after warm-up ({preset})"
 
 
+def test_per_frame_scalars_compile_nothing_new_in_the_default_vr():
+    """The same for the default preset, vr (its launch in tile order), with every scalar that
+    it reads; theta, the full-resolution disc's radius, also sets its buffer's grid (a whole
+    number of rings and angles), so a new theta is a new buffer, like a new film size."""
+    scalars = {k: v for k, v in PER_FRAME_SCALARS.items()
+               if k not in ("theta", "edge_threshold", "stochastic_jitter")}
+    new = _new_kernels_after_warmup("auto", scalars)
+    assert not new, f"{len(new)} new kernels after warm-up (vr)"
+
+
 @pytest.mark.parametrize("layout", ["rows", "rows_blocks"])
 def test_row_layout_launch_compiles_nothing_new(layout):
     new = _new_kernels_after_warmup("paper", {"gaze": PER_FRAME_SCALARS["gaze"]},
