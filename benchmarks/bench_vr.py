@@ -83,6 +83,16 @@ ENVELOPE = "every uniform family"
 RING_DEG = 5.0
 
 
+def film_size(data: dict) -> str:
+    """What a study renders, in words: its film, or the eye buffer its headset sets."""
+    viewer = data.get("viewer", {})
+    if not viewer.get("headset"):
+        return f"{data['size'][0]}x{data['size'][1]}"
+    from foveated_mi.headsets import headset
+    w, h = headset(viewer["headset"]).rig(viewer.get("eye_width")).size("left")
+    return f"{w}x{h}" + (" per eye" if viewer.get("stereo") else "")
+
+
 def overridden(data: dict, a) -> dict:
     """The study table with the command line's size, frames, seeds and scenes."""
     d = copy.deepcopy(data)
@@ -406,7 +416,7 @@ def main(argv=None) -> int:
     camera = (f"the {viewer['headset']} headset's {'eyes' if stereo else 'left eye'} "
               f"({viewer.get('eye_width', 'render-target')} px wide)"
               if viewer.get("headset") else f"a {data['camera']['fov']:g}° camera")
-    lines = [f"# The VR study ({data['size'][0]}x{data['size'][1]}, {mi.variant()})", "",
+    lines = [f"# The VR study ({film_size(data)}, {mi.variant()})", "",
              f"Command: `{cmd}`  ",
              f"Machine: {report['machine']['processor']}, {os.cpu_count()} cores, "
              f"{mi.variant()}; date {report['date']}.  ",

@@ -119,6 +119,16 @@ def test_the_tables_carry_the_flicker_per_ring(bench):
     assert uni.count("0.0150 ± 0.0071") == 6
 
 
+def test_the_tables_name_the_eye_buffer_a_headset_sets(bench):
+    from foveated_mi.headsets import headset
+    w, h = headset("quest3").rig(40).size("left")
+    data = {"size": [320, 320], "viewer": {"headset": "quest3", "eye_width": 40}}
+    assert bench.film_size(data) == f"{w}x{h}" and (w, h) != (320, 320)
+    data["viewer"]["stereo"] = True
+    assert bench.film_size(data) == f"{w}x{h} per eye"
+    assert bench.film_size({"size": [32, 18]}) == "32x18"
+
+
 def test_a_headset_stereo_and_tracker_come_from_the_command_line(bench):
     """--headset replaces the study's display by the headset's; --reuse and --first-eye
     say how the eyes render; --one-eye drops a stereo study's second eye; --latency-ms and
