@@ -291,6 +291,13 @@ def test_front_table_names_the_options_that_vary():
     named = front_table([dict(r(1.0, 19.0, "compact"), config=json.dumps(
         {"full_options": {"preset": "oidn", "reorder": "compact"}}))], "psnr")
     assert "foveated oidn" in named.splitlines()[2]
+    # A row formed in the foveal buffer reads neither sigma_p nor a reconstruction.
+    vr = front_table([dict(r(1.0, 19.0, "tiles"), config=json.dumps(
+        {"full_options": {"preset": "vr", "formation": "foveal", "theta": 0.15}}))], "psnr")
+    cells = vr.splitlines()[2].split()
+    assert cells[1:5] == ["foveated", "vr", "0.1", "-"] and cells[5] == "-", vr
+    film = front_table([r(1.0, 19.0, "tiles")], "psnr").splitlines()[2].split()
+    assert film[3:5] == ["0.8", "sibson"]
 
 
 def test_uniform_history_rows_and_seeds_expand(tmp_path):

@@ -101,14 +101,20 @@ def _baseline_style(method: str, k: int) -> dict:
                 label=label)
 
 
+def _full_options(r: dict[str, Any]) -> dict[str, Any]:
+    """A foveated row's integrator options, from its ``config`` JSON (empty when unreadable)."""
+    import json
+    try:
+        opts = json.loads(r.get("config") or "{}").get("full_options", {})
+    except (TypeError, ValueError):
+        return {}
+    return opts if isinstance(opts, dict) else {}
+
+
 def _foveated_name(r: dict[str, Any]) -> str:
     """``foveated <preset>`` (e.g. ``foveated oidn``): a reconstruction alone does not say
     which pipeline ran."""
-    import json
-    try:
-        preset = json.loads(r.get("config") or "{}").get("full_options", {}).get("preset")
-    except (TypeError, ValueError):
-        preset = None
+    preset = _full_options(r).get("preset")
     return f"foveated {preset}" if preset else "foveated"
 
 
@@ -215,13 +221,14 @@ def _scatter_points(ax, sub: list[dict[str, Any]], metric: str, recs: list,
     import matplotlib
     cmap = matplotlib.colormaps["tab10"]
     for rec_i, (name, rec) in enumerate(recs):
-        pts = [(r["time_ms"], r[metric]) for r in sub
-               if r["method"] == "foveated" and r["reconstruction"] == rec
-               and _foveated_name(r) == name and _finite(r, metric)]
-        if pts:
-            x, y = zip(*pts)
+        mine = [r for r in sub if r["method"] == "foveated" and r["reconstruction"] == rec
+                and _foveated_name(r) == name and _finite(r, metric)]
+        if mine:
+            x, y = zip(*[(r["time_ms"], r[metric]) for r in mine])
+            # The foveal formation warps its cells: it has no reconstruction to name.
+            foveal = all(_full_options(r).get("formation") == "foveal" for r in mine)
             ax.scatter(x, y, s=22, marker="o", color=cmap(rec_i % 10), alpha=0.8,
-                       label=f"{name}, {rec}")
+                       label=name if foveal else f"{name}, {rec}")
     for r in sub:                  # later frames (history) carry their frame number
         if r["method"] == "foveated" and r["frame"] > 1 and _finite(r, metric):
             ax.annotate(f"f{int(r['frame'])}", (r["time_ms"], r[metric]), fontsize=6,
@@ -302,10 +309,12 @@ def front_table(rows: list[dict[str, Any]], metric: str) -> str:
     for scene, front in scene_fronts(rows, metric).items():
         for r in front:
             fov = r["method"] == "foveated"
+            # The foveal formation (vr) reads neither σp nor a reconstruction: it warps cells.
+            film = fov and _full_options(r).get("formation") != "foveal"
             line = (scene, _foveated_name(r) if fov else r["method"],
                     num(r["theta"], "g") if fov else "-",
-                    num(r["sigma_p"], "g") if fov else "-",
-                    r["reconstruction"] if fov else "-", num(r["spp"], ".0f"),
+                    num(r["sigma_p"], "g") if film else "-",
+                    r["reconstruction"] if film else "-", num(r["spp"], ".0f"),
                     num(r["frame"], ".0f"), num(r["time_ms"], ".2f"), num(r[metric], ".4f"))
             if varying:
                 opts = json.loads(r["config"]).get("full_options", {}) if fov else {}
