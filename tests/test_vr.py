@@ -158,15 +158,22 @@ def test_a_still_view_accumulates_history_in_the_traced_pixels(space):
     ref = np.array(mi.render(scene, integrator=scene.integrator(), spp=512, seed=9))
     integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", denoiser="none",
                                foveal_space=space)
-    err = []
+    err, rates = [], []
     for k in range(8):
         mi.render(scene, integrator=integ, spp=1, seed=k)
         mine, theirs, count = _ref_at(ref, integ, space)
         err.append(float(np.mean((mine - theirs) ** 2)))
+        rates.append(integ.stats["history_hit_rate"])
     # The traced pixels' Monte Carlo error falls as samples accumulate (8 frames: about 1/8).
     assert err[-1] < 0.4 * err[0], err
     # A still gaze traces the same pixels every frame: each holds all 8 frames' samples.
     assert count.min() == 8.0
+    if space == "buffer":
+        # From the second frame every sample on the film finds its history: the rate is a
+        # share of the samples reprojected, not of the film's pixels.
+        s = integ.stats
+        assert rates[0] == 0.0 and set(rates[1:]) == {1.0}, rates
+        assert s["history_hits"] == s["reprojected"] < s["pixels"]
 
 
 @pytest.mark.parametrize("bad,match", [

@@ -45,7 +45,10 @@ class FrameOutputs:
             if s:
                 s["ray_fraction"] = s["rays"] / s["pixels"]
                 s["edge_fraction"] = s["edge_rays"] / s["pixels"]
-                s["history_hit_rate"] = s["history_hits"] / s["pixels"]
+                # The share of the positions reprojected (the film's pixels, or the foveal
+                # buffer's samples on the film) that found their history.
+                s["history_hit_rate"] = s["history_hits"] / max(s.get("reprojected",
+                                                                      s["pixels"]), 1)
             self._stats = s
         return dict(self._stats)
 
@@ -172,6 +175,9 @@ def frame_outputs(plan: FramePlan, samples, formed: Formed, fs: FormationSetting
         "edge_rays": dr.count(plan.edges) if plan.edges is not None else 0,
         "frame": index,
         "history_hits": dr.count(reproj.hit), **entry.stats(formed.buffers),
+        # What was reprojected: each film pixel, or each sample of the foveal buffer on it.
+        "reprojected": (plan.width * plan.height if formed.buffers.get("sample_on") is None
+                        else dr.count(formed.buffers["sample_on"])),
         "rejected_samples": samples.rejected, "clamped_samples": samples.clamped,
         "timings_ms": timer.finish(), "gbuffer_reused": plan.gbuffer_reused,
         "trace_replayed": bool(replayed[0]), "formation_replayed": bool(replayed[1]),
