@@ -19,7 +19,8 @@ Layout (every key optional except ``scene``)::
     [camera]                      # absent: the scene's own camera, static
     interpolation = "catmull_rom" # linear | catmull_rom | step
     [[camera.keyframes]]          # t plus any of origin, target, up, fov, yaw, cut; missing
-    t = 0.0                       # values come from the scene's camera
+    t = 0.0                       # values come from the scene's camera (an XML scene's target:
+                                  # one unit ahead of its camera; give one when moving it)
     origin = [-60, 30, -60]
     [gaze]                        # absent: fixed at the centre
     type = "fixed"                # fixed (x, y) | keyframes (keyframes, interpolation) |

@@ -22,6 +22,9 @@ segment under ``"step"``. From the cut's time on, the second keyframe's value ho
 ``yaw`` (degrees, default 0) turns the view about the keyframe's ``up`` axis, positive to the
 right, after interpolation: a head turning at a constant rate is two keyframes with linear
 interpolation, whatever the scene's own camera (which fills ``origin``, ``target``, ``up``).
+A keyframe that leaves out ``target`` looks at the scene camera's target: a built-in scene's
+is what its camera looks at, an XML scene's is one unit ahead of its camera (the file names
+no distance), so a keyframe that moves an XML scene's camera far should give ``target`` too.
 :meth:`CameraPath.cut_between` tells whether a cut lies in ``(t0, t1]``.
 
 Gaze, in normalised film coordinates (origin top-left, x right, y down; values outside
