@@ -212,6 +212,50 @@ def flicker_table(rows: list[dict]) -> list[str]:
     return out
 
 
+def flicker_against_envelope(rows: list[dict], column: str) -> list[str]:
+    """Each foveated cell's flicker against the uniform cell just above it on the envelope of
+    every uniform family: the cheapest uniform cell, of any family, whose ``column`` reaches
+    the foveated cell's (means over seeds). Outside the fovea and ring by ring: ``≤`` where the
+    foveated cell flickers no more, ``>`` where it flickers more, ``≈`` where the seeds do
+    not settle it (:func:`foveated_mi.study.aggregate.margin`: the difference within its
+    spread); "-" for a ring the film never reaches. A foveated cell above every uniform cell
+    has nothing to be held to."""
+    from foveated_mi.metrics import FLICKER_RINGS_DEG, flicker_ring_columns
+    from foveated_mi.study.aggregate import aggregate, margin
+    rings = list(zip(FLICKER_RINGS_DEG, FLICKER_RINGS_DEG[1:]))
+    cols = ["flicker_periphery", *flicker_ring_columns()]
+
+    def finite(v) -> bool:
+        return isinstance(v, (int, float)) and math.isfinite(v)
+
+    out = [f"| scene | configuration | {column} | the uniform cell above it | its {column} | "
+           "periphery | " + " | ".join(ring_name(lo, hi) for lo, hi in rings) + " |",
+           "|---|---|---|---|---|---|" + "---|" * len(rings)]
+    for scene in sorted({r["scene"] for r in rows}):
+        cells = aggregate([r for r in rows if r["scene"] == scene])
+        uniform = [c for c in cells if c["method"] != "foveated" and finite(c.get(column))
+                   and finite(c.get("time_ms"))]
+        for c in sorted((c for c in cells if c["method"] == "foveated"), key=label):
+            q = c.get(column)
+            above = [u for u in uniform if finite(q) and u[column] >= q]
+            if not above:
+                out.append(f"| {scene} | {label(c)} | {_pm(c, column)} | none: above every "
+                           "uniform cell | - | " + "- | " * len(cols))
+                continue
+            u = min(above, key=lambda u: u["time_ms"])
+            marks = []
+            for col in cols:
+                if not (finite(c.get(col)) and finite(u.get(col))):
+                    marks.append("-")
+                    continue
+                m = margin(u, c, col)
+                sign = "≈" if m.tie else ("≤" if m.delta >= 0.0 else ">")
+                marks.append(f"{c[col]:.4f} {sign} {u[col]:.4f}")
+            out.append(f"| {scene} | {label(c)} | {_pm(c, column)} | {label(u)} | "
+                       f"{_pm(u, column)} | " + " | ".join(marks) + " |")
+    return out
+
+
 def speedup_table(sps: list[dict]) -> list[str]:
     fams = [f for f in (*FAMILIES, ENVELOPE) if any(s["family"] == f for s in sps)]
     out = ["| scene | configuration | time ms | " + " | ".join(fams) + " |",
@@ -464,6 +508,12 @@ def main(argv=None) -> int:
               "pixels of the change of its error from frame to frame, against a reference "
               "per frame), over the whole frame, outside the fovea and per ring of "
               "eccentricity from each frame's gaze:", "", *flicker_table(res.rows), ""]
+    column = conditions.get("headset")
+    if column:
+        lines += ["Each foveated cell's flicker against the uniform cell just above it on the "
+                  f"envelope of every uniform family (the cheapest that reaches its `{column}`; "
+                  "`≤`: it flickers no more, `>`: more, `≈`: within the seeds' spread):", "",
+                  *flicker_against_envelope(res.rows, column), ""]
     # Rows whose frames ran differently (replayed, traced): their ratios were refused above.
     report["warnings"] = res.warnings
     if res.warnings:

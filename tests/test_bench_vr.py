@@ -119,6 +119,45 @@ def test_the_tables_carry_the_flicker_per_ring(bench):
     assert uni.count("0.0150 ± 0.0071") == 6
 
 
+def test_flicker_is_held_to_the_uniform_cell_just_above_on_the_envelope(bench):
+    """The cheapest uniform cell of any family whose JOD reaches the foveated cell's is the
+    one its flicker is held to, ring by ring; within the seeds' spread it is a tie; a
+    foveated cell above every uniform cell has none."""
+    from foveated_mi.metrics import flicker_ring_columns
+
+    def row(method, spp, seed, jod, ms, periphery, rings, preset=None):
+        config = {"options": {"preset": preset}} if preset else {}
+        return {"scene": "city", "method": method, "spp": float(spp), "frame": 6.0,
+                "seed": float(seed), "time_ms": ms, "jod_video_min": jod,
+                "config": json.dumps(config), "flicker": periphery,
+                "flicker_periphery": periphery,
+                **dict(zip(flicker_ring_columns(), rings))}
+    nan = math.nan
+    rows = []
+    for seed in (0, 1):
+        e = 0.001 * seed                      # a spread of 0.0007 between the two seeds
+        rows += [
+            # The vr cell (JOD 7.0): below, equal, above, a tie and a ring never reached.
+            row("foveated", 1, seed, 7.0, 10.0, 0.020, [0.01, 0.03, 0.050 + e, 0.0300, nan],
+                "vr"),
+            row("foveated", 4, seed, 9.5, 30.0, 0.010, [0.01] * 5, "vr"),
+            row("uniform", 1, seed, 6.5, 10.0, 0.001, [0.001] * 5),    # below its JOD
+            row("uniform+history", 1, seed, 7.2, 40.0, 0.001, [0.001] * 5),  # dearer
+            # Just above on the envelope: the cheapest cell that reaches 7.0.
+            row("uniform+oidn", 1, seed, 8.0, 20.0, 0.030,
+                [0.02, 0.03, 0.04, 0.0300 + 2 * e, 0.02]),
+        ]
+    table = bench.flicker_against_envelope(rows, "jod_video_min")
+    assert table[0].startswith("| scene | configuration | jod_video_min | the uniform cell "
+                               "above it | its jod_video_min | periphery | 0-5° |")
+    vr1 = next(line for line in table if "| vr 1 spp |" in line).split(" | ")
+    assert vr1[3] == "uniform+oidn 1 spp"
+    assert vr1[5:] == ["0.0200 ≤ 0.0300", "0.0100 ≤ 0.0200", "0.0300 ≤ 0.0300",
+                       "0.0505 > 0.0400", "0.0300 ≈ 0.0310", "- |"]
+    vr4 = next(line for line in table if "| vr 4 spp |" in line)
+    assert "none: above every uniform cell" in vr4
+
+
 def test_the_tables_name_the_eye_buffer_a_headset_sets(bench):
     from foveated_mi.headsets import headset
     w, h = headset("quest3").rig(40).size("left")
