@@ -38,6 +38,8 @@ class FrameOutputs:
         if self._stats is None:
             s = {}
             for k, v in self._stats_raw.items():
+                if isinstance(v, mi.Bool) and dr.width(v) > 1:
+                    v = dr.count(v)          # a mask the frame left uncounted
                 if isinstance(v, (mi.UInt32, mi.Int32, mi.Float, mi.Bool)) or dr.is_array_v(v):
                     v = v[0] if dr.width(v) == 1 else v
                     v = int(v) if not isinstance(v, float) else float(v)
@@ -175,9 +177,10 @@ def frame_outputs(plan: FramePlan, samples, formed: Formed, fs: FormationSetting
         "edge_rays": dr.count(plan.edges) if plan.edges is not None else 0,
         "frame": index,
         "history_hits": dr.count(reproj.hit), **entry.stats(formed.buffers),
-        # What was reprojected: each film pixel, or each sample of the foveal buffer on it.
+        # What was reprojected: each film pixel, or each sample of the foveal buffer on it
+        # (its mask, counted only when the stats are read: no kernel in the frame).
         "reprojected": (plan.width * plan.height if formed.buffers.get("sample_on") is None
-                        else dr.count(formed.buffers["sample_on"])),
+                        else formed.buffers["sample_on"]),
         "rejected_samples": samples.rejected, "clamped_samples": samples.clamped,
         "timings_ms": timer.finish(), "gbuffer_reused": plan.gbuffer_reused,
         "trace_replayed": bool(replayed[0]), "formation_replayed": bool(replayed[1]),
