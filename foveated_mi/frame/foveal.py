@@ -550,13 +550,16 @@ def foveal_stats(buffers: dict[str, Any]) -> dict[str, Any]:
     Returns
     -------
     stats : dict
-        ``resampled`` and ``holes``, counts on the device.
+        ``resampled`` and ``holes``, counts on the device; on the samples, ``reprojected``
+        too (the samples on the film).
     """
     on = buffers.get("sample_on")
     if on is None:
         return film_stats(buffers)
+    # ``reprojected``: the samples the history hit rate counts, as a mask (counted when the
+    # stats are read, so that the frame launches no kernel for it).
     return {"resampled": dr.count(buffers["resampled"]),
-            "holes": dr.count(on & ~buffers["shading_mask"])}
+            "holes": dr.count(on & ~buffers["shading_mask"]), "reprojected": on}
 
 
 register_formation("foveal", form_foveal, grid=foveal_buffer_grid, stats=foveal_stats,

@@ -177,10 +177,6 @@ def frame_outputs(plan: FramePlan, samples, formed: Formed, fs: FormationSetting
         "edge_rays": dr.count(plan.edges) if plan.edges is not None else 0,
         "frame": index,
         "history_hits": dr.count(reproj.hit), **entry.stats(formed.buffers),
-        # What was reprojected: each film pixel, or each sample of the foveal buffer on it
-        # (its mask, counted only when the stats are read: no kernel in the frame).
-        "reprojected": (plan.width * plan.height if formed.buffers.get("sample_on") is None
-                        else formed.buffers["sample_on"]),
         "rejected_samples": samples.rejected, "clamped_samples": samples.clamped,
         "timings_ms": timer.finish(), "gbuffer_reused": plan.gbuffer_reused,
         "trace_replayed": bool(replayed[0]), "formation_replayed": bool(replayed[1]),
