@@ -274,8 +274,7 @@ def _varying_options(rows: list[dict[str, Any]]) -> list[str]:
     for r in rows:
         if r.get("method") != "foveated" or not r.get("config"):
             continue
-        opts = json.loads(r["config"]).get("full_options", {})
-        for k, v in opts.items():
+        for k, v in _full_options(r).items():
             seen.setdefault(k, set()).add(json.dumps(v, sort_keys=True))
     return [k for k, v in seen.items() if len(v) > 1
             and k not in ("theta", "sigma_p", "reconstruction")]
@@ -296,7 +295,6 @@ def front_table(rows: list[dict[str, Any]], metric: str) -> str:
     table : str
         The table, one line per front point under a header.
     """
-    import json
     from ..io import format_table
     varying = _varying_options(rows)
     header = ("scene", "method", "theta", "sigma_p", "reconstruction", "spp", "frame",
@@ -317,7 +315,7 @@ def front_table(rows: list[dict[str, Any]], metric: str) -> str:
                     r["reconstruction"] if film else "-", num(r["spp"], ".0f"),
                     num(r["frame"], ".0f"), num(r["time_ms"], ".2f"), num(r[metric], ".4f"))
             if varying:
-                opts = json.loads(r["config"]).get("full_options", {}) if fov else {}
+                opts = _full_options(r) if fov else {}
                 line += (" ".join(f"{k}={opts[k]}" for k in varying if k in opts) or "-",)
             table.append(line)
     return format_table(table)
