@@ -609,5 +609,7 @@ def borrow(own: ReprojectionMap, history: History | None, other: ReprojectionMap
                                  count=read("count", mi.Float), moment2=read("moment2", mi.Float),
                                  shown=shown)
     n = dr.width(take)
-    return ReprojectionMap(dr.select(take, other.coords, own.coords), take | keep,
-                           dr.arange(mi.UInt32, n), own.agree), merged
+    coords = dr.select(take, other.coords, own.coords)
+    # One kernel for every read: each alone would run both maps' gathers again.
+    dr.schedule(coords, take | keep, merged.mean, merged.count, merged.moment2, merged.shown)
+    return ReprojectionMap(coords, take | keep, dr.arange(mi.UInt32, n), own.agree), merged
