@@ -174,6 +174,29 @@ class Headset:
                  "principal_point": list(self.frustum.principal_point)},
                 self.rig(width).size("left"))
 
+    def head_camera(self, head: dict, width: int | None = None
+                    ) -> tuple[dict, tuple[int, int]]:
+        """The head of both eyes (a stereo study's scene camera), as a camera dict and a film
+        size: :meth:`foveated_mi.stereo.StereoRig.head`'s frustum, centred on the head's axis,
+        at the eye buffers' pixels per unit tangent.
+
+        Parameters
+        ----------
+        head : dict
+            A camera dict ``{origin, target, up, fov}`` (its ``fov`` is replaced).
+        width : int or None, optional
+            The eye buffers' width (None: the recommended one).
+
+        Returns
+        -------
+        camera : dict
+            ``head`` with the head frustum's ``fov`` and no principal point offset.
+        size : tuple of int
+            The head film's ``(width, height)``.
+        """
+        f, size = self.rig(width).head()
+        return {**head, "fov": f.fov_x, "principal_point": [0.0, 0.0]}, size
+
     def buffer_ppd(self, width: int | None = None) -> float:
         """The eye buffer's pixels per degree at its pinhole's centre (its optical axis).
 

@@ -173,6 +173,29 @@ class StereoRig:
         tl, tr, tu, td = self.frustum(eye).tangents
         return self.width, max(1, round(self.width * (tu + td) / (tl + tr)))
 
+    def head(self) -> tuple[Frustum, tuple[int, int]]:
+        """The head's (cyclopean) frustum and film: centred on the head's axis, each side as
+        wide as the wider eye's, at the eyes' pixels per unit tangent. A head's gaze at its
+        film's centre then looks straight ahead, and the eyes' gazes mirror each other; on
+        the left eye's off-axis frustum it would look 15° to the left under Quest 3's, and
+        the right eye would see its periphery out to 69°.
+
+        Returns
+        -------
+        frustum : Frustum
+            Symmetric: ``left == right``, ``up == down``.
+        size : tuple of int
+            Its film's ``(width, height)`` in pixels.
+        """
+        a, b = self.frustum("left"), self.frustum("right")
+        across = max(a.left, a.right, b.left, b.right)
+        down = max(a.up, a.down, b.up, b.down)
+        f = Frustum(across, across, down, down)
+        tl, tr, _, _ = a.tangents
+        tx, _, ty, _ = f.tangents
+        per_tangent = self.width / (tl + tr)
+        return f, (max(1, round(2.0 * tx * per_tangent)), max(1, round(2.0 * ty * per_tangent)))
+
     def realised(self, eye: str) -> Frustum:
         """The frustum the eye's sensor has: its left and right angles exactly, its up and
         down angles within half a pixel of the frustum's (the eye buffer's height is a whole

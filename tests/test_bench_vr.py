@@ -185,7 +185,7 @@ def test_a_headset_stereo_and_tracker_come_from_the_command_line(bench):
     assert spec.perceptual["display"] == "htc_vive_pro"
     motion = spec.scenes[0].motion
     assert motion["stereo"] == {"ipd": 0.063, "headset": "htc_vive_pro", "reuse": True,
-                                "first": "left"}
+                                "first": "left", "eye_width": 40}
     assert motion["gaze_noise_deg"] == 0.5 and "rendered_gazes" in motion
     args.reuse, args.first_eye = "periphery", "right"
     how = parse_study(bench.overridden(data, args), base_dir=os.path.dirname(stereo))

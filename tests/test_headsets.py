@@ -156,6 +156,40 @@ def test_a_study_headset_keeps_the_frustum_along_a_camera_path():
         assert cam["fov"] == pytest.approx(f.fov_x) and cam["principal_point"] == [0.0, 0.0]
 
 
+def test_a_stereo_study_s_head_looks_straight_ahead_and_its_eyes_gazes_mirror():
+    from foveated_mi.stereo import EyeSensors
+    motion = {"frames": 2, "camera": {"keyframes": [{"t": 0.0, "yaw": 0.0}]}}
+    spec = parse_study(_study({"headset": "quest3", "eye_width": 48, "stereo": True},
+                              motion=motion))
+    scene = spec.scenes[0]
+    rig = headset("quest3").rig(48)
+    f, size = rig.head()
+    # Centred on the head's axis, each side the eyes' widest (Quest 3: 54° across, 54.27°
+    # down), at the eye buffers' pixels per unit tangent.
+    assert (f.left, f.right, f.up, f.down) == (54.0, 54.0, 54.27, 54.27)
+    assert scene.camera["principal_point"] == [0.0, 0.0] and scene.size == size
+    assert all(c["fov"] == pytest.approx(108.0) for c in scene.motion["cameras"])
+    loaded = load_scene("cornell-box", width=size[0], height=size[1], camera=scene.camera)
+    got = frustum_of(loaded.sensors()[0])
+    for side in ("left", "right", "up", "down"):
+        assert abs(math.radians(getattr(got, side) - getattr(f, side))) < 0.5 * math.radians(
+            108.0) / size[0] + ANGLE_RAD       # the height is whole pixels: half a pixel
+    # The head's gaze at its film's centre: the eyes' gazes mirror each other (the fixation
+    # lies on the head's mid-plane), within float32 projections.
+    (gl, gr), _, hit = EyeSensors(loaded, rig).gazes((0.5, 0.5))
+    assert hit
+    assert gl[0] + gr[0] == pytest.approx(1.0, abs=1e-5) and gl[1] == pytest.approx(gr[1],
+                                                                                     abs=1e-5)
+    assert gl[0] > 0.5 > gr[0]      # each eye looks nasally of its film's centre
+    # A new width keeps the head centred and the eyes at that width.
+    wide = spec.with_size((96, 1)).scenes[0]
+    assert wide.size == headset("quest3").rig(96).head()[1]
+    assert wide.motion["stereo"]["eye_width"] == 96
+    # One eye alone keeps its own off-axis frustum.
+    mono = parse_study(_study({"headset": "quest3", "eye_width": 48})).scenes[0]
+    assert mono.camera["principal_point"] != [0.0, 0.0]
+
+
 @pytest.mark.parametrize("viewer, match", [
     ({"headset": "quest4"}, r"viewer.headset"),
     ({"headset": "quest3", "eye_width": 2}, r"viewer.eye_width"),

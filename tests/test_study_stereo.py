@@ -91,7 +91,8 @@ def test_stereo_settings_reach_each_scene_s_motion():
     spec = parse_study({**base, "viewer": {"headset": "varjo_xr4", "stereo": True,
                                            "reuse": False, "first_eye": "right"}})
     assert spec.scenes[0].motion["stereo"] == {"ipd": 0.063, "headset": "varjo_xr4",
-                                               "reuse": False, "first": "right"}
+                                               "reuse": False, "first": "right",
+                                               "eye_width": 3840}   # its render target
     mono = parse_study({**base, "viewer": {"headset": "varjo_xr4"}})
     assert "stereo" not in mono.scenes[0].motion
 

@@ -121,10 +121,12 @@ def rendered_gazes(scene, task: dict) -> list:
     return out
 
 
-def _sequence_summary(task: dict, n: int, times: list, rays: list) -> dict:
-    """The row's identity, rays and time (the median frame time after the first)."""
+def _sequence_summary(task: dict, n: int, times: list, rays: list,
+                      size: tuple[int, int] | None = None) -> dict:
+    """The row's identity, rays and time (the median frame time after the first); its film
+    is the scene's, or ``size`` (a stereo row's eye buffer)."""
     spp, seed = task["spp"], task["seed"]
-    w, h = task["scene"]["width"], task["scene"]["height"]
+    w, h = size if size is not None else (task["scene"]["width"], task["scene"]["height"])
     return {"task_id": task["task_id"], "scene": task["label"], "method": task["method"],
             "seed": seed, "spp": spp, "width": w, "height": h, "repeats": 1,
             "variant": task["variant"], "config": task["config"], "frame": n,

@@ -238,10 +238,21 @@ class StudySpec:
         headset only the width is taken: the height follows from the eye's frustum."""
         if size is None:
             return self
-        if self.headset is not None:
-            from ..headsets import headset
-            size = headset(self.headset).rig(int(size[0])).size("left")
-        return replace(self, scenes=tuple(replace(s, size=tuple(size)) for s in self.scenes))
+        if self.headset is None:
+            return replace(self, scenes=tuple(replace(s, size=tuple(size)) for s in self.scenes))
+        from ..headsets import headset
+        rig = headset(self.headset).rig(int(size[0]))
+        return replace(self, scenes=tuple(_resized_eyes(s, rig) for s in self.scenes))
+
+
+def _resized_eyes(scene: SceneSpec, rig) -> SceneSpec:
+    """``scene`` under a headset at ``rig``'s eye width: one eye's buffer, or with two eyes
+    the head's film and the eyes' width."""
+    stereo = None if scene.motion is None else scene.motion.get("stereo")
+    if stereo is None:
+        return replace(scene, size=rig.size("left"))
+    return replace(scene, size=rig.head()[1],
+                   motion={**scene.motion, "stereo": {**stereo, "eye_width": rig.width}})
 
 
 def load_study(path: str | os.PathLike) -> StudySpec:
@@ -600,8 +611,12 @@ def _eyes(ctx: TableContext, table: Any, scenes: list) -> tuple[list, str | None
     (None without one)."""
     headset = _headset(ctx, table)
     if headset is not None:
-        scenes = [_on_headset(s, *headset) for s in scenes]
+        # Two eyes look from one head, whose gaze at its film's centre looks straight ahead.
+        head = dict(table).get("stereo") is True
+        scenes = [_on_headset(s, *headset, head=head) for s in scenes]
     stereo = _stereo(ctx, table, scenes, None if headset is None else headset[0])
+    if stereo is not None and headset is not None:
+        stereo["eye_width"] = headset[1]        # the head's film is wider than an eye's
     if stereo is not None:
         scenes = [s if s.motion is None else replace(s, motion={**s.motion, "stereo": stereo})
                   for s in scenes]
@@ -664,18 +679,19 @@ def _headset(ctx: TableContext, table: Any):
     return model, width
 
 
-def _on_headset(scene: SceneSpec, model, width: int) -> SceneSpec:
-    """``scene`` seen by one eye of ``model`` at the scene's camera (the head): the eye's
-    frustum and an eye buffer ``width`` pixels wide (:meth:`Headset.eye_camera`); every
+def _on_headset(scene: SceneSpec, model, width: int, head: bool = False) -> SceneSpec:
+    """``scene`` seen by one eye of ``model`` at the scene's camera: the eye's frustum and an
+    eye buffer ``width`` pixels wide (:meth:`Headset.eye_camera`); with ``head``, the
+    scene's camera is the head of both eyes instead (:meth:`Headset.head_camera`). Every
     frame of a camera path keeps the frustum."""
     if scene.missing:
         return scene
     from ..scenes import scene_camera
-    camera, size = model.eye_camera(scene.camera or scene_camera(scene.source), width)
+    view = model.head_camera if head else model.eye_camera
+    camera, size = view(scene.camera or scene_camera(scene.source), width)
     motion = scene.motion
     if motion is not None and motion.get("cameras"):
-        motion = {**motion, "cameras": [model.eye_camera(c, width)[0]
-                                        for c in motion["cameras"]]}
+        motion = {**motion, "cameras": [view(c, width)[0] for c in motion["cameras"]]}
     return replace(scene, camera=camera, size=size, motion=motion)
 
 

@@ -38,26 +38,26 @@ __all__ = ["STEREO_KEYS", "stereo_rig", "stereo_reference", "stereo_sequence_row
 
 
 def stereo_rig(scene, stereo: dict) -> StereoRig:
-    """The eyes of a stereo task: the headset's rig at the film's width, else the head
-    camera's own frustum at each eye.
+    """The eyes of a stereo task: the headset's rig at its ``eye_width``, else the head
+    camera's own frustum and film width at each eye.
 
     Parameters
     ----------
     scene : mi.Scene
         The task's scene (its first sensor is the head).
     stereo : dict
-        ``motion["stereo"]``: ``{"ipd", "headset", "reuse", "first"}``.
+        ``motion["stereo"]``: ``{"ipd", "headset", "eye_width", "reuse", "first"}``.
 
     Returns
     -------
     rig : StereoRig
-        Both eyes, as wide as the head's film.
+        Both eyes.
     """
     head = scene.sensors()[0]
     width = int(head.film().crop_size()[0])
     if stereo.get("headset"):
         from ..headsets import headset
-        return headset(stereo["headset"]).rig(width, stereo["ipd"])
+        return headset(stereo["headset"]).rig(stereo.get("eye_width", width), stereo["ipd"])
     return StereoRig(frustum_of(head), ipd=stereo["ipd"], width=width)
 
 
@@ -149,9 +149,11 @@ def stereo_sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = F
     n = len(motion["gazes"])
     refs = reference if reference.shape[0] == n else np.broadcast_to(
         reference, (n,) + reference.shape[1:])
-    render, eyes, integ = _renderer(scene, task, stereo_rig(scene, motion["stereo"]))
+    rig = stereo_rig(scene, motion["stereo"])
+    render, eyes, integ = _renderer(scene, task, rig)
     times, rays, frames = _frames(scene, task, refs, render, eyes)
-    row = _sequence_summary(task, n, [t for t, _ in times], rays)
+    # The film is an eye's buffer, not the head's.
+    row = _sequence_summary(task, n, [t for t, _ in times], rays, rig.size(EYES[0]))
     for e, eye in enumerate(EYES):         # each eye's own share (the first eye's: one alone)
         row[f"time_{eye}_ms"] = _median([each[e] for _, each in times[1:]])
     modes = getattr(render, "modes", None)      # the row's time: the frames after the first
