@@ -53,6 +53,8 @@ Layout (every key optional except ``scenes``)::
                                 #   frustum and eye buffer replace each scene's field of view
                                 #   and film size (fov = "sensor" and its display's
                                 #   photometry follow); the scene's camera is the head
+                                #   (with stereo, centred on its axis: its gaze at the
+                                #   film's centre looks straight ahead)
     eye_width = 640             #   the eye buffer's width (default: the headset's render
                                 #   target); its height follows from the frustum
     stereo = true               #   both eyes (with [motion]): the headset's rig, else the
