@@ -219,3 +219,39 @@ def test_bad_input_gets_one_line(kwargs, match):
         Stereo(scene, FoveatedIntegrator(preset="vr", nested=scene.integrator()),
                StereoRig(FRUSTUM, width=32), **kwargs)
     assert "\n" not in str(e.value)
+
+
+def test_borrow_reads_each_sample_from_one_history_in_one_kernel():
+    """Where the other eye's map hits, a sample reads the other eye's value, count and
+    second moment; elsewhere its own history's where its own map hits; and all of the reads
+    are one kernel: evaluating one evaluates the rest (a timed frame forces them one at a
+    time, and each alone would run both maps' gathers again)."""
+    from foveated_mi.frame.buffer_space import borrow
+    from foveated_mi.frame.reproject import CameraState, History, ReprojectionMap
+    n = 6
+    camera = CameraState(mi.Matrix4f(1.0), mi.Point3f(0.0))
+
+    def history(base):
+        k = dr.arange(mi.Float, n)
+        return History(mean=mi.Color3f(base + k, base + 10 * k, base), count=base + k,
+                       moment2=base * k, depth=dr.full(mi.Float, 1.0, n), camera=camera,
+                       width=n, height=1)
+    own_h, partner = history(100.0), history(200.0)
+    i = dr.arange(mi.UInt32, n)
+    coords = mi.Point2f(mi.Float(i), 0.0)
+    # Lazy maps, as a frame's are: sample k reads the other eye's sample n-1-k on 0 and 1,
+    # its own sample k+1 on 1 to 3 (the other eye wins on 1), nothing on 4 and 5.
+    other = ReprojectionMap(coords + 0.5, i < 2, (n - 1) - i)
+    own = ReprojectionMap(coords, (i >= 1) & (i <= 3), dr.minimum(i + 1, n - 1),
+                          dr.full(mi.Bool, True, n))
+    m, merged = borrow(own, own_h, other, partner)
+    dr.eval(merged.mean)
+    for v in (merged.count, merged.moment2, m.hit, m.coords.x):
+        assert v.state == dr.VarState.Evaluated
+    src = np.array([n - 1, n - 2, 3, 4, 0, 0])
+    mine = np.array([True, True, False, False, False, False])
+    hit = np.array([True, True, True, True, False, False])
+    want = np.where(mine, 200.0 + src, 100.0 + src)
+    np.testing.assert_array_equal(np.array(merged.count)[hit], want[hit])
+    np.testing.assert_array_equal(np.array(m.hit), hit)
+    np.testing.assert_array_equal(np.array(m.index), np.arange(n))

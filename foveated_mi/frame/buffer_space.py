@@ -609,7 +609,7 @@ def borrow(own: ReprojectionMap, history: History | None, other: ReprojectionMap
                                  count=read("count", mi.Float), moment2=read("moment2", mi.Float),
                                  shown=shown)
     n = dr.width(take)
-    coords = dr.select(take, other.coords, own.coords)
+    coords, hit = dr.select(take, other.coords, own.coords), take | keep
     # One kernel for every read: each alone would run both maps' gathers again.
-    dr.schedule(coords, take | keep, merged.mean, merged.count, merged.moment2, merged.shown)
-    return ReprojectionMap(coords, take | keep, dr.arange(mi.UInt32, n), own.agree), merged
+    dr.schedule(coords, hit, merged.mean, merged.count, merged.moment2, merged.shown)
+    return ReprojectionMap(coords, hit, dr.arange(mi.UInt32, n), own.agree), merged
