@@ -189,8 +189,8 @@ class StereoRig:
         """
         a, b = self.frustum("left"), self.frustum("right")
         across = max(a.left, a.right, b.left, b.right)
-        down = max(a.up, a.down, b.up, b.down)
-        f = Frustum(across, across, down, down)
+        vertical = max(a.up, a.down, b.up, b.down)
+        f = Frustum(across, across, vertical, vertical)
         tl, tr, _, _ = a.tangents
         tx, _, ty, _ = f.tangents
         per_tangent = self.width / (tl + tr)

@@ -612,13 +612,12 @@ def _eyes(ctx: TableContext, table: Any, scenes: list) -> tuple[list, str | None
     ``motion["stereo"]`` under ``[viewer] stereo`` (:func:`_stereo`), and the headset's name
     (None without one)."""
     headset = _headset(ctx, table)
+    stereo = _stereo(ctx, table, scenes, None if headset is None else headset[0])
     if headset is not None:
         # Two eyes look from one head, whose gaze at its film's centre looks straight ahead.
-        head = dict(table).get("stereo") is True
-        scenes = [_on_headset(s, *headset, head=head) for s in scenes]
-    stereo = _stereo(ctx, table, scenes, None if headset is None else headset[0])
-    if stereo is not None and headset is not None:
-        stereo["eye_width"] = headset[1]        # the head's film is wider than an eye's
+        scenes = [_on_headset(s, *headset, head=stereo is not None) for s in scenes]
+        if stereo is not None:
+            stereo["eye_width"] = headset[1]    # the head's film is wider than an eye's
     if stereo is not None:
         scenes = [s if s.motion is None else replace(s, motion={**s.motion, "stereo": stereo})
                   for s in scenes]

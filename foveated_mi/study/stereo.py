@@ -53,12 +53,11 @@ def stereo_rig(scene, stereo: dict) -> StereoRig:
     rig : StereoRig
         Both eyes.
     """
-    head = scene.sensors()[0]
-    width = int(head.film().crop_size()[0])
     if stereo.get("headset"):
         from ..headsets import headset
-        return headset(stereo["headset"]).rig(stereo.get("eye_width", width), stereo["ipd"])
-    return StereoRig(frustum_of(head), ipd=stereo["ipd"], width=width)
+        return headset(stereo["headset"]).rig(stereo["eye_width"], stereo["ipd"])
+    head = scene.sensors()[0]
+    return StereoRig(frustum_of(head), ipd=stereo["ipd"], width=int(head.film().crop_size()[0]))
 
 
 def stereo_reference(scene, task: dict, frames) -> np.ndarray:
