@@ -216,7 +216,7 @@ def foveal_settings(width: int, height: int, o: Options) -> FovealSettings:
         offset)
     return FovealSettings(float(o["max_history"]), domain_settings(o), denoise_settings(o),
                           o["foveal_upsampling"], o["foveal_space"], o["foveal_disc"], lay,
-                          grid, float(o["foveal_taa"]))
+                          grid, float(o["foveal_taa"]), float(o["foveal_contrast"]))
 
 
 def viewer_options(o: Options, sensor) -> Options:

@@ -380,12 +380,21 @@ _SCHEMA: tuple[Option, ...] = (
            "pixels (§3.4-3.5); ``foveal`` denoises in the log-polar buffer of "
            "``sampling_law = 'polar'`` and warps it once to the film "
            "(:mod:`foveated_mi.frame.foveal`)"),
-    _choice("foveal_upsampling", ("bilinear", "joint"), "the warp of the foveal formation's "
-            "buffer to the film: bilinear, or joint (weighted by the full-resolution G-buffer)",
+    _choice("foveal_upsampling", ("bilinear", "cubic", "joint"), "the warp of the foveal "
+            "formation's buffer to the film: bilinear, cubic (Catmull-Rom), or joint (weighted "
+            "by the full-resolution G-buffer)",
             doc="How ``formation = 'foveal'`` warps its buffer to the film: ``bilinear`` over "
-            "the four cells around a pixel, or ``joint``, a joint bilateral upsampling whose "
+            "the four cells around a pixel; ``cubic``, Catmull-Rom over the 4 x 4 cells "
+            "around it where all of them hold a value (bilinear elsewhere), which keeps more "
+            "of the cells' contrast; or ``joint``, a joint bilateral upsampling whose "
             "weights also stop at the film G-buffer's surface edges "
             "(:func:`foveated_mi.frame.foveal.warp`)"),
+    Option("foveal_contrast", 0.0, "float", "the foveal buffer's contrast gain before the "
+           "warp: each cell pushed away from its neighbours' mean by this times their "
+           "difference (0: none)", lo=0.0, hi=4.0,
+           doc="With ``formation = 'foveal'``: an unsharp mask at the cells' own scale "
+           "before the warp, so that its reach grows with eccentricity as the cells do "
+           "(:func:`foveated_mi.frame.foveal.sharpen`); 0 leaves the cells as they are"),
     _choice("foveal_space", ("buffer", "film"), "where the foveal formation keeps its "
             "G-buffer and history: on the buffer's samples, or on the film's pixels",
             doc="Where ``formation = 'foveal'`` keeps its geometry and history: ``buffer`` "
@@ -671,6 +680,9 @@ def _check_combination(out: dict[str, Any]) -> None:
                                     or out["foveal_space"] != "buffer"):
         raise ParameterError("foveal_taa", out["foveal_taa"],
                              "1 unless formation = 'foveal' and foveal_space = 'buffer'")
+    if out["foveal_contrast"] > 0.0 and out["formation"] != "foveal":
+        raise ParameterError("foveal_contrast", out["foveal_contrast"],
+                             "0 unless formation = 'foveal'")
     if out["formation"] == "foveal":
         # Its cells are the pixels the polar law traces, and it keeps radiance throughout.
         if out["sampling_law"] != "polar":
@@ -681,9 +693,9 @@ def _check_combination(out: dict[str, Any]) -> None:
         if out["foveal_space"] == "buffer":
             # Nothing full-resolution exists to read: no film G-buffer, no film history.
             why = "with foveal_space = 'buffer' (set foveal_space = 'film' to use it)"
-            if out["foveal_upsampling"] != "bilinear":
+            if out["foveal_upsampling"] == "joint":
                 raise ParameterError("foveal_upsampling", out["foveal_upsampling"],
-                                     f"'bilinear' {why}")
+                                     f"'bilinear' or 'cubic' {why}")
             if out["emission_edges"]:
                 raise ParameterError("emission_edges", True, f"False {why}")
             if out["edge_threshold"] > 0:

@@ -73,3 +73,53 @@ def test_a_ramp_comes_back_within_the_bilinear_bound_of_the_polar_mapping(offset
     assert (err[inside] <= bound[inside]).all(), float(np.max(err[inside] - bound[inside]))
     # The bound is not loose by orders of magnitude: the worst error reaches a tenth of it.
     assert np.max(err[inside] / bound[inside]) > 0.1
+
+
+def _ring_quadratic(grid, alpha, beta, gamma):
+    """Cells holding a quadratic of their ring's centre coordinate, and that quadratic."""
+    u = np.array(grid.cells()[2], np.float64) + 0.5
+    values = alpha + beta * u + gamma * u * u
+    return mi.Color3f(mi.Float(values.astype(np.float32))), \
+        (lambda x: alpha + beta * x + gamma * x * x)
+
+
+@pytest.mark.parametrize("kernel", ["bilinear", "cubic"])
+def test_the_cubic_warp_brings_back_a_constant_with_a_hole_in_the_cells(kernel):
+    """Catmull-Rom's weights sum to one, and where one of its sixteen cells holds no value
+    the pixel takes the bilinear weights of the four that do: a constant stays a constant."""
+    grid = _grid()
+    g = mi.Point2f(0.4 * W, 0.5 * H)
+    valid = np.ones(grid.size, bool)
+    valid[grid.width * (grid.height // 2) + 3] = False
+    cells = np.full(grid.size, 2.5, np.float32)
+    cells[~valid] = np.nan
+    got = np.array(warp(mi.Color3f(mi.Float(cells)), mi.Bool(valid), grid, g, W, H,
+                        kernel=kernel))[0]
+    # Sixteen weighted terms summed: their roundings, each term's weight at most 1.3 x 1.3.
+    np.testing.assert_allclose(got, 2.5, rtol=tolerances.gamma(20) * 1.7, atol=0)
+
+
+def test_the_cubic_warp_reproduces_a_quadratic_across_the_rings():
+    """Catmull-Rom reproduces polynomials up to degree two (Keys 1981): cells holding a
+    quadratic of the ring coordinate come back as that quadratic at every pixel whose sixteen
+    cells lie inside the rings; bilinear interpolation bends it by up to gamma / 4."""
+    grid = _grid()
+    g = mi.Point2f(0.5 * W, 0.5 * H)
+    cells, f = _ring_quadratic(grid, 0.2, 0.03, 0.011)
+    valid = dr.full(mi.Bool, True, grid.size)
+    cubic = np.array(warp(cells, valid, grid, g, W, H, kernel="cubic"))[0]
+    bilinear = np.array(warp(cells, valid, grid, g, W, H))[0]
+    _, u, _, _ = _film_coords(grid, g)
+    y0 = np.floor(u - 0.5)
+    inner = (y0 >= 1) & (y0 <= grid.height - 3)
+    assert inner.sum() > 0.5 * W * H
+    want = f(u.astype(np.float64))
+    # Sixteen terms of |f| <= f(h) with weights summing in absolute value to at most 1.6,
+    # the weights' own cubic roundings, and u's from the polar mapping (a few ulps of u).
+    top = float(np.max(np.abs(want[inner])))
+    slope = 0.03 + 2 * 0.011 * grid.height
+    bound = tolerances.gamma(24) * 1.6 * top + tolerances.gamma(8) * grid.height * slope
+    err = np.abs(cubic - want)
+    assert (err[inner] <= bound).all(), float(np.max(err[inner]))
+    # The test can fail: bilinear interpolation misses the curvature by up to gamma / 4.
+    assert np.max(np.abs(bilinear - want)[inner]) > 100 * bound

@@ -90,6 +90,8 @@ class FovealSettings:
     grid: PolarGrid
     #: ``foveal_taa``: this frame's weight in what a cell shows (1: its denoised value)
     taa: float = 1.0
+    #: ``foveal_contrast``: the cells' unsharp gain before the warp (0: none)
+    contrast: float = 0.0
 
 
 def foveal_buffer_grid(width: int, height: int, s: FovealSettings) -> PolarGrid:
@@ -288,8 +290,78 @@ def stabilize(cells: mi.Color3f, valid: mi.Bool, grid: Grid, previous: mi.Color3
     return dr.select(use, dr.lerp(prev, cells, alpha), cells)
 
 
+def sharpen(cells: mi.Color3f, valid: mi.Bool, grid: Grid, gain: float) -> mi.Color3f:
+    """Each cell pushed away from the mean of its valid 3 x 3 neighbours by ``gain`` times
+    their difference (an unsharp mask at the cells' own scale, so that its reach grows with
+    eccentricity as the cells do), kept non-negative: the contrast that the cells' spacing
+    and the bilinear warp take from the periphery given back (Patney et al. 2016 enhance the
+    blurred periphery's contrast). Linear in ``cells`` with constant weights where it stays
+    non-negative: a cell's gradient is ``1 + gain`` on itself and ``-gain / n`` on each of
+    its ``n`` valid neighbours.
+
+    Parameters
+    ----------
+    cells, valid : mi.Color3f, mi.Bool
+        The cells' radiance, and those that hold a value.
+    grid : Grid
+        The buffer's grid.
+    gain : float
+        How far past the neighbours' mean (0: unchanged).
+
+    Returns
+    -------
+    cells : mi.Color3f
+        The cells sharpened (unchanged where no neighbour holds a value).
+    """
+    _, x, y = grid.cells()
+    acc = dr.zeros(mi.Color3f, grid.size)
+    n = dr.zeros(mi.Float, grid.size)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            if dx == 0 and dy == 0:
+                continue
+            q, inside = grid.neighbour(x + dx, y + dy)
+            cq = dr.gather(mi.Color3f, cells, q, inside)
+            ok = inside & dr.gather(mi.Bool, valid, q, inside) & dr.isfinite(cq.x) & \
+                dr.isfinite(cq.y) & dr.isfinite(cq.z)
+            acc += dr.select(ok, cq, 0.0)
+            n += dr.select(ok, 1.0, 0.0)
+    use = valid & (n > 0.0)
+    k = dr.opaque(mi.Float, gain)
+    mean = acc / dr.select(use, n, 1.0)
+    return dr.select(use, dr.maximum(cells + k * (cells - mean), 0.0), cells)
+
+
+def _catmull_rom(t: mi.Float) -> tuple[mi.Float, ...]:
+    """The four Catmull-Rom weights of the taps at -1, 0, 1, 2 for a fraction ``t``."""
+    t2 = t * t
+    t3 = t2 * t
+    return (0.5 * (-t3 + 2.0 * t2 - t), 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+            0.5 * (-3.0 * t3 + 4.0 * t2 + t), 0.5 * (t3 - t2))
+
+
+def _cubic(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, x0: mi.Float, y0: mi.Float,
+           fx: mi.Float, fy: mi.Float) -> tuple[mi.Color3f, mi.Bool]:
+    """Catmull-Rom over the 4 x 4 cells around each pixel (wrapping in angle, clamping
+    radially), kept non-negative; and whether all sixteen hold a value."""
+    wx, wy = _catmull_rom(fx), _catmull_rom(fy)
+    acc = dr.zeros(mi.Color3f, dr.width(fx))
+    every = dr.full(mi.Bool, True, dr.width(fx))
+    for j in range(4):
+        qy = dr.clip(mi.Int32(y0) + (j - 1), 0, grid.height - 1)
+        for i in range(4):
+            q, _ = grid.neighbour(mi.Int32(x0) + (i - 1), qy)
+            cq = dr.gather(mi.Color3f, cells, q)
+            ok = dr.gather(mi.Bool, valid, q) & dr.isfinite(cq.x) & dr.isfinite(cq.y) \
+                & dr.isfinite(cq.z)
+            every &= ok
+            acc += dr.select(ok, cq, 0.0) * dr.detach(wx[i] * wy[j])
+    return dr.maximum(acc, 0.0), every
+
+
 def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, width: int,
-         height: int, guide: tuple[Surface, Surface] | None = None) -> mi.Color3f:
+         height: int, guide: tuple[Surface, Surface] | None = None,
+         kernel: str = "bilinear") -> mi.Color3f:
     """The buffer on the film: bilinear over the four cells around each pixel's continuous
     cell coordinates that are ``valid`` and finite (wrapping in angle, clamping radially).
 
@@ -306,6 +378,10 @@ def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, w
         (:func:`~foveated_mi.kernels.taps.surface_energy`, σn = 0.3 and σx = 0.1, as SVGF's)
         multiplies each cell's (a joint bilateral upsampling: a cell on another surface lends
         little; where all four do, the plain bilinear weights). None: plain bilinear.
+    kernel : str, optional
+        ``"cubic"``: Catmull-Rom over the 4 x 4 cells around each pixel where all of them
+        hold a value (it keeps more of the cells' contrast than bilinear), the bilinear
+        result elsewhere.
 
     Returns
     -------
@@ -346,7 +422,11 @@ def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, w
         # Where no cell lies on the pixel's surface, the plain bilinear weights.
         use = wsum > 1e-4 * psum
         acc, wsum = dr.select(use, acc, plain), dr.select(use, wsum, psum)
-    return dr.select(wsum > 0.0, acc / dr.select(wsum > 0.0, wsum, 1.0), 0.0)
+    image = dr.select(wsum > 0.0, acc / dr.select(wsum > 0.0, wsum, 1.0), 0.0)
+    if kernel == "cubic":
+        sharp, every = _cubic(cells, valid, grid, x0, y0, fx, fy)
+        image = dr.select(every, sharp, image)
+    return image
 
 
 def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
@@ -383,8 +463,10 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
     if s.upsampling == "joint":
         guide = (Surface.of(gb.normal, gb.position, gb.hit),
                  Surface.of(cgb.normal, cgb.position, cgb.hit))
-    warped = domain.to_radiance(warp(out.image, has, grid, inp.gaze, width, height, guide), gb,
-                                d, clamp=True)
+    cells = sharpen(out.image, has, grid, s.contrast) if s.contrast > 0.0 else out.image
+    warped = domain.to_radiance(warp(cells, has, grid, inp.gaze, width, height, guide,
+                                     "cubic" if s.upsampling == "cubic" else "bilinear"),
+                                gb, d, clamp=True)
     # The fovea disc shows its own pixels, blended into the warp across the seam.
     film = Grid.film(width, height)
     p = film.film_position(film.cells()[0])
@@ -492,7 +574,10 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
     if previous is not None:
         # What each cell showed last frame, blended in where it reads its history.
         radiance = stabilize(radiance, has, grid, previous, s.taa)
-    warped = warp(radiance, has, grid, inp.gaze, width, height)
+    shown = radiance
+    if s.contrast > 0.0:
+        shown = sharpen(radiance, has, grid, s.contrast)
+    warped = warp(shown, has, grid, inp.gaze, width, height, kernel=s.upsampling)
     # The disc shows its own samples, blended into the warp across the seam.
     disc, held = _disc_values(resolved, inp, s, grad_pass)
     own, mine, t = _disc_samples(disc, held, inp, s)
