@@ -1,0 +1,185 @@
+"""Where a row of a VR study loses its video JOD: in the disc or the periphery, and in the
+first frames or after them.
+
+    python benchmarks/bench_vr_where.py --study configs/studies/vr_periphery_screen.toml \
+        --out out/vr_periphery_screen [--rows 0 10] [--after 4] [--budgets 0.1 0.25]
+
+Run it after the study, whose references it reads from ``--out``. Each chosen row
+(``--rows``: indices among the study's rows of its first scene and seed, the foveated rows
+first, as ``--list`` prints them) is rendered again as the study renders it, and its video JOD
+in the headset (the study's viewing geometry and display) is scored against the same
+references:
+
+* as shown;
+* from frame ``--after`` on: without the first frames, where a history is still filling;
+* with the disc around each frame's gaze (the first foveated row's ``theta``, out to the
+  seam) taken from the reference: what a perfect fovea would add;
+* with everything outside that disc taken from the reference: what a perfect periphery
+  would add.
+
+Then the periphery's ceiling for each ``--budgets`` (default: the first foveated row's
+``ray_budget``): every frame's cells of the ``vr`` buffer filled from that frame's reference,
+taken at the cell's centre pixel (what the preset traces) or as the mean of its pixels, warped
+to the film, the disc from the reference. No noise and no history: the most that the buffer's
+warp can score in motion at that budget.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, ".."))
+sys.path.insert(0, HERE)
+
+
+def _disc_masks(gazes, width: int, height: int, radius: float) -> np.ndarray:
+    """(F, H, W, 1): the pixels within ``radius`` of each frame's gaze (pixels)."""
+    yy, xx = np.mgrid[0:height, 0:width]
+    return np.stack([np.hypot(xx + 0.5 - g[0] * width, yy + 0.5 - g[1] * height) < radius
+                     for g in gazes])[..., None]
+
+
+def _scorer(scene, task):
+    """The study's headset video JOD of a (F, H, W, 3) display-referred test video, from
+    frame ``start`` on."""
+    from foveated_mi.perceptual import jod_video
+    from foveated_mi.study.scoring import _viewing
+    viewing = _viewing(scene, task)
+    motion = task["motion"]
+
+    def score(ref, test, start: int = 0):
+        return jod_video(ref[start:], test[start:], fixations=motion["gazes"][start:],
+                         fps=motion["fps"], ppd=viewing["ppd"], fov_horizontal=viewing["fov"],
+                         display=task["perceptual"]["display"])
+    return score
+
+
+def where(task, refs: np.ndarray, theta: float, after: int) -> dict:
+    """The row's video JOD as shown, after its first frames, with a perfect disc and with a
+    perfect periphery (module docstring)."""
+    from foveated_mi.frame.foveal import SEAM
+    from foveated_mi.frame.sampling import fovea_radius
+    from foveated_mi.study.tasks import get_scene, run_sequence_task
+    _, shown = run_sequence_task(task, refs)
+    scene = get_scene(task["scene"], task["variant"])
+    ref = np.stack([r for r, _ in shown])
+    test = np.stack([t for _, t in shown])
+    h, w = ref.shape[1:3]
+    disc = _disc_masks(task["motion"]["gazes"], w, h, fovea_radius(w, h, theta) + SEAM)
+    score = _scorer(scene, task)
+    return {"as_shown": score(ref, test), "after": score(ref, test, after),
+            "reference_disc": score(ref, np.where(disc, ref, test)),
+            "reference_periphery": score(ref, np.where(disc, test, ref))}
+
+
+def ceiling(task, refs: np.ndarray, budget: float) -> dict:
+    """The buffer's noise-free warp in motion at ``budget`` (module docstring)."""
+    import mitsuba as mi
+    from bench_cell_prefilter import cells_both_ways
+    from foveated_mi.frame import buffer_space
+    from foveated_mi.frame.foveal import SEAM, warp
+    from foveated_mi.frame.sampling import fovea_radius
+    from foveated_mi.render import to_display
+    from foveated_mi.study.tasks import get_scene
+    scene = get_scene(task["scene"], task["variant"])
+    h, w = refs.shape[1:3]
+    theta = task["options"]["theta"]
+    grid = buffer_space.layout(w, h, theta, budget, 0.0, 1).grid
+    r0 = fovea_radius(w, h, theta)
+    gazes = task["motion"]["gazes"]
+    yy, xx = np.mgrid[0:h, 0:w]
+    shown = {"centre": [], "mean": []}
+    for k, ref in enumerate(refs):
+        g = mi.Point2f(gazes[k][0] * w, gazes[k][1] * h)
+        centre, on, mean, held = cells_both_ways(ref, grid, g, w, h)
+        t = np.clip((r0 - np.hypot(xx + 0.5 - gazes[k][0] * w,
+                                   yy + 0.5 - gazes[k][1] * h)) / SEAM, 0.0, 1.0)[..., None]
+        for key, cells, valid in (("centre", centre, on), ("mean", mean, held)):
+            image = np.array(warp(cells, valid, grid, g, w, h)).T.reshape(h, w, 3)
+            shown[key].append(to_display(image * (1.0 - t) + ref * t))
+    ref_d = np.stack([to_display(r) for r in refs])
+    score = _scorer(scene, task)
+    return {"budget": budget, "cells": grid.size,
+            "cell_centres": score(ref_d, np.stack(shown["centre"])),
+            "cell_means": score(ref_d, np.stack(shown["mean"]))}
+
+
+def _name(task) -> str:
+    """A row as the study's tables name it: its preset, spp and the options set beside."""
+    if task["method"] != "foveated":
+        return f"{task['method']} {task['spp']} spp"
+    opts = json.loads(task["config"]).get("options", {})
+    rest = "".join(f", {k} {v}" for k, v in sorted(opts.items()) if k != "preset")
+    return f"{opts.get('preset', 'auto')} {task['spp']} spp{rest}"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--study", required=True, help="the study file")
+    ap.add_argument("--out", required=True, help="the study's output folder (its references)")
+    ap.add_argument("--rows", type=int, nargs="+", default=[0],
+                    help="rows, by index (default: the first foveated row)")
+    ap.add_argument("--list", action="store_true", help="print the rows' indices and stop")
+    ap.add_argument("--after", type=int, default=4,
+                    help="also score from this frame on (default 4)")
+    ap.add_argument("--budgets", type=float, nargs="*", default=None,
+                    help="ray budgets of the noise-free ceiling (default: the row's)")
+    ap.add_argument("--json", default=None, help="also write the figures here")
+    args = ap.parse_args(argv)
+    import foveated_mi
+    from foveated_mi.perceptual import available
+    from foveated_mi.study.pictures import cached_reference
+    from foveated_mi.study.spec import load_study
+    from foveated_mi.study.tasks import expand_tasks
+    if not available():
+        print("bench_vr_where: needs the perceptual extra (pip install -e '.[perceptual]')")
+        return 1
+    variant = foveated_mi.set_variant(None)
+    spec = load_study(args.study)
+    tasks = [t for t in expand_tasks(spec, variant)
+             if t["seed"] == spec.seeds[0] and t["label"] == spec.scenes[0].label]
+    tasks.sort(key=lambda t: t["method"] != "foveated")
+    if args.list:
+        for i, t in enumerate(tasks):
+            print(i, _name(t))
+        return 0
+    bad = [r for r in args.rows if not 0 <= r < len(tasks)]
+    if bad or tasks[0]["method"] != "foveated":
+        print(f"bench_vr_where: --rows {bad[0] if bad else args.rows} is invalid: expected "
+              f"0 to {len(tasks) - 1} in a study with a foveated row")
+        return 2
+    first = tasks[0]["options"]
+    theta = float(first["theta"])
+    refs = cached_reference(spec, args.out, variant)
+    frames = refs.shape[0] if refs.ndim == 4 else len(tasks[0]["motion"]["gazes"])
+    if not 0 < args.after < frames - 1:
+        print(f"bench_vr_where: --after {args.after} is invalid: expected 1 to {frames - 2}")
+        return 2
+    out = {"study": args.study, "after": args.after, "rows": [], "ceilings": []}
+    print(f"| row | as shown | from frame {args.after} | reference disc | reference periphery |"
+          "\n|---|---|---|---|---|")
+    for r in args.rows:
+        got = {"row": r, "name": _name(tasks[r]), **where(tasks[r], refs, theta, args.after)}
+        out["rows"].append(got)
+        print(f"| {got['name']} | {got['as_shown']:.2f} | {got['after']:.2f} "
+              f"| {got['reference_disc']:.2f} | {got['reference_periphery']:.2f} |", flush=True)
+    budgets = args.budgets or [float(first["ray_budget"])]
+    print("\n| rays | cells | cell centres | cell means |\n|---|---|---|---|")
+    for b in budgets:
+        c = ceiling(tasks[0], refs, b)
+        out["ceilings"].append(c)
+        print(f"| {b:g} | {c['cells']} | {c['cell_centres']:.2f} | {c['cell_means']:.2f} |",
+              flush=True)
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(out, f, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,50 @@
+"""Where a VR study's row loses its JOD (benchmarks/bench_vr_where.py): the disc it swaps for
+the reference, the ceiling's cells, and its arguments."""
+import os
+
+import numpy as np
+import pytest
+
+BENCH = os.path.join(os.path.dirname(__file__), "..", "benchmarks")
+STUDY = os.path.join(os.path.dirname(__file__), "..", "configs", "studies",
+                     "vr_periphery_screen.toml")
+
+
+@pytest.fixture
+def where(monkeypatch):
+    monkeypatch.syspath_prepend(BENCH)
+    import bench_vr_where
+    return bench_vr_where
+
+
+def test_the_disc_follows_each_frame_s_gaze(where):
+    masks = where._disc_masks([(0.25, 0.5), (0.75, 0.5)], 40, 20, 3.0)
+    assert masks.shape == (2, 20, 40, 1)
+    for k, cx in enumerate((10.0, 30.0)):
+        yy, xx = np.nonzero(masks[k, ..., 0])
+        # The pixels whose centres lie within 3 px of the gaze, and only those.
+        assert np.all(np.hypot(xx + 0.5 - cx, yy + 0.5 - 10.0) < 3.0)
+        inside = sum((x + 0.5 - cx) ** 2 + (y + 0.5 - 10.0) ** 2 < 9.0
+                     for y in range(20) for x in range(40))
+        assert len(xx) == inside > 0
+
+
+def test_it_lists_the_study_s_rows_foveated_first(where, capsys):
+    assert where.main(["--study", STUDY, "--out", "unused", "--list"]) in (0, 1)
+    out = capsys.readouterr().out
+    if "perceptual extra" in out:
+        pytest.skip("needs the perceptual extra")
+    lines = out.strip().splitlines()
+    assert lines[0] == "0 vr 4 spp"
+    assert lines[-1].endswith("uniform+history 4 spp")
+    assert all(" vr " in line for line in lines[:10])
+
+
+def test_a_row_past_the_study_s_is_refused_in_one_line(where, capsys):
+    code = where.main(["--study", STUDY, "--out", "unused", "--rows", "99"])
+    out = capsys.readouterr().out
+    if "perceptual extra" in out:
+        pytest.skip("needs the perceptual extra")
+    assert code == 2
+    assert out.strip() == ("bench_vr_where: --rows 99 is invalid: expected 0 to 12 in a study "
+                           "with a foveated row")
