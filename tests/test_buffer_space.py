@@ -216,7 +216,7 @@ def test_a_camera_cut_reads_no_history(interleave):
 
 @pytest.mark.parametrize("bad,match", [
     ({"foveal_upsampling": "joint"}, r"foveal_upsampling = 'joint' is invalid: expected "
-                                     r"'bilinear' with foveal_space = 'buffer'"),
+                                     r"'bilinear' or 'cubic' with foveal_space = 'buffer'"),
     ({"emission_edges": True}, r"emission_edges = True is invalid: expected False with "
                                r"foveal_space = 'buffer'"),
     ({"edge_threshold": 0.1}, r"edge_threshold = 0\.1 is invalid: expected 0 with "

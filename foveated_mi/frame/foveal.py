@@ -393,11 +393,24 @@ def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, w
     u, v = c.x - 0.5, c.y - 0.5
     x0, y0 = dr.floor(u), dr.floor(v)
     fx, fy = u - x0, v - y0
-    acc = dr.zeros(mi.Color3f, film.size)
-    wsum = dr.zeros(mi.Float, film.size)
-    plain, psum = dr.zeros(mi.Color3f, film.size), dr.zeros(mi.Float, film.size)
+    image = _bilinear(cells, valid, grid, x0, y0, fx, fy,
+                      None if guide is None else (guide[0].at(idx, mi.Bool(True)), guide[1]))
+    if kernel == "cubic":
+        sharp, every = _cubic(cells, valid, grid, x0, y0, fx, fy)
+        image = dr.select(every, sharp, image)
+    return image
+
+
+def _bilinear(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, x0: mi.Float, y0: mi.Float,
+              fx: mi.Float, fy: mi.Float, guide: tuple | None) -> mi.Color3f:
+    """Bilinear over the four cells around each pixel that hold a value (:func:`warp`), their
+    weights times the surfaces' edge-stopping weight with a ``guide`` (the pixels' surface,
+    the cells' :class:`Surface`)."""
+    n = dr.width(fx)
+    acc, wsum = dr.zeros(mi.Color3f, n), dr.zeros(mi.Float, n)
+    plain, psum = dr.zeros(mi.Color3f, n), dr.zeros(mi.Float, n)
     if guide is not None:
-        here = guide[0].at(idx, mi.Bool(True))
+        here = guide[0]
         inv_n, inv_x = dr.opaque(mi.Float, 1.0 / 0.3 ** 2), dr.opaque(mi.Float, 1.0 / 0.1 ** 2)
     for dy, wy in ((0, 1.0 - fy), (1, fy)):
         for dx, wx in ((0, 1.0 - fx), (1, fx)):
@@ -422,11 +435,7 @@ def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, w
         # Where no cell lies on the pixel's surface, the plain bilinear weights.
         use = wsum > 1e-4 * psum
         acc, wsum = dr.select(use, acc, plain), dr.select(use, wsum, psum)
-    image = dr.select(wsum > 0.0, acc / dr.select(wsum > 0.0, wsum, 1.0), 0.0)
-    if kernel == "cubic":
-        sharp, every = _cubic(cells, valid, grid, x0, y0, fx, fy)
-        image = dr.select(every, sharp, image)
-    return image
+    return dr.select(wsum > 0.0, acc / dr.select(wsum > 0.0, wsum, 1.0), 0.0)
 
 
 def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
@@ -459,14 +468,11 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
     timer.mark("reconstruct", res.shading, res.count, cgb.normal, cgb.position)
     # Denoising in the buffer (§3.5), one warp to the film, the albedo multiplied back there.
     out = _denoise(res, cgb, grid, s, grad_pass, on)
-    guide = None
-    if s.upsampling == "joint":
-        guide = (Surface.of(gb.normal, gb.position, gb.hit),
-                 Surface.of(cgb.normal, cgb.position, cgb.hit))
+    guide = (Surface.of(gb.normal, gb.position, gb.hit), Surface.of(
+        cgb.normal, cgb.position, cgb.hit)) if s.upsampling == "joint" else None
     cells = sharpen(out.image, has, grid, s.contrast) if s.contrast > 0.0 else out.image
     warped = domain.to_radiance(warp(cells, has, grid, inp.gaze, width, height, guide,
-                                     "cubic" if s.upsampling == "cubic" else "bilinear"),
-                                gb, d, clamp=True)
+                                     s.upsampling), gb, d, clamp=True)
     # The fovea disc shows its own pixels, blended into the warp across the seam.
     film = Grid.film(width, height)
     p = film.film_position(film.cells()[0])
