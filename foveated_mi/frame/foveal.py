@@ -242,6 +242,20 @@ def fill_cells(res: Resolved, grid: Grid, radius: int, targets: mi.Bool | bool =
                     res.resampled | fill, dr.select(fill, m2 * inv, res.moment2))
 
 
+def _neighbours(cells: mi.Color3f, valid: mi.Bool, grid: Grid):
+    """Each cell's eight neighbours under the grid's neighbour rule, one at a time: their
+    values and whether each is inside, ``valid`` and finite."""
+    _, x, y = grid.cells()
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            if dx == 0 and dy == 0:
+                continue
+            q, inside = grid.neighbour(x + dx, y + dy)
+            cq = dr.gather(mi.Color3f, cells, q, inside)
+            yield cq, inside & dr.gather(mi.Bool, valid, q, inside) & dr.isfinite(cq.x) & \
+                dr.isfinite(cq.y) & dr.isfinite(cq.z)
+
+
 def stabilize(cells: mi.Color3f, valid: mi.Bool, grid: Grid, previous: mi.Color3f,
               alpha: float) -> mi.Color3f:
     """What each cell shows with ``foveal_taa``: its denoised value blended with what it
@@ -269,21 +283,11 @@ def stabilize(cells: mi.Color3f, valid: mi.Bool, grid: Grid, previous: mi.Color3
     shown : mi.Color3f
         The cells as shown.
     """
-    idx = dr.arange(mi.UInt32, grid.size)
-    y = mi.Int32(idx // grid.width)
-    x = mi.Int32(idx) - y * grid.width
     here = dr.detach(cells)
     lo, hi = mi.Color3f(here), mi.Color3f(here)
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            if dx == 0 and dy == 0:
-                continue
-            q, inside = grid.neighbour(x + dx, y + dy)
-            cq = dr.gather(mi.Color3f, here, q, inside)
-            ok = inside & dr.gather(mi.Bool, valid, q, inside) & dr.isfinite(cq.x) & \
-                dr.isfinite(cq.y) & dr.isfinite(cq.z)
-            lo = dr.select(ok, dr.minimum(lo, cq), lo)
-            hi = dr.select(ok, dr.maximum(hi, cq), hi)
+    for cq, ok in _neighbours(here, valid, grid):
+        lo = dr.select(ok, dr.minimum(lo, cq), lo)
+        hi = dr.select(ok, dr.maximum(hi, cq), hi)
     prev = dr.detach(previous)
     use = valid & dr.isfinite(prev.x) & dr.isfinite(prev.y) & dr.isfinite(prev.z)
     prev = dr.clip(dr.select(use, prev, 0.0), lo, hi)
@@ -313,19 +317,11 @@ def sharpen(cells: mi.Color3f, valid: mi.Bool, grid: Grid, gain: float) -> mi.Co
     cells : mi.Color3f
         The cells sharpened (unchanged where no neighbour holds a value).
     """
-    _, x, y = grid.cells()
     acc = dr.zeros(mi.Color3f, grid.size)
     n = dr.zeros(mi.Float, grid.size)
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            if dx == 0 and dy == 0:
-                continue
-            q, inside = grid.neighbour(x + dx, y + dy)
-            cq = dr.gather(mi.Color3f, cells, q, inside)
-            ok = inside & dr.gather(mi.Bool, valid, q, inside) & dr.isfinite(cq.x) & \
-                dr.isfinite(cq.y) & dr.isfinite(cq.z)
-            acc += dr.select(ok, cq, 0.0)
-            n += dr.select(ok, 1.0, 0.0)
+    for cq, ok in _neighbours(cells, valid, grid):
+        acc += dr.select(ok, cq, 0.0)
+        n += dr.select(ok, 1.0, 0.0)
     use = valid & (n > 0.0)
     k = dr.opaque(mi.Float, gain)
     mean = acc / dr.select(use, n, 1.0)
