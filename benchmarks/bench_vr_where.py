@@ -136,9 +136,6 @@ def main(argv=None) -> int:
     from foveated_mi.study.pictures import cached_reference
     from foveated_mi.study.spec import load_study
     from foveated_mi.study.tasks import expand_tasks
-    if not available():
-        print("bench_vr_where: needs the perceptual extra (pip install -e '.[perceptual]')")
-        return 1
     variant = foveated_mi.set_variant(None)
     spec = load_study(args.study)
     tasks = [t for t in expand_tasks(spec, variant)
@@ -153,6 +150,9 @@ def main(argv=None) -> int:
         print(f"bench_vr_where: --rows {bad[0] if bad else args.rows} is invalid: expected "
               f"0 to {len(tasks) - 1} in a study with a foveated row")
         return 2
+    if not available():
+        print("bench_vr_where: needs the perceptual extra (pip install -e '.[perceptual]')")
+        return 1
     first = tasks[0]["options"]
     theta = float(first["theta"])
     refs = cached_reference(spec, args.out, variant)

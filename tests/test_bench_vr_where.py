@@ -30,11 +30,8 @@ def test_the_disc_follows_each_frame_s_gaze(where):
 
 
 def test_it_lists_the_study_s_rows_foveated_first(where, capsys):
-    assert where.main(["--study", STUDY, "--out", "unused", "--list"]) in (0, 1)
-    out = capsys.readouterr().out
-    if "perceptual extra" in out:
-        pytest.skip("needs the perceptual extra")
-    lines = out.strip().splitlines()
+    assert where.main(["--study", STUDY, "--out", "unused", "--list"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
     assert lines[0] == "0 vr 4 spp"
     assert lines[-1].endswith("uniform+history 4 spp")
     assert all(" vr " in line for line in lines[:10])
@@ -43,8 +40,6 @@ def test_it_lists_the_study_s_rows_foveated_first(where, capsys):
 def test_a_row_past_the_study_s_is_refused_in_one_line(where, capsys):
     code = where.main(["--study", STUDY, "--out", "unused", "--rows", "99"])
     out = capsys.readouterr().out
-    if "perceptual extra" in out:
-        pytest.skip("needs the perceptual extra")
     assert code == 2
     assert out.strip() == ("bench_vr_where: --rows 99 is invalid: expected 0 to 12 in a study "
                            "with a foveated row")
