@@ -18,7 +18,8 @@ references:
   would add.
 
 Then the periphery's ceiling for each ``--budgets`` (default: the first foveated row's
-``ray_budget``): every frame's cells of the ``vr`` buffer filled from that frame's reference,
+``ray_budget``): every frame's cells of the ``vr`` buffer (its log-polar cells,
+``polar_cells = "log"``, at that row's ``theta``) filled from that frame's reference,
 taken at the cell's centre pixel (what the preset traces) or as the mean of its pixels, warped
 to the film, the disc from the reference. No noise and no history: the most that the buffer's
 warp can score in motion at that budget.

@@ -123,3 +123,26 @@ def test_the_cubic_warp_reproduces_a_quadratic_across_the_rings():
     assert (err[inner] <= bound).all(), float(np.max(err[inner]))
     # The test can fail: bilinear interpolation misses the curvature by up to gamma / 4.
     assert np.max(np.abs(bilinear - want)[inner]) > 100 * bound
+
+
+def test_the_cubic_warp_s_reverse_mode_is_the_transpose_of_its_forward_mode():
+    """The cubic warp is linear in the cells where it stays non-negative (its weights are
+    held): the gradient of <warp(x), g> is its transpose applied to g."""
+    from gradcheck import forward_and_reverse
+    grid = _grid()
+    g = mi.Point2f(0.45 * W, 0.55 * H)
+    rng = np.random.default_rng(11)
+    valid = rng.uniform(size=grid.size) > 0.05
+    # Values close together: Catmull-Rom's negative lobes never take a pixel below 0.
+    x0 = rng.uniform(1.0, 1.2, (3, grid.size)).astype(np.float32)
+    dx = rng.normal(size=(3, grid.size)).astype(np.float32)
+    gy = rng.normal(size=(3, W * H)).astype(np.float32)
+
+    def run(x):
+        return warp(x, mi.Bool(valid), grid, g, W, H, kernel="cubic")
+
+    jdx, jtg = forward_and_reverse(run, x0, dx, gy)
+    # Sixteen weighted terms (or four, renormalised, where a cell is missing) per pixel.
+    lhs, rhs = tolerances.dot(jdx, gy), tolerances.dot(dx, jtg)
+    assert abs(lhs - rhs) <= tolerances.transpose_bound(jdx, gy, dx, jtg, 20), (lhs, rhs)
+    assert np.abs(jdx).max() > 0.1

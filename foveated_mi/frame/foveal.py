@@ -576,9 +576,7 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
     if previous is not None:
         # What each cell showed last frame, blended in where it reads its history.
         radiance = stabilize(radiance, has, grid, previous, s.taa)
-    shown = radiance
-    if s.contrast > 0.0:
-        shown = sharpen(radiance, has, grid, s.contrast)
+    shown = sharpen(radiance, has, grid, s.contrast) if s.contrast > 0.0 else radiance
     warped = warp(shown, has, grid, inp.gaze, width, height, kernel=s.upsampling)
     # The disc shows its own samples, blended into the warp across the seam.
     disc, held = _disc_values(resolved, inp, s, grad_pass)
