@@ -177,6 +177,33 @@ def test_the_spatial_fallback_runs_where_a_pixel_has_few_samples_and_nowhere_els
     tolerances.assert_within(est[few], pooled[few], bound[few], "pooled moments")
 
 
+def test_a_hole_adds_nothing_to_its_neighbours_spatial_estimate():
+    """A pixel without a value (NaN, as a foveal buffer's empty cell holds) beside pixels with
+    few samples: their pooled 5x5 estimate is the one with the hole holding any finite value,
+    finite, and not 0."""
+    w, h = 12, 10
+    n = w * h
+    rng = np.random.default_rng(5)
+    count = np.full(n, 2.0, np.float32)
+    mask = np.ones(n, bool)
+    hole = np.array([w * 4 + 5, w * 4 + 6])
+    mask[hole], count[hole] = False, 0.0
+    mu = rng.uniform(0.5, 1.5, n).astype(np.float32)
+    m2 = (mu.astype(np.float64) ** 2 + rng.uniform(0.05, 0.2, n)).astype(np.float32)
+    _, guide = two_planes(w, h, split=w)              # one plane
+
+    def estimate(fill):
+        values = mu.copy()
+        values[hole] = fill
+        return sample_variance(c3(np.repeat(values[:, None], 3, 1)), mi.Float(m2),
+                               mi.Float(count), mi.Bool(mask), guide.normal, guide.hit, w,
+                               h).numpy()
+
+    with_nan, with_zero = estimate(np.nan), estimate(0.0)
+    assert np.all(np.isfinite(with_nan)) and np.all(with_nan[mask] > 0.0)
+    np.testing.assert_array_equal(with_nan, with_zero)
+
+
 def test_estimate_variance_divides_by_samples_and_albedo():
     w, h = 8, 6
     n = w * h
@@ -235,15 +262,24 @@ def test_svgf_lowers_the_error_of_a_noisy_image_and_keeps_the_corner():
     assert abs(out[col].mean() - truth[col].mean()) < 0.05
 
 
-def test_svgf_does_not_spread_nan_or_inf():
+def test_svgf_does_not_spread_nan_or_inf_and_fills_no_hole():
+    """A pixel without a finite value (a hole of the foveal buffer) is no neighbour and reads
+    no tap: it stays as it was, and every other pixel comes out finite and as filtered
+    without it (the hole's neighbours read nothing the filter made up for it)."""
     w, h = 20, 16
     img = _smooth(w, h)
     img[37] = np.nan
     img[100, 1] = np.inf
+    bad = ~np.isfinite(img).all(1)
     _, guide = two_planes(w, h)
-    out = np3(svgf(c3(img), mi.Float(np.full(w * h, 0.01, np.float32)), guide.normal,
-                   guide.position, guide.hit, w, h, iterations=3))
-    assert np.all(np.isfinite(out))
+    var = mi.Float(np.full(w * h, 0.01, np.float32))
+    out = np3(svgf(c3(img), var, guide.normal, guide.position, guide.hit, w, h, iterations=3))
+    assert np.all(np.isfinite(out[~bad]))
+    np.testing.assert_array_equal(out[bad], img[bad].astype(np.float32))
+    # The same holes made NaN: the same image elsewhere, bit for bit.
+    nan = np.where(bad[:, None], np.nan, img)
+    again = np3(svgf(c3(nan), var, guide.normal, guide.position, guide.hit, w, h, iterations=3))
+    np.testing.assert_array_equal(again[~bad], out[~bad])
 
 
 # ----------------------------------------------------------------------------- reconstructions

@@ -320,8 +320,8 @@ def test_the_filter_skips_the_cells_off_the_film(space, denoiser, monkeypatch):
 
     images, skipped, on = run()
     monkeypatch.setattr(foveal, "_denoise",
-                        lambda res, cgb, grid, o, grad_pass, region=None:
-                        real(res, cgb, grid, o, grad_pass, None))
+                        lambda image, res, cgb, grid, o, grad_pass, region=None:
+                        real(image, res, cgb, grid, o, grad_pass, None))
     everywhere, filtered, _ = run()
     assert 0 < on.sum() < on.size * 3 // 4
     assert all(np.isfinite(a).all() for a in images)
@@ -355,3 +355,36 @@ def test_the_preset_denoises_its_disc_where_the_frame_is_noisy():
                 fovea = np.hypot(xx + 0.5 - 32, yy + 0.5 - 24) <= r0 - 2
             errors[disc].append(np.mean((image[fovea] - reference[fovea]) ** 2))
     assert all(d < r for d, r in zip(errors["denoised"], errors["resolved"])), errors
+
+
+def test_the_buffer_s_filter_weighs_the_noise_of_the_values_it_filters():
+    """With ``demodulate`` the cells are filtered as irradiance E = L / a, and SVGF's colour
+    weight scales with the noise of E: the samples' per-sample variance of L over their count,
+    over a's luminance squared, as on the film. Its mean and second moment must be read in one
+    domain: E's mean against L's second moment gives m2 - E^2 < 0 where a < 1, no variance,
+    and a filter that keeps every cell's noise."""
+    from types import SimpleNamespace
+    from foveated_mi.frame import foveal
+    from foveated_mi.frame.settings import DenoiseSettings, DomainSettings
+    from foveated_mi.kernels.buffers import GBuffer, Resolved
+    from foveated_mi.kernels.grid import Grid
+    w, h = 8, 6
+    n = w * h
+    radiance, per_sample, count, albedo = 0.3, 0.02, 8.0, 0.5
+    res = Resolved(mi.Color3f(dr.full(mi.Float, radiance, n)), dr.full(mi.Bool, True, n),
+                   dr.full(mi.Float, count, n), dr.zeros(mi.Bool, n),
+                   dr.full(mi.Float, radiance ** 2 + per_sample, n))
+    gb = GBuffer(dr.zeros(mi.Point3f, n), mi.Normal3f(dr.zeros(mi.Float, n),
+                 dr.zeros(mi.Float, n), dr.ones(mi.Float, n)), dr.ones(mi.Float, n),
+                 dr.full(mi.Bool, True, n), mi.Vector3f(0, 0, 1),
+                 mi.Color3f(dr.full(mi.Float, albedo, n)), dr.zeros(mi.Color3f, n))
+    settings = SimpleNamespace(
+        denoise=DenoiseSettings("svgf", (("atrous_iterations", 1), ("sigma_luminance", 4.0),
+                                         ("demodulate", True)), True),
+        domain=DomainSettings(True, False, "reinhard", 0.0, np.inf))
+    out = foveal._denoise(res.shading / albedo, res, gb, Grid(w, h), settings, False)
+    # s^2 = (m2 - mu^2) n / (n - 1), over n samples, over lum(a)^2; m2 - mu^2 cancels
+    # (0.11 - 0.09 = 0.02: a condition of 10 on a handful of roundings).
+    want = per_sample / (count - 1.0) / albedo ** 2
+    tolerances.assert_within(out.variance.numpy(), want,
+                             want * tolerances.gamma(10 * 10), "variance of E")

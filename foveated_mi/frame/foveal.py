@@ -112,10 +112,9 @@ def foveal_buffer_grid(width: int, height: int, s: FovealSettings) -> PolarGrid:
     return s.grid
 
 
-def _cells(values: mi.Color3f, resolved: Resolved, gb: GBuffer, q: mi.UInt32, has: mi.Bool):
-    """Each cell's working value, counts and G-buffer, from its pixel."""
-    nan = dr.nan
-    value = dr.select(has, dr.gather(mi.Color3f, values, q, has), nan)
+def _cells(resolved: Resolved, gb: GBuffer, q: mi.UInt32, has: mi.Bool):
+    """Each cell's resolved samples (radiance) and G-buffer, from its pixel."""
+    value = dr.select(has, dr.gather(mi.Color3f, resolved.shading, q, has), dr.nan)
     res = Resolved(value, has, dr.gather(mi.Float, resolved.count, q, has),
                    dr.zeros(mi.Bool, dr.width(q)), dr.gather(mi.Float, resolved.moment2, q, has))
     cgb = _gather(gb, q, has)
@@ -129,20 +128,22 @@ def _gather(bundle, index: mi.UInt32, active: mi.Bool | bool = True):
                           for v in bundle))
 
 
-def _denoise(res: Resolved, cgb: GBuffer, grid: Grid, s: FovealSettings,
+def _denoise(image: mi.Color3f, res: Resolved, cgb: GBuffer, grid: Grid, s: FovealSettings,
              grad_pass: bool, region: mi.Bool | None = None) -> Denoised:
-    """The registered denoiser on the buffer's working values (irradiance with
-    ``demodulate``), in the domain it declares; returns working values. ``region``: the
-    cells on the film, the only ones the warp reads (a filter skips the others)."""
+    """The registered denoiser on the buffer's working values ``image`` (irradiance with
+    ``demodulate``), in the domain it declares; returns working values. ``res``: the
+    resolved samples behind them, in radiance as the film's are, so that their mean and
+    second moment give the noise's variance in one domain. ``region``: the cells on the
+    film, the only ones the warp reads (a filter skips the others)."""
     entry, d = DENOISERS[s.denoise.name], s.domain
     if not runs(s.denoise, grad_pass):
-        return Denoised(res.shading)
-    ctx = DenoiseInput(res.shading, cgb, res, dr.arange(mi.UInt32, grid.size), grid.width,
+        return Denoised(image)
+    ctx = DenoiseInput(image, cgb, res, dr.arange(mi.UInt32, grid.size), grid.width,
                        grid.height, s.denoise.options, grad_pass, None, grid, region)
     call = entry.fn if entry.grid_aware else _padded(entry.fn, grid)
     if entry.domain == "irradiance":
-        return denoise_in_domain(call, entry.domain, ctx, res.shading, d)
-    out = denoise_in_domain(call, entry.domain, ctx, domain.to_radiance(res.shading, cgb, d), d,
+        return denoise_in_domain(call, entry.domain, ctx, image, d)
+    out = denoise_in_domain(call, entry.domain, ctx, domain.to_radiance(image, cgb, d), d,
                             on=res.mask)
     return out._replace(image=domain.to_irradiance(out.image, cgb, d))
 
@@ -185,8 +186,8 @@ def _disc_patch(resolved: Resolved, gb: GBuffer, index: mi.UInt32, on: mi.Bool, 
     pgb = _gather(gb, index, on)
     pgb = pgb._replace(hit=pgb.hit & has)
     value = dr.select(has, domain.to_irradiance(pr.shading, pgb, s.domain), dr.nan)
-    res = Resolved(value, has, pr.count, dr.zeros(mi.Bool, side * side), pr.moment2)
-    out = _denoise(res, pgb, Grid(side, side), s, grad_pass, on)
+    res = Resolved(pr.shading, has, pr.count, dr.zeros(mi.Bool, side * side), pr.moment2)
+    out = _denoise(value, res, pgb, Grid(side, side), s, grad_pass, on)
     return domain.to_radiance(out.image, pgb, s.domain, clamp=True)
 
 
@@ -460,10 +461,11 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
         gb = gb._replace(emission=dr.select(inp.emission_edges, 0.0, gb.emission))
     # The working values: irradiance with demodulate, so that the albedo's detail comes
     # back at the film's resolution after the warp.
-    res, cgb = _cells(domain.to_irradiance(resolved.shading, gb, d), resolved, gb, q, has)
-    timer.mark("reconstruct", res.shading, res.count, cgb.normal, cgb.position)
+    res, cgb = _cells(resolved, gb, q, has)
+    values = dr.select(has, domain.to_irradiance(res.shading, cgb, d), dr.nan)
+    timer.mark("reconstruct", values, res.count, cgb.normal, cgb.position)
     # Denoising in the buffer (§3.5), one warp to the film, the albedo multiplied back there.
-    out = _denoise(res, cgb, grid, s, grad_pass, on)
+    out = _denoise(values, res, cgb, grid, s, grad_pass, on)
     guide = (Surface.of(gb.normal, gb.position, gb.hit), Surface.of(
         cgb.normal, cgb.position, cgb.hit)) if s.upsampling == "joint" else None
     cells = sharpen(out.image, has, grid, s.contrast) if s.contrast > 0.0 else out.image
@@ -489,7 +491,7 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
     timer.mark("post", image)
     buffers = {"traced": shading.mask, "shading": resolved.shading,
                "shading_mask": resolved.mask, "history_count": resolved.count,
-               "resampled": resolved.resampled, "cells": res.shading, "cell_mask": has,
+               "resampled": resolved.resampled, "cells": values, "cell_mask": has,
                "filtered": out.filtered, "tonemapped": out.tonemapped, "image": image}
     history = {"mean": resolved.shading, "count": resolved.count, "moment2": resolved.moment2}
     return Formed(image, buffers, history)
@@ -557,20 +559,12 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
     timer.mark("reconstruct", resolved.shading, resolved.mask, resolved.count)
     # The cells: the first samples, in the working domain (irradiance with demodulate).
     c = dr.arange(mi.UInt32, nc)
-    cr = _gather(resolved, c)
-    has = cr.mask
-    cgb = _gather(gb, c)
-    cgb = cgb._replace(hit=cgb.hit & has)
-    cells = dr.select(has, domain.to_irradiance(cr.shading, cgb, d), dr.nan)
-    res = Resolved(cells, has, cr.count, dr.zeros(mi.Bool, nc), cr.moment2)
-    if lay.interleave > 1:
-        # The cells not traced this frame and without history: their neighbours' values.
-        res = fill_cells(res, grid, lay.interleave // 2, dr.gather(mi.Bool, on, c))
-        has = res.mask
-    timer.mark("reconstruct", res.shading, res.count, cgb.normal, cgb.position)
+    cells, res, cgb = _buffer_cells(resolved, gb, s, dr.gather(mi.Bool, on, c))
+    has = res.mask
+    timer.mark("reconstruct", cells, res.count, cgb.normal, cgb.position)
     # Denoising in the buffer (§3.5); each cell's albedo multiplied back before the warp:
     # there is no full-resolution albedo to take it from.
-    out = _denoise(res, cgb, grid, s, grad_pass, dr.gather(mi.Bool, on, c))
+    out = _denoise(cells, res, cgb, grid, s, grad_pass, dr.gather(mi.Bool, on, c))
     radiance = domain.to_radiance(out.image, cgb, d, clamp=True)
     previous = _last_shown(inp, c) if s.taa < 1.0 else None
     if previous is not None:
@@ -586,7 +580,7 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
     buffers = {"traced": shading.mask, "shading": resolved.shading,
                "shading_mask": resolved.mask, "history_count": resolved.count,
                "resampled": resolved.resampled, "sample_on": on, "sample_pixel": pixels,
-               "cells": res.shading,
+               "cells": cells,
                "cell_mask": has, "filtered": out.filtered, "tonemapped": out.tonemapped,
                "image": image}
     history = {"mean": resolved.shading, "count": resolved.count, "moment2": resolved.moment2}
@@ -598,6 +592,30 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
                    held)
         history["shown"] = shown
     return Formed(image, buffers, history)
+
+
+def _buffer_cells(resolved: Resolved, gb: GBuffer, s: FovealSettings, targets: mi.Bool
+                  ) -> tuple[mi.Color3f, Resolved, GBuffer]:
+    """The buffer's cells (its first samples): their working values (irradiance with
+    ``demodulate``; non-finite where none), the resolved samples behind them in radiance,
+    whose mean and second moment give the noise's variance in one domain, and their
+    G-buffer. With ``foveal_interleave``, a cell of ``targets`` (on the film) not traced this
+    frame and without history takes its neighbours' values (:func:`fill_cells`)."""
+    lay = s.layout
+    nc = lay.cells
+    c = dr.arange(mi.UInt32, nc)
+    cr = _gather(resolved, c)
+    has = cr.mask
+    cgb = _gather(gb, c)
+    cgb = cgb._replace(hit=cgb.hit & has)
+    cells = dr.select(has, domain.to_irradiance(cr.shading, cgb, s.domain), dr.nan)
+    res = Resolved(dr.select(has, cr.shading, dr.nan), has, cr.count, dr.zeros(mi.Bool, nc),
+                   cr.moment2)
+    if lay.interleave > 1:
+        reach = lay.interleave // 2
+        cells = fill_cells(res._replace(shading=cells), lay.grid, reach, targets).shading
+        res = fill_cells(res, lay.grid, reach, targets)
+    return cells, res, cgb
 
 
 def foveal_grids(width: int, height: int, s: FovealSettings) -> dict[str, Grid]:

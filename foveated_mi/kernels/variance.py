@@ -62,7 +62,8 @@ def sample_variance(mean: mi.Color3f, moment2: mi.Float, count: mi.Float, mask: 
     variance : mi.Float
         :math:`s^2` per pixel; the spatial estimate where :math:`n < 4`.
     """
-    mu = luminance(dr.detach(mean))
+    # A pixel without a value (a hole: NaN in a buffer's cells) adds nothing to a window.
+    mu = dr.select(mask, luminance(dr.detach(mean)), 0.0)
     n = dr.select(mask, dr.detach(count), 0.0)
     raw = dr.select(mask, dr.maximum(dr.detach(moment2) - mu * mu, 0.0), 0.0)
     bessel = dr.select(n > 1.0, n / dr.maximum(n - 1.0, 1.0), 1.0)

@@ -33,7 +33,10 @@ whose neighbours all have weight 0 keeps its value bit for bit. Hits and misses 
 
 The colour weights depend on the radiance; they are computed from detached values (held at
 their primal values), so the filter is linear in the colour for gradients, as the issue's
-adjoint requires. Non-finite colours get weight 0 as neighbours.
+adjoint requires. Non-finite colours get weight 0 as neighbours, and a pixel without a finite
+value (a hole of the foveal buffer: the trace rejects non-finite samples) keeps it: the filter
+fills no hole, so that a hole's neighbours read no value it made up at an earlier level. The
+variance's 3 x 3 prefilter averages the pixels that hold a value.
 """
 from __future__ import annotations
 
@@ -54,17 +57,19 @@ EPSILON = 1e-10
 
 
 def _prefilter(var: mi.Float, grid: Grid) -> mi.Float:
-    """3 x 3 Gaussian blur of the variance (SVGF), renormalised at clamped borders."""
+    """3 x 3 Gaussian blur of the variance (SVGF), renormalised over the taps that hold a
+    value: not beyond a clamped border, nor a pixel without a value (variance < 0)."""
     px, py = pixel_xy(grid.width, grid.height)
     acc = dr.zeros(mi.Float, grid.size)
     wsum = dr.zeros(mi.Float, grid.size)
     for dy in (-1, 0, 1):
         for dx in (-1, 0, 1):
             q, inside = grid.neighbour(px + dx, py + dy)
-            w = dr.select(inside, _G3[dx + 1] * _G3[dy + 1], 0.0)
-            acc = dr.fma(w, dr.gather(mi.Float, var, q, inside), acc)
+            v = dr.gather(mi.Float, var, q, inside)
+            w = dr.select(inside & (v >= 0.0), _G3[dx + 1] * _G3[dy + 1], 0.0)
+            acc = dr.fma(w, v, acc)
             wsum += w
-    return acc / wsum
+    return acc / dr.select(wsum > 0.0, wsum, 1.0)
 
 
 def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: mi.Vector3f,
@@ -119,6 +124,10 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
         return color
     c = mi.Color3f(color)
     var = dr.select(dr.isfinite(variance), dr.maximum(dr.detach(variance), 0.0), 0.0)
+    # A pixel without a finite value (a hole) holds variance -1 through every level: no
+    # estimate, which the prefilter leaves out and no tap reads.
+    cd = dr.detach(c)
+    var = dr.select(dr.isfinite(cd.x) & dr.isfinite(cd.y) & dr.isfinite(cd.z), var, -1.0)
     surface = Surface.of(normal, position, hit)
     for level in range(iterations):
         c, var = _level(c, var, surface, grid,
@@ -159,7 +168,8 @@ def _level(c: mi.Color3f, var: mi.Float, surface: Surface, grid: Grid, *, step,
         else:
             diff = dr.abs(P[0] - Q[0])
             e_col = (diff.x + diff.y + diff.z) / P[3]
-        use = tap.inside & Q[1] & (P[6] == Q[6])
+        # A cell without a value (a buffer's hole) reads no tap: the filter fills nothing.
+        use = tap.inside & P[1] & Q[1] & (P[6] == Q[6])
         return dr.select(use, tap.b3 * dr.exp(-(e_col + e_geo)), 0.0)
 
     y, v_acc, w_acc = held_filter(c, HeldLevel(
