@@ -565,10 +565,12 @@ PRESETS: dict[str, dict[str, Any]] = {
     # The formation in a log-polar buffer around the gaze, sized by the ray budget: no
     # reconstruction on the film, the denoiser in the buffer, one warp. Tiles: the launch of
     # its samples built in tile order costs what compact's does, and its scattered rays
-    # trace faster in 2D packets (docs/results.md#the-vr-preset).
+    # trace faster in 2D packets (docs/results.md#the-vr-preset). SVGF four levels wide, its
+    # colour test at 8 noise deviations: a periphery seen at a few pixels per degree scores
+    # higher smooth than with its cells' noise (docs/results.md#the-buffers-filter-strength).
     "vr": {"sampling_law": "polar", "formation": "foveal", "ray_budget": 0.1, "theta": 0.15,
            "reorder": "tiles", "edge_threshold": 0.0, "denoiser": "svgf",
-           "atrous_iterations": 2, "foveal_disc": "denoised"},
+           "atrous_iterations": 4, "sigma_luminance": 8.0, "foveal_disc": "denoised"},
 }
 PRESET_NAMES = ("auto", *PRESETS)
 
