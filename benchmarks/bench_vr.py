@@ -15,7 +15,9 @@ Then it writes, to ``--results`` (default ``docs/results/``):
 * ``vr.md``: every cell (mean ± standard deviation over the seeds) and, per condition and
   scene, the **speed-up at equal video JOD** of each foveated configuration against each
   uniform family (uniform, + OIDN, + the same history, + the same history and OIDN; 1, 2 and 4
-  spp), and against all of them at once (``every uniform family``: their lower envelope):
+  spp), and against all of them at once (``every uniform family``: their lower envelope,
+  at each JOD the least time of any family's own curve and of their joint Pareto front,
+  :func:`foveated_mi.study.equal_time.envelope_over_seeds`):
   the time the family needs to reach the configuration's ``jod_video``, read along its
   best-so-far curve in log time (:func:`foveated_mi.study.equal_time.speedup`), over the
   configuration's time; ``>`` where the family never reaches it, ``<`` where its fastest
@@ -77,8 +79,8 @@ RESULTS = os.path.join(HERE, "..", "docs", "results")
 CONDITIONS = {"headset": "jod_video", "monitor": "jod_video_monitor"}
 #: The uniform families a foveated configuration is measured against.
 FAMILIES = ("uniform", "uniform+oidn", "uniform+history", "uniform+history+oidn")
-#: Every uniform row of any family: their lower envelope in time and quality (the best
-#: quality any uniform frame reaches within a time), read as one more family.
+#: Every uniform row of any family: their lower envelope in time and quality (the least time
+#: any family's curve, or their joint front, takes to reach a quality), read as one more family.
 ENVELOPE = "every uniform family"
 RING_DEG = 5.0
 
@@ -150,16 +152,20 @@ def speedups(rows: list[dict], column: str) -> list[dict]:
     """Per scene, foveated configuration and uniform family: the speed-up at equal
     ``column`` on the means and seed by seed (module docstring)."""
     from foveated_mi.study.aggregate import aggregate
-    from foveated_mi.study.equal_time import speedup_over_seeds
+    from foveated_mi.study.equal_time import envelope_over_seeds, speedup_over_seeds
     out = []
     for scene in sorted({r["scene"] for r in rows}):
         cells = aggregate([r for r in rows if r["scene"] == scene])
+        families = [[c for c in cells if c["method"] == fam] for fam in FAMILIES]
+        families = [f for f in families if f]
         for cell in (c for c in cells if c["method"] == "foveated"):
             for fam in (*FAMILIES, ENVELOPE):
                 family = [c for c in cells if c["method"] == fam
                           or (fam == ENVELOPE and c["method"] != "foveated")]
                 if family:
-                    s = speedup_over_seeds(cell, family, column)
+                    # Every family: the lower envelope of their curves and joint front.
+                    s = envelope_over_seeds(cell, families, column) if fam == ENVELOPE \
+                        else speedup_over_seeds(cell, family, column)
                     out.append({"scene": scene, "configuration": label(cell), "family": fam,
                                 "column": column, "ratio": s.ratio, "relation": s.relation,
                                 "per_seed": s.per_seed, "seed_mean": s.mean, "seed_sd": s.sd,

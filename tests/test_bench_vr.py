@@ -216,3 +216,37 @@ def test_two_eyes_are_read_against_the_first_eye_alone_at_equal_quality(bench):
     assert got["vr 4 spp"].startswith(f"×{50 / 28:.2f}")
     # 7.0 lies below every one-eye point: one eye reaches it in at most 17 ms.
     assert got["vr 2 spp"].startswith(f"≥×{40 / 17:.2f}")
+
+
+def test_every_family_is_the_lower_envelope_of_each_family_s_curve(bench):
+    """The envelope of every uniform family is never above a family's own curve. The joint
+    front of two families can bracket a quality between a cheap cell of one (266 ms, 8.21)
+    and a dearer cell of the other (414 ms, 8.23) so that, read between 414 and 440 ms, it
+    takes far longer than the first family's own curve (266 to 440 ms, 8.21 to 8.61); and
+    where the front is the lower (between the two families' cells), the front counts."""
+    def row(method, spp, seed, jod, ms, preset=None):
+        config = {"options": {"preset": preset}} if preset else {}
+        return {"scene": "city", "method": method, "spp": float(spp), "frame": 6.0,
+                "seed": float(seed), "time_ms": ms, "jod_video": jod,
+                "config": json.dumps(config)}
+    rows = []
+    for seed in (0, 1):
+        rows += [row("foveated", 4, seed, 8.24, 121.0, "vr"),
+                 row("foveated", 1, seed, 8.0, 50.0, "vr"),
+                 row("uniform+history", 2, seed, 8.21, 266.0),
+                 row("uniform+history", 4, seed, 8.61, 440.0),
+                 row("uniform", 1, seed, 7.0, 100.0),
+                 row("uniform", 4, seed, 8.23, 414.0)]
+    sps = {(s["configuration"], s["family"]): s for s in bench.speedups(rows, "jod_video")}
+    env = sps[("vr 4 spp", bench.ENVELOPE)]
+    own = sps[("vr 4 spp", "uniform+history")]
+    # Its own curve: 266 ms * (440 / 266) ** (0.03 / 0.40), over 121 ms.
+    want = 266.0 * (440.0 / 266.0) ** (0.03 / 0.40) / 121.0
+    assert own["ratio"] == pytest.approx(want, rel=1e-9)
+    assert env["ratio"] == pytest.approx(want, rel=1e-9) and env["relation"] == "="
+    assert all(x == pytest.approx(want, rel=1e-9) and r == "=" for x, r in env["per_seed"])
+    # At 8.0 the front (100 ms, 7.0 to 266 ms, 8.21) is below the families' own curves
+    # (uniform: 100 to 414 ms; uniform + history: its cheapest cell already does, 266 ms).
+    front = 100.0 * (266.0 / 100.0) ** (1.0 / 1.21) / 50.0
+    assert sps[("vr 1 spp", bench.ENVELOPE)]["ratio"] == pytest.approx(front, rel=1e-9)
+    assert front < min(sps[("vr 1 spp", f)]["ratio"] for f in ("uniform", "uniform+history"))

@@ -29,7 +29,7 @@ from typing import Any
 from .aggregate import Margin, aggregate, margin
 
 __all__ = ["Verdict", "equal_time_verdicts", "verdict_lines", "verdict_sentence", "speedup",
-           "speedup_over_seeds", "Speedup", "TARGETS", "comparable", "trace_modes",
+           "speedup_over_seeds", "envelope_over_seeds", "Speedup", "TARGETS", "comparable", "trace_modes",
            "modes_warning"]
 
 #: (name, frame, column, needed margin, against): "uniform" is the baseline without history
@@ -330,6 +330,49 @@ def speedup_over_seeds(cell: dict, family: list[dict], column: str) -> Speedup:
         rows = [x for c in family for x in (c.get("rows") or [c])
                 if x.get("seed") == r.get("seed")]
         per_seed.append(speedup(r, rows, column))
+    xs = [x for x, _ in per_seed if math.isfinite(x)]
+    return Speedup(ratio, rel, per_seed, sum(xs) / len(xs) if xs else math.nan,
+                   statistics.stdev(xs) if len(xs) > 1 else math.nan)
+
+
+def _lowest(results: list[tuple[float, str]]) -> tuple[float, str]:
+    """The envelope's ``(ratio, relation)`` from each curve's: the least time at which any
+    curve reaches the quality (exact, or at most its cheapest cell's); where none does, at
+    least the slowest cell's of any; refused where any curve is."""
+    if any(r == "≠" for _, r in results):
+        return math.nan, "≠"
+    reach = [(x, r) for x, r in results if r in ("=", "<") and math.isfinite(x)]
+    if reach:
+        return min(reach, key=lambda p: (p[0], p[1] == "<"))
+    never = [x for x, r in results if r == ">" and math.isfinite(x)]
+    return (max(never), ">") if never else (math.nan, "=")
+
+
+def envelope_over_seeds(cell: dict, families: list[list[dict]], column: str) -> Speedup:
+    """:func:`speedup_over_seeds` against the lower envelope of several uniform families: at
+    each quality the least time of any family's own curve and of their joint Pareto front
+    (each interpolated in log time between the cells that bracket it), on the means and seed
+    by seed. The front alone can bracket a quality between two families' cells dearer than
+    a family's own curve reaches it; the envelope is never above any family's.
+
+    Parameters
+    ----------
+    cell : dict
+        An aggregated foveated cell.
+    families : list of list of dict
+        Each family's aggregated cells.
+    column : str
+        The quality column.
+
+    Returns
+    -------
+    speedup : Speedup
+        As :func:`speedup_over_seeds`.
+    """
+    curves = [*families, [c for f in families for c in f]]
+    parts = [speedup_over_seeds(cell, f, column) for f in curves]
+    ratio, rel = _lowest([(p.ratio, p.relation) for p in parts])
+    per_seed = [_lowest([p.per_seed[i] for p in parts]) for i in range(len(parts[0].per_seed))]
     xs = [x for x, _ in per_seed if math.isfinite(x)]
     return Speedup(ratio, rel, per_seed, sum(xs) / len(xs) if xs else math.nan,
                    statistics.stdev(xs) if len(xs) > 1 else math.nan)
