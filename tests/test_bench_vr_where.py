@@ -32,7 +32,7 @@ def test_the_disc_follows_each_frame_s_gaze(where):
 def test_it_lists_the_study_s_rows_foveated_first(where, capsys):
     assert where.main(["--study", STUDY, "--out", "unused", "--list"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
-    assert lines[0] == "0 vr 4 spp"
+    assert lines[0] == "0 vr 4 spp, atrous_iterations 2, sigma_luminance 4.0"
     assert lines[-1].endswith("uniform+history 4 spp")
     assert all(" vr " in line for line in lines[:10])
 

@@ -123,11 +123,7 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
     if iterations == 0:
         return color
     c = mi.Color3f(color)
-    var = dr.select(dr.isfinite(variance), dr.maximum(dr.detach(variance), 0.0), 0.0)
-    # A pixel without a finite value (a hole) holds variance -1 through every level: no
-    # estimate, which the prefilter leaves out and no tap reads.
-    cd = dr.detach(c)
-    var = dr.select(dr.isfinite(cd.x) & dr.isfinite(cd.y) & dr.isfinite(cd.z), var, -1.0)
+    var = _initial_variance(c, variance)
     surface = Surface.of(normal, position, hit)
     for level in range(iterations):
         c, var = _level(c, var, surface, grid,
@@ -136,6 +132,15 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
                         inv_n=dr.opaque(mi.Float, inv_n), inv_x=dr.opaque(mi.Float, inv_x),
                         active=active)
     return c
+
+
+def _initial_variance(c: mi.Color3f, variance: mi.Float) -> mi.Float:
+    """The variance the first level reads: 0 where not finite, and -1 where the pixel holds
+    no finite value (a hole), which it keeps through every level: no estimate, which the
+    prefilter leaves out and no tap reads."""
+    var = dr.select(dr.isfinite(variance), dr.maximum(dr.detach(variance), 0.0), 0.0)
+    cd = dr.detach(c)
+    return dr.select(dr.isfinite(cd.x) & dr.isfinite(cd.y) & dr.isfinite(cd.z), var, -1.0)
 
 
 def _level(c: mi.Color3f, var: mi.Float, surface: Surface, grid: Grid, *, step,
