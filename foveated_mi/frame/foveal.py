@@ -121,6 +121,12 @@ def _cells(resolved: Resolved, gb: GBuffer, q: mi.UInt32, has: mi.Bool):
     return res, cgb._replace(hit=cgb.hit & has)
 
 
+def _working(res: Resolved, gb: GBuffer, d) -> mi.Color3f:
+    """The working values of resolved samples (irradiance with ``demodulate``; non-finite
+    where they hold none), for ``gb`` gathered at the same samples."""
+    return dr.select(res.mask, domain.to_irradiance(res.shading, gb, d), dr.nan)
+
+
 def _gather(bundle, index: mi.UInt32, active: mi.Bool | bool = True):
     """Every buffer of a named bundle (a ``GBuffer``, ``Resolved``) at ``index`` (None stays
     None)."""
@@ -185,9 +191,8 @@ def _disc_patch(resolved: Resolved, gb: GBuffer, index: mi.UInt32, on: mi.Bool, 
     has = on & pr.mask
     pgb = _gather(gb, index, on)
     pgb = pgb._replace(hit=pgb.hit & has)
-    value = dr.select(has, domain.to_irradiance(pr.shading, pgb, s.domain), dr.nan)
     res = Resolved(pr.shading, has, pr.count, dr.zeros(mi.Bool, side * side), pr.moment2)
-    out = _denoise(value, res, pgb, Grid(side, side), s, grad_pass, on)
+    out = _denoise(_working(res, pgb, s.domain), res, pgb, Grid(side, side), s, grad_pass, on)
     return domain.to_radiance(out.image, pgb, s.domain, clamp=True)
 
 
@@ -462,7 +467,7 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
     # The working values: irradiance with demodulate, so that the albedo's detail comes
     # back at the film's resolution after the warp.
     res, cgb = _cells(resolved, gb, q, has)
-    values = dr.select(has, domain.to_irradiance(res.shading, cgb, d), dr.nan)
+    values = _working(res, cgb, d)
     timer.mark("reconstruct", values, res.count, cgb.normal, cgb.position)
     # Denoising in the buffer (§3.5), one warp to the film, the albedo multiplied back there.
     out = _denoise(values, res, cgb, grid, s, grad_pass, on)
@@ -602,15 +607,9 @@ def _buffer_cells(resolved: Resolved, gb: GBuffer, s: FovealSettings, targets: m
     G-buffer. With ``foveal_interleave``, a cell of ``targets`` (on the film) not traced this
     frame and without history takes its neighbours' values (:func:`fill_cells`)."""
     lay = s.layout
-    nc = lay.cells
-    c = dr.arange(mi.UInt32, nc)
-    cr = _gather(resolved, c)
-    has = cr.mask
-    cgb = _gather(gb, c)
-    cgb = cgb._replace(hit=cgb.hit & has)
-    cells = dr.select(has, domain.to_irradiance(cr.shading, cgb, s.domain), dr.nan)
-    res = Resolved(dr.select(has, cr.shading, dr.nan), has, cr.count, dr.zeros(mi.Bool, nc),
-                   cr.moment2)
+    c = dr.arange(mi.UInt32, lay.cells)
+    res, cgb = _cells(resolved, gb, c, dr.gather(mi.Bool, resolved.mask, c))
+    cells = _working(res, cgb, s.domain)
     if lay.interleave > 1:
         reach = lay.interleave // 2
         cells = fill_cells(res._replace(shading=cells), lay.grid, reach, targets).shading
