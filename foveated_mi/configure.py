@@ -216,7 +216,31 @@ def foveal_settings(width: int, height: int, o: Options) -> FovealSettings:
         offset)
     return FovealSettings(float(o["max_history"]), domain_settings(o), denoise_settings(o),
                           o["foveal_upsampling"], o["foveal_space"], o["foveal_disc"], lay,
-                          grid, float(o["foveal_taa"]), float(o["foveal_contrast"]))
+                          grid, float(o["foveal_taa"]), float(o["foveal_contrast"]),
+                          disc_denoise_settings(o))
+
+
+def disc_denoise_settings(o: Options) -> DenoiseSettings:
+    """The denoiser of the foveal disc's patch: the frame's, with ``foveal_disc_iterations``
+    and ``foveal_disc_sigma_luminance`` in place of the buffer's levels and colour test where
+    they are set.
+
+    Parameters
+    ----------
+    o : dict
+        The validated options.
+
+    Returns
+    -------
+    settings : DenoiseSettings
+        As :func:`denoise_settings` gives for the disc's values of those two options.
+    """
+    disc = dict(o)
+    if o["foveal_disc_iterations"] >= 0:
+        disc["atrous_iterations"] = o["foveal_disc_iterations"]
+    if o["foveal_disc_sigma_luminance"] > 0.0:
+        disc["sigma_luminance"] = o["foveal_disc_sigma_luminance"]
+    return denoise_settings(disc)
 
 
 def viewer_options(o: Options, sensor) -> Options:

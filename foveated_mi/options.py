@@ -413,6 +413,18 @@ _SCHEMA: tuple[Option, ...] = (
             "history's variance says a pixel is noisy, and it raised the fovea's PSNR by 2.0 dB "
             "on voxel-city and 3.9 dB on a path-traced interior at 1 spp, "
             "``docs/results.md#the-disc-around-the-gaze-denoised``)"),
+    Option("foveal_disc_iterations", -1, "int", "levels of the denoiser on the foveal "
+           "disc's patch (-1: atrous_iterations, the buffer's)", lo=-1, hi=16,
+           doc="With ``foveal_disc = 'denoised'``: the levels of the à-trous / SVGF filter on "
+           "the disc's patch of full-resolution pixels, apart from the buffer's cells (-1: "
+           "``atrous_iterations``, as the cells). A cell spans many pixels, a disc pixel one: "
+           "the filter that the cells need reaches further than a converged fovea wants"),
+    Option("foveal_disc_sigma_luminance", 0.0, "float", "SVGF's colour sigma on the foveal "
+           "disc's patch, in noise deviations (0: sigma_luminance, the buffer's)",
+           lo=0.0, hi=1e9,
+           doc="With ``foveal_disc = 'denoised'`` and ``denoiser = 'svgf'``: the colour test "
+           "on the disc's patch, in noise standard deviations, apart from the buffer's cells "
+           "(0: ``sigma_luminance``, as the cells)"),
     Option("foveal_interleave", 1, "int", "n: the foveal buffer holds n x n times the cells "
            "and a frame traces one in each n x n block of them, in turn (1: every cell)",
            lo=1, hi=4,
@@ -682,6 +694,11 @@ def _check_combination(out: dict[str, Any]) -> None:
                                     or out["foveal_space"] != "buffer"):
         raise ParameterError("foveal_taa", out["foveal_taa"],
                              "1 unless formation = 'foveal' and foveal_space = 'buffer'")
+    for name, unset in (("foveal_disc_iterations", -1), ("foveal_disc_sigma_luminance", 0.0)):
+        if out[name] != unset and (out["formation"] != "foveal"
+                                   or out["foveal_disc"] != "denoised"):
+            raise ParameterError(name, out[name], f"{unset:g} unless formation = 'foveal' "
+                                 "and foveal_disc = 'denoised'")
     if out["foveal_contrast"] > 0.0 and out["formation"] != "foveal":
         raise ParameterError("foveal_contrast", out["foveal_contrast"],
                              "0 unless formation = 'foveal'")

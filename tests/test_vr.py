@@ -293,6 +293,41 @@ def test_oidn_denoises_the_disc_as_a_plain_image():
     assert not np.allclose(images["resolved"][inner], images["denoised"][inner])
 
 
+def test_the_disc_s_own_filter_changes_the_disc_only():
+    # The disc's levels apart from the cells': 0 shows its resolved pixels, the cells'
+    # own levels the preset's frame; anything else changes the disc and nothing outside it.
+    W, H = 64, 48
+    scene = _scene((W, H), spp=1)
+
+    def frames(**o):
+        integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", history=False, **o)
+        return integ, [np.array(mi.render(scene, integrator=integ, seed=s)) for s in range(2)]
+
+    integ, default = frames()
+    levels = integ.options["atrous_iterations"]
+    assert levels > 1 and integ.options["foveal_disc_iterations"] == -1
+    for a, b in zip(default, frames(foveal_disc_iterations=levels)[1]):
+        np.testing.assert_array_equal(a, b)
+    for a, b in zip(frames(foveal_disc="resolved")[1], frames(foveal_disc_iterations=0)[1]):
+        np.testing.assert_array_equal(a, b)
+    inner, outer = _disc_masks(integ, W, H, 1.0)
+    for o in ({"foveal_disc_iterations": 1}, {"foveal_disc_sigma_luminance": 1.0}):
+        for a, b in zip(default, frames(**o)[1]):
+            np.testing.assert_array_equal(a[outer], b[outer])
+            assert not np.array_equal(a[inner], b[inner]), o
+
+
+@pytest.mark.parametrize("options", [
+    {"preset": "vr", "foveal_disc": "resolved", "foveal_disc_iterations": 2},
+    {"preset": "guided", "foveal_disc_sigma_luminance": 2.0},
+    {"preset": "vr", "foveal_disc_iterations": 17}])
+def test_the_disc_s_own_filter_outside_a_denoised_disc_gets_one_line(options):
+    name = next(k for k in options if k.startswith("foveal_disc_"))
+    with pytest.raises(ParameterError, match=name) as e:
+        FoveatedIntegrator(**options)
+    assert "\n" not in str(e.value)
+
+
 def test_a_bad_foveal_disc_gets_one_line():
     with pytest.raises(ParameterError, match=r"foveal_disc = 'blurred' is invalid") as e:
         FoveatedIntegrator(preset="vr", foveal_disc="blurred")
@@ -320,8 +355,8 @@ def test_the_filter_skips_the_cells_off_the_film(space, denoiser, monkeypatch):
 
     images, skipped, on = run()
     monkeypatch.setattr(foveal, "_denoise",
-                        lambda image, res, cgb, grid, o, grad_pass, region=None:
-                        real(image, res, cgb, grid, o, grad_pass, None))
+                        lambda image, res, cgb, grid, o, grad_pass, region=None, ds=None:
+                        real(image, res, cgb, grid, o, grad_pass, None, ds))
     everywhere, filtered, _ = run()
     assert 0 < on.sum() < on.size * 3 // 4
     assert all(np.isfinite(a).all() for a in images)

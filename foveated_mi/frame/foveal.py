@@ -92,6 +92,8 @@ class FovealSettings:
     taa: float = 1.0
     #: ``foveal_contrast``: the cells' unsharp gain before the warp (0: none)
     contrast: float = 0.0
+    #: the denoiser on the disc's patch (``foveal_disc_iterations``, ...; None: ``denoise``)
+    disc_denoise: DenoiseSettings | None = None
 
 
 def foveal_buffer_grid(width: int, height: int, s: FovealSettings) -> PolarGrid:
@@ -135,17 +137,19 @@ def _gather(bundle, index: mi.UInt32, active: mi.Bool | bool = True):
 
 
 def _denoise(image: mi.Color3f, res: Resolved, cgb: GBuffer, grid: Grid, s: FovealSettings,
-             grad_pass: bool, region: mi.Bool | None = None) -> Denoised:
-    """The registered denoiser on the buffer's working values ``image`` (irradiance with
-    ``demodulate``), in the domain it declares; returns working values. ``res``: the
-    resolved samples behind them, in radiance as the film's are, so that their mean and
-    second moment give the noise's variance in one domain. ``region``: the cells on the
-    film, the only ones the warp reads (a filter skips the others)."""
-    entry, d = DENOISERS[s.denoise.name], s.domain
-    if not runs(s.denoise, grad_pass):
+             grad_pass: bool, region: mi.Bool | None = None,
+             ds: DenoiseSettings | None = None) -> Denoised:
+    """The registered denoiser (``ds``, else the buffer's) on working values ``image``
+    (irradiance with ``demodulate``), in the domain it declares; returns working values.
+    ``res``: the resolved samples behind them, in radiance as the film's are, so that their
+    mean and second moment give the noise's variance in one domain. ``region``: the cells on
+    the film, the only ones the warp reads (a filter skips the others)."""
+    ds = s.denoise if ds is None else ds
+    entry, d = DENOISERS[ds.name], s.domain
+    if not runs(ds, grad_pass):
         return Denoised(image)
     ctx = DenoiseInput(image, cgb, res, dr.arange(mi.UInt32, grid.size), grid.width,
-                       grid.height, s.denoise.options, grad_pass, None, grid, region)
+                       grid.height, ds.options, grad_pass, None, grid, region)
     call = entry.fn if entry.grid_aware else _padded(entry.fn, grid)
     if entry.domain == "irradiance":
         return denoise_in_domain(call, entry.domain, ctx, image, d)
@@ -192,7 +196,8 @@ def _disc_patch(resolved: Resolved, gb: GBuffer, index: mi.UInt32, on: mi.Bool, 
     pgb = _gather(gb, index, on)
     pgb = pgb._replace(hit=pgb.hit & has)
     res = Resolved(pr.shading, has, pr.count, dr.zeros(mi.Bool, side * side), pr.moment2)
-    out = _denoise(_working(res, pgb, s.domain), res, pgb, Grid(side, side), s, grad_pass, on)
+    out = _denoise(_working(res, pgb, s.domain), res, pgb, Grid(side, side), s, grad_pass, on,
+                   s.disc_denoise)
     return domain.to_radiance(out.image, pgb, s.domain, clamp=True)
 
 
