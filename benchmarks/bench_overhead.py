@@ -19,7 +19,8 @@ Cases (the film size is multiplied by ``--scale``):
     log-polar buffer around the gaze, denoised there (SVGF), one warp to the film; the
     G-buffer and history on the buffer's samples. ``-vr-film``: the same with them on the
     film's pixels (``foveal_space = "film"``). ``staircase-vr-oidn``: OIDN in the buffer
-    (skipped without ``pyoidn``).
+    (skipped without ``pyoidn``). ``voxel-study-vr``: a frame of the VR study at 8.4
+    pixels per degree, 1152x648 across 100°, path ``max_depth`` 8, 4 spp, orbiting 1/3° per frame.
 ``table1-rungholt`` / ``table1-vokselia`` / ``table1-eye-exam``
     the paper's Table 1 budgets at 1024x1024, path ``max_depth`` 8, 1 spp, ``preset="paper"``:
     θ calibrated to 19.8 % (voxel-city, 200² blocks), 3.3 % (the shared voxel-monument) and
@@ -88,6 +89,11 @@ CASES = {
     "staircase-vr": dict(scene=STAIRCASE, size=(640, 360), max_depth=8, spp=2,
                          preset="vr", fraction=None, orbit=0.0,
                          options={"ray_budget": 0.10}),
+    # A frame of the VR study at 8.4 pixels per degree (configs/studies/vr_10ppd*.toml):
+    # 1152x648, path depth 8, 4 spp, the head turning 30 deg/s at 90 Hz (1/3 deg per frame).
+    "voxel-study-vr": dict(scene="voxel-city", size=(1152, 648), max_depth=8, spp=4,
+                           preset="vr", fraction=None, orbit=1.0 / 3.0, fov=100.0,
+                           options={"ray_budget": 0.10}),
     # The same, with the G-buffer and history on the film's pixels (foveal_space = "film").
     "voxel-static-vr-film": dict(scene="voxel-city", size=(1024, 1024), max_depth=3, spp=1,
                                  preset="vr", fraction=None, orbit=0.0,
@@ -212,6 +218,9 @@ def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int,
     timed = FoveatedIntegrator(**opts, timing=True)
     counted = FoveatedIntegrator(**opts)
     camera = camera_of(scene)
+    if "fov" in spec:
+        camera = dict(camera, fov=spec["fov"])
+        apply_camera(scene, camera)
 
     full, full_replayed = [], []
     frame, stages, launches, compiled, fractions = [], [], [], 0, []
