@@ -23,6 +23,7 @@ import argparse
 import json
 import os
 import sys
+import textwrap
 
 import numpy as np
 
@@ -69,7 +70,7 @@ def _figure(path: str, lines, boxes, names: list[str], zoom: int) -> None:
     import matplotlib.pyplot as plt
     cols = len(names)
     fig, axes = plt.subplots(len(lines), cols, squeeze=False,
-                             figsize=(2.6 * cols, 1.5 * len(lines) + 0.4))
+                             figsize=(3.4 * cols, 1.9 * len(lines) + 0.6))
     for r, (line, box) in enumerate(zip(lines, boxes)):
         for c, (im, name) in enumerate(zip(line, names)):
             ax = axes[r][c]
@@ -77,7 +78,7 @@ def _figure(path: str, lines, boxes, names: list[str], zoom: int) -> None:
             ax.set_xticks([])
             ax.set_yticks([])
             if r == 0:
-                ax.set_title(name, fontsize=8)
+                ax.set_title(textwrap.fill(name, 34), fontsize=8)
             if c == 0:
                 ax.set_ylabel(f"{box[0]}\n({box[3]}x{box[4]} px, x{zoom})", fontsize=8)
     fig.tight_layout()
