@@ -124,20 +124,18 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     import foveated_mi
     from bench_vr import overridden
-    from bench_vr_where import _name
+    from bench_vr_where import _name, study_rows
     from foveated_mi.config import read_toml
     from foveated_mi.study import parse_study
     from foveated_mi.study.pictures import cached_reference
-    from foveated_mi.study.tasks import expand_tasks, get_scene
+    from foveated_mi.study.tasks import get_scene
     from foveated_mi.viewer import pixels_per_degree
     variant = foveated_mi.set_variant(None)
     opts = argparse.Namespace(size=None, frames=args.frames, seeds=None, scenes=None)
     spec = parse_study(overridden(read_toml("study", args.study)[0], opts),
                        base_dir=os.path.dirname(os.path.abspath(args.study)),
                        source=args.study, name="vr")
-    tasks = [t for t in expand_tasks(spec, variant)
-             if t["seed"] == spec.seeds[0] and t["label"] == spec.scenes[0].label]
-    tasks.sort(key=lambda t: t["method"] != "foveated")
+    tasks = study_rows(spec, variant)
     if args.list:
         for i, t in enumerate(tasks):
             print(i, _name(t))

@@ -119,6 +119,16 @@ def _name(task) -> str:
     return f"{opts.get('preset', 'auto')} {task['spp']} spp{rest}"
 
 
+def study_rows(spec, variant: str) -> list[dict]:
+    """The tasks of the study's first scene and seed, the foveated rows first: the rows that
+    ``--rows`` indexes and ``--list`` prints."""
+    from foveated_mi.study.tasks import expand_tasks
+    tasks = [t for t in expand_tasks(spec, variant)
+             if t["seed"] == spec.seeds[0] and t["label"] == spec.scenes[0].label]
+    tasks.sort(key=lambda t: t["method"] != "foveated")
+    return tasks
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--study", required=True, help="the study file")
@@ -136,12 +146,9 @@ def main(argv=None) -> int:
     from foveated_mi.perceptual import available
     from foveated_mi.study.pictures import cached_reference
     from foveated_mi.study.spec import load_study
-    from foveated_mi.study.tasks import expand_tasks
     variant = foveated_mi.set_variant(None)
     spec = load_study(args.study)
-    tasks = [t for t in expand_tasks(spec, variant)
-             if t["seed"] == spec.seeds[0] and t["label"] == spec.scenes[0].label]
-    tasks.sort(key=lambda t: t["method"] != "foveated")
+    tasks = study_rows(spec, variant)
     if args.list:
         for i, t in enumerate(tasks):
             print(i, _name(t))
