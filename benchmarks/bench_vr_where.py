@@ -17,6 +17,10 @@ references:
 * with everything outside that disc taken from the reference: what a perfect periphery
   would add.
 
+With ``--disc-from``, each chosen row is also scored with the disc around each frame's gaze
+taken from another row of the same seed (say the same preset at fewer spp): what its disc's
+rays buy, short of a disc traced at another rate.
+
 Then the periphery's ceiling for each ``--budgets`` (default: the first foveated row's
 ``ray_budget``): every frame's cells of the ``vr`` buffer (its log-polar cells,
 ``polar_cells = "log"``, at that row's ``theta``) filled from that frame's reference,
@@ -76,6 +80,21 @@ def where(task, refs: np.ndarray, theta: float, after: int) -> dict:
     return {"as_shown": score(ref, test), "after": score(ref, test, after),
             "reference_disc": score(ref, np.where(disc, ref, test)),
             "reference_periphery": score(ref, np.where(disc, test, ref))}
+
+
+def disc_from(task, other, refs: np.ndarray, theta: float) -> float:
+    """The row's video JOD with the disc around each frame's gaze taken from row ``other``
+    (module docstring)."""
+    from foveated_mi.frame.foveal import SEAM
+    from foveated_mi.frame.sampling import fovea_radius
+    from foveated_mi.study.tasks import get_scene, run_sequence_task
+    _, shown = run_sequence_task(task, refs)
+    _, theirs = run_sequence_task(other, refs)
+    ref = np.stack([r for r, _ in shown])
+    h, w = ref.shape[1:3]
+    disc = _disc_masks(task["motion"]["gazes"], w, h, fovea_radius(w, h, theta) + SEAM)
+    test = np.where(disc, np.stack([t for _, t in theirs]), np.stack([t for _, t in shown]))
+    return _scorer(get_scene(task["scene"], task["variant"]), task)(ref, test)
 
 
 def ceiling(task, refs: np.ndarray, budget: float) -> dict:
@@ -140,6 +159,8 @@ def main(argv=None) -> int:
                     help="also score from this frame on (default 4)")
     ap.add_argument("--budgets", type=float, nargs="*", default=None,
                     help="ray budgets of the noise-free ceiling (default: the row's)")
+    ap.add_argument("--disc-from", type=int, nargs="*", default=[], dest="disc_from",
+                    help="also score each row with its disc from these rows")
     ap.add_argument("--json", default=None, help="also write the figures here")
     args = ap.parse_args(argv)
     import foveated_mi
@@ -153,9 +174,11 @@ def main(argv=None) -> int:
         for i, t in enumerate(tasks):
             print(i, _name(t))
         return 0
-    bad = [r for r in args.rows if not 0 <= r < len(tasks)]
+    bad = [(f, r) for f, rows in (("--rows", args.rows), ("--disc-from", args.disc_from))
+           for r in rows if not 0 <= r < len(tasks)]
     if bad or tasks[0]["method"] != "foveated":
-        print(f"bench_vr_where: --rows {bad[0] if bad else args.rows} is invalid: expected "
+        flag, value = bad[0] if bad else ("--rows", args.rows)
+        print(f"bench_vr_where: {flag} {value} is invalid: expected "
               f"0 to {len(tasks) - 1} in a study with a foveated row")
         return 2
     if not available():
@@ -176,6 +199,15 @@ def main(argv=None) -> int:
         out["rows"].append(got)
         print(f"| {got['name']} | {got['as_shown']:.2f} | {got['after']:.2f} "
               f"| {got['reference_disc']:.2f} | {got['reference_periphery']:.2f} |", flush=True)
+    if args.disc_from:
+        print("\n| row | its disc from | video JOD |\n|---|---|---|")
+    for r in args.rows if args.disc_from else ():
+        for d in args.disc_from:
+            got = {"row": r, "disc_from": d, "jod_video": disc_from(tasks[r], tasks[d], refs,
+                                                                   theta)}
+            out.setdefault("disc_from", []).append(got)
+            print(f"| {_name(tasks[r])} | {_name(tasks[d])} | {got['jod_video']:.2f} |",
+                  flush=True)
     budgets = args.budgets or [float(first["ray_budget"])]
     print("\n| rays | cells | cell centres | cell means |\n|---|---|---|---|")
     for b in budgets:

@@ -43,3 +43,11 @@ def test_a_row_past_the_study_s_is_refused_in_one_line(where, capsys):
     assert code == 2
     assert out.strip() == ("bench_vr_where: --rows 99 is invalid: expected 0 to 12 in a study "
                            "with a foveated row")
+
+
+def test_a_disc_from_a_row_past_the_study_s_is_refused_in_one_line(where, capsys):
+    code = where.main(["--study", STUDY, "--out", "unused", "--rows", "0", "--disc-from", "13"])
+    assert code == 2
+    assert capsys.readouterr().out.strip() == (
+        "bench_vr_where: --disc-from 13 is invalid: expected 0 to 12 in a study with a "
+        "foveated row")
