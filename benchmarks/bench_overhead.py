@@ -20,7 +20,9 @@ Cases (the film size is multiplied by ``--scale``):
     G-buffer and history on the buffer's samples. ``-vr-film``: the same with them on the
     film's pixels (``foveal_space = "film"``). ``staircase-vr-oidn``: OIDN in the buffer
     (skipped without ``pyoidn``). ``voxel-study-vr``: a frame of the VR study at 8.4
-    pixels per degree, 1152x648 across 100°, path ``max_depth`` 8, 4 spp, orbiting 1/3° per frame.
+    pixels per degree, 1152x648 across 100°, path ``max_depth`` 8, 4 spp, orbiting 1/3° per
+    frame; ``voxel-study-vr-no-disc``: the same cells without the disc (θ 0.01, ``ray_budget``
+    0.058).
 ``table1-rungholt`` / ``table1-vokselia`` / ``table1-eye-exam``
     the paper's Table 1 budgets at 1024x1024, path ``max_depth`` 8, 1 spp, ``preset="paper"``:
     θ calibrated to 19.8 % (voxel-city, 200² blocks), 3.3 % (the shared voxel-monument) and
@@ -94,6 +96,11 @@ CASES = {
     "voxel-study-vr": dict(scene="voxel-city", size=(1152, 648), max_depth=8, spp=4,
                            preset="vr", fraction=None, orbit=1.0 / 3.0, fov=100.0,
                            options={"ray_budget": 0.10}),
+    # Its disc shrunk to nothing and the budget lowered so that the same 43,298 cells
+    # remain: what the disc's samples cost, against the case above in the same run.
+    "voxel-study-vr-no-disc": dict(scene="voxel-city", size=(1152, 648), max_depth=8, spp=4,
+                                   preset="vr", fraction=None, orbit=1.0 / 3.0, fov=100.0,
+                                   options={"ray_budget": 0.058, "theta": 0.01}),
     # The same, with the G-buffer and history on the film's pixels (foveal_space = "film").
     "voxel-static-vr-film": dict(scene="voxel-city", size=(1024, 1024), max_depth=3, spp=1,
                                  preset="vr", fraction=None, orbit=0.0,

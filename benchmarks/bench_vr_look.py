@@ -3,7 +3,7 @@ enlarged crops of chosen regions beside the reference.
 
     python benchmarks/bench_vr_look.py --study configs/studies/vr_10ppd_families.toml \
         --frames 36 --out out/vr_10ppd_families --rows 0 1 4 \
-        --crop horizon 40 120 256 128 --crop ground 60 470 256 128 \
+        --crop horizon 96 136 224 112 --crop ground 64 470 224 112 \
         --png docs/results/vr_look/crops.png --json docs/results/vr_look/flip.json
 
 Run it after the study, whose references it reads from ``--out``. Each chosen row

@@ -64,37 +64,42 @@ def _scorer(scene, task):
     return score
 
 
-def where(task, refs: np.ndarray, theta: float, after: int) -> dict:
-    """The row's video JOD as shown, after its first frames, with a perfect disc and with a
-    perfect periphery (module docstring)."""
+def sequence(task, refs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The row rendered again as the study renders it: its references and its frames as
+    shown, (F, H, W, 3) display values each."""
+    from foveated_mi.study.tasks import run_sequence_task
+    _, shown = run_sequence_task(task, refs)
+    return np.stack([r for r, _ in shown]), np.stack([t for _, t in shown])
+
+
+def _disc(task, ref: np.ndarray, theta: float) -> np.ndarray:
+    """(F, H, W, 1): each frame's disc around its gaze, out to the seam, at ``theta``."""
     from foveated_mi.frame.foveal import SEAM
     from foveated_mi.frame.sampling import fovea_radius
-    from foveated_mi.study.tasks import get_scene, run_sequence_task
-    _, shown = run_sequence_task(task, refs)
-    scene = get_scene(task["scene"], task["variant"])
-    ref = np.stack([r for r, _ in shown])
-    test = np.stack([t for _, t in shown])
     h, w = ref.shape[1:3]
-    disc = _disc_masks(task["motion"]["gazes"], w, h, fovea_radius(w, h, theta) + SEAM)
-    score = _scorer(scene, task)
+    return _disc_masks(task["motion"]["gazes"], w, h, fovea_radius(w, h, theta) + SEAM)
+
+
+def where(task, seq: tuple[np.ndarray, np.ndarray], theta: float, after: int) -> dict:
+    """The row's video JOD as shown, after its first frames, with a perfect disc and with a
+    perfect periphery (module docstring); ``seq``: its :func:`sequence`."""
+    from foveated_mi.study.tasks import get_scene
+    ref, test = seq
+    disc = _disc(task, ref, theta)
+    score = _scorer(get_scene(task["scene"], task["variant"]), task)
     return {"as_shown": score(ref, test), "after": score(ref, test, after),
             "reference_disc": score(ref, np.where(disc, ref, test)),
             "reference_periphery": score(ref, np.where(disc, test, ref))}
 
 
-def disc_from(task, other, refs: np.ndarray, theta: float) -> float:
-    """The row's video JOD with the disc around each frame's gaze taken from row ``other``
-    (module docstring)."""
-    from foveated_mi.frame.foveal import SEAM
-    from foveated_mi.frame.sampling import fovea_radius
-    from foveated_mi.study.tasks import get_scene, run_sequence_task
-    _, shown = run_sequence_task(task, refs)
-    _, theirs = run_sequence_task(other, refs)
-    ref = np.stack([r for r, _ in shown])
-    h, w = ref.shape[1:3]
-    disc = _disc_masks(task["motion"]["gazes"], w, h, fovea_radius(w, h, theta) + SEAM)
-    test = np.where(disc, np.stack([t for _, t in theirs]), np.stack([t for _, t in shown]))
-    return _scorer(get_scene(task["scene"], task["variant"]), task)(ref, test)
+def disc_from(task, seq: tuple[np.ndarray, np.ndarray], other: np.ndarray,
+              theta: float) -> float:
+    """The row's video JOD (``seq``: its :func:`sequence`) with the disc around each frame's
+    gaze taken from ``other``, another row's frames as shown (module docstring)."""
+    from foveated_mi.study.tasks import get_scene
+    ref, test = seq
+    mixed = np.where(_disc(task, ref, theta), other, test)
+    return _scorer(get_scene(task["scene"], task["variant"]), task)(ref, mixed)
 
 
 def ceiling(task, refs: np.ndarray, budget: float) -> dict:
@@ -194,8 +199,16 @@ def main(argv=None) -> int:
     out = {"study": args.study, "after": args.after, "rows": [], "ceilings": []}
     print(f"| row | as shown | from frame {args.after} | reference disc | reference periphery |"
           "\n|---|---|---|---|---|")
+    seqs: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def seq(r: int):
+        # Each row rendered once, however many tables read it.
+        if r not in seqs:
+            seqs[r] = sequence(tasks[r], refs)
+        return seqs[r]
+
     for r in args.rows:
-        got = {"row": r, "name": _name(tasks[r]), **where(tasks[r], refs, theta, args.after)}
+        got = {"row": r, "name": _name(tasks[r]), **where(tasks[r], seq(r), theta, args.after)}
         out["rows"].append(got)
         print(f"| {got['name']} | {got['as_shown']:.2f} | {got['after']:.2f} "
               f"| {got['reference_disc']:.2f} | {got['reference_periphery']:.2f} |", flush=True)
@@ -203,8 +216,8 @@ def main(argv=None) -> int:
         print("\n| row | its disc from | video JOD |\n|---|---|---|")
     for r in args.rows if args.disc_from else ():
         for d in args.disc_from:
-            got = {"row": r, "disc_from": d, "jod_video": disc_from(tasks[r], tasks[d], refs,
-                                                                   theta)}
+            got = {"row": r, "disc_from": d,
+                   "jod_video": disc_from(tasks[r], seq(r), seq(d)[1], theta)}
             out.setdefault("disc_from", []).append(got)
             print(f"| {_name(tasks[r])} | {_name(tasks[d])} | {got['jod_video']:.2f} |",
                   flush=True)

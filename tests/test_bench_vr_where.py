@@ -51,3 +51,24 @@ def test_a_disc_from_a_row_past_the_study_s_is_refused_in_one_line(where, capsys
     assert capsys.readouterr().out.strip() == (
         "bench_vr_where: --disc-from 13 is invalid: expected 0 to 12 in a study with a "
         "foveated row")
+
+
+def test_a_disc_from_another_row_takes_that_row_inside_the_disc_only(where, monkeypatch):
+    # A fake scorer returns what it was given; the row's frames are 0, the other row's 1.
+    seen = {}
+
+    def scorer(scene, task):
+        def score(ref, test):
+            seen["test"] = test
+            return 0.0
+        return score
+
+    monkeypatch.setattr(where, "_scorer", scorer)
+    import foveated_mi.study.tasks as tasks
+    monkeypatch.setattr(tasks, "get_scene", lambda scene, variant: None)
+    task = {"scene": None, "variant": None, "motion": {"gazes": [(0.25, 0.5), (0.75, 0.5)]}}
+    ref = np.zeros((2, 20, 40, 3))
+    where.disc_from(task, (ref, np.zeros_like(ref)), np.ones_like(ref), 0.1)
+    disc = where._disc(task, ref, 0.1)
+    assert disc.any() and not disc.all()
+    np.testing.assert_array_equal(seen["test"], np.broadcast_to(disc, ref.shape))

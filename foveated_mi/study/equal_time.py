@@ -29,8 +29,8 @@ from typing import Any
 from .aggregate import Margin, aggregate, margin
 
 __all__ = ["Verdict", "equal_time_verdicts", "verdict_lines", "verdict_sentence", "speedup",
-           "speedup_over_seeds", "envelope_over_seeds", "Speedup", "TARGETS", "comparable", "trace_modes",
-           "modes_warning"]
+           "speedup_over_seeds", "envelope_over_seeds", "Speedup", "TARGETS", "comparable",
+           "trace_modes", "modes_warning"]
 
 #: (name, frame, column, needed margin, against): "uniform" is the baseline without history
 #: (frame 1: it does not change with the frame), "history" the uniform frame with the same
