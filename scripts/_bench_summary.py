@@ -149,6 +149,19 @@ def summarise(out: str, variant: str) -> str:
     for name in ("overhead.json", "overhead_2x.json", "overhead_2x_host.json", os.path.join("table1", "results.csv")):
         if os.path.exists(os.path.join(out, name)):
             md += ["", f"Also written: `{name}`."]
+    stereo = [r for r in ((_json(os.path.join(out, n)) or {}).get("result")
+                          for n in sorted(os.listdir(out)) if n.startswith("stereo_")) if r]
+    if stereo:
+        md += ["", "## Two eyes (bench_stereo_frame; medians, ms)", "",
+               "| headset | eye buffer | full (one eye) | vr one eye | vr stereo | no reuse "
+               "| stereo x one eye | x uniform stereo |", "|---|---|---|---|---|---|---|---|"]
+        for r in stereo:
+            ms = r.get("median_ms", {})
+            md.append(f"| {r.get('headset')} | {'x'.join(map(str, r.get('eye_buffer', [])))} | "
+                      + " | ".join(_f(ms.get(c), ".2f") for c in ("full", "vr one eye", "vr stereo",
+                                                                   "vr stereo, no reuse"))
+                      + f" | x{_f(r.get('stereo_x_one_eye'), '.2f')}"
+                      f" | x{_f(r.get('speedup_vs_uniform_stereo'), '.2f')} |")
     parity_log = _read(os.path.join(out, "logs", "tests_parity.log")).splitlines()
     parity_last = next((l for l in reversed(parity_log) if l.strip() and not l.startswith("not collected")), "")
     if parity_last:
@@ -162,7 +175,7 @@ def summarise(out: str, variant: str) -> str:
         f.write(text)
     with open(os.path.join(out, "summary.json"), "w") as f:
         json.dump({"gpu": gpu, "variant": variant, "steps": steps, "reorder": reorder,
-                   "backward": backward, "overhead": overhead, "tests": tests_last.strip(), "tests_parity": parity_last.strip(),
+                   "backward": backward, "overhead": overhead, "stereo": stereo, "tests": tests_last.strip(), "tests_parity": parity_last.strip(),
                    "failed": [s["step"] for s in failed]}, f, indent=2)
     return text
 

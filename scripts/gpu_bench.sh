@@ -23,7 +23,7 @@
 # GPU_BENCH_DEADLINE (seconds for the whole run, default 470), GPU_BENCH_TESTS (pytest
 # targets, default tests), GPU_BENCH_PARITY_TESTS (run first: the backend-parity and kernel-budget
 # tests), GPU_BENCH_MAXFAIL (25), GPU_BENCH_ONLY (step names to run, e.g. "overhead tests_parity";
-# install, scenes and variant always run; default every step but the opt-in "vr"),
+# install, scenes and variant always run; default every step but the opt-in "vr" and "stereo"),
 # GPU_BENCH_OVERHEAD_CASES and GPU_BENCH_OVERHEAD_CASES_2X (bench_overhead's cases at 1024² and 2048²), GPU_BENCH_OVERHEAD_ARGS
 # (more bench_overhead arguments, e.g. --no-freeze).
 set -u
@@ -228,6 +228,18 @@ if [[ " ${GPU_BENCH_ONLY:-} " == *" vr "* ]]; then
   fi
 else
   skip vr "opt-in: GPU_BENCH_ONLY=\"vr\""
+fi
+
+# A headset's two eyes against one eye and uniform stereo, frame cost at its whole eye buffer
+# (Quest 3, then Varjo XR-4): opt-in (GPU_BENCH_ONLY="stereo").
+if [[ " ${GPU_BENCH_ONLY:-} " == *" stereo "* ]]; then
+  EW=0; [ $LOCAL = 1 ] && EW=48
+  step stereo 120 "bench_stereo_frame quest3 and varjo_xr4, whole eye buffer (--eye-width $EW)" \
+    bash -c 'for hs in quest3 varjo_xr4; do echo "== $hs"; "$0" "$1"/bench_stereo_frame.py \
+      --headset $hs --eye-width "$2" --variant "$3" --out "$4/stereo_$hs.json" || exit 1; done' \
+    "$VPY" "$B" "$EW" "$VARIANT" "$OUT"
+else
+  skip stereo "opt-in: GPU_BENCH_ONLY=\"stereo\""
 fi
 
 if missing=$(have_modules pytest); then

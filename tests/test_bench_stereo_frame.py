@@ -1,0 +1,44 @@
+"""Two eyes against one, frame cost (benchmarks/bench_stereo_frame.py): a tiny run's figures
+and its arguments."""
+import json
+import os
+
+import pytest
+
+BENCH = os.path.join(os.path.dirname(__file__), "..", "benchmarks")
+
+
+@pytest.fixture
+def bench(monkeypatch):
+    monkeypatch.syspath_prepend(BENCH)
+    import bench_stereo_frame
+    return bench_stereo_frame
+
+
+def test_a_tiny_run_times_every_case_and_its_ratios_are_of_its_medians(bench, tmp_path):
+    out = tmp_path / "stereo.json"
+    assert bench.main(["--eye-width", "32", "--frames", "2", "--warmup", "1",
+                       "--out", str(out)]) == 0
+    r = json.loads(out.read_text())["result"]
+    assert r["headset"] == "quest3" and r["eye_buffer"][0] == 32
+    ms = r["median_ms"]
+    assert set(ms) == set(bench.CASES) and all(len(r["times_ms"][c]) == 2 for c in bench.CASES)
+    assert r["stereo_x_one_eye"] == pytest.approx(ms["vr stereo"] / ms["vr one eye"], rel=1e-12)
+    assert r["speedup_vs_uniform_stereo"] == pytest.approx(2 * ms["full"] / ms["vr stereo"],
+                                                           rel=1e-12)
+    # Reuse only removes rays from the second eye; without it both eyes trace one eye's share.
+    f = r["ray_fraction"]
+    assert 0 < f["vr stereo"] <= f["vr stereo, no reuse"] <= 1
+    assert f["vr stereo, no reuse"] == pytest.approx(f["vr one eye"], rel=0.05)
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--eye-width", "8"], "--eye-width 8"),
+    (["--ray-budget", "0"], "--ray-budget 0.0"),
+    (["--frames", "0", "--spp", "0"], "--spp 0"),
+])
+def test_bad_arguments_get_one_line(bench, capsys, args, needle):
+    with pytest.raises(SystemExit):
+        bench.main(args)
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert needle in err and "allowed" in err
