@@ -90,7 +90,8 @@ def frame_settings(o: Options) -> FrameSettings:
         :func:`formation_space`) and the trace pass's.
     """
     plan = PlanSettings(
-        sampling_settings(o), LaunchSettings(o["reorder"], int(o["block_height"])),
+        sampling_settings(o), LaunchSettings(o["reorder"], int(o["block_height"]),
+                                            int(o["foveal_disc_spp"])),
         HistorySettings(bool(o["history"]), o["reprojection"],
                         float(o["reprojection_tolerance"])),
         space=formation_space(o),

@@ -425,6 +425,14 @@ _SCHEMA: tuple[Option, ...] = (
            doc="With ``foveal_disc = 'denoised'`` and ``denoiser = 'svgf'``: the colour test "
            "on the disc's patch, in noise standard deviations, apart from the buffer's cells "
            "(0: ``sigma_luminance``, as the cells)"),
+    Option("foveal_disc_spp", 0, "int", "samples per pixel of the foveal disc's rays (0: "
+           "the frame's spp, as the cells)", lo=0, hi=1 << 16,
+           doc="With ``formation = 'foveal'`` and ``foveal_space = 'buffer'``: the disc's "
+           "pixels trace this many samples, the cells the frame's spp (a value of the frame's "
+           "spp or more traces the frame's). The disc holds about two fifths of a ``vr`` "
+           "frame's rays and a third of its trace time at 8.4 pixels per degree, where it "
+           "buys little video JOD (``docs/results.md#what-the-discs-rays-buy``); its history "
+           "counts the samples each pixel traced"),
     Option("foveal_interleave", 1, "int", "n: the foveal buffer holds n x n times the cells "
            "and a frame traces one in each n x n block of them, in turn (1: every cell)",
            lo=1, hi=4,
@@ -690,6 +698,10 @@ def _check_combination(out: dict[str, Any]) -> None:
                                          or out["foveal_space"] != "buffer"):
         raise ParameterError("foveal_interleave", out["foveal_interleave"],
                              "1 unless formation = 'foveal' and foveal_space = 'buffer'")
+    if out["foveal_disc_spp"] > 0 and (out["formation"] != "foveal"
+                                       or out["foveal_space"] != "buffer"):
+        raise ParameterError("foveal_disc_spp", out["foveal_disc_spp"],
+                             "0 unless formation = 'foveal' and foveal_space = 'buffer'")
     if out["foveal_taa"] < 1.0 and (out["formation"] != "foveal"
                                     or out["foveal_space"] != "buffer"):
         raise ParameterError("foveal_taa", out["foveal_taa"],

@@ -77,6 +77,10 @@ CASES = [
     Case("prb", "albedo", {"preset": "vr"}, grad_spp=256, grad_seeds=6, fd_spp=256, fd_seeds=6),
     Case("path", "albedo", {"preset": "vr"}, grad_spp=256, grad_seeds=6, fd_spp=256,
          fd_seeds=6),
+    # Its disc at a quarter of the cells' samples: the gradient pass lays its launch out
+    # the same way.
+    Case("prb", "albedo", {"preset": "vr", "foveal_disc_spp": 64}, grad_spp=256,
+         grad_seeds=6, fd_spp=256, fd_seeds=6),
 ]
 
 

@@ -430,9 +430,11 @@ class NestedAdjoint:
         camera-ray sampling and estimator, the gradient pass's seed and spp."""
         ro = frame.reordered
         spp = spp if spp else int(frame.sensor.sampler().sample_count())
+        # The disc at its own rate, as the primal frame traced it.
+        disc_spp = frame.disc_spp if 0 < frame.disc_spp < spp else 0
         samples = _shading.trace_wavefront(
             scene, frame.sensor, integrator, ro.wavefront, frame.width, frame.height, spp=spp,
             seed=seed, active=ro.active, clamp=settings.clamp,
-            filter_sampler=frame.filter_sampler)
+            filter_sampler=frame.filter_sampler, disc=frame.disc_rays, disc_spp=disc_spp)
         return _shading.develop(samples, ro.wavefront, spp, frame.sensor.film(),
-                                settings.pixel_filter).value
+                                settings.pixel_filter, disc_spp=disc_spp).value

@@ -257,6 +257,31 @@ def sample_rays(pixels: mi.UInt32, on: mi.Bool, wavefront: mi.UInt32, active: mi
     return dr.gather(mi.UInt32, ray_of, pixels, on)
 
 
+def disc_rays(lay: SampleLayout, rays: mi.UInt32, traced: mi.Bool, n_rays: int) -> mi.Bool:
+    """The rays of a launch that trace a pixel of the full-resolution disc (a cell whose
+    pixel lies in the disc reads that ray too).
+
+    Parameters
+    ----------
+    lay : SampleLayout
+        The samples.
+    rays : mi.UInt32
+        Each sample's ray (:func:`sample_rays`).
+    traced : mi.Bool
+        The samples traced.
+    n_rays : int
+        The launch's rays.
+
+    Returns
+    -------
+    disc : mi.Bool
+        One flag per ray.
+    """
+    disc = dr.zeros(mi.Bool, n_rays)
+    dr.scatter(disc, True, rays, traced & (dr.arange(mi.UInt32, lay.size) >= lay.cells))
+    return disc
+
+
 def _patch_xy(lay: SampleLayout, k: mi.Int32, gaze: mi.Point2f) -> tuple[mi.Int32, mi.Int32]:
     """The film pixel of the patch's ``k``-th pixel (row by row)."""
     x0, y0 = _patch_origin(lay, gaze)

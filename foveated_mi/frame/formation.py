@@ -64,6 +64,9 @@ class FormationInput(NamedTuple):
     #: where the shading buffer, G-buffer, reprojection and history live: the film's pixels,
     #: or the foveal buffer's samples (:mod:`foveated_mi.frame.space`)
     space: Any = None
+    #: the foveal disc's samples per pixel where below ``spp`` (``foveal_disc_spp``): each
+    #: sample's history then weighs the samples it traced; 0: every one ``spp``
+    disc_spp: int = 0
 
 
 class Formed(NamedTuple):
@@ -232,7 +235,7 @@ def _form_frame(arrays: dict, key: dict) -> dict:
                          _reproject.ReprojectionMap(**arrays["reprojection"]), history,
                          key["width"], key["height"], key["spp"], arrays["fill_seed"],
                          arrays["emission_edges"], arrays["gaze"],
-                         space_of(key["space"], arrays["space"]))
+                         space_of(key["space"], arrays["space"]), key["disc_spp"])
     fn = FORMATIONS[key["formation"]].fn
     formed = fn(ShadingBuffer(**arrays["shading"]), inp, key["settings"], StageTimer(False))
     # The image leaves the recording interleaved, as the frame returns it: the last pass
@@ -290,7 +293,8 @@ class FrozenFormation:
             "space": inp.space.arrays(),
         }
         key = {"formation": fs.name, "width": inp.width, "height": inp.height,
-               "spp": inp.spp, "settings": fs.settings, "space": inp.space.key()}
+               "spp": inp.spp, "settings": fs.settings, "space": inp.space.key(),
+               "disc_spp": inp.disc_spp}
         with _no_collection():          # a collection inside a recording aborts (above)
             out = self._frozen(arrays, key)
         image = dr.unravel(mi.Color3f, out["flat"])

@@ -563,8 +563,10 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
     grid, nc = lay.grid, lay.cells
     pixels, on = inp.space.pixels, inp.space.on
     gb = inp.gbuffer
-    # This frame's samples (the shading buffer is on them), blended with their own history.
-    resolved = _reproject.resolve(shading.value, shading.mask, inp.spp, inp.reprojection,
+    # This frame's samples (the shading buffer is on them), blended with their own history;
+    # with a disc rate each weighs the samples it traced.
+    spp = shading.count if inp.disc_spp else inp.spp
+    resolved = _reproject.resolve(shading.value, shading.mask, spp, inp.reprojection,
                                   inp.history, s.max_history, shading.moment2)
     timer.mark("reconstruct", resolved.shading, resolved.mask, resolved.count)
     # The cells: the first samples, in the working domain (irradiance with demodulate).

@@ -58,7 +58,7 @@ def formation_input(plan: FramePlan) -> FormationInput:
     """
     return FormationInput(plan.gbuffer, plan.reprojection, plan.history, plan.width,
                           plan.height, plan.spp, plan.fill_seed, plan.emission_edges, plan.gaze,
-                          plan.space)
+                          plan.space, plan.disc_spp)
 
 
 def form_primal(plan: FramePlan, shading: ShadingBuffer, fs: FormationSettings,

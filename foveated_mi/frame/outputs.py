@@ -46,6 +46,8 @@ class FrameOutputs:
                 s[k] = v
             if s:
                 s["ray_fraction"] = s["rays"] / s["pixels"]
+                if "disc_rays" in s:     # the disc's rays traced disc_spp samples each
+                    s["lanes_active"] -= s["disc_rays"] * (s["spp"] - s["disc_spp"])
                 s["edge_fraction"] = s["edge_rays"] / s["pixels"]
                 # The share of the positions reprojected (the film's pixels, or the foveal
                 # buffer's samples on the film) that found their history.
@@ -124,6 +126,12 @@ def trace_mode(trace_replayed: bool, formation_replayed: bool) -> str:
     return "partly replayed" if trace_replayed or formation_replayed else "traced"
 
 
+def _disc_stats(plan: FramePlan) -> dict[str, Any]:
+    """The foveal disc's rays and their samples, where it has a rate of its own."""
+    return {} if plan.disc_rays is None else {"disc_rays": plan.disc_rays,
+                                              "disc_spp": plan.disc_spp}
+
+
 def frame_outputs(plan: FramePlan, samples, formed: Formed, fs: FormationSettings,
                   timer: StageTimer, index: int, replayed: tuple[bool, bool] = (False, False),
                   record: dict[str, Any] | None = None) -> FrameOutputs:
@@ -131,10 +139,8 @@ def frame_outputs(plan: FramePlan, samples, formed: Formed, fs: FormationSetting
 
     Parameters
     ----------
-    plan, formed : FramePlan, Formed
-        The frame's plan and what its formation returned.
-    samples : Shaded
-        The trace pass's counters (``rejected``, ``clamped``).
+    plan, formed, samples : FramePlan, Formed, Shaded
+        The frame's plan, what its formation returned, the trace's counters.
     fs : FormationSettings
         The formation that formed it, with its settings (its grids and stats).
     timer : StageTimer
@@ -172,6 +178,7 @@ def frame_outputs(plan: FramePlan, samples, formed: Formed, fs: FormationSetting
         "width": plan.width, "height": plan.height, "pixels": plan.width * plan.height,
         "rays": rays, "spp": plan.spp, "lanes": ro.lanes * plan.spp,
         "lanes_launched": ro.lanes * plan.spp, "lanes_active": rays * plan.spp,
+        **_disc_stats(plan),
         "reorder_swaps": ro.swaps if ro.swaps is not None else 0,
         # Rays forced on depth edges (some the sampling probability would draw too).
         "edge_rays": dr.count(plan.edges) if plan.edges is not None else 0,

@@ -72,6 +72,10 @@ class FramePlan:
     #: where the G-buffer, shading buffer, reprojection map and history live: the film's
     #: pixels, or the foveal buffer's samples (:mod:`.space`)
     space: FilmSpace | BufferSpace | None = None
+    #: the launch's rays traced at ``disc_spp`` samples (the foveal disc's), when a disc
+    #: rate below ``spp`` is set (``foveal_disc_spp``); else None and 0
+    disc_rays: mi.Bool | None = None
+    disc_spp: int = 0
 
 
 @dataclass(eq=False)
@@ -225,9 +229,10 @@ class Planner:
             timer.mark("sampling", reproj.hit, reproj.index, traced)
             if turn not in sm.launch:
                 sm.launch[turn] = self._launch(sm.pixels, traced, width, height,
-                                               settings.launch)
-            ro, smap, rays = sm.launch[turn]
-            timer.mark("reorder", ro.wavefront, rays)
+                                               settings.launch, lay)
+            ro, smap, rays, disc = sm.launch[turn]
+            timer.mark("reorder", ro.wavefront, rays, disc)
+            disc_spp = settings.launch.disc_spp if disc is not None else 0
         return FramePlan(sensor=sensor, width=width, height=height, spp=spp, seed=frame_seed,
                          map_seed=ss.map_seed if ss.map_seed >= 0 else frame_seed,
                          gbuffer=gb._replace(view_dependent=None), edges=None,
@@ -235,7 +240,9 @@ class Planner:
                          reprojection=reproj, reordered=ro, history=history,
                          filter_sampler=self._filter_sampler(sensor, settings.pixel_filter),
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=None, gaze=gaze,
-                         space=dataclasses.replace(space, rays=rays, traced=traced))
+                         space=dataclasses.replace(space, rays=rays, traced=traced),
+                         disc_rays=disc if 0 < disc_spp < spp else None,
+                         disc_spp=disc_spp if 0 < disc_spp < spp else 0)
 
     @staticmethod
     def _traced(sm: _Samples, lay, turn: int, borrowing: bool) -> mi.Bool:
@@ -268,7 +275,8 @@ class Planner:
         gaze and the other eye's samples are those of the last frame; and whether reused."""
         ls = settings.launch
         key = (state.camera, state.scene, gaze_key, lay, settings.materials, width, height,
-               ls.reorder, ls.block_height, partner is not None, self.partner_disc)
+               ls.reorder, ls.block_height, ls.disc_spp > 0, partner is not None,
+               self.partner_disc)
         mark = None if partner is None else partner.position
         cached = self._samples_cache
         if cached is not None and cached.key == key and cached.partner is mark:
@@ -288,14 +296,15 @@ class Planner:
         return self._samples_cache, False
 
     @staticmethod
-    def _launch(pixels: mi.UInt32, traced: mi.Bool, width: int, height: int, ls) -> tuple:
-        """The launch of the ``traced`` samples' pixels, the sampling map they make, and each
-        sample's ray in it."""
+    def _launch(pixels: mi.UInt32, traced: mi.Bool, width: int, height: int, ls, lay) -> tuple:
+        """The launch of the ``traced`` samples' pixels, the sampling map they make, each
+        sample's ray in it, and with a disc rate the rays of the disc (else None)."""
         ro, smap = _reorder.launch_of_pixels(pixels, traced, width, height, ls.reorder,
                                              ls.block_height)
         rays = _buffer_space.sample_rays(pixels, traced, ro.wavefront, ro.active,
                                          width * height)
-        return ro, smap, rays
+        disc = _buffer_space.disc_rays(lay, rays, traced, ro.lanes) if ls.disc_spp else None
+        return ro, smap, rays, disc
 
     def _partner_history(self, lay, settings: PlanSettings) -> History | None:
         """The other eye's history to reuse this frame (:attr:`partner`), or None: no

@@ -326,7 +326,7 @@ def unless_cut(reproj: ReprojectionMap, fraction: float) -> tuple[ReprojectionMa
     return reproj._replace(hit=reproj.hit & ~cut), cut
 
 
-def resolve(new: mi.Color3f, traced: mi.Bool, spp: int, reproj: ReprojectionMap,
+def resolve(new: mi.Color3f, traced: mi.Bool, spp: int | mi.Float, reproj: ReprojectionMap,
             history: History | None, max_history: float,
             moment2: mi.Float | None = None) -> Resolved:
     """Merge this frame's sparse samples with the reprojected history (Fig. 4).
@@ -337,8 +337,8 @@ def resolve(new: mi.Color3f, traced: mi.Bool, spp: int, reproj: ReprojectionMap,
         This frame's mean :math:`L` per pixel (or sample), read where ``traced``.
     traced : mi.Bool
         The traced pixels.
-    spp : int
-        :math:`s`, the samples behind each traced value.
+    spp : int or mi.Float
+        :math:`s`, the samples behind each traced value (one number, or one per entry).
     reproj : ReprojectionMap
         The reprojection map (its ``hit`` and ``index``).
     history : History or None

@@ -45,6 +45,8 @@ class LaunchSettings:
     """The reordered launch (:mod:`.reorder`, §3.2)."""
     reorder: str               #: one of :data:`~.reorder.REORDER_MODES`
     block_height: int          #: rows per block of Strategy 2
+    #: samples of the foveal disc's rays (``foveal_disc_spp``; 0: the frame's spp)
+    disc_spp: int = 0
 
 
 @dataclass(frozen=True)

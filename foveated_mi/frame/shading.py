@@ -189,10 +189,18 @@ def camera_rays(sensor: mi.Sensor, sampler: mi.Sampler, pixels: mi.UInt32, width
     return ray, weight, fs
 
 
-def lanes_of(pixels: mi.UInt32, spp: int, active: mi.Bool | None = None
+def lanes_of(pixels: mi.UInt32, spp: int, active: mi.Bool | None = None,
+             disc: mi.Bool | None = None, disc_spp: int = 0
              ) -> tuple[mi.UInt32, mi.Bool | None]:
     """The pixel of each lane of a wavefront (``spp`` consecutive lanes per pixel of
     ``pixels``, as ``SamplingIntegrator::render`` lays them out), and each lane's flag.
+
+    With ``disc`` rays traced at ``disc_spp`` < ``spp`` samples (the foveal disc's,
+    ``foveal_disc_spp``) the launch is as wide, in two runs: every ray's first ``disc_spp``
+    samples (``disc_spp`` consecutive lanes per ray), then the other rays' remaining
+    ``spp - disc_spp``. The disc's lanes of the second run are off; its rays lie together in
+    the launch, so whole SIMD packets or warps of them skip the path loop. :func:`pixel_major`
+    puts the samples back in the usual order.
 
     Parameters
     ----------
@@ -202,14 +210,27 @@ def lanes_of(pixels: mi.UInt32, spp: int, active: mi.Bool | None = None
         Samples per pixel.
     active : mi.Bool or None, optional
         The flag of each entry of ``pixels`` (None: every lane traces).
+    disc : mi.Bool or None, optional
+        The entries of ``pixels`` traced at ``disc_spp`` samples.
+    disc_spp : int, optional
+        Their samples (0, or ``spp`` or more: ``spp``, as every ray).
 
     Returns
     -------
     pix : mi.UInt32
         Each lane's pixel (``spp * len(pixels)`` lanes).
     active : mi.Bool or None
-        Each lane's flag from ``active`` (None when ``active`` is).
+        Each lane's flag (None when every lane traces).
     """
+    if disc is not None and 0 < disc_spp < spp:
+        rays = dr.width(pixels)
+        lane = dr.arange(mi.UInt32, rays * spp)
+        first = lane < rays * disc_spp
+        ray_id = dr.select(first, lane // disc_spp, (lane - rays * disc_spp) // (spp - disc_spp))
+        on = first | ~dr.gather(mi.Bool, disc, ray_id)
+        if active is not None:
+            on &= dr.gather(mi.Bool, active, ray_id)
+        return dr.gather(mi.UInt32, pixels, ray_id), on
     if spp == 1:
         return pixels, active
     ray_id = dr.arange(mi.UInt32, dr.width(pixels) * spp) // spp
@@ -217,11 +238,46 @@ def lanes_of(pixels: mi.UInt32, spp: int, active: mi.Bool | None = None
             None if active is None else dr.gather(mi.Bool, active, ray_id))
 
 
+def pixel_major(samples: TracedSamples, rays: int, spp: int, disc_spp: int = 0
+                ) -> TracedSamples:
+    """The samples of a launch laid out by :func:`lanes_of` with a disc rate, in the usual
+    order (``spp`` consecutive lanes per ray): each disc ray's samples past ``disc_spp`` are
+    off (not accepted, zero), so each ray's estimate averages the samples it traced. A
+    permutation (gathers): the gradient flows back through it.
+
+    Parameters
+    ----------
+    samples : TracedSamples
+        One sample per lane of the two runs.
+    rays : int
+        The launch's rays.
+    spp, disc_spp : int
+        As :func:`lanes_of`'s (the samples come back unchanged unless 0 < disc_spp < spp).
+
+    Returns
+    -------
+    samples : TracedSamples
+        The same samples, ``spp`` consecutive lanes per ray.
+    """
+    if not 0 < disc_spp < spp:
+        return samples
+    lane = dr.arange(mi.UInt32, rays * spp)
+    ray = lane // spp
+    k = lane - ray * spp
+    src = dr.select(k < disc_spp, ray * disc_spp + k,
+                    rays * disc_spp + ray * (spp - disc_spp) + (k - disc_spp))
+    return samples._replace(radiance=dr.gather(mi.Color3f, samples.radiance, src),
+                            ok=dr.gather(mi.Bool, samples.ok, src),
+                            position=dr.gather(mi.Point2f, samples.position, src))
+
+
 def trace_wavefront(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingIntegrator,
                     pixels: mi.UInt32, width: int, height: int, *, spp: int, seed,
                     active: mi.Bool | None = None, clamp: float = 1e4,
-                    filter_sampler: FilterSampler | None = None) -> TracedSamples:
-    """Trace ``spp`` camera rays through each pixel of ``pixels`` with ``integrator``.
+                    filter_sampler: FilterSampler | None = None, disc: mi.Bool | None = None,
+                    disc_spp: int = 0) -> TracedSamples:
+    """Trace ``spp`` camera rays through each pixel of ``pixels`` with ``integrator``
+    (``disc_spp`` through those of ``disc``).
 
     Parameters
     ----------
@@ -247,13 +303,16 @@ def trace_wavefront(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingI
     filter_sampler : FilterSampler or None, optional
         Built from the sensor's film when not given (build it once per film and pass it in:
         tabulating a filter costs a host round trip).
+    disc, disc_spp : mi.Bool or None, int, optional
+        Rays traced at fewer samples (:func:`lanes_of`).
 
     Returns
     -------
     samples : TracedSamples
-        One sample per lane (``spp`` consecutive lanes per pixel).
+        One sample per lane (``spp`` consecutive lanes per pixel, unless a disc rate lays
+        them out in two runs: :func:`pixel_major`).
     """
-    pix, lane_active = lanes_of(pixels, spp, active)
+    pix, lane_active = lanes_of(pixels, spp, active, disc, disc_spp)
     return trace_lanes(scene, sensor, integrator, pix, width, height, spp=spp, seed=seed,
                        active=lane_active, clamp=clamp, filter_sampler=filter_sampler)
 
@@ -499,7 +558,8 @@ def _splat_gather(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.
 
 
 def develop(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.Film,
-            mode: str, at: tuple[mi.UInt32, mi.Bool] | None = None) -> ShadingBuffer:
+            mode: str, at: tuple[mi.UInt32, mi.Bool] | None = None, disc_spp: int = 0
+            ) -> ShadingBuffer:
     """The sparse shading buffer of a frame's samples: on the film's pixels, or on the foveal
     buffer's samples.
 
@@ -518,12 +578,16 @@ def develop(samples: TracedSamples, pixels: mi.UInt32, spp: int, film: mi.Film,
     at : tuple or None, optional
         ``(rays, on)``: develop on the foveal buffer's samples (:func:`to_samples`); None:
         on the film's pixels.
+    disc_spp : int, optional
+        The disc's rate of a launch laid out in two runs (:func:`lanes_of`); a ray's
+        ``count`` is then the samples it traced.
 
     Returns
     -------
     shading : ShadingBuffer
         One entry per film pixel, or per sample with ``at``.
     """
+    samples = pixel_major(samples, dr.width(pixels), spp, disc_spp)
     if mode == "splat" and not film.rfilter().is_box_filter():
         per_ray = _splat_per_ray(samples, pixels, spp, film)
     else:

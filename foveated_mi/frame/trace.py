@@ -88,7 +88,8 @@ def trace(scene: mi.Scene, integrator: mi.SamplingIntegrator, plan: FramePlan,
     ro = plan.reordered
     return trace_wavefront(scene, plan.sensor, integrator, ro.wavefront, plan.width,
                            plan.height, spp=plan.spp, seed=plan.seed, active=ro.active,
-                           clamp=settings.clamp, filter_sampler=plan.filter_sampler)
+                           clamp=settings.clamp, filter_sampler=plan.filter_sampler,
+                           disc=plan.disc_rays, disc_spp=plan.disc_spp)
 
 
 def develop_plan(samples: TracedSamples, plan: FramePlan,
@@ -113,7 +114,7 @@ def develop_plan(samples: TracedSamples, plan: FramePlan,
     if settings.tonemap_samples:
         samples = tonemap_samples(samples, settings.tonemap, settings.exposure)
     return develop(samples, plan.reordered.wavefront, plan.spp, plan.sensor.film(),
-                   settings.pixel_filter, plan.space.develop_at())
+                   settings.pixel_filter, plan.space.develop_at(), plan.disc_spp)
 
 
 def shade(scene: mi.Scene, integrator: mi.SamplingIntegrator, plan: FramePlan,
@@ -203,7 +204,8 @@ class FrozenTrace:
         film = sensor.film()
         # Laid out per lane here, so that every array of the recording is as wide as an
         # input (a replay takes its widths from them).
-        pix, active = lanes_of(ro.wavefront, plan.spp, ro.active)
+        pix, active = lanes_of(ro.wavefront, plan.spp, ro.active, plan.disc_rays,
+                               plan.disc_spp)
         arrays = {"lanes": pix, "active": active,
                   "seed": opaque_seed(plan.seed),
                   # A named tuple is no input to a frozen function: its fields are.
