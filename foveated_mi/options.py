@@ -429,10 +429,11 @@ _SCHEMA: tuple[Option, ...] = (
            "the frame's spp, as the cells)", lo=0, hi=1 << 16,
            doc="With ``formation = 'foveal'`` and ``foveal_space = 'buffer'``: the disc's "
            "pixels trace this many samples, the cells the frame's spp (a value of the frame's "
-           "spp or more traces the frame's). The disc holds about two fifths of a ``vr`` "
-           "frame's rays and a third of its trace time at 8.4 pixels per degree, where it "
-           "buys little video JOD (``docs/results.md#what-the-discs-rays-buy``); its history "
-           "counts the samples each pixel traced"),
+           "spp or more traces the frame's; the ``vr`` preset: 2). The disc holds about two "
+           "fifths of a ``vr`` frame's rays and a third of its trace time at 8.4 pixels per "
+           "degree, where half its samples cost 0.02-0.03 video JOD for a tenth to a fifth "
+           "of the frame (``docs/results.md#the-disc-at-a-sample-rate-of-its-own``); its "
+           "history counts the samples each pixel traced"),
     Option("foveal_interleave", 1, "int", "n: the foveal buffer holds n x n times the cells "
            "and a frame traces one in each n x n block of them, in turn (1: every cell)",
            lo=1, hi=4,
@@ -588,9 +589,12 @@ PRESETS: dict[str, dict[str, Any]] = {
     # trace faster in 2D packets (docs/results.md#the-vr-preset). SVGF four levels wide, its
     # colour test at 8 noise deviations: a periphery seen at a few pixels per degree scores
     # higher smooth than with its cells' noise (docs/results.md#the-buffers-filter-strength).
+    # Its disc at most 2 samples a pixel: above that its rays cost more than the fovea's video
+    # JOD gains (docs/results.md#the-disc-at-a-sample-rate-of-its-own).
     "vr": {"sampling_law": "polar", "formation": "foveal", "ray_budget": 0.1, "theta": 0.15,
            "reorder": "tiles", "edge_threshold": 0.0, "denoiser": "svgf",
-           "atrous_iterations": 4, "sigma_luminance": 8.0, "foveal_disc": "denoised"},
+           "atrous_iterations": 4, "sigma_luminance": 8.0, "foveal_disc": "denoised",
+           "foveal_disc_spp": 2},
 }
 PRESET_NAMES = ("auto", *PRESETS)
 
@@ -682,6 +686,9 @@ def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[s
     out = {name: opt.validate(merged[name]) for name, opt in SCHEMA.items()}
     out["preset"] = preset
     out["pixel_filter"] = resolve_pixel_filter(out["pixel_filter"], out["denoiser"])
+    if "foveal_disc_spp" not in options and (out["formation"] != "foveal"
+                                             or out["foveal_space"] != "buffer"):
+        out["foveal_disc_spp"] = 0      # the preset's disc rate needs the buffer's samples
     _check_combination(out)
     return out
 

@@ -1,7 +1,8 @@
 """The foveal disc at a sample rate of its own (``foveal_disc_spp``): the launch lays the disc's
 rays out so that their missing samples are whole runs of lanes, the develop and the history
-count the samples each pixel traced, a rate of the frame's spp is the preset's frame bit for
-bit, a replayed trace is the traced one, and a bad value gets one line."""
+count the samples each pixel traced, a rate of the frame's spp is the disc at the cells' rate
+bit for bit, the ``vr`` preset traces its disc at 2 samples at most, a replayed trace is the
+traced one, and a bad value gets one line."""
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -105,15 +106,26 @@ def test_a_constant_scene_is_the_same_whatever_the_disc_s_rate():
         np.testing.assert_allclose(images[d], images[0], rtol=1e-5)
 
 
-@pytest.mark.parametrize("rate", [0, 4, 9])
-def test_a_rate_of_the_frame_s_spp_or_more_is_the_preset_s_frame(rate):
+@pytest.mark.parametrize("rate", [4, 9])
+def test_a_rate_of_the_frame_s_spp_or_more_is_the_disc_at_the_cells_rate(rate):
     scene = _scene()
-    a = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
+    a = FoveatedIntegrator(nested=scene.integrator(), preset="vr", foveal_disc_spp=0)
     b = FoveatedIntegrator(nested=scene.integrator(), preset="vr", foveal_disc_spp=rate)
     for k in range(2):
         np.testing.assert_array_equal(np.array(mi.render(scene, integrator=a, seed=k)),
                                       np.array(mi.render(scene, integrator=b, seed=k)))
-    assert "disc_rays" not in b.stats
+    assert "disc_rays" not in a.stats and "disc_rays" not in b.stats
+
+
+def test_the_preset_traces_its_disc_at_two_samples_at_most():
+    assert FoveatedIntegrator(preset="vr").options["foveal_disc_spp"] == 2
+    # On the film's pixels the preset's rate falls away (set explicitly, it is refused).
+    assert FoveatedIntegrator(preset="vr", foveal_space="film").options["foveal_disc_spp"] == 0
+    for spp, rate in ((4, 2), (2, None), (1, None)):
+        scene = _scene(spp=spp)
+        integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
+        mi.render(scene, integrator=integ, seed=0)
+        assert integ.stats.get("disc_spp") == rate, spp
 
 
 def test_a_replayed_trace_with_a_disc_rate_is_the_traced_one():
