@@ -718,3 +718,26 @@ def test_a_tracker_s_latency_renders_earlier_gazes_and_scores_the_true_ones(tmp_
     assert scored == motion["gazes"]
     assert given == [motion["gazes"][max(k - shift, 0)] for k in range(len(given))]
     assert given != scored
+
+
+def test_a_reference_key_follows_the_scene_file_s_content_not_its_time(tmp_path):
+    """A remount or a copy that touches the XML keeps its references; an edit renders again."""
+    import os
+    import mitsuba as mi
+    from foveated_mi.study import parse_study
+    from foveated_mi.study.tasks import reference_key
+    xml = tmp_path / "scene.xml"
+    xml.write_text('<scene version="3.0.0"><sensor type="perspective"><film type="hdrfilm">'
+                   '<integer name="width" value="8"/><integer name="height" value="8"/>'
+                   '</film></sensor><emitter type="constant"/></scene>')
+
+    def key():
+        spec = parse_study({"scenes": [{"scene": str(xml)}], "size": [8, 8],
+                            "foveated": {"grid": {"reconstruction": ["voronoi"]}}})
+        return reference_key(spec.scenes[0], mi.variant())
+    before = key()
+    st = os.stat(xml)
+    os.utime(xml, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
+    assert key() == before
+    xml.write_text(xml.read_text().replace('type="constant"', 'type="constant" id="sky"'))
+    assert key() != before

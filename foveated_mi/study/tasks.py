@@ -96,7 +96,8 @@ def task_id(scene_identity: dict, method: str, options: dict, spp: int, seed: in
 
 def reference_key(scene, variant: str) -> str:
     """Cache key of a rendered reference: scene, size, parameters, integrator, spp, seed, camera
-    and variant (and the XML file's modification time).
+    and variant (and the XML file's content: an edit renders again, a copy or a remount that
+    only changes its modification time does not).
 
     Parameters
     ----------
@@ -112,11 +113,12 @@ def reference_key(scene, variant: str) -> str:
     """
     from ..scenes import scene_camera
     camera = scene.camera or scene_camera(scene.source)
-    mtime = None if scene.builtin else os.stat(scene.source).st_mtime_ns
     key = {"scene": scene.name, "size": list(scene.size), "params": scene.params,
            "integrator": scene.integrator, "spp": scene.reference["spp"],
-           "seed": scene.reference["seed"], "camera": camera, "variant": variant,
-           "mtime": mtime}
+           "seed": scene.reference["seed"], "camera": camera, "variant": variant}
+    if not scene.builtin:
+        with open(scene.source, "rb") as f:
+            key["xml"] = hashlib.sha1(f.read()).hexdigest()
     if scene.motion is not None and scene.motion["cameras"] is not None:
         key["cameras"] = scene.motion["cameras"]      # one reference per frame of the path
     if scene.motion is not None and scene.motion.get("stereo") is not None:
