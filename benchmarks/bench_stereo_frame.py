@@ -27,40 +27,21 @@ per-eye video JOD, run ``bench_vr.py --stereo`` against ``--one-eye``.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
-import time
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 import foveated_mi
+from bench_overhead import _forced, _orbit
 from common import machine, md_table, median, write_json
 
 CASES = ("full", "vr one eye", "vr stereo", "vr stereo, no reuse")
 
 
-def _forced(fn) -> float:
-    """Wall time (ms) of ``fn()`` with every image it returns evaluated on the device."""
-    dr.sync_thread()
-    t0 = time.perf_counter()
-    dr.eval(*fn())
-    dr.sync_thread()
-    return (time.perf_counter() - t0) * 1e3
-
-
-def _orbit(camera: dict, degrees: float) -> dict:
-    """``camera`` turned by ``degrees`` about the vertical axis through its target."""
-    o, t = np.array(camera["origin"], float), np.array(camera["target"], float)
-    a = math.radians(degrees)
-    rot = np.array([[math.cos(a), 0, math.sin(a)], [0, 1, 0], [-math.sin(a), 0, math.cos(a)]])
-    return {**camera, "origin": list(t + rot @ (o - t))}
-
-
 def _cases(scene, rig, spp: int, options: dict) -> dict:
     """Each case's ``render(seed)``, returning the images to force, and the foveated
-    integrators whose stats give the ray fractions."""
+    cases' per-eye stats (their ray fractions)."""
     from foveated_mi.integrators.foveated import FoveatedIntegrator
     from foveated_mi.stereo import EyeSensors, Stereo
 
@@ -90,7 +71,7 @@ def _cases(scene, rig, spp: int, options: dict) -> dict:
              "vr stereo": lambda: [pairs[True].views[e].stats for e in ("left", "right")],
              "vr stereo, no reuse": lambda: [pairs[False].views[e].stats
                                              for e in ("left", "right")]}
-    return renders, stats, eyes
+    return renders, stats
 
 
 def run(scene_name: str, headset_name: str, eye_width: int, *, spp: int, max_depth: int,
@@ -111,7 +92,7 @@ def run(scene_name: str, headset_name: str, eye_width: int, *, spp: int, max_dep
     scene = load_scene(scene_name, width=w, height=h, spp=spp,
                        integrator={"type": "path", "max_depth": max_depth})
     options = {"preset": "vr", "ray_budget": ray_budget}
-    renders, stats, _ = _cases(scene, rig, spp, options)
+    renders, stats = _cases(scene, rig, spp, options)
     camera = camera_of(scene)
     times = {c: [] for c in CASES}
     fractions = {c: [] for c in stats}

@@ -8,6 +8,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
+from kernel_counts import compiled_by
 from foveated_mi.frame.shading import TracedSamples, lanes_of, pixel_major
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.scenes import load_scene
@@ -78,9 +79,10 @@ def test_the_disc_traces_and_counts_its_own_samples():
     on = integ.buffer("sample_on")[0].astype(bool)
     count = integ.buffer("history_count")[0][on]
     assert set(np.unique(count)) == {3.0, 12.0}
-    # The disc's samples are the ones past the cells.
+    # The disc's samples are the ones past the cells, one per disc ray.
     cells = integ.buffer("cells").shape[0] * integ.buffer("cells").shape[1]
-    assert (count[on[:cells].sum():] == 3.0).sum() >= s["disc_rays"] - 1
+    disc = count[on[:cells].sum():]
+    assert len(disc) == s["disc_rays"] and (disc == 3.0).all()
 
 
 def test_a_constant_scene_is_the_same_whatever_the_disc_s_rate():
@@ -153,3 +155,19 @@ def test_a_bad_disc_rate_gets_one_line(options, match):
     with pytest.raises(ParameterError, match=match) as e:
         FoveatedIntegrator(**options)
     assert "\n" not in str(e.value)
+
+
+def test_a_moving_gaze_with_a_disc_rate_compiles_nothing_from_frame_3():
+    # The launch's width changes with the gaze: it must reach the kernels as a value, not
+    # as a constant compiled into them.
+    scene = _scene()
+    for freeze in (True, False):
+        integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", foveal_disc_spp=1,
+                                   freeze=freeze)
+        compiled = []
+        for k in range(6):
+            integ.gaze = (0.3 + 0.07 * k, 0.6 - 0.05 * k)
+            compiled.append(compiled_by(lambda: np.array(mi.render(scene, integrator=integ,
+                                                                   seed=k))))
+            assert integ.stats["disc_rays"] > 0
+        assert compiled[3:] == [0, 0, 0], (freeze, compiled)

@@ -232,7 +232,8 @@ class Planner:
                                                settings.launch, lay)
             ro, smap, rays, disc = sm.launch[turn]
             timer.mark("reorder", ro.wavefront, rays, disc)
-            disc_spp = settings.launch.disc_spp if disc is not None else 0
+            rate = settings.launch.disc_spp
+            disc_spp = rate if disc is not None and 0 < rate < spp else 0
         return FramePlan(sensor=sensor, width=width, height=height, spp=spp, seed=frame_seed,
                          map_seed=ss.map_seed if ss.map_seed >= 0 else frame_seed,
                          gbuffer=gb._replace(view_dependent=None), edges=None,
@@ -241,8 +242,7 @@ class Planner:
                          filter_sampler=self._filter_sampler(sensor, settings.pixel_filter),
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=None, gaze=gaze,
                          space=dataclasses.replace(space, rays=rays, traced=traced),
-                         disc_rays=disc if 0 < disc_spp < spp else None,
-                         disc_spp=disc_spp if 0 < disc_spp < spp else 0)
+                         disc_rays=disc if disc_spp else None, disc_spp=disc_spp)
 
     @staticmethod
     def _traced(sm: _Samples, lay, turn: int, borrowing: bool) -> mi.Bool:

@@ -225,8 +225,11 @@ def lanes_of(pixels: mi.UInt32, spp: int, active: mi.Bool | None = None,
     if disc is not None and 0 < disc_spp < spp:
         rays = dr.width(pixels)
         lane = dr.arange(mi.UInt32, rays * spp)
-        first = lane < rays * disc_spp
-        ray_id = dr.select(first, lane // disc_spp, (lane - rays * disc_spp) // (spp - disc_spp))
+        # The first run's end moves with the launch's width (every gaze move): a value, not
+        # a constant of the kernel.
+        head = dr.opaque(mi.UInt32, rays * disc_spp)
+        first = lane < head
+        ray_id = dr.select(first, lane // disc_spp, (lane - head) // (spp - disc_spp))
         on = first | ~dr.gather(mi.Bool, disc, ray_id)
         if active is not None:
             on &= dr.gather(mi.Bool, active, ray_id)
@@ -264,8 +267,9 @@ def pixel_major(samples: TracedSamples, rays: int, spp: int, disc_spp: int = 0
     lane = dr.arange(mi.UInt32, rays * spp)
     ray = lane // spp
     k = lane - ray * spp
+    head = dr.opaque(mi.UInt32, rays * disc_spp)     # as in lanes_of: not a kernel constant
     src = dr.select(k < disc_spp, ray * disc_spp + k,
-                    rays * disc_spp + ray * (spp - disc_spp) + (k - disc_spp))
+                    head + ray * (spp - disc_spp) + (k - disc_spp))
     return samples._replace(radiance=dr.gather(mi.Color3f, samples.radiance, src),
                             ok=dr.gather(mi.Bool, samples.ok, src),
                             position=dr.gather(mi.Point2f, samples.position, src))
