@@ -46,8 +46,7 @@ frames after the first, on this machine, comparable within one run only.
 buffer and photometry: ``foveated-mi headsets``); with a stereo study
 (``configs/studies/vr_stereo.toml``, or ``--stereo``) both eyes render, the time is both eyes'
 and the headset condition judges the worse eye (``jod_video_min``); the second eye reuses the
-first eye's samples (``--reuse periphery``: its disc traced; ``--reuse shown``: showing
-there what the first eye showed; ``--reuse none``: each eye
+first eye's samples (``--reuse periphery``: its disc traced; ``--reuse none``: each eye
 traces all of its own; ``--first-eye right``: the right eye goes first); ``--one-eye`` runs its left eye alone, for two eyes against one. ``--latency-ms`` and ``--noise-deg`` set the eye
 tracker (``[viewer] gaze_latency_ms``, ``gaze_noise_deg``).
 
@@ -115,8 +114,7 @@ def overridden(data: dict, a) -> dict:
     if flag("stereo"):
         viewer["stereo"] = True
     if flag("reuse"):           # how the second eye reuses the first eye's samples
-        viewer["reuse"] = {"all": True, "periphery": "periphery", "shown": "shown",
-                           "none": False}[a.reuse]
+        viewer["reuse"] = {"all": True, "periphery": "periphery", "none": False}[a.reuse]
     if flag("first_eye"):
         viewer["first_eye"] = a.first_eye
     if flag("one_eye"):         # the left eye alone, for two eyes against one
@@ -424,10 +422,9 @@ def main(argv=None) -> int:
                     "judges the worse eye's video JOD (jod_video_min), the time is both eyes'")
     ap.add_argument("--noise-deg", type=float, default=None, dest="noise_deg",
                     help="the eye tracker's jitter in degrees (viewer.gaze_noise_deg)")
-    ap.add_argument("--reuse", choices=("all", "periphery", "shown", "none"), default=None,
+    ap.add_argument("--reuse", choices=("all", "periphery", "none"), default=None,
                     help="what a stereo study's second eye reuses of the first eye's samples "
-                    "(default all; periphery: its disc traced; shown: all, showing there what "
-                    "the first eye showed; none: it traces every sample)")
+                    "(default all; periphery: its disc traced; none: it traces every sample)")
     ap.add_argument("--first-eye", choices=("left", "right"), default=None, dest="first_eye",
                     help="the eye rendered first, whose samples the other reuses")
     ap.add_argument("--one-eye", action="store_true", dest="one_eye",

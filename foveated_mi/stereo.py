@@ -27,10 +27,6 @@ what the first eye did not see (the crescents, :func:`crescent`), the sky, and s
 BSDF has a glossy or delta lobe, whose radiance differs between the eyes. With
 ``reuse="periphery"`` it traces its own disc too: a reused disc pixel is the first eye's
 value of a point a sub-pixel off its own (measured: ``docs/results.md#two-eyes-in-a-headset``).
-With ``reuse="shown"`` it reuses the same samples, but shows there what the first eye showed
-(its denoised cells and disc, in radiance) and runs its own denoiser on what it traces only:
-the first eye's filtered value of the point it saw, where the second eye would otherwise
-filter the same samples again.
 Where a sample is reused, both eyes show the same estimate: their noise there is shared, not
 independent, which a per-eye metric cannot tell from independent noise (neither sees
 binocular rivalry). Reused values are constants to a gradient pass, as history is. Without
@@ -53,9 +49,8 @@ from .validate import ParameterError, check_choice, check_int, check_point2, che
 EYES = ("left", "right")
 
 #: What the second eye may reuse of the first eye's samples (:class:`Stereo`'s ``reuse``):
-#: all it can, the cells outside its disc only, all it can with what the first eye showed
-#: there (its denoised values), or nothing.
-REUSE = (True, "periphery", "shown", False)
+#: all it can, the cells outside its disc only, or nothing.
+REUSE = (True, "periphery", False)
 
 
 def check_reuse(name: str, value) -> bool | str:
@@ -73,9 +68,9 @@ def check_reuse(name: str, value) -> bool | str:
     reuse : bool or str
         ``value``.
     """
-    if isinstance(value, bool) or value in ("periphery", "shown"):
+    if isinstance(value, bool) or value == "periphery":
         return value
-    raise ParameterError(name, value, "true, false, 'periphery' or 'shown'")
+    raise ParameterError(name, value, "true, false or 'periphery'")
 
 
 @dataclass(frozen=True)
@@ -465,8 +460,7 @@ class Stereo:
     reuse : bool or str, optional
         The second eye reuses the first eye's samples where it sees the same diffuse surface
         (module docstring): True, or ``"periphery"`` (its disc traced: reused disc pixels are
-        the first eye's, resampled a sub-pixel off), ``"shown"`` (as True, showing what the
-        first eye showed where it reuses, denoising only what it traces), or False.
+        the first eye's, resampled a sub-pixel off), or False.
     first : str, optional
         The eye rendered first, whose samples the other reuses: ``"left"`` or ``"right"``.
     """
@@ -489,13 +483,8 @@ class Stereo:
         self.order = (self.first, _other(self.first))
         second = self.views[self.order[1]].planner
         second.partner = self.views[self.first].planner if reuse else None
-        second.partner_disc = reuse is True or reuse == "shown"
-        second.partner_shown = reuse == "shown"
-        lender = self.views[self.first].planner
-        lender.partner, lender.partner_shown = None, False
-        # The first eye keeps what it showed in its history, for the second to show.
-        lender.lends = reuse == "shown"
-        second.lends = False
+        second.partner_disc = reuse is True
+        self.views[self.first].planner.partner = None
 
     def head_pose(self) -> mi.ScalarTransform4f:
         """The head's to-world transform, as the scene's sensor has it now."""

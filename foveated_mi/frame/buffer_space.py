@@ -588,35 +588,6 @@ def partner_map(gb: GBuffer, on: mi.Bool, partner: History, lay: SampleLayout, w
                            dr.select(is_cell, source, m.index), dr.select(is_cell, agree, m.agree))
 
 
-def lent(other: ReprojectionMap, partner: History) -> mi.Color3f | None:
-    """What the other eye showed at the samples that read its samples (``other.hit``): its
-    denoised value there, in radiance; NaN at the others. None where the other eye kept no
-    record of what it showed.
-
-    What the other eye showed is a constant here, as its samples are to :func:`borrow`.
-
-    Parameters
-    ----------
-    other : ReprojectionMap
-        :func:`partner_map`'s.
-    partner : History
-        The other eye's history of this frame, with ``shown``.
-
-    Returns
-    -------
-    lent : mi.Color3f or None
-        One value per sample of this eye.
-    """
-    if partner.shown is None:
-        return None
-    take = other.hit
-    value = dr.gather(mi.Color3f, dr.detach(partner.shown), other.index, take)
-    out = dr.select(take, value, mi.Color3f(dr.nan))
-    # With the borrowed reads' launch: each later use alone would run the map again.
-    dr.schedule(out)
-    return out
-
-
 def borrow(own: ReprojectionMap, history: History | None, other: ReprojectionMap,
            partner: History) -> tuple[ReprojectionMap, History]:
     """A frame's reprojection map and history with the other eye's samples in them: where

@@ -186,20 +186,18 @@ def _padded(fn, grid: Grid):
 
 
 def _disc_patch(resolved: Resolved, gb: GBuffer, index: mi.UInt32, on: mi.Bool, side: int,
-                s: FovealSettings, grad_pass: bool, region: mi.Bool | None = None
-                ) -> mi.Color3f:
+                s: FovealSettings, grad_pass: bool) -> mi.Color3f:
     """``foveal_disc = "denoised"``: the disc's square patch of ``side`` x ``side`` pixels
     (``index`` into ``resolved`` and ``gb``; ``on`` where the pixel's centre lies in the
     disc) through the frame's denoiser, as the cells are; radiance, in patch order. The
-    patch is a plain image of full-resolution pixels: no seam, no padding. ``region``: the
-    pixels whose result is read (default ``on``)."""
+    patch is a plain image of full-resolution pixels: no seam, no padding."""
     pr = _gather(resolved, index, on)
     has = on & pr.mask
     pgb = _gather(gb, index, on)
     pgb = pgb._replace(hit=pgb.hit & has)
     res = Resolved(pr.shading, has, pr.count, dr.zeros(mi.Bool, side * side), pr.moment2)
-    out = _denoise(_working(res, pgb, s.domain), res, pgb, Grid(side, side), s, grad_pass,
-                   on if region is None else region, s.disc_denoise)
+    out = _denoise(_working(res, pgb, s.domain), res, pgb, Grid(side, side), s, grad_pass, on,
+                   s.disc_denoise)
     return domain.to_radiance(out.image, pgb, s.domain, clamp=True)
 
 
@@ -524,35 +522,19 @@ def _disc_values(resolved: Resolved, inp: FormationInput, s: FovealSettings,
                  grad_pass: bool) -> tuple[mi.Color3f, mi.Bool]:
     """Each sample of the disc's square patch as the disc shows it: resolved, or through the
     denoiser on the patch (``foveal_disc = "denoised"``), and with ``foveal_taa`` blended
-    with what it showed last frame; and which hold a value. A pixel that shows what another
-    eye showed (``space.lent``) takes that, and the denoiser runs on the others only."""
+    with what it showed last frame; and which hold a value."""
     lay = s.layout
     patch = lay.cells + dr.arange(mi.UInt32, lay.side * lay.side)
     on = dr.gather(mi.Bool, inp.space.on, patch)
-    lent, borrowed = _lent(inp, patch)
     if s.disc == "denoised":
-        values = _disc_patch(resolved, inp.gbuffer, patch, on, lay.side, s, grad_pass,
-                             None if borrowed is None else on & ~borrowed)
+        values = _disc_patch(resolved, inp.gbuffer, patch, on, lay.side, s, grad_pass)
     else:
         values = dr.gather(mi.Color3f, resolved.shading, patch)
     held = on & dr.gather(mi.Bool, resolved.mask, patch)
-    if borrowed is not None:
-        values = dr.select(borrowed, lent, values)
-        held |= on & borrowed
     previous = _last_shown(inp, patch) if s.taa < 1.0 else None
     if previous is not None:
         values = stabilize(values, held, Grid(lay.side, lay.side), previous, s.taa)
     return values, held
-
-
-def _lent(inp: FormationInput, index: mi.UInt32) -> tuple[mi.Color3f | None, mi.Bool | None]:
-    """What another eye showed at the samples ``index`` (``space.lent``, a constant: its
-    gradient stops here, as a borrowed sample's does), and where it did; Nones without."""
-    lent = getattr(inp.space, "lent", None)
-    if lent is None:
-        return None, None
-    value = dr.gather(mi.Color3f, lent, index)
-    return value, dr.isfinite(value.x)
 
 
 def _disc_samples(values: mi.Color3f, held: mi.Bool, inp: FormationInput, s: FovealSettings
@@ -594,15 +576,8 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
     timer.mark("reconstruct", cells, res.count, cgb.normal, cgb.position)
     # Denoising in the buffer (§3.5); each cell's albedo multiplied back before the warp:
     # there is no full-resolution albedo to take it from.
-    # Where another eye's samples stand for these and it showed them, what it showed is
-    # shown; the denoiser runs on the rest.
-    lent, borrowed = _lent(inp, c)
-    region = dr.gather(mi.Bool, on, c)
-    out = _denoise(cells, res, cgb, grid, s, grad_pass,
-                   region if borrowed is None else region & ~borrowed)
+    out = _denoise(cells, res, cgb, grid, s, grad_pass, dr.gather(mi.Bool, on, c))
     radiance = domain.to_radiance(out.image, cgb, d, clamp=True)
-    if borrowed is not None:
-        radiance = dr.select(borrowed & has, lent, radiance)
     previous = _last_shown(inp, c) if s.taa < 1.0 else None
     if previous is not None:
         # What each cell showed last frame, blended in where it reads its history.
@@ -621,7 +596,7 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
                "cell_mask": has, "filtered": out.filtered, "tonemapped": out.tonemapped,
                "image": image}
     history = {"mean": resolved.shading, "count": resolved.count, "moment2": resolved.moment2}
-    if s.taa < 1.0 or inp.space.keeps_shown:
+    if s.taa < 1.0:
         # What every sample showed: the cells after the denoiser, the disc's patch as shown.
         shown = mi.Color3f(dr.detach(resolved.shading))
         dr.scatter(shown, dr.detach(radiance), c, has)

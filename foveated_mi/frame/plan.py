@@ -117,11 +117,6 @@ class Planner:
         self.partner: Planner | None = None
         #: The disc's pixels reuse the partner's too (else only the cells do).
         self.partner_disc = True
-        #: Where a sample reuses the partner's, it shows what the partner showed there (its
-        #: denoised value), and the denoiser runs on the traced samples only.
-        self.partner_shown = False
-        #: This view keeps what it showed in its history (a partner that shows it).
-        self.lends = False
 
     def reset(self) -> None:
         """Forget the history (next frame starts fresh, as frame 0)."""
@@ -222,13 +217,11 @@ class Planner:
                                              reused and self._gaze == gaze_key)
             self._gaze = gaze_key
             frame_seed = self._frame_seed(seed, cut, hs.keep)
-            lent = None
             if partner is not None:
                 # The other eye's samples of this frame stand for those it saw alike; only
                 # the rest is traced.
                 reproj, history = self._borrow(scene, sm, partner, lay, hs, reproj, history,
                                                width, height)
-                lent = _buffer_space.lent(sm.other, partner) if self.partner_shown else None
             turn = self.index % lay.phases
             if turn not in sm.traced:
                 sm.traced[turn] = self._traced(sm, lay, turn, partner is not None)
@@ -248,8 +241,7 @@ class Planner:
                          reprojection=reproj, reordered=ro, history=history,
                          filter_sampler=self._filter_sampler(sensor, settings.pixel_filter),
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=None, gaze=gaze,
-                         space=dataclasses.replace(space, rays=rays, traced=traced, lent=lent,
-                                                   keeps_shown=self.lends),
+                         space=dataclasses.replace(space, rays=rays, traced=traced),
                          disc_rays=disc if disc_spp else None, disc_spp=disc_spp)
 
     @staticmethod

@@ -201,9 +201,7 @@ class BufferSpace(SampleSpace):
     """The foveal buffer's samples (:mod:`.buffer_space`): each one's film ``pixel``, whether
     it is ``on`` (on the film; a patch pixel inside the disc), and its ``ray`` in the launch;
     ``traced``: the samples the launch traces, where not all that are on (another eye's
-    samples stand for the rest); ``lent``: what the other eye showed at the samples that
-    read its samples (NaN elsewhere; None: nothing shown is borrowed); ``keeps_shown``: the
-    frame's history keeps what it showed (for another eye to show)."""
+    samples stand for the rest)."""
     width: int
     height: int
     layout: _buffer_space.SampleLayout
@@ -211,8 +209,6 @@ class BufferSpace(SampleSpace):
     on: mi.Bool
     rays: mi.UInt32
     traced: mi.Bool | None = None
-    lent: mi.Color3f | None = None
-    keeps_shown: bool = False
     kind = "buffer"
 
     @property
@@ -246,14 +242,10 @@ class BufferSpace(SampleSpace):
                                               self.height, tolerance=tolerance, mode=mode)
 
     def arrays(self) -> dict:
-        out = {"pixels": self.pixels, "on": self.on, "rays": self.rays}
-        if self.lent is not None:
-            out["lent"] = self.lent
-        return out
+        return {"pixels": self.pixels, "on": self.on, "rays": self.rays}
 
     def key(self) -> tuple:
-        return (self.kind, self.width, self.height, self.layout, self.lent is not None,
-                self.keeps_shown)
+        return (self.kind, self.width, self.height, self.layout)
 
     @staticmethod
     def of(key: tuple, arrays: dict) -> BufferSpace:
@@ -271,10 +263,9 @@ class BufferSpace(SampleSpace):
         space : BufferSpace
             The space rebuilt.
         """
-        _, width, height, layout, lent, keeps_shown = key
+        _, width, height, layout = key
         return BufferSpace(width, height, layout, arrays["pixels"], arrays["on"],
-                           arrays["rays"], lent=arrays["lent"] if lent else None,
-                           keeps_shown=keeps_shown)
+                           arrays["rays"])
 
 
 def space_of(key: tuple, arrays: dict | None) -> SampleSpace:

@@ -64,8 +64,7 @@ Layout (every key optional except ``scenes``)::
                                 #   both eyes together (foveated_mi.study.stereo)
     reuse = true                #   the second eye reuses the first eye's samples (a foveal
     first_eye = "left"          #   buffer's: the vr preset) and traces the rest; "periphery":
-                                #   its disc traced; "shown": it shows there what the first
-                                #   eye showed, and denoises only what it traces
+                                #   its disc traced
 
     [motion]                    # rows are sequences instead of frames of a still view
     frames = 45                 #   frames per sequence (>= 2), shown at fps
