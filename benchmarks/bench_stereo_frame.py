@@ -19,7 +19,9 @@ meets the scene. Each frame runs, back to back so they share the machine's noise
     both eyes, each tracing all of its own rays.
 
 Every image is forced inside the timed region (``dr.eval`` + ``dr.sync_thread``), and each
-foveated case includes its gaze (the fixation ray). Medians over the frames after
+foveated case includes its gaze (the fixation ray). ``--stages`` also times each eye's
+stages (``timing=True``: each stage's outputs evaluated and synchronised at its end, so the
+frames then take a little longer; ``stages_ms`` in the JSON, medians per eye and stage). Medians over the frames after
 ``--warmup``; the ratios are of medians: two eyes against one (the target is at most 1.5,
 the goal 1.3) and against uniform stereo (twice ``full``). This is frame cost only; at equal
 per-eye video JOD, run ``bench_vr.py --stereo`` against ``--one-eye``.
@@ -75,7 +77,8 @@ def _cases(scene, rig, spp: int, options: dict) -> dict:
 
 
 def run(scene_name: str, headset_name: str, eye_width: int, *, spp: int, max_depth: int,
-        ray_budget: float, orbit: float, frames: int, warmup: int) -> dict:
+        ray_budget: float, orbit: float, frames: int, warmup: int,
+        stages: bool = False) -> dict:
     """Times every case at each frame's head pose (module docstring).
 
     Returns
@@ -91,11 +94,12 @@ def run(scene_name: str, headset_name: str, eye_width: int, *, spp: int, max_dep
     w, h = rig.size("left")
     scene = load_scene(scene_name, width=w, height=h, spp=spp,
                        integrator={"type": "path", "max_depth": max_depth})
-    options = {"preset": "vr", "ray_budget": ray_budget}
+    options = {"preset": "vr", "ray_budget": ray_budget, "timing": stages}
     renders, stats = _cases(scene, rig, spp, options)
     camera = camera_of(scene)
     times = {c: [] for c in CASES}
     fractions = {c: [] for c in stats}
+    timings = {c: [] for c in stats}
     for k in range(warmup + frames):
         camera = _orbit(camera, orbit)
         apply_camera(scene, camera)
@@ -104,9 +108,14 @@ def run(scene_name: str, headset_name: str, eye_width: int, *, spp: int, max_dep
             if k >= warmup:
                 times[case].append(t)
                 if case in stats:
-                    fractions[case].append(float(np.mean([s["ray_fraction"]
-                                                          for s in stats[case]()])))
+                    eyes = stats[case]()
+                    fractions[case].append(float(np.mean([s["ray_fraction"] for s in eyes])))
+                    if stages:
+                        timings[case].append([dict(s["timings_ms"]) for s in eyes])
     ms = {c: median(v) for c, v in times.items()}
+    # Each eye's stages: medians over the frames (the first eye first).
+    stage_ms = {c: [{st: median([f[e][st] for f in v]) for st in v[0][e]}
+                    for e in range(len(v[0]))] for c, v in timings.items() if v}
     return {"scene": scene_name, "headset": hs.name, "eye_buffer": [w, h], "spp": spp,
             "max_depth": max_depth, "ray_budget": ray_budget, "orbit_deg": orbit,
             "frames": frames, "warmup": warmup, "median_ms": ms, "times_ms": times,
@@ -114,7 +123,7 @@ def run(scene_name: str, headset_name: str, eye_width: int, *, spp: int, max_dep
             "stereo_x_one_eye": ms["vr stereo"] / ms["vr one eye"],
             "no_reuse_x_one_eye": ms["vr stereo, no reuse"] / ms["vr one eye"],
             "speedup_vs_uniform_stereo": 2.0 * ms["full"] / ms["vr stereo"],
-            "one_eye_speedup": ms["full"] / ms["vr one eye"]}
+            "one_eye_speedup": ms["full"] / ms["vr one eye"], "stages_ms": stage_ms}
 
 
 def main(argv=None):
@@ -130,6 +139,8 @@ def main(argv=None):
     p.add_argument("--orbit", type=float, default=0.5, help="degrees the head turns a frame")
     p.add_argument("--frames", type=int, default=5)
     p.add_argument("--warmup", type=int, default=3)
+    p.add_argument("--stages", action="store_true",
+                   help="also time each eye's stages (module docstring)")
     p.add_argument("--variant")
     p.add_argument("--out", help="JSON results")
     a = p.parse_args(argv)
@@ -144,7 +155,8 @@ def main(argv=None):
         p.error("; ".join(bad))
     foveated_mi.set_variant(a.variant)
     r = run(a.scene, a.headset, a.eye_width, spp=a.spp, max_depth=a.max_depth,
-            ray_budget=a.ray_budget, orbit=a.orbit, frames=a.frames, warmup=a.warmup)
+            ray_budget=a.ray_budget, orbit=a.orbit, frames=a.frames, warmup=a.warmup,
+            stages=a.stages)
     rows = [[c, f"{r['median_ms'][c]:.2f}", f"{min(r['times_ms'][c]):.2f}",
              f"{max(r['times_ms'][c]):.2f}",
              f"{100 * r['ray_fraction'][c]:.1f} %" if c in r["ray_fraction"] else "100 %"]
@@ -154,6 +166,12 @@ def main(argv=None):
           f"{a.spp} spp, depth {a.max_depth}: two eyes x{r['stereo_x_one_eye']:.2f} one eye "
           f"(no reuse x{r['no_reuse_x_one_eye']:.2f}); x{r['speedup_vs_uniform_stereo']:.2f} "
           f"faster than uniform stereo; one eye x{r['one_eye_speedup']:.2f} faster than full")
+    if r["stages_ms"]:
+        names = list(r["stages_ms"]["vr one eye"][0])
+        print("\n" + md_table(["case, eye", *(f"{n} ms" for n in names)], [
+            [f"{c}, {eye}", *(f"{st[n]:.1f}" for n in names)]
+            for c, eyes in r["stages_ms"].items()
+            for eye, st in zip(("left", "right"), eyes)]))
     print(f"{machine()}; medians of {a.frames} frames after {a.warmup} warm-up frames")
     write_json(a.out, {"machine": machine(), "result": r})
     return 0

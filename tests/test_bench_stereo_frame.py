@@ -32,6 +32,22 @@ def test_a_tiny_run_times_every_case_and_its_ratios_are_of_its_medians(bench, tm
     assert f["vr stereo, no reuse"] == pytest.approx(f["vr one eye"], rel=0.05)
 
 
+def test_stages_are_timed_per_eye(bench, tmp_path):
+    """--stages: one eye's stages and each of the two eyes', every stage within the frame's
+    total (so too its median: each frame's stage is within that frame's total)."""
+    from foveated_mi.timing import STAGES
+    out = tmp_path / "stereo.json"
+    assert bench.main(["--eye-width", "32", "--frames", "2", "--warmup", "1", "--stages",
+                       "--out", str(out)]) == 0
+    st = json.loads(out.read_text())["result"]["stages_ms"]
+    assert {c: len(v) for c, v in st.items()} == {"vr one eye": 1, "vr stereo": 2,
+                                                   "vr stereo, no reuse": 2}
+    for eyes in st.values():
+        for eye in eyes:
+            assert set(eye) == set(STAGES)
+            assert all(0 <= eye[s] <= eye["total"] for s in STAGES)
+
+
 @pytest.mark.parametrize("args, needle", [
     (["--eye-width", "8"], "--eye-width 8"),
     (["--ray-budget", "0"], "--ray-budget 0.0"),
