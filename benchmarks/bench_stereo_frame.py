@@ -21,10 +21,11 @@ meets the scene. Each frame runs, back to back so they share the machine's noise
 Every image is forced inside the timed region (``dr.eval`` + ``dr.sync_thread``), and each
 foveated case includes its gaze (the fixation ray). ``--stages`` also times each eye's
 stages (``timing=True``: each stage's outputs evaluated and synchronised at its end, so the
-frames then take a little longer; ``stages_ms`` in the JSON, medians per eye and stage). Medians over the frames after
-``--warmup``; the ratios are of medians: two eyes against one (the target is at most 1.5,
-the goal 1.3) and against uniform stereo (twice ``full``). This is frame cost only; at equal
-per-eye video JOD, run ``bench_vr.py --stereo`` against ``--one-eye``.
+frames then take a little longer; ``stages_ms`` in the JSON, medians per eye and stage).
+Medians over the frames after ``--warmup``; the ratios are of medians: two eyes against one
+(the target is at most 1.5, the goal 1.3) and against uniform stereo (twice ``full``). This
+is frame cost only; at equal per-eye video JOD, run ``bench_vr.py --stereo`` against
+``--one-eye``.
 """
 from __future__ import annotations
 

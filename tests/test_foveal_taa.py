@@ -84,7 +84,7 @@ def test_a_still_view_flickers_less_and_ends_no_worse():
     out = {}
     for taa in (1.0, 0.2):
         integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", foveal_taa=taa,
-                                       foveal_disc_spp=0)   # the disc as the cells
+                                   foveal_disc_spp=0)   # the disc as the cells
         frames = [to_display(np.array(mi.render(scene, integrator=integ, seed=k)))
                   for k in range(16)]
         per = _periphery(W, H, integ)
