@@ -476,13 +476,30 @@ def _agrees(gb: GBuffer, history: History, j: mi.UInt32, inside: mi.Bool, tolera
     return inside & (same_surface | same_background), prev_count
 
 
+def _seen_at(partner: History, camera: CameraState, width: int, height: int
+             ) -> tuple[mi.Point2f, mi.Bool]:
+    """Where each of the other eye's samples lies on this view's film (pixels), and whether
+    it lies ahead of this camera: its point, or where it saw the sky its direction (the sky
+    lies at infinity, the same from both eyes, whose cameras are parallel)."""
+    x, d = partner.position, partner.direction
+    surface = dr.isfinite(partner.depth)
+    point = mi.Vector4f(x.x, x.y, x.z, 1.0)
+    known = surface
+    if d is not None:
+        known = mi.Bool(True)
+        point = dr.select(surface, point, mi.Vector4f(d.x, d.y, d.z, 0.0))
+    q = camera.matrix @ point
+    inv_w = dr.rcp(q.w)
+    return mi.Point2f(q.x * inv_w * width, q.y * inv_w * height), known & (q.w > 0)
+
+
 def toward(lay: SampleLayout, pixels: mi.UInt32, partner: History, camera: CameraState,
            gaze: mi.Point2f, width: int, height: int
            ) -> tuple[mi.UInt32, mi.Bool, mi.UInt32]:
     """The cells' pixels moved onto the other eye's samples (reuse between the eyes): each of
-    the other eye's samples that hit a surface is projected into this view, and the cell it
-    lands in (outside the disc) takes the pixel it lands on, the one landing nearest the
-    cell's centre winning. A cell's sample is one point of the cell, its centre pixel or
+    the other eye's samples is projected into this view (its point, or where it saw the sky
+    its direction), and the cell it lands in (outside the disc) takes the pixel it lands
+    on, the one landing nearest the cell's centre winning. A cell's sample is one point of the cell, its centre pixel or
     another: where it is the other eye's point, that sample can stand for it
     (:func:`partner_map`), where the cell's centre would lie on another voxel face than the
     other eye's sample as often as not, and the other eye's sample of the same place is a
@@ -513,14 +530,11 @@ def toward(lay: SampleLayout, pixels: mi.UInt32, partner: History, camera: Camer
     source : mi.UInt32
         The other eye's sample whose point each claimed cell took.
     """
-    x = partner.position
-    q = camera.matrix @ mi.Vector4f(x.x, x.y, x.z, 1.0)
-    inv_w = dr.rcp(q.w)
-    uv = mi.Point2f(q.x * inv_w * width, q.y * inv_w * height)
+    uv, ahead = _seen_at(partner, camera, width, height)
     grid = lay.grid
     c = grid.coords_at(uv, gaze)
     cell, in_grid = grid.cell_at(uv, gaze)
-    claims = dr.isfinite(partner.depth) & (partner.count > 0) & (q.w > 0) & in_grid & \
+    claims = ahead & (partner.count > 0) & in_grid & \
         (c.y >= 0) & (uv.x >= 0) & (uv.y >= 0) & (uv.x < width) & (uv.y < height)
     centre = grid.film_position(cell, gaze)
     wins = nearest_claim(uv, mi.Point2f(dr.floor(centre.x) + 0.5, dr.floor(centre.y) + 0.5),
@@ -548,9 +562,11 @@ def partner_map(gb: GBuffer, on: mi.Bool, partner: History, lay: SampleLayout, w
 
     Only a surface seen by both is reused, and only where its BSDF has neither a glossy nor a
     delta lobe (``gb.view_dependent``): a diffuse surface's radiance is the same from both
-    eyes, a glossy one's is not. The sky is traced again: a sky sample next to a silhouette
-    holds part of it (its film filter's footprint), and the silhouette lies elsewhere from
-    the other eye; a sky sample costs a ray that escapes.
+    eyes, a glossy one's is not. A cell in open sky (:func:`open_sky`) reads the other eye's
+    sky sample whose direction it took: the sky lies at infinity, and the eyes' cameras
+    are parallel. The sky by a silhouette is traced again: a sample there holds part of the
+    silhouette (its film filter's footprint), which lies elsewhere from the other eye; and
+    so is the disc's sky.
 
     Parameters
     ----------
@@ -583,9 +599,42 @@ def partner_map(gb: GBuffer, on: mi.Bool, partner: History, lay: SampleLayout, w
     m = reprojection_map(gb, keep & ~is_cell if disc else mi.Bool(False), partner, lay, width,
                          height, tolerance=tolerance, mode=mode)
     took, source = claimed
+    # A cell in open sky reads the other eye's sky sample whose direction it took, where
+    # that one lies in open sky too (a near object's disparity can reach past a cell).
+    there = open_sky(dr.isfinite(partner.depth), partner.count > 0, lay)
+    keep |= is_cell & open_sky(gb.hit, on, lay) & dr.gather(mi.Bool, there, source, took)
     agree, count = _agrees(gb, partner, source, keep & is_cell & took, tolerance)
     return ReprojectionMap(m.coords, dr.select(is_cell, agree & (count > 0), m.hit),
                            dr.select(is_cell, source, m.index), dr.select(is_cell, agree, m.agree))
+
+
+def open_sky(hit: mi.Bool, on: mi.Bool, lay: SampleLayout) -> mi.Bool:
+    """The cells whose sample and every neighbour's (the next cell each way round the grid
+    and across its rings) saw the sky, or lie off the film: no silhouette within a cell of
+    the sample, whose film filter reaches a pixel or two, so its value is the sky's alone.
+    A cell next to the disc is never open: the disc lies beyond its inner ring.
+
+    Parameters
+    ----------
+    hit, on : mi.Bool
+        Each sample's G-buffer hit, and which samples are on the film.
+    lay : SampleLayout
+
+    Returns
+    -------
+    open : mi.Bool
+        One entry per sample (False for the disc's).
+    """
+    grid = lay.grid
+    idx, x, y = grid.cells()
+    clear = dr.gather(mi.Bool, on, idx) & ~dr.gather(mi.Bool, hit, idx)
+    for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        k, inside = grid.neighbour(x + dx, y + dy)
+        seen = dr.gather(mi.Bool, on, k, inside) & dr.gather(mi.Bool, hit, k, inside)
+        clear &= dr.select(inside, ~seen, y + dy >= grid.height)
+    out = dr.zeros(mi.Bool, lay.size)
+    dr.scatter(out, clear, idx)
+    return out
 
 
 def borrow(own: ReprojectionMap, history: History | None, other: ReprojectionMap,

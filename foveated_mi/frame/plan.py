@@ -264,8 +264,10 @@ class Planner:
                                               sm.claimed, disc=self.partner_disc,
                                               tolerance=hs.tolerance, mode=hs.reprojection)
             # On the surface the other eye saw is not enough: it saw the point.
+            # (The sky is seen from both: the other eye's sample saw it.)
             sm.other = other._replace(hit=_gbuffer.seen_from(
-                scene, gb.position, partner.camera.origin, other.hit))
+                scene, gb.position, partner.camera.origin, other.hit & gb.hit)
+                | (other.hit & ~gb.hit))
         return _buffer_space.borrow(reproj, history, sm.other, partner)
 
     def _samples(self, scene, sensor, lay, gaze: mi.Point2f, gaze_key: tuple,
@@ -335,7 +337,8 @@ class Planner:
                                    position=gb.position if in_buffer else None,
                                    normal=gb.normal if in_buffer else None,
                                    gaze=plan.gaze if in_buffer else None,
-                                   pixels=plan.space.pixels if in_buffer else None)
+                                   pixels=plan.space.pixels if in_buffer else None,
+                                   direction=gb.direction if in_buffer else None)
         self.index += 1
 
     def _check_reset(self, scene: mi.Scene, state: SceneState, width: int, height: int) -> None:

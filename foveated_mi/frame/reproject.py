@@ -82,6 +82,9 @@ class History:
     gaze: mi.Point2f | None = None
     #: each sample's film pixel (foveal buffer samples; None: kept on the film's pixels)
     pixels: mi.UInt32 | None = None
+    #: each sample's view direction (foveal buffer samples: where the other eye finds the
+    #: sky a sample saw; None: kept on the film's pixels)
+    direction: mi.Vector3f | None = None
     #: what each sample showed, after the denoiser (``foveal_taa``; None: not kept)
     shown: mi.Color3f | None = None
 
