@@ -66,6 +66,10 @@ from .sampling import foveal_grid, fovea_radius
 
 #: Smallest cosine between a sample's normal and its previous sample's for one surface.
 NORMAL_AGREEMENT = 0.9
+#: How near (relative to its distance) a second eye's hit lies to the first eye's point for
+#: one point: a pixel's footprint is a few thousandths of the distance at a headset's
+#: resolution, float32 positions agree to about a millionth.
+SAME_POINT = 1e-3
 
 
 #: The order in which ``foveal_interleave = n`` traces the cells of each ``n`` x ``n``
@@ -504,7 +508,8 @@ def toward(lay: SampleLayout, pixels: mi.UInt32, partner: History, camera: Camer
     (:func:`partner_map`), where the cell's centre would lie on another voxel face than the
     other eye's sample as often as not, and the other eye's sample of the same place is a
     point of another cell. A cell that no sample lands in keeps its centre; the disc's
-    pixels keep theirs.
+    pixels keep theirs. The cell's G-buffer ray then passes through the point itself
+    (``at``): where it meets that very point, both eyes saw it (:func:`same_point`).
 
     Parameters
     ----------
@@ -529,6 +534,9 @@ def toward(lay: SampleLayout, pixels: mi.UInt32, partner: History, camera: Camer
         The cells that took a sample's point (False for the disc's pixels).
     source : mi.UInt32
         The other eye's sample whose point each claimed cell took.
+    at : mi.Point2f
+        Where in its pixel each sample's ray passes: a claimed cell's through the point it
+        took, the others' through the centre.
     """
     uv, ahead = _seen_at(partner, camera, width, height)
     grid = lay.grid
@@ -539,14 +547,16 @@ def toward(lay: SampleLayout, pixels: mi.UInt32, partner: History, camera: Camer
     centre = grid.film_position(cell, gaze)
     wins = nearest_claim(uv, mi.Point2f(dr.floor(centre.x) + 0.5, dr.floor(centre.y) + 0.5),
                          cell, claims, lay.cells)
-    moved = dr.copy(pixels)
+    moved, at = dr.copy(pixels), dr.full(mi.Point2f, 0.5, lay.size)
     dr.scatter(moved, mi.UInt32(dr.floor(uv.y)) * width + mi.UInt32(dr.floor(uv.x)), cell,
                wins)
+    # The cell's ray passes through the point itself: it sees that point, or what hides it.
+    dr.scatter(at, uv - dr.floor(uv), cell, wins)
     claimed = dr.zeros(mi.Bool, lay.size)
     dr.scatter(claimed, True, cell, wins)
     source = dr.zeros(mi.UInt32, lay.size)
     dr.scatter(source, dr.arange(mi.UInt32, dr.width(wins)), cell, wins)
-    return moved, claimed, source
+    return moved, claimed, source, at
 
 
 def partner_map(gb: GBuffer, on: mi.Bool, partner: History, lay: SampleLayout, width: int,
@@ -606,6 +616,31 @@ def partner_map(gb: GBuffer, on: mi.Bool, partner: History, lay: SampleLayout, w
     agree, count = _agrees(gb, partner, source, keep & is_cell & took, tolerance)
     return ReprojectionMap(m.coords, dr.select(is_cell, agree & (count > 0), m.hit),
                            dr.select(is_cell, source, m.index), dr.select(is_cell, agree, m.agree))
+
+
+def same_point(gb: GBuffer, partner: History, claimed: tuple[mi.Bool, mi.UInt32]) -> mi.Bool:
+    """The claimed cells (:func:`toward`) whose G-buffer ray, cast through the other eye's
+    point, met that very point (to a thousandth of its distance, a fraction of a pixel's
+    footprint): the other eye saw it, this one sees it, with no shadow ray between them.
+
+    Parameters
+    ----------
+    gb : GBuffer
+        These samples' G-buffer.
+    partner : History
+        The other eye's history after its frame.
+    claimed : tuple of mi.Bool and mi.UInt32
+        The cells that took one of the other eye's points, and whose.
+
+    Returns
+    -------
+    same : mi.Bool
+        One entry per sample.
+    """
+    took, source = claimed
+    took = took & gb.hit
+    x = dr.gather(mi.Point3f, partner.position, source, took)
+    return took & (dr.norm(gb.position - x) <= SAME_POINT * gb.depth)
 
 
 def open_sky(hit: mi.Bool, on: mi.Bool, lay: SampleLayout) -> mi.Bool:

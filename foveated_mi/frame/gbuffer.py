@@ -49,9 +49,9 @@ def render_gbuffer(scene: mi.Scene, sensor: mi.Sensor, *, materials: bool = Fals
 
 def gbuffer_at(scene: mi.Scene, sensor: mi.Sensor, x: mi.UInt32, y: mi.UInt32, width: int,
                height: int, active: mi.Bool | bool = True, *, materials: bool = False,
-               lobes: bool = False) -> GBuffer:
-    """The G-buffer of the pixel centres ``(x, y)`` only: what a formation that keeps nothing
-    on the film casts at its samples.
+               lobes: bool = False, at: mi.Point2f | None = None) -> GBuffer:
+    """The G-buffer of the pixel centres ``(x, y)`` only (or of the points ``at`` of them):
+    what a formation that keeps nothing on the film casts at its samples.
 
     Parameters
     ----------
@@ -70,6 +70,8 @@ def gbuffer_at(scene: mi.Scene, sensor: mi.Sensor, x: mi.UInt32, y: mi.UInt32, w
     lobes : bool, optional
         Also note where the BSDF at the hit has a glossy or delta lobe
         (``view_dependent``): radiance that another eye sees otherwise.
+    at : mi.Point2f or None, optional
+        Where in each pixel its ray passes, in [0, 1)^2 (None: the centre).
 
     Returns
     -------
@@ -78,7 +80,7 @@ def gbuffer_at(scene: mi.Scene, sensor: mi.Sensor, x: mi.UInt32, y: mi.UInt32, w
         ``view_dependent`` None without ``lobes``).
     """
     with dr.suspend_grad():
-        ray = primary_rays(sensor, x, y, width, height)
+        ray = primary_rays(sensor, x, y, width, height, at)
         si = scene.ray_intersect(mi.Ray3f(ray), ray_flags=mi.RayFlags.All, coherent=True,
                                  active=mi.Bool(active))
         hit = si.is_valid() & active

@@ -263,11 +263,12 @@ class Planner:
             other = _buffer_space.partner_map(gb, sm.on, partner, lay, width, height,
                                               sm.claimed, disc=self.partner_disc,
                                               tolerance=hs.tolerance, mode=hs.reprojection)
-            # On the surface the other eye saw is not enough: it saw the point.
-            # (The sky is seen from both: the other eye's sample saw it.)
+            # On the surface the other eye saw is not enough: it saw the point. A cell whose
+            # ray met the other eye's point, and the sky, need no shadow ray.
+            known = ~gb.hit | _buffer_space.same_point(gb, partner, sm.claimed)
             sm.other = other._replace(hit=_gbuffer.seen_from(
-                scene, gb.position, partner.camera.origin, other.hit & gb.hit)
-                | (other.hit & ~gb.hit))
+                scene, gb.position, partner.camera.origin, other.hit & ~known)
+                | (other.hit & known))
         return _buffer_space.borrow(reproj, history, sm.other, partner)
 
     def _samples(self, scene, sensor, lay, gaze: mi.Point2f, gaze_key: tuple,
@@ -287,13 +288,13 @@ class Planner:
         claimed = None
         if partner is not None:
             # The cells sample where the other eye's samples lie.
-            pixels, took, source = _buffer_space.toward(lay, pixels, partner,
-                                                        _reproject.camera_state(sensor), gaze,
-                                                        width, height)
+            pixels, took, source, at = _buffer_space.toward(
+                lay, pixels, partner, _reproject.camera_state(sensor), gaze, width, height)
             claimed = (took, source)
         y = pixels // width
         gb = _gbuffer.gbuffer_at(scene, sensor, pixels - y * width, y, width, height, on,
-                                 materials=settings.materials, lobes=partner is not None)
+                                 materials=settings.materials, lobes=partner is not None,
+                                 at=None if partner is None else at)
         self._samples_cache = _Samples(key, mark, pixels, on, gb, claimed)
         return self._samples_cache, False
 

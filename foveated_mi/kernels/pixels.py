@@ -88,8 +88,9 @@ def film_size(sensor: mi.Sensor) -> tuple[int, int]:
 
 
 def primary_rays(sensor: mi.Sensor, x: mi.UInt32, y: mi.UInt32,
-                 width: int, height: int) -> mi.RayDifferential3f:
-    """Rays through the pixel centres of ``(x, y)``.
+                 width: int, height: int, at: mi.Point2f | None = None
+                 ) -> mi.RayDifferential3f:
+    """Rays through the pixel centres of ``(x, y)`` (or through the points ``at`` of them).
 
     Parameters
     ----------
@@ -99,13 +100,17 @@ def primary_rays(sensor: mi.Sensor, x: mi.UInt32, y: mi.UInt32,
         Pixel coordinates.
     width, height : int
         Film size, in pixels.
+    at : mi.Point2f or None, optional
+        Where in each pixel the ray passes, in [0, 1)^2 (None: the centre, 0.5).
 
     Returns
     -------
     rays : mi.RayDifferential3f
         One ray per pixel.
     """
-    pos = mi.Point2f((mi.Float(x) + 0.5) / width, (mi.Float(y) + 0.5) / height)
+    if at is None:
+        at = mi.Point2f(0.5)
+    pos = mi.Point2f((mi.Float(x) + at.x) / width, (mi.Float(y) + at.y) / height)
     ray, _ = sensor.sample_ray_differential(
         time=sensor.shutter_open(), sample1=0.0, sample2=pos, sample3=mi.Point2f(0.5))
     return ray
