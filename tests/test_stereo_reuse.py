@@ -35,6 +35,18 @@ def _diffuse(rgb):
     return {"type": "diffuse", "reflectance": {"type": "rgb", "value": rgb}}
 
 
+def _head(integrator: str) -> dict:
+    """A scene's integrator and its sensor: a head at the origin looking down +z, 80° wide,
+    WIDTH pixels square, a box filter, one sample a pixel."""
+    return {"type": "scene", "integrator": {"type": integrator},
+            "sensor": {"type": "perspective", "fov": 80,
+                       "to_world": mi.ScalarTransform4f().look_at(
+                           origin=[0, 0, 0], target=[0, 0, 1], up=[0, 1, 0]),
+                       "film": {"type": "hdrfilm", "width": WIDTH, "height": WIDTH,
+                                "rfilter": {"type": "box"}},
+                       "sampler": {"type": "independent", "sample_count": 1}}}
+
+
 def _scene(glossy: bool = False):
     """A wall of flat-coloured tiles and a floor, seen by a head at the origin looking down
     +z, a thin card 0.25 in front of the left eye (0.0315 to its side), which hides from
@@ -43,13 +55,7 @@ def _scene(glossy: bool = False):
     tells a card from the wall behind it. The tiles stand at depths 0.12 or more
     apart, more than the plane test's tolerance there (0.02 of the distance): no two
     neighbours share a plane."""
-    d = {"type": "scene", "integrator": {"type": "test_albedo"},
-         "sensor": {"type": "perspective", "fov": 80,
-                    "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 0],
-                                                               target=[0, 0, 1], up=[0, 1, 0]),
-                    "film": {"type": "hdrfilm", "width": WIDTH, "height": WIDTH,
-                             "rfilter": {"type": "box"}},
-                    "sampler": {"type": "independent", "sample_count": 1}},
+    d = {**_head("test_albedo"),
          "card": {"type": "rectangle", "bsdf": _diffuse([0.9, 0.1, 0.1]),
                   "to_world": mi.ScalarTransform4f().translate([0.0315, 0.0, 0.25])
                   .scale([0.012, 0.2, 1.0]).rotate([0, 1, 0], 180)},
@@ -305,13 +311,7 @@ def _sky_scene():
     rows = 181
     ramp = np.linspace(1.0, 0.2, rows, dtype=np.float32)
     sky = np.repeat(ramp[:, None, None], 3, axis=2) * np.ones((rows, 362, 3), np.float32)
-    d = {"type": "scene", "integrator": {"type": "test_sky_albedo"},
-         "sensor": {"type": "perspective", "fov": 80,
-                    "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 0],
-                                                               target=[0, 0, 1], up=[0, 1, 0]),
-                    "film": {"type": "hdrfilm", "width": WIDTH, "height": WIDTH,
-                             "rfilter": {"type": "box"}},
-                    "sampler": {"type": "independent", "sample_count": 1}},
+    d = {**_head("test_sky_albedo"),
          "sky": {"type": "envmap", "bitmap": mi.Bitmap(sky)},
          "floor": {"type": "rectangle", "bsdf": _diffuse([0.45, 0.35, 0.25]),
                    "to_world": mi.ScalarTransform4f().translate([0.0, -1.0, 4.0])
