@@ -499,15 +499,15 @@ def _seen_at(partner: History, camera: CameraState, width: int, height: int
 
 def toward(lay: SampleLayout, pixels: mi.UInt32, partner: History, camera: CameraState,
            gaze: mi.Point2f, width: int, height: int
-           ) -> tuple[mi.UInt32, mi.Bool, mi.UInt32]:
+           ) -> tuple[mi.UInt32, mi.Bool, mi.UInt32, mi.Point2f]:
     """The cells' pixels moved onto the other eye's samples (reuse between the eyes): each of
     the other eye's samples is projected into this view (its point, or where it saw the sky
     its direction), and the cell it lands in (outside the disc) takes the pixel it lands
-    on, the one landing nearest the cell's centre winning. A cell's sample is one point of the cell, its centre pixel or
-    another: where it is the other eye's point, that sample can stand for it
-    (:func:`partner_map`), where the cell's centre would lie on another voxel face than the
-    other eye's sample as often as not, and the other eye's sample of the same place is a
-    point of another cell. A cell that no sample lands in keeps its centre; the disc's
+    on, the one landing nearest the cell's centre winning. A cell's sample is one point of
+    the cell, its centre pixel or another: where it is the other eye's point, that sample
+    can stand for it (:func:`partner_map`), where the cell's centre would lie on another
+    voxel face than the other eye's sample as often as not, and the other eye's sample of
+    the same place is a point of another cell. A cell that no sample lands in keeps its centre; the disc's
     pixels keep theirs. The cell's G-buffer ray then passes through the point itself
     (``at``): where it meets that very point, both eyes saw it (:func:`same_point`).
 
