@@ -22,7 +22,12 @@ class Albedo(mi.SamplingIntegrator):
         si = scene.ray_intersect(mi.Ray3f(ray), active)
         ok = si.is_valid() & active
         value = si.bsdf().eval_diffuse_reflectance(si, ok)
-        return dr.select(ok, mi.Spectrum(value), 0.0), mi.Bool(True), []
+        return dr.select(ok, mi.Spectrum(value), self.missed(scene, si, active & ~ok)), \
+            mi.Bool(True), []
+
+    def missed(self, scene, si, active):
+        """The radiance of a ray that hit nothing."""
+        return mi.Spectrum(0.0)
 
     def to_string(self):
         return "Albedo"
@@ -99,14 +104,19 @@ def _borrowed(stereo, eye):
     return took, pixels, values, on
 
 
-def _seen(stereo, eye, px, py, du=0.5, dv=0.5):
-    """What film points ``(px + du, py + dv)`` of ``eye`` see: the albedo (-1 on a miss), the
-    hit and the point."""
+def _hits(stereo, eye, px, py, du=0.5, dv=0.5):
+    """What the rays through film points ``(px + du, py + dv)`` of ``eye`` meet."""
     sensor = stereo.sensors[eye]
     w, h = (int(v) for v in sensor.film().crop_size())
     pos = mi.Point2f(mi.Float((px + du) / w), mi.Float((py + dv) / h))
     ray, _ = sensor.sample_ray(0.0, 0.5, pos, mi.Point2f(0.5, 0.5))
-    si = stereo.scene.ray_intersect(ray)
+    return stereo.scene.ray_intersect(ray)
+
+
+def _seen(stereo, eye, px, py, du=0.5, dv=0.5):
+    """What film points ``(px + du, py + dv)`` of ``eye`` see: the albedo (-1 on a miss), the
+    hit and the point."""
+    si = _hits(stereo, eye, px, py, du, dv)
     ok = si.is_valid()
     a = si.bsdf().eval_diffuse_reflectance(si, ok)
     a = np.array(dr.select(ok, mi.Color3f(a), -1.0), dtype=np.float64).reshape(3, -1).T
@@ -158,7 +168,7 @@ def _hidden(stereo, first, second):
     """Whether each of ``second``'s samples sees a point that ``first`` does not: a shadow
     ray from its G-buffer point (a disc pixel's through its centre, a cell's through the
     point it took) to ``first``'s centre meets something."""
-    gb = stereo.views[second].planner._samples_cache.gb
+    gb = stereo.views[second].planner.samples.gb
     origin = mi.Point3f(*(float(v) for v in
                           np.array(stereo.views[first].planner.history.camera.origin).ravel()))
     d = gb.position - origin
@@ -283,16 +293,12 @@ def test_borrow_reads_each_sample_from_one_history_in_one_kernel():
     np.testing.assert_array_equal(np.array(m.index), np.arange(n))
 
 
-class SkyAlbedo(mi.SamplingIntegrator):
+class SkyAlbedo(Albedo):
     """The albedo at the primary hit, the environment's radiance on a miss: deterministic,
     and the same from both eyes for a direction at infinity."""
 
-    def sample(self, scene, sampler, ray, medium=None, active=True):
-        si = scene.ray_intersect(mi.Ray3f(ray), active)
-        ok = si.is_valid() & active
-        value = si.bsdf().eval_diffuse_reflectance(si, ok)
-        sky = scene.environment().eval(si, active & ~ok)
-        return dr.select(ok, mi.Spectrum(value), sky), mi.Bool(True), []
+    def missed(self, scene, si, active):
+        return scene.environment().eval(si, active)
 
     def to_string(self):
         return "SkyAlbedo"
@@ -323,12 +329,7 @@ def _sky_scene():
 
 def _sky_seen(stereo, eye, px, py):
     """The sky's radiance at the centres of ``eye``'s pixels ``(px, py)``."""
-    sensor = stereo.sensors[eye]
-    w, h = (int(v) for v in sensor.film().crop_size())
-    pos = mi.Point2f(mi.Float((px + 0.5) / w), mi.Float((py + 0.5) / h))
-    ray, _ = sensor.sample_ray(0.0, 0.5, pos, mi.Point2f(0.5, 0.5))
-    si = stereo.scene.ray_intersect(ray)
-    sky = stereo.scene.environment().eval(si)
+    sky = stereo.scene.environment().eval(_hits(stereo, eye, px, py))
     return np.array(mi.Color3f(sky), dtype=np.float64).reshape(3, -1).T
 
 

@@ -61,7 +61,7 @@ import mitsuba as mi
 from ..kernels.buffers import GBuffer
 from ..kernels.grid import Grid
 from ..kernels.polar import PolarGrid, polar_grid_of
-from .reproject import CameraState, History, ReprojectionMap, nearest_claim
+from .reproject import CameraState, History, ReprojectionMap, nearest_claim, project_seen
 from .sampling import foveal_grid, fovea_radius
 
 #: Smallest cosine between a sample's normal and its previous sample's for one surface.
@@ -431,15 +431,9 @@ def reprojection_map(gb: GBuffer, on: mi.Bool, history: History | None, lay: Sam
     if history is None:
         return ReprojectionMap(dr.zeros(mi.Point2f, n), dr.zeros(mi.Bool, n),
                                dr.zeros(mi.UInt32, n), dr.zeros(mi.Bool, n))
-    hit, x, d = gb.hit, gb.position, gb.direction
-    m = history.camera.matrix
-    q = m @ mi.Vector4f(x.x, x.y, x.z, 1.0)
-    qd = m @ mi.Vector4f(d.x, d.y, d.z, 0.0)
-    qq = dr.select(hit, q, qd)
-    inv_w = dr.rcp(qq.w)
-    uv = mi.Point2f(qq.x * inv_w * width, qq.y * inv_w * height)
+    uv, ahead = project_seen(history.camera, gb.position, gb.direction, gb.hit, width, height)
     # A point behind the previous camera projects, mirrored, into its film: never seen.
-    inside = on & (qq.w > 0) & dr.isfinite(uv.x) & dr.isfinite(uv.y) & (uv.x >= 0) & \
+    inside = on & ahead & dr.isfinite(uv.x) & dr.isfinite(uv.y) & (uv.x >= 0) & \
         (uv.y >= 0) & (uv.x < width) & (uv.y < height)
     j, in_grid, centre = sample_at(lay, uv, history.gaze)
     inside &= in_grid
@@ -480,23 +474,6 @@ def _agrees(gb: GBuffer, history: History, j: mi.UInt32, inside: mi.Bool, tolera
     return inside & (same_surface | same_background), prev_count
 
 
-def _seen_at(partner: History, camera: CameraState, width: int, height: int
-             ) -> tuple[mi.Point2f, mi.Bool]:
-    """Where each of the other eye's samples lies on this view's film (pixels), and whether
-    it lies ahead of this camera: its point, or where it saw the sky its direction (the sky
-    lies at infinity, the same from both eyes, whose cameras are parallel)."""
-    x, d = partner.position, partner.direction
-    surface = dr.isfinite(partner.depth)
-    point = mi.Vector4f(x.x, x.y, x.z, 1.0)
-    known = surface
-    if d is not None:
-        known = mi.Bool(True)
-        point = dr.select(surface, point, mi.Vector4f(d.x, d.y, d.z, 0.0))
-    q = camera.matrix @ point
-    inv_w = dr.rcp(q.w)
-    return mi.Point2f(q.x * inv_w * width, q.y * inv_w * height), known & (q.w > 0)
-
-
 def toward(lay: SampleLayout, pixels: mi.UInt32, partner: History, camera: CameraState,
            gaze: mi.Point2f, width: int, height: int
            ) -> tuple[mi.UInt32, mi.Bool, mi.UInt32, mi.Point2f]:
@@ -507,9 +484,10 @@ def toward(lay: SampleLayout, pixels: mi.UInt32, partner: History, camera: Camer
     the cell, its centre pixel or another: where it is the other eye's point, that sample
     can stand for it (:func:`partner_map`), where the cell's centre would lie on another
     voxel face than the other eye's sample as often as not, and the other eye's sample of
-    the same place is a point of another cell. A cell that no sample lands in keeps its centre; the disc's
-    pixels keep theirs. The cell's G-buffer ray then passes through the point itself
-    (``at``): where it meets that very point, both eyes saw it (:func:`same_point`).
+    the same place is a point of another cell. A cell that no sample lands in keeps its
+    centre; the disc's pixels keep theirs. The cell's G-buffer ray then passes through the
+    point itself (``at``): where it meets that very point, both eyes saw it
+    (:func:`same_point`).
 
     Parameters
     ----------
@@ -518,7 +496,7 @@ def toward(lay: SampleLayout, pixels: mi.UInt32, partner: History, camera: Camer
     pixels : mi.UInt32
         Each sample's film pixel (:func:`sample_pixels`).
     partner : History
-        The other eye's history after its frame.
+        The other eye's history after its frame (on its samples, with their directions).
     camera : CameraState
         This view's camera.
     gaze : mi.Point2f
@@ -538,7 +516,8 @@ def toward(lay: SampleLayout, pixels: mi.UInt32, partner: History, camera: Camer
         Where in its pixel each sample's ray passes: a claimed cell's through the point it
         took, the others' through the centre.
     """
-    uv, ahead = _seen_at(partner, camera, width, height)
+    uv, ahead = project_seen(camera, partner.position, partner.direction,
+                             dr.isfinite(partner.depth), width, height)
     grid = lay.grid
     c = grid.coords_at(uv, gaze)
     cell, in_grid = grid.cell_at(uv, gaze)
@@ -548,13 +527,11 @@ def toward(lay: SampleLayout, pixels: mi.UInt32, partner: History, camera: Camer
     wins = nearest_claim(uv, mi.Point2f(dr.floor(centre.x) + 0.5, dr.floor(centre.y) + 0.5),
                          cell, claims, lay.cells)
     moved, at = dr.copy(pixels), dr.full(mi.Point2f, 0.5, lay.size)
-    dr.scatter(moved, mi.UInt32(dr.floor(uv.y)) * width + mi.UInt32(dr.floor(uv.x)), cell,
-               wins)
-    # The cell's ray passes through the point itself: it sees that point, or what hides it.
-    dr.scatter(at, uv - dr.floor(uv), cell, wins)
-    claimed = dr.zeros(mi.Bool, lay.size)
+    claimed, source = dr.zeros(mi.Bool, lay.size), dr.zeros(mi.UInt32, lay.size)
+    pixel = dr.floor(uv)
+    dr.scatter(moved, mi.UInt32(pixel.y) * width + mi.UInt32(pixel.x), cell, wins)
+    dr.scatter(at, uv - pixel, cell, wins)   # the ray through the point: it, or what hides it
     dr.scatter(claimed, True, cell, wins)
-    source = dr.zeros(mi.UInt32, lay.size)
     dr.scatter(source, dr.arange(mi.UInt32, dr.width(wins)), cell, wins)
     return moved, claimed, source, at
 

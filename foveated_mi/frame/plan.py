@@ -118,6 +118,13 @@ class Planner:
         #: The disc's pixels reuse the partner's too (else only the cells do).
         self.partner_disc = True
 
+    @property
+    def samples(self) -> _Samples | None:
+        """The foveal buffer's samples as the last frame made them (pixels, G-buffer, and
+        with a partner the cells that took its points and the map of what it stands for),
+        or None: a diagnostic view of what a frame traced and why."""
+        return self._samples_cache
+
     def reset(self) -> None:
         """Forget the history (next frame starts fresh, as frame 0)."""
         self.history = None

@@ -158,6 +158,35 @@ def project(camera: CameraState, p: mi.Point3f, width: int, height: int
     return uv, dr.norm(p - camera.origin)
 
 
+def project_seen(camera: CameraState, position: mi.Point3f, direction: mi.Vector3f,
+                 hit: mi.Bool, width: int, height: int) -> tuple[mi.Point2f, mi.Bool]:
+    """Where what each ray saw lies on ``camera``'s film: a hit's point, a miss's direction
+    (the sky, at infinity); and whether it lies ahead of the camera (a point behind it
+    projects, mirrored, into its film).
+
+    Parameters
+    ----------
+    camera : CameraState
+        The camera.
+    position, direction, hit : mi.Point3f, mi.Vector3f, mi.Bool
+        Each ray's hit point, direction and whether it hit.
+    width, height : int
+        The film's size.
+
+    Returns
+    -------
+    uv : mi.Point2f
+        Film coordinates, in pixels (continuous).
+    ahead : mi.Bool
+        Whether in front of the camera.
+    """
+    x, d = position, direction
+    q = camera.matrix @ dr.select(hit, mi.Vector4f(x.x, x.y, x.z, 1.0),
+                                  mi.Vector4f(d.x, d.y, d.z, 0.0))
+    inv_w = dr.rcp(q.w)
+    return mi.Point2f(q.x * inv_w * width, q.y * inv_w * height), q.w > 0
+
+
 #: How a pixel reads the history (module docstring): the paper's nearest previous pixel, or
 #: exclusive reads, where each previous pixel serves at most one pixel.
 REPROJECTION_MODES = ("exclusive", "nearest")
