@@ -46,6 +46,7 @@ from typing import Any
 import drjit as dr
 import mitsuba as mi
 
+from ..kernels.pixels import gather4, packet
 from ..kernels.taps import Surface, surface_energy
 from ..kernels.buffers import GBuffer, Resolved
 from ..kernels.grid import Grid, wrap_padding
@@ -347,10 +348,11 @@ def _catmull_rom(t: mi.Float) -> tuple[mi.Float, ...]:
             0.5 * (-3.0 * t3 + 4.0 * t2 + t), 0.5 * (t3 - t2))
 
 
-def _cubic(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, x0: mi.Float, y0: mi.Float,
-           fx: mi.Float, fy: mi.Float) -> tuple[mi.Color3f, mi.Bool]:
+def _cubic(cells: mi.Float, grid: PolarGrid, x0: mi.Float, y0: mi.Float, fx: mi.Float,
+           fy: mi.Float) -> tuple[mi.Color3f, mi.Bool]:
     """Catmull-Rom over the 4 x 4 cells around each pixel (wrapping in angle, clamping
-    radially), kept non-negative; and whether all sixteen hold a value."""
+    radially), kept non-negative; and whether all sixteen hold a value. ``cells``: their
+    packet (:func:`_cell_packet`)."""
     wx, wy = _catmull_rom(fx), _catmull_rom(fy)
     acc = dr.zeros(mi.Color3f, dr.width(fx))
     every = dr.full(mi.Bool, True, dr.width(fx))
@@ -358,12 +360,18 @@ def _cubic(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, x0: mi.Float, y0:
         qy = dr.clip(mi.Int32(y0) + (j - 1), 0, grid.height - 1)
         for i in range(4):
             q, _ = grid.neighbour(mi.Int32(x0) + (i - 1), qy)
-            cq = dr.gather(mi.Color3f, cells, q)
-            ok = dr.gather(mi.Bool, valid, q) & dr.isfinite(cq.x) & dr.isfinite(cq.y) \
-                & dr.isfinite(cq.z)
-            every &= ok
-            acc += dr.select(ok, cq, 0.0) * dr.detach(wx[i] * wy[j])
+            v = gather4(cells, q, mi.Bool(True))
+            every &= v.w > 0.0
+            acc += mi.Color3f(v.x, v.y, v.z) * dr.detach(wx[i] * wy[j])
     return dr.maximum(acc, 0.0), every
+
+
+def _cell_packet(cells: mi.Color3f, valid: mi.Bool) -> mi.Float:
+    """The cells as one packet a warp tap reads at once: the value where it is ``valid`` and
+    finite (else 0), and 1 there (else 0)."""
+    ok = valid & dr.isfinite(cells.x) & dr.isfinite(cells.y) & dr.isfinite(cells.z)
+    c = dr.select(ok, cells, 0.0)
+    return packet(c.x, c.y, c.z, dr.select(ok, 1.0, 0.0))
 
 
 def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, width: int,
@@ -400,19 +408,21 @@ def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, w
     u, v = c.x - 0.5, c.y - 0.5
     x0, y0 = dr.floor(u), dr.floor(v)
     fx, fy = u - x0, v - y0
-    image = _bilinear(cells, valid, grid, x0, y0, fx, fy,
+    # One gather a tap: value and validity together.
+    pk = _cell_packet(cells, valid)
+    image = _bilinear(pk, grid, x0, y0, fx, fy,
                       None if guide is None else (guide[0].at(idx, mi.Bool(True)), guide[1]))
     if kernel == "cubic":
-        sharp, every = _cubic(cells, valid, grid, x0, y0, fx, fy)
+        sharp, every = _cubic(pk, grid, x0, y0, fx, fy)
         image = dr.select(every, sharp, image)
     return image
 
 
-def _bilinear(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, x0: mi.Float, y0: mi.Float,
-              fx: mi.Float, fy: mi.Float, guide: tuple | None) -> mi.Color3f:
-    """Bilinear over the four cells around each pixel that hold a value (:func:`warp`), their
-    weights times the surfaces' edge-stopping weight with a ``guide`` (the pixels' surface,
-    the cells' :class:`Surface`)."""
+def _bilinear(cells: mi.Float, grid: PolarGrid, x0: mi.Float, y0: mi.Float, fx: mi.Float,
+              fy: mi.Float, guide: tuple | None) -> mi.Color3f:
+    """Bilinear over the four cells around each pixel that hold a value (:func:`warp`;
+    ``cells``: their packet, :func:`_cell_packet`), their weights times the surfaces'
+    edge-stopping weight with a ``guide`` (the pixels' surface, the cells' :class:`Surface`)."""
     n = dr.width(fx)
     acc, wsum = dr.zeros(mi.Color3f, n), dr.zeros(mi.Float, n)
     plain, psum = dr.zeros(mi.Color3f, n), dr.zeros(mi.Float, n)
@@ -423,16 +433,13 @@ def _bilinear(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, x0: mi.Float, 
         for dx, wx in ((0, 1.0 - fx), (1, fx)):
             qy = dr.clip(mi.Int32(y0) + dy, 0, grid.height - 1)
             q, _ = grid.neighbour(mi.Int32(x0) + dx, qy)
-            cq = dr.gather(mi.Color3f, cells, q)
-            w = dr.detach(wx * wy)
-            ok = dr.gather(mi.Bool, valid, q) & dr.isfinite(cq.x) & dr.isfinite(cq.y) \
-                & dr.isfinite(cq.z)
-            w = dr.select(ok, w, 0.0)
-            cq = dr.select(ok, cq, 0.0)
+            v = gather4(cells, q, mi.Bool(True))
+            cq = mi.Color3f(v.x, v.y, v.z)      # 0 where the cell holds no value
+            w = dr.detach(wx * wy * v.w)
             if guide is not None:
                 plain += cq * w
                 psum += w
-                there = guide[1].at(q, ok)
+                there = guide[1].at(q, v.w > 0.0)
                 w = w * dr.detach(dr.select(here[2] == there[2],
                                             dr.exp(-surface_energy(here, there, inv_n, inv_x)),
                                             0.0))

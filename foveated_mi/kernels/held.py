@@ -49,6 +49,10 @@ class HeldLevel(NamedTuple):
     #: The cells whose result is read (None: all). The others are not visited: their sums
     #: are 0, so a normalised level keeps their value and an unnormalised one gives 0.
     active: mi.Bool | None = None
+    #: Data that only the pixel whose sum is taken reads (a tuple of arrays, one entry per
+    #: cell), appended to its ``at`` data ``P``: computed in the taps' own kernel by the
+    #: primal and tangent passes; the transpose, where ``P`` is the tap, gathers it there.
+    centre: tuple = ()
 
 
 def _finite(c: mi.Color3f) -> mi.Color3f:
@@ -69,7 +73,7 @@ def _apply(level: HeldLevel, x: mi.Color3f, norm=None, extras: bool = True,
         xpk = packet(xs.x, xs.y, xs.z, dr.zeros(mi.Float, n))
         dr.schedule(xpk)
     own = dr.arange(mi.UInt32, n)
-    P = level.at(own, mi.Bool(True))
+    P = (*level.at(own, mi.Bool(True)), *level.centre)
     if own_values:
         xs = level.value(P)
     with_extra = extras and level.extra is not None
@@ -121,9 +125,12 @@ def _transpose(level: HeldLevel, g: mi.Color3f, norm) -> mi.Color3f:
     dr.schedule(gpk)
     own = dr.arange(mi.UInt32, n)
     Q = level.at(own, mi.Bool(True))
+    centre = level.centre
+    dr.schedule(*centre)
 
     def visit(tap, acc):
-        P = level.at(tap.q, tap.inside)
+        P = (*level.at(tap.q, tap.inside),
+             *(dr.gather(type(c), c, tap.q, tap.inside) for c in centre))
         # p = q + s d sees q at offset -d: the B3 weight is symmetric.
         w = level.weight(P, Q, tap)
         v = gather4(gpk, tap.q, tap.inside)

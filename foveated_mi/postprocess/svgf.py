@@ -56,16 +56,18 @@ _G3 = (0.25, 0.5, 0.25)
 EPSILON = 1e-10
 
 
-def _prefilter(var: mi.Float, grid: Grid) -> mi.Float:
+def _prefilter(src: mi.Float, grid: Grid) -> mi.Float:
     """3 x 3 Gaussian blur of the variance (SVGF), renormalised over the taps that hold a
-    value: not beyond a clamped border, nor a pixel without a value (variance < 0)."""
+    value: not beyond a clamped border, nor a pixel without a value (variance < 0). ``src``:
+    the level's packet, the variance its fourth value; read by the taps' own kernel, so a
+    level launches no kernel of its own for it."""
     px, py = pixel_xy(grid.width, grid.height)
     acc = dr.zeros(mi.Float, grid.size)
     wsum = dr.zeros(mi.Float, grid.size)
     for dy in (-1, 0, 1):
         for dx in (-1, 0, 1):
             q, inside = grid.neighbour(px + dx, py + dy)
-            v = dr.gather(mi.Float, var, q, inside)
+            v = dr.gather(mi.Float, src, 4 * q + 3, inside)
             w = dr.select(inside & (v >= 0.0), _G3[dx + 1] * _G3[dy + 1], 0.0)
             acc = dr.fma(w, v, acc)
             wsum += w
@@ -152,35 +154,33 @@ def _level(c: mi.Color3f, var: mi.Float, surface: Surface, grid: Grid, *, step,
     cd = dr.detach(c)
     finite = dr.isfinite(cd.x) & dr.isfinite(cd.y) & dr.isfinite(cd.z)
     cd = dr.select(finite, cd, 0.0)
-    # sigma_luminance = inf switches the colour weight off (a purely geometric filter).
-    denom = dr.zeros(mi.Float, n) if sl is None else \
-        sl * dr.sqrt(_prefilter(var, grid)) + EPSILON
-    # Colour and variance, finiteness as the variance's sign (variances are >= 0); the
-    # colour distance's denominator of the centre pixel.
+    # Colour and variance, finiteness as the variance's sign (variances are >= 0).
     src = packet(cd.x, cd.y, cd.z, dr.select(finite, var, -1.0))
-    aux = packet(denom, dr.zeros(mi.Float, n), dr.zeros(mi.Float, n), dr.zeros(mi.Float, n))
-    dr.schedule(src, aux)
+    dr.schedule(src)
+    # The colour distance's denominator of the centre pixel (sigma_luminance = inf switches
+    # the colour weight off: a purely geometric filter).
+    centre = () if sl is None else (sl * dr.sqrt(_prefilter(src, grid)) + EPSILON,)
 
     def at(q, active):
         v4 = gather4(src, q, active)
         return (mi.Color3f(v4.x, v4.y, v4.z), v4.w >= 0.0, dr.maximum(v4.w, 0.0),
-                gather4(aux, q, active).x, *surface.at(q, active))
+                *surface.at(q, active))
 
     def weight(P, Q, tap):
-        e_geo = surface_energy(P[4:], Q[4:], inv_n, inv_x)
+        e_geo = surface_energy(P[3:6], Q[3:6], inv_n, inv_x)
         if sl is None:
             e_col = mi.Float(0.0)
         else:
             diff = dr.abs(P[0] - Q[0])
-            e_col = (diff.x + diff.y + diff.z) / P[3]
+            e_col = (diff.x + diff.y + diff.z) / P[6]
         # A cell without a value (a buffer's hole) reads no tap: the filter fills nothing.
-        use = tap.inside & P[1] & Q[1] & (P[6] == Q[6])
+        use = tap.inside & P[1] & Q[1] & (P[5] == Q[5])
         return dr.select(use, tap.b3 * dr.exp(-(e_col + e_geo)), 0.0)
 
     y, v_acc, w_acc = held_filter(c, HeldLevel(
         grid, step, at, weight, residual=True,
         extra=lambda P, Q, w: (w * w * Q[2], w), label="svgf_taps", value=lambda Q: Q[0],
-        active=active))
+        active=active, centre=centre))
     has = w_acc > 0
     inv = dr.rcp(dr.select(has, w_acc, 1.0))
     return y, dr.select(has, v_acc * inv * inv, var)
