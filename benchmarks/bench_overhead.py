@@ -258,6 +258,9 @@ def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int,
             profile = _kernel_profile(hist)
             kernel_ms.append(profile["kernel_ms"])
             longest.append(profile["longest"][0]["ms"] if profile["longest"] else 0.0)
+    if kernels and spec["orbit"]:     # the listed frame moves as the timed ones did
+        camera = _orbit(camera, spec["orbit"])
+        apply_camera(scene, camera)
     by_stage = stage_kernels(lambda: mi.render(scene, integrator=timed, spp=spec["spp"],
                                                seed=warmup + frames)) if kernels else None
     full_ms = median(full)
