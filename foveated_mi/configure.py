@@ -52,6 +52,23 @@ def interleave_of(o: Options) -> int:
     return int(o["foveal_interleave"]) if o["history"] else 1
 
 
+def jitter_of(o: Options) -> float:
+    """``foveal_jitter``, which needs a history: a cell's value is the mean of the points its
+    history traced. Without one, every cell traces its centre (0).
+
+    Parameters
+    ----------
+    o : dict
+        The validated options.
+
+    Returns
+    -------
+    jitter : float
+        The jitter the plan uses.
+    """
+    return float(o["foveal_jitter"]) if o["history"] else 0.0
+
+
 def sampling_settings(o: Options) -> SamplingSettings:
     """The sampling law's settings of validated options ``o``.
 
@@ -71,7 +88,8 @@ def sampling_settings(o: Options) -> SamplingSettings:
         acuity_floor=float(o["acuity_floor"]), edge_threshold=float(o["edge_threshold"]),
         edge_detector=o["edge_detector"], emission_edges=bool(o["emission_edges"]),
         map_seed=int(o["map_seed"]), polar_cells=o["polar_cells"],
-        viewer_ppd=float(o["viewer_ppd"]), interleave=interleave_of(o))
+        viewer_ppd=float(o["viewer_ppd"]), interleave=interleave_of(o),
+        jitter=jitter_of(o))
 
 
 def frame_settings(o: Options) -> FrameSettings:

@@ -445,6 +445,16 @@ _SCHEMA: tuple[Option, ...] = (
            "its history; one without history (the first frames, a disocclusion) its "
            "neighbours' values. A still view converges to the finer cells in ``n * n`` "
            "frames; a moving one keeps what its history holds"),
+    Option("foveal_jitter", 0.0, "float", "a cell's ray goes through a point of the cell that "
+           "changes every frame, this fraction of the cell across (0: the cell's centre)",
+           lo=0.0, hi=1.0,
+           doc="With ``formation = 'foveal'`` in ``foveal_space = 'buffer'`` and ``history``: "
+           "each frame a cell's ray goes through a point of the cell, offset from its centre "
+           "by this fraction of the cell along its angle and its ring, in a low-discrepancy "
+           "sequence of its own (:func:`foveated_mi.frame.buffer_space.ray_shifts`), so that "
+           "its history holds the cell's mean rather than one point's value, as a box "
+           "prefilter of the cell would. The G-buffer, the launch and the history stay at "
+           "the cells' centres"),
     Option("foveal_taa", 1.0, "float", "this frame's weight in what each cell of the foveal "
            "buffer shows: 1 shows its denoised value; below 1, blended with what it showed "
            "last frame, clamped to its neighbours' range", lo=0.0, hi=1.0, lo_open=True,
@@ -693,6 +703,11 @@ def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[s
     return out
 
 
+#: Options of the foveal buffer's own samples, and the value that leaves them off.
+_BUFFER_ONLY = (("foveal_interleave", 1), ("foveal_disc_spp", 0), ("foveal_jitter", 0.0),
+                ("foveal_taa", 1.0))
+
+
 def _check_combination(out: dict[str, Any]) -> None:
     """Checks of one option against another, and of the denoiser's requirements."""
     if out["sampling_law"] == "acuity" and out["acuity_floor"] > out["ray_budget"]:
@@ -701,18 +716,11 @@ def _check_combination(out: dict[str, Any]) -> None:
     if out["polar_cells"] != "log" and out["sampling_law"] != "polar":
         raise ParameterError("polar_cells", out["polar_cells"],
                              "'log' unless sampling_law = 'polar' (the only law with cells)")
-    if out["foveal_interleave"] > 1 and (out["formation"] != "foveal"
-                                         or out["foveal_space"] != "buffer"):
-        raise ParameterError("foveal_interleave", out["foveal_interleave"],
-                             "1 unless formation = 'foveal' and foveal_space = 'buffer'")
-    if out["foveal_disc_spp"] > 0 and (out["formation"] != "foveal"
-                                       or out["foveal_space"] != "buffer"):
-        raise ParameterError("foveal_disc_spp", out["foveal_disc_spp"],
-                             "0 unless formation = 'foveal' and foveal_space = 'buffer'")
-    if out["foveal_taa"] < 1.0 and (out["formation"] != "foveal"
-                                    or out["foveal_space"] != "buffer"):
-        raise ParameterError("foveal_taa", out["foveal_taa"],
-                             "1 unless formation = 'foveal' and foveal_space = 'buffer'")
+    in_buffer = out["formation"] == "foveal" and out["foveal_space"] == "buffer"
+    for name, neutral in _BUFFER_ONLY:
+        if out[name] != neutral and not in_buffer:
+            raise ParameterError(name, out[name], f"{neutral:g} unless formation = 'foveal' "
+                                 "and foveal_space = 'buffer'")
     for name, unset in (("foveal_disc_iterations", -1), ("foveal_disc_sigma_luminance", 0.0)):
         if out[name] != unset and (out["formation"] != "foveal"
                                    or out["foveal_disc"] != "denoised"):

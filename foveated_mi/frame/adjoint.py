@@ -311,7 +311,16 @@ class NestedAdjoint:
             return None, None, None
         fp = self._footprint(frame.sensor.film(), mode)
         traced = frame.sampling_map if mode == "splat" else None
-        sensor, layout = self.sensors.get(frame.sensor, pixels, fp, traced)
+        shift = None
+        if frame.ray_shift is not None:
+            # The primal's rays went through their cells' points (``foveal_jitter``): the
+            # derivative is taken at the same points. Each pixel has one ray.
+            ro = frame.reordered
+            at = dr.zeros(mi.Vector2f, frame.width * frame.height)
+            dr.scatter(at, frame.ray_shift, ro.wavefront, True if ro.active is None
+                       else ro.active)
+            shift = dr.gather(mi.Vector2f, at, pixels)
+        sensor, layout = self.sensors.get(frame.sensor, pixels, fp, traced, shift)
         return pixels, sensor, layout
 
     # -- reverse mode

@@ -191,6 +191,79 @@ def interleaved(lay: SampleLayout, index: int) -> mi.Bool | None:
     return (idx >= lay.cells) | (rank == turn)
 
 
+#: The two-dimensional golden ratio's sequence (Roberts' R2): frame ``k`` of a cell's jitter
+#: is ``frac(h + k * R2)``, ``h`` the cell's own rotation, so that any run of frames covers
+#: the cell evenly, and neighbouring cells do not move in step.
+R2 = (0.7548776662466927, 0.5698402909980532)
+
+
+def jitter_phase(index: int) -> tuple[float, float]:
+    """``frac(index * R2)`` in double precision (a float32 product loses the fraction)."""
+    return tuple(math.modf(index * a)[0] for a in R2)
+
+
+def ray_shifts(lay: SampleLayout, pixels: mi.UInt32, traced: mi.Bool, rays: mi.UInt32,
+               n_rays: int, gaze: mi.Point2f, width: int, height: int, jitter: float,
+               phase: tuple[float, float]) -> mi.Vector2f:
+    """Where each ray of a launch goes through its pixel's film position, with
+    ``foveal_jitter``: a cell's ray goes through a point of the cell, not its centre.
+
+    The point lies at ``jitter`` times a uniform offset in the cell's (angle, ring)
+    coordinates about its centre, the offset ``frac(h + phase) - 1/2`` with ``h`` a hash of
+    the cell (:data:`R2`). A cell's history then holds the mean over its area rather than
+    the value at one point: the box prefilter of the cell, which a still view converges to.
+    Rays of the disc's pixels, and a ray that more than one sample reads, go through their
+    pixel as they would without it.
+
+    Parameters
+    ----------
+    lay : SampleLayout
+        The samples.
+    pixels, traced, rays : mi.UInt32, mi.Bool, mi.UInt32
+        Each sample's pixel, whether it is traced, and its ray (:func:`sample_rays`).
+    n_rays : int
+        The launch's rays.
+    gaze : mi.Point2f
+        The gaze's film position, in pixels.
+    width, height : int
+        The film's size (a point is kept inside it).
+    jitter : float
+        The offset's extent, as a fraction of the cell (``foveal_jitter``, in ``(0, 1]``).
+    phase : tuple of float
+        The frame's place in the sequence (:func:`jitter_phase`); opaque on the device, so
+        that a new frame compiles nothing.
+
+    Returns
+    -------
+    shift : mi.Vector2f
+        Per ray, in pixels, from where the footprint sampler puts it.
+    """
+    grid, nc = lay.grid, lay.cells
+    idx = dr.arange(mi.UInt32, lay.size)
+    cell = traced & (idx < nc)
+    c = dr.select(cell, idx, 0)
+    ring = c // grid.width
+    h0, h1 = mi.sample_tea_32(c, mi.UInt32(0x6A177E5))
+    u = mi.Point2f(mi.Float(h0 >> 8) * 2.0 ** -24, mi.Float(h1 >> 8) * 2.0 ** -24)
+    u += mi.Point2f(dr.opaque(mi.Float, phase[0]), dr.opaque(mi.Float, phase[1]))
+    u -= dr.floor(u)
+    j = dr.opaque(mi.Float, jitter)
+    at = mi.Point2f(mi.Float(c - ring * grid.width) + 0.5 + j * (u.x - 0.5),
+                    mi.Float(ring) + 0.5 + j * (u.y - 0.5))
+    p = grid.position_of(at, gaze)
+    p = mi.Point2f(dr.clip(p.x, 0.0, width * (1.0 - 2.0 ** -20)),
+                   dr.clip(p.y, 0.0, height * (1.0 - 2.0 ** -20)))
+    y = pixels // width
+    shift = p - mi.Point2f(mi.Float(pixels - y * width) + 0.5, mi.Float(y) + 0.5)
+    # Samples per ray: a ray that two samples read (a cell and the disc pixel under it, or
+    # two cells on one pixel) keeps its place, and no two writes to one ray race.
+    owners = dr.zeros(mi.UInt32, n_rays)
+    dr.scatter_reduce(dr.ReduceOp.Add, owners, 1, rays, traced)
+    out = dr.zeros(mi.Vector2f, n_rays)
+    dr.scatter(out, mi.Vector2f(shift), rays, cell)
+    return dr.select(owners == 1, out, 0.0)
+
+
 def _patch_origin(lay: SampleLayout, gaze: mi.Point2f) -> tuple[mi.Int32, mi.Int32]:
     """The patch's top-left pixel: the first column and row whose centres can lie in the
     disc around ``gaze``."""

@@ -76,6 +76,10 @@ class FramePlan:
     #: rate below ``spp`` is set (``foveal_disc_spp``); else None and 0
     disc_rays: mi.Bool | None = None
     disc_spp: int = 0
+    #: per ray of the launch, where it goes through its pixel's film position (pixels):
+    #: a cell's point with ``foveal_jitter`` (:func:`~.buffer_space.ray_shifts`), which
+    #: moves every frame while the cell's pixel and launch stay; else None
+    ray_shift: mi.Vector2f | None = None
 
 
 @dataclass(eq=False)
@@ -238,7 +242,10 @@ class Planner:
                 sm.launch[turn] = self._launch(sm.pixels, traced, width, height,
                                                settings.launch, lay)
             ro, smap, rays, disc = sm.launch[turn]
-            timer.mark("reorder", ro.wavefront, rays, disc)
+            shift = None if ss.jitter == 0 else _buffer_space.ray_shifts(
+                lay, sm.pixels, traced, rays, dr.width(ro.wavefront), gaze, width, height,
+                ss.jitter, _buffer_space.jitter_phase(self.index))
+            timer.mark("reorder", ro.wavefront, rays, disc, shift)
             rate = settings.launch.disc_spp
             disc_spp = rate if disc is not None and 0 < rate < spp else 0
         return FramePlan(sensor=sensor, width=width, height=height, spp=spp, seed=frame_seed,
@@ -249,7 +256,8 @@ class Planner:
                          filter_sampler=self._filter_sampler(sensor, settings.pixel_filter),
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=None, gaze=gaze,
                          space=dataclasses.replace(space, rays=rays, traced=traced),
-                         disc_rays=disc if disc_spp else None, disc_spp=disc_spp)
+                         disc_rays=disc if disc_spp else None, disc_spp=disc_spp,
+                         ray_shift=shift)
 
     @staticmethod
     def _traced(sm: _Samples, lay, turn: int, borrowing: bool) -> mi.Bool:

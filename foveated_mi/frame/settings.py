@@ -33,6 +33,7 @@ class SamplingSettings:
     polar_cells: str = "log"   #: the ``polar`` law's cells: ``log`` or ``acuity``
     viewer_ppd: float = 0.0    #: pixels per degree of ``acuity`` cells (0: the sensor's)
     interleave: int = 1        #: a frame traces one cell in each n x n block of the buffer
+    jitter: float = 0.0        #: a cell's ray goes through a point of the cell (0: its centre)
 
     @property
     def in_degrees(self) -> bool:

@@ -144,7 +144,8 @@ def sample_nested(integrator: mi.SamplingIntegrator, scene: mi.Scene, sampler: m
 
 
 def camera_rays(sensor: mi.Sensor, sampler: mi.Sampler, pixels: mi.UInt32, width: int,
-                filter_sampler: FilterSampler, active: mi.Bool
+                filter_sampler: FilterSampler, active: mi.Bool,
+                shift: mi.Vector2f | None = None
                 ) -> tuple[mi.RayDifferential3f, mi.Spectrum, FilterSample]:
     """One camera ray per lane through pixel ``pixels``, at a position inside the pixel's
     footprint from ``filter_sampler``.
@@ -166,6 +167,10 @@ def camera_rays(sensor: mi.Sensor, sampler: mi.Sampler, pixels: mi.UInt32, width
         Draws the position inside the pixel's footprint.
     active : mi.Bool
         The lanes that trace.
+    shift : mi.Vector2f or None, optional
+        Per lane, moves the ray's film position by this many pixels (a foveal cell's
+        point, ``foveal_jitter``); the filter sample keeps the footprint's position, so
+        the develop weighs the sample as it would without it.
 
     Returns
     -------
@@ -179,7 +184,8 @@ def camera_rays(sensor: mi.Sensor, sampler: mi.Sampler, pixels: mi.UInt32, width
     y = pixels // width
     x = pixels - y * width
     fs = filter_sampler.sample(sampler.next_2d(active), x, y)
-    pos = mi.Point2f(fs.position.x / filter_sampler.width, fs.position.y / filter_sampler.height)
+    pos = fs.position if shift is None else fs.position + shift
+    pos = mi.Point2f(pos.x / filter_sampler.width, pos.y / filter_sampler.height)
     aperture = sampler.next_2d(active) if sensor.needs_aperture_sample() else mi.Point2f(0.5)
     time = mi.Float(sensor.shutter_open())
     if sensor.shutter_open_time() > 0:
@@ -222,23 +228,42 @@ def lanes_of(pixels: mi.UInt32, spp: int, active: mi.Bool | None = None,
     active : mi.Bool or None
         Each lane's flag (None when every lane traces).
     """
+    ray_id, first = _ray_of_lane(dr.width(pixels), spp, disc, disc_spp)
+    if first is not None:
+        on = first | ~dr.gather(mi.Bool, disc, ray_id)
+        if active is not None:
+            on &= dr.gather(mi.Bool, active, ray_id)
+        return dr.gather(mi.UInt32, pixels, ray_id), on
+    if ray_id is None:
+        return pixels, active
+    return (dr.gather(mi.UInt32, pixels, ray_id),
+            None if active is None else dr.gather(mi.Bool, active, ray_id))
+
+
+def _ray_of_lane(rays: int, spp: int, disc: mi.Bool | None, disc_spp: int
+                 ) -> tuple[mi.UInt32 | None, mi.Bool | None]:
+    """Each lane's ray in :func:`lanes_of`'s layout (None: lane ``i`` is ray ``i``), and with
+    a disc rate whether the lane lies in the first run (else None)."""
     if disc is not None and 0 < disc_spp < spp:
-        rays = dr.width(pixels)
         lane = dr.arange(mi.UInt32, rays * spp)
         # The first run's end moves with the launch's width (every gaze move): a value, not
         # a constant of the kernel.
         head = dr.opaque(mi.UInt32, rays * disc_spp)
         first = lane < head
-        ray_id = dr.select(first, lane // disc_spp, (lane - head) // (spp - disc_spp))
-        on = first | ~dr.gather(mi.Bool, disc, ray_id)
-        if active is not None:
-            on &= dr.gather(mi.Bool, active, ray_id)
-        return dr.gather(mi.UInt32, pixels, ray_id), on
+        return dr.select(first, lane // disc_spp, (lane - head) // (spp - disc_spp)), first
     if spp == 1:
-        return pixels, active
-    ray_id = dr.arange(mi.UInt32, dr.width(pixels) * spp) // spp
-    return (dr.gather(mi.UInt32, pixels, ray_id),
-            None if active is None else dr.gather(mi.Bool, active, ray_id))
+        return None, None
+    return dr.arange(mi.UInt32, rays * spp) // spp, None
+
+
+def shifts_of(shift: mi.Vector2f | None, spp: int, disc: mi.Bool | None = None,
+              disc_spp: int = 0) -> mi.Vector2f | None:
+    """Each lane's shift of its film position (:func:`lanes_of`'s layout) from one per ray
+    (:attr:`~foveated_mi.frame.plan.FramePlan.ray_shift`); None for None."""
+    if shift is None:
+        return None
+    ray_id, _ = _ray_of_lane(dr.width(shift), spp, disc, disc_spp)
+    return shift if ray_id is None else dr.gather(mi.Vector2f, shift, ray_id)
 
 
 def pixel_major(samples: TracedSamples, rays: int, spp: int, disc_spp: int = 0
@@ -279,7 +304,7 @@ def trace_wavefront(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingI
                     pixels: mi.UInt32, width: int, height: int, *, spp: int, seed,
                     active: mi.Bool | None = None, clamp: float = 1e4,
                     filter_sampler: FilterSampler | None = None, disc: mi.Bool | None = None,
-                    disc_spp: int = 0) -> TracedSamples:
+                    disc_spp: int = 0, shift: mi.Vector2f | None = None) -> TracedSamples:
     """Trace ``spp`` camera rays through each pixel of ``pixels`` with ``integrator``
     (``disc_spp`` through those of ``disc``).
 
@@ -309,6 +334,8 @@ def trace_wavefront(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingI
         tabulating a filter costs a host round trip).
     disc, disc_spp : mi.Bool or None, int, optional
         Rays traced at fewer samples (:func:`lanes_of`).
+    shift : mi.Vector2f or None, optional
+        Per ray, moves its film position by this many pixels (:func:`camera_rays`).
 
     Returns
     -------
@@ -318,13 +345,15 @@ def trace_wavefront(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingI
     """
     pix, lane_active = lanes_of(pixels, spp, active, disc, disc_spp)
     return trace_lanes(scene, sensor, integrator, pix, width, height, spp=spp, seed=seed,
-                       active=lane_active, clamp=clamp, filter_sampler=filter_sampler)
+                       active=lane_active, clamp=clamp, filter_sampler=filter_sampler,
+                       shift=shifts_of(shift, spp, disc, disc_spp))
 
 
 def trace_lanes(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingIntegrator,
                 pix: mi.UInt32, width: int, height: int, *, spp: int, seed,
                 active: mi.Bool | None = None, clamp: float = 1e4,
-                filter_sampler: FilterSampler | None = None) -> TracedSamples:
+                filter_sampler: FilterSampler | None = None,
+                shift: mi.Vector2f | None = None) -> TracedSamples:
     """:func:`trace_wavefront` of lanes already laid out (:func:`lanes_of`): every array it
     makes is as wide as ``pix``, so a frozen recording of it replays at any width.
 
@@ -332,10 +361,9 @@ def trace_lanes(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingInteg
     ----------
     scene, sensor, integrator, width, height, spp, seed, clamp, filter_sampler
         As :func:`trace_wavefront`'s.
-    pix : mi.UInt32
-        Each lane's pixel (flat index ``y * W + x``).
-    active : mi.Bool or None, optional
-        Each lane's flag (None: every lane traces).
+    pix, active, shift : mi.UInt32, mi.Bool or None, mi.Vector2f or None
+        Each lane's pixel (flat index ``y * W + x``), flag (None: every lane traces) and
+        shift of its film position (:func:`shifts_of`; None: none).
 
     Returns
     -------
@@ -347,11 +375,10 @@ def trace_lanes(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.SamplingInteg
     sampler.set_sample_count(spp)
     sampler.set_samples_per_wavefront(spp)
     sampler.seed(seed, lanes)
-
     lane_active = mi.Bool(True) if active is None else active
     if filter_sampler is None:
         filter_sampler = FilterSampler(sensor.film())
-    ray, weight, fs = camera_rays(sensor, sampler, pix, width, filter_sampler, lane_active)
+    ray, weight, fs = camera_rays(sensor, sampler, pix, width, filter_sampler, lane_active, shift)
     ray.scale_differential(dr.rsqrt(spp))
 
     L, _ = sample_nested(integrator, scene, sampler, ray, lane_active)

@@ -54,8 +54,8 @@ from .formation import RECORDINGS, _fields, _no_collection
 from .plan import FramePlan
 from .sampling import opaque_seed
 from .settings import TraceSettings
-from .shading import (ShadingBuffer, TracedSamples, develop, lanes_of, trace_lanes,
-                      trace_wavefront)
+from .shading import (ShadingBuffer, TracedSamples, develop, lanes_of, shifts_of,
+                      trace_lanes, trace_wavefront)
 
 
 class Shaded(NamedTuple):
@@ -89,7 +89,8 @@ def trace(scene: mi.Scene, integrator: mi.SamplingIntegrator, plan: FramePlan,
     return trace_wavefront(scene, plan.sensor, integrator, ro.wavefront, plan.width,
                            plan.height, spp=plan.spp, seed=plan.seed, active=ro.active,
                            clamp=settings.clamp, filter_sampler=plan.filter_sampler,
-                           disc=plan.disc_rays, disc_spp=plan.disc_spp)
+                           disc=plan.disc_rays, disc_spp=plan.disc_spp,
+                           shift=plan.ray_shift)
 
 
 def develop_plan(samples: TracedSamples, plan: FramePlan,
@@ -149,7 +150,8 @@ def _trace_frame(scene, sensor, integrator, filter_sampler, arrays: dict, key: d
         scene, sensor, integrator, arrays["lanes"], key["width"], key["height"],
         spp=key["spp"], seed=arrays["seed"], active=arrays["active"], clamp=key["clamp"],
         filter_sampler=filter_sampler.with_table(
-            None if table is None else type(filter_sampler.table)(**table)))
+            None if table is None else type(filter_sampler.table)(**table)),
+        shift=arrays["shift"])
     return dict(samples._asdict())
 
 
@@ -207,6 +209,7 @@ class FrozenTrace:
         pix, active = lanes_of(ro.wavefront, plan.spp, ro.active, plan.disc_rays,
                                plan.disc_spp)
         arrays = {"lanes": pix, "active": active,
+                  "shift": shifts_of(plan.ray_shift, plan.spp, plan.disc_rays, plan.disc_spp),
                   "seed": opaque_seed(plan.seed),
                   # A named tuple is no input to a frozen function: its fields are.
                   "filter": _fields(plan.filter_sampler.table),

@@ -16,7 +16,9 @@ foveated frame's traced pixels only. It follows ``mi.ad.loaders.FlatSensor`` (Mi
   (:class:`~foveated_mi.frame.pixel_filter.SplatFootprint`, ``'splat'``). The returned weight is the
   source sensor's times the sample's signed filter weight, so the box-filtered mean of flat
   pixel :math:`k` estimates the filtered value :math:`I(p_k)` that the foveated frame shows,
-  and its derivative estimates :math:`\partial I(p_k)/\partial\pi`.
+  and its derivative estimates :math:`\partial I(p_k)/\partial\pi`; where the frame's rays
+  went through a point of a foveal cell (``foveal_jitter``), the position moves to that point
+  as the primal's did.
 
 Two departures from ``FlatSensor``, both for speed and precision:
 
@@ -85,13 +87,16 @@ def _sensor_class() -> type:
             self.pixels = dr.zeros(mi.UInt32, 1)
             self.footprint = None
             self.traced = None
+            self.shift = None
             self.flat_size = (1, 1)
 
-        def bind(self, source: mi.Sensor, pixels: mi.UInt32, footprint, traced) -> None:
+        def bind(self, source: mi.Sensor, pixels: mi.UInt32, footprint, traced,
+                 shift=None) -> None:
             self.source = source
             self.pixels = pixels
             self.footprint = footprint
             self.traced = traced
+            self.shift = shift
             self.m_needs_sample_3 = bool(source.needs_aperture_sample())
 
         def sample_ray_differential(self, time, sample1, sample2, sample3, active=True):
@@ -108,7 +113,10 @@ def _sensor_class() -> type:
                 fs = fp.sample(u, x, y)
             else:
                 fs = fp.sample(u, x, y, self.traced)
-            pos = mi.Point2f(fs.position.x / fp.width, fs.position.y / fp.height)
+            pos = fs.position
+            if self.shift is not None:
+                pos = pos + (dr.repeat(self.shift, spp) if spp > 1 else self.shift)
+            pos = mi.Point2f(pos.x / fp.width, pos.y / fp.height)
             ray, weight = self.source.sample_ray_differential(time, sample1, pos, sample3, active)
             if fp.signed:
                 weight = weight * fs.weight
@@ -131,8 +139,8 @@ class TracedSensors:
     def __init__(self):
         self._cache: dict[tuple, mi.Sensor] = {}
 
-    def get(self, source: mi.Sensor, pixels: mi.UInt32, footprint, traced: mi.Bool | None
-            ) -> tuple[mi.Sensor, FlatLayout]:
+    def get(self, source: mi.Sensor, pixels: mi.UInt32, footprint, traced: mi.Bool | None,
+            shift: mi.Vector2f | None = None) -> tuple[mi.Sensor, FlatLayout]:
         """A flat sensor over ``pixels`` (UInt32 flat indices of ``source``'s film).
 
         Parameters
@@ -146,6 +154,9 @@ class TracedSensors:
         traced : mi.Bool or None
             The frame's mask of traced pixels, for a :class:`~.pixel_filter.SplatFootprint`; None
             for a :class:`~.pixel_filter.FilterSampler`.
+        shift : mi.Vector2f or None, optional
+            Per traced pixel, where its rays go through the film from the footprint's
+            position, in pixels (a foveal cell's point, ``foveal_jitter``); None: nowhere.
 
         Returns
         -------
@@ -178,8 +189,11 @@ class TracedSensors:
             self._cache[key] = sensor
         total = layout.width * layout.height
         if total > n:
-            pad = dr.gather(mi.UInt32, pixels, dr.full(mi.UInt32, n - 1, total - n))
-            pixels = dr.concat([pixels, pad])
-        sensor.bind(source, pixels, footprint, traced)
+            last = dr.full(mi.UInt32, n - 1, total - n)
+            pixels = dr.concat([pixels, dr.gather(mi.UInt32, pixels, last)])
+            if shift is not None:
+                pad = dr.gather(mi.Vector2f, shift, last)
+                shift = mi.Vector2f(dr.concat([shift.x, pad.x]), dr.concat([shift.y, pad.y]))
+        sensor.bind(source, pixels, footprint, traced, shift)
         return sensor, layout
 
