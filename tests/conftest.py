@@ -37,6 +37,16 @@ if VARIANT.startswith("llvm_") and os.environ.get("FOVEATED_MI_TEST_VECTOR_WIDTH
     _llvm_vector_width(int(os.environ["FOVEATED_MI_TEST_VECTOR_WIDTH"]))
 
 SHARED_SCENES = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "scenes")
+BENCHMARKS = os.path.join(os.path.dirname(__file__), "..", "benchmarks")
+
+
+@pytest.fixture
+def bench(request, monkeypatch):
+    """The benchmark script that the test module names in its ``BENCH_MODULE``, imported
+    from ``benchmarks/``."""
+    import importlib
+    monkeypatch.syspath_prepend(BENCHMARKS)
+    return importlib.import_module(request.module.BENCH_MODULE)
 
 
 @pytest.fixture(autouse=True)

@@ -9,11 +9,7 @@ import pytest
 BENCH = os.path.join(os.path.dirname(__file__), "..", "benchmarks")
 
 
-@pytest.fixture
-def bench(monkeypatch):
-    monkeypatch.syspath_prepend(BENCH)
-    import bench_cell_prefilter
-    return bench_cell_prefilter
+BENCH_MODULE = "bench_cell_prefilter"  # the conftest's ``bench`` fixture imports it
 
 
 def _grid(w, h):

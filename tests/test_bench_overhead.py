@@ -1,17 +1,10 @@
 """The overhead benchmark runs end to end at a tiny size and reports a consistent table."""
 import json
-import os
 
 import pytest
 
-BENCH = os.path.join(os.path.dirname(__file__), "..", "benchmarks")
 
-
-@pytest.fixture
-def bench(monkeypatch):
-    monkeypatch.syspath_prepend(BENCH)
-    import bench_overhead
-    return bench_overhead
+BENCH_MODULE = "bench_overhead"  # the conftest's ``bench`` fixture imports it
 
 
 def test_tiny_run_reports_stages_kernels_and_speedup(bench, tmp_path, capsys):

@@ -1,18 +1,11 @@
 """benchmarks/bench_polar_cells.py: its flags, its regions, and one tiny run of both cell laws."""
 import argparse
-import os
 
 import numpy as np
 import pytest
 
-BENCH = os.path.join(os.path.dirname(__file__), "..", "benchmarks")
 
-
-@pytest.fixture
-def bench(monkeypatch):
-    monkeypatch.syspath_prepend(BENCH)
-    import bench_polar_cells
-    return bench_polar_cells
+BENCH_MODULE = "bench_polar_cells"  # the conftest's ``bench`` fixture imports it
 
 
 def test_the_cells_flag(bench):

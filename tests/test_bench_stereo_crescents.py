@@ -1,16 +1,6 @@
 """The crescents benchmark: each eye's share of pixels the other cannot see."""
-import os
 
-import pytest
-
-BENCH = os.path.join(os.path.dirname(__file__), "..", "benchmarks")
-
-
-@pytest.fixture
-def bench(monkeypatch):
-    monkeypatch.syspath_prepend(BENCH)
-    import stereo_crescents
-    return stereo_crescents
+BENCH_MODULE = "stereo_crescents"  # the conftest's ``bench`` fixture imports it
 
 
 def _wall_scene(model, width: int):

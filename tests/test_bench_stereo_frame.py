@@ -1,18 +1,11 @@
 """Two eyes against one, frame cost (benchmarks/bench_stereo_frame.py): a tiny run's figures
 and its arguments."""
 import json
-import os
 
 import pytest
 
-BENCH = os.path.join(os.path.dirname(__file__), "..", "benchmarks")
 
-
-@pytest.fixture
-def bench(monkeypatch):
-    monkeypatch.syspath_prepend(BENCH)
-    import bench_stereo_frame
-    return bench_stereo_frame
+BENCH_MODULE = "bench_stereo_frame"  # the conftest's ``bench`` fixture imports it
 
 
 def test_a_tiny_run_times_every_case_and_its_ratios_are_of_its_medians(bench, tmp_path):

@@ -1,16 +1,9 @@
 """The second eye's census: what it traces, by cause."""
-import os
 
 import pytest
 
-BENCH = os.path.join(os.path.dirname(__file__), "..", "benchmarks")
 
-
-@pytest.fixture
-def bench(monkeypatch):
-    monkeypatch.syspath_prepend(BENCH)
-    import stereo_traced
-    return stereo_traced
+BENCH_MODULE = "stereo_traced"  # the conftest's ``bench`` fixture imports it
 
 
 def test_the_second_eye_borrows_most_and_its_rays_meet_the_points_they_took(bench):

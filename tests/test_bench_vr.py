@@ -10,11 +10,7 @@ import pytest
 BENCH = os.path.join(os.path.dirname(__file__), "..", "benchmarks")
 
 
-@pytest.fixture
-def bench(monkeypatch):
-    monkeypatch.syspath_prepend(BENCH)
-    import bench_vr
-    return bench_vr
+BENCH_MODULE = "bench_vr"  # the conftest's ``bench`` fixture imports it
 
 
 def test_psnr_by_eccentricity_pools_every_frame_of_a_ring(bench):

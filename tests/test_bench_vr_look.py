@@ -5,16 +5,16 @@ import os
 import numpy as np
 import pytest
 
-BENCH = os.path.join(os.path.dirname(__file__), "..", "benchmarks")
 STUDY = os.path.join(os.path.dirname(__file__), "..", "configs", "studies",
                      "vr_10ppd_families.toml")
 
 
+BENCH_MODULE = "bench_vr_look"  # the conftest's ``bench`` fixture imports it
+
+
 @pytest.fixture
-def look(monkeypatch):
-    monkeypatch.syspath_prepend(BENCH)
-    import bench_vr_look
-    return bench_vr_look
+def look(bench):
+    return bench
 
 
 def test_each_ring_averages_its_own_pixels(look):

@@ -5,16 +5,16 @@ import os
 import numpy as np
 import pytest
 
-BENCH = os.path.join(os.path.dirname(__file__), "..", "benchmarks")
 STUDY = os.path.join(os.path.dirname(__file__), "..", "configs", "studies",
                      "vr_periphery_screen.toml")
 
 
+BENCH_MODULE = "bench_vr_where"  # the conftest's ``bench`` fixture imports it
+
+
 @pytest.fixture
-def where(monkeypatch):
-    monkeypatch.syspath_prepend(BENCH)
-    import bench_vr_where
-    return bench_vr_where
+def where(bench):
+    return bench
 
 
 def test_the_disc_follows_each_frame_s_gaze(where):
