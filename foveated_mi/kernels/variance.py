@@ -29,7 +29,7 @@ import mitsuba as mi
 from .demodulation import safe_albedo
 from .grid import Grid, grid_of
 from .pixels import NO_SITE, gather4, luminance, packet
-from .taps import Surface, for_each_tap
+from .taps import for_each_tap
 
 #: Below this many samples a pixel's own moments are replaced by the spatial estimate.
 MIN_TEMPORAL_SAMPLES = 4.0
@@ -42,14 +42,9 @@ def sample_variance(mean: mi.Color3f, moment2: mi.Float, count: mi.Float, mask: 
 
     Parameters
     ----------
-    mean : mi.Color3f
-        Shading value per pixel (detached).
-    moment2 : mi.Float
-        Mean squared sample luminance :math:`m_2` per pixel.
-    count : mi.Float
-        Samples :math:`n` behind each pixel's value.
-    mask : mi.Bool
-        Pixels that hold a value.
+    mean, moment2, count, mask : mi.Color3f, mi.Float, mi.Float, mi.Bool
+        Per pixel: the shading value (detached), the mean squared sample luminance
+        :math:`m_2`, the samples :math:`n` behind the value, and whether it holds one.
     normal, hit : mi.Vector3f, mi.Bool
         Shading normals and hit flags (the spatial estimate pools taps on the same surface).
     width, height : int
@@ -72,17 +67,20 @@ def sample_variance(mean: mi.Color3f, moment2: mi.Float, count: mi.Float, mask: 
     # Spatial estimate: pooled moments of the samples of a 5x5 window on the same surface,
     # run only where a pixel holds a value with fewer samples than that (a symbolic branch:
     # a SIMD packet whose pixels all have their own moments skips the 25 taps).
-    surface = Surface.of(normal, dr.zeros(mi.Vector3f, width * height), hit)
+    # A tap reads two packets: its normal with its hit flag, then its moments.
+    hit = mi.Bool(hit)
+    nrm = dr.select(hit, mi.Vector3f(normal), 0.0)
+    surface = packet(nrm.x, nrm.y, nrm.z, dr.select(hit, 1.0, 0.0))
     m2 = dr.select(mask, dr.detach(moment2), 0.0)
     moments = packet(n, mu, m2, dr.zeros(mi.Float, width * height))
-    dr.schedule(moments)
+    dr.schedule(surface, moments)
     grid = grid_of(width, height, grid)
 
     def spatial(own):
         def visit(tap, s0, s1, s2):
-            nq_, _, hq = surface.at(tap.q, tap.inside)
-            same = tap.inside & (hq == surface.hit)
-            same &= ~surface.hit | (dr.dot(surface.normal, nq_) > 0.9)
+            s4 = gather4(surface, tap.q, tap.inside)
+            same = tap.inside & ((s4.w > 0.0) == hit)
+            same &= ~hit | (dr.dot(nrm, mi.Vector3f(s4.x, s4.y, s4.z)) > 0.9)
             v = gather4(moments, tap.q, same)
             return s0 + v.x, dr.fma(v.x, v.y, s1), dr.fma(v.x, v.z, s2)
 
