@@ -453,8 +453,12 @@ _SCHEMA: tuple[Option, ...] = (
            "by this fraction of the cell along its angle and its ring, in a low-discrepancy "
            "sequence of its own (:func:`foveated_mi.frame.buffer_space.ray_shifts`), so that "
            "its history holds the cell's mean rather than one point's value, as a box "
-           "prefilter of the cell would. The G-buffer, the launch and the history stay at "
-           "the cells' centres"),
+           "prefilter of the cell would; a cell without history traces its centre. The "
+           "G-buffer, the launch and the history stay at the cells' centres. It helps a "
+           "still view a little at 0.5 and costs video JOD with the head turning; across "
+           "whole cells, the first frame after a camera move that ends a long still view "
+           "trails a fresh frame by more than 0.5 dB "
+           "(``docs/results.md#each-cells-ray-through-a-moving-point-of-the-cell``)"),
     Option("foveal_taa", 1.0, "float", "this frame's weight in what each cell of the foveal "
            "buffer shows: 1 shows its denoised value; below 1, blended with what it showed "
            "last frame, clamped to its neighbours' range", lo=0.0, hi=1.0, lo_open=True,

@@ -205,14 +205,15 @@ def _cut_frame(**options):
     return np.array(mi.render(scene, integrator=integ, seed=5)), integ
 
 
-@pytest.mark.parametrize("interleave", [1, 2])
-def test_a_camera_cut_reads_no_history(interleave):
-    image, integ = _cut_frame(foveal_interleave=interleave)
+@pytest.mark.parametrize("options", [{}, {"foveal_interleave": 2}, {"foveal_jitter": 1.0}],
+                         ids=["cells", "interleave", "jitter"])
+def test_a_camera_cut_reads_no_history(options):
+    image, integ = _cut_frame(**options)
     assert integ.stats["history_hits"] == 0
     on = integ.buffer("sample_on")[0].astype(bool)
     assert (integ.buffer("history_count")[0][on] <= 1.0).all()
     # Nor does it show what the samples showed before the cut (foveal_taa).
-    blended, integ = _cut_frame(foveal_interleave=interleave, foveal_taa=0.3)
+    blended, integ = _cut_frame(foveal_taa=0.3, **options)
     assert integ.stats["history_hits"] == 0
     np.testing.assert_array_equal(blended, image)
 

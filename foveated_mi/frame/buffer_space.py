@@ -204,7 +204,7 @@ def jitter_phase(index: int) -> tuple[float, float]:
 
 def ray_shifts(lay: SampleLayout, pixels: mi.UInt32, traced: mi.Bool, rays: mi.UInt32,
                n_rays: int, gaze: mi.Point2f, width: int, height: int, jitter: float,
-               phase: tuple[float, float]) -> mi.Vector2f:
+               phase: tuple[float, float], held: mi.Bool | None = None) -> mi.Vector2f:
     """Where each ray of a launch goes through its pixel's film position, with
     ``foveal_jitter``: a cell's ray goes through a point of the cell, not its centre.
 
@@ -212,8 +212,10 @@ def ray_shifts(lay: SampleLayout, pixels: mi.UInt32, traced: mi.Bool, rays: mi.U
     coordinates about its centre, the offset ``frac(h + phase) - 1/2`` with ``h`` a hash of
     the cell (:data:`R2`). A cell's history then holds the mean over its area rather than
     the value at one point: the box prefilter of the cell, which a still view converges to.
-    Rays of the disc's pixels, and a ray that more than one sample reads, go through their
-    pixel as they would without it.
+    A cell without history (a first frame, a cut, a disocclusion) traces its centre, the
+    best single value for the warp, which interpolates between centres. Rays of the disc's
+    pixels, and a ray that more than one sample reads, go through their pixel as they would
+    without it.
 
     Parameters
     ----------
@@ -232,25 +234,20 @@ def ray_shifts(lay: SampleLayout, pixels: mi.UInt32, traced: mi.Bool, rays: mi.U
     phase : tuple of float
         The frame's place in the sequence (:func:`jitter_phase`); opaque on the device, so
         that a new frame compiles nothing.
+    held : mi.Bool or None, optional
+        Per sample, whether it reads a history this frame (the reprojection map's ``hit``);
+        None: every sample.
 
     Returns
     -------
     shift : mi.Vector2f
         Per ray, in pixels, from where the footprint sampler puts it.
     """
-    grid, nc = lay.grid, lay.cells
     idx = dr.arange(mi.UInt32, lay.size)
-    cell = traced & (idx < nc)
-    c = dr.select(cell, idx, 0)
-    ring = c // grid.width
-    h0, h1 = mi.sample_tea_32(c, mi.UInt32(0x6A177E5))
-    u = mi.Point2f(mi.Float(h0 >> 8) * 2.0 ** -24, mi.Float(h1 >> 8) * 2.0 ** -24)
-    u += mi.Point2f(dr.opaque(mi.Float, phase[0]), dr.opaque(mi.Float, phase[1]))
-    u -= dr.floor(u)
-    j = dr.opaque(mi.Float, jitter)
-    at = mi.Point2f(mi.Float(c - ring * grid.width) + 0.5 + j * (u.x - 0.5),
-                    mi.Float(ring) + 0.5 + j * (u.y - 0.5))
-    p = grid.position_of(at, gaze)
+    cell = traced & (idx < lay.cells)
+    if held is not None:
+        cell &= held
+    p = _cell_point(lay.grid, dr.select(cell, idx, 0), gaze, jitter, phase)
     p = mi.Point2f(dr.clip(p.x, 0.0, width * (1.0 - 2.0 ** -20)),
                    dr.clip(p.y, 0.0, height * (1.0 - 2.0 ** -20)))
     y = pixels // width
@@ -262,6 +259,21 @@ def ray_shifts(lay: SampleLayout, pixels: mi.UInt32, traced: mi.Bool, rays: mi.U
     out = dr.zeros(mi.Vector2f, n_rays)
     dr.scatter(out, mi.Vector2f(shift), rays, cell)
     return dr.select(owners == 1, out, 0.0)
+
+
+def _cell_point(grid, c: mi.UInt32, gaze: mi.Point2f, jitter: float,
+                phase: tuple[float, float]) -> mi.Point2f:
+    """The film point of cell ``c`` this frame: ``jitter`` times ``frac(h + phase) - 1/2``
+    cells from its centre along its angle and its ring, ``h`` the cell's hash."""
+    ring = c // grid.width
+    h0, h1 = mi.sample_tea_32(c, mi.UInt32(0x6A177E5))
+    u = mi.Point2f(mi.Float(h0 >> 8) * 2.0 ** -24, mi.Float(h1 >> 8) * 2.0 ** -24)
+    u += mi.Point2f(dr.opaque(mi.Float, phase[0]), dr.opaque(mi.Float, phase[1]))
+    u -= dr.floor(u)
+    j = dr.opaque(mi.Float, jitter)
+    at = mi.Point2f(mi.Float(c - ring * grid.width) + 0.5 + j * (u.x - 0.5),
+                    mi.Float(ring) + 0.5 + j * (u.y - 0.5))
+    return grid.position_of(at, gaze)
 
 
 def _patch_origin(lay: SampleLayout, gaze: mi.Point2f) -> tuple[mi.Int32, mi.Int32]:

@@ -244,7 +244,7 @@ class Planner:
             ro, smap, rays, disc = sm.launch[turn]
             shift = None if ss.jitter == 0 else _buffer_space.ray_shifts(
                 lay, sm.pixels, traced, rays, dr.width(ro.wavefront), gaze, width, height,
-                ss.jitter, _buffer_space.jitter_phase(self.index))
+                ss.jitter, _buffer_space.jitter_phase(self.index), reproj.hit)
             timer.mark("reorder", ro.wavefront, rays, disc, shift)
             rate = settings.launch.disc_spp
             disc_spp = rate if disc is not None and 0 < rate < spp else 0
