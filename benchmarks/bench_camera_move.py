@@ -28,7 +28,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import foveated_mi  # noqa: E402
 import mitsuba as mi  # noqa: E402
 
-from common import machine, md_table, write_json  # noqa: E402
+from common import machine, md_table, parse_sets, write_json  # noqa: E402
 
 #: The camera moves after the still frames: ``closer`` (the default: several pixels land in
 #: one previous pixel), ``away`` (the box shrinks and the sky around it appears) and ``turn``.
@@ -109,11 +109,15 @@ def main(argv=None) -> int:
     p.add_argument("--ref-spp", type=int, default=512)
     p.add_argument("--reprojection", choices=["exclusive", "nearest"])
     p.add_argument("--moves", nargs="+", default=["closer"], choices=list(MOVES))
+    p.add_argument("--set", action="append", default=[], metavar="OPTION=VALUE",
+                   help="an option of the foveated integrator for every row, over the "
+                   "preset's (a Python literal, e.g. --set foveal_jitter=0.5); repeatable")
     p.add_argument("--variant")
     p.add_argument("--out", help="JSON results")
     a = p.parse_args(argv)
     foveated_mi.set_variant(a.variant)
     extra = {"reprojection": a.reprojection} if a.reprojection else {}
+    extra.update(parse_sets(a.set))
     rows = [camera_move(pr, n, s, a.size, a.ref_spp, move=mv, **extra)
             for mv in a.moves for pr in a.presets for n in a.history for s in a.seeds]
     table = [[r["move"], r["preset"], r["still"], r["seed"], m, f"{r[f'{m}_1']:.2f}",
@@ -126,7 +130,7 @@ def main(argv=None) -> int:
                    table))
     if a.out:
         write_json(a.out, {"machine": machine(), "reprojection": a.reprojection or "preset",
-                           "rows": rows})
+                           "options": extra, "rows": rows})
     return 0
 
 

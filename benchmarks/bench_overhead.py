@@ -62,7 +62,8 @@ import mitsuba as mi
 import numpy as np
 
 import foveated_mi
-from common import calibrate_theta, machine, md_table, median, preset_edges, write_json
+from common import (calibrate_theta, machine, md_table, median, parse_sets, preset_edges,
+                    write_json)
 
 SHARED = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "scenes")
 STAIRCASE = os.path.join(SHARED, "staircase", "scene.xml")
@@ -286,21 +287,6 @@ def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int,
             "image_to_host": to_host, "freeze": freeze,
             # With --kernels: one more timed frame's launches, stage by stage.
             "stage_kernels": by_stage}
-
-
-def parse_sets(items: list[str]) -> dict:
-    """``["reorder='tiles'", "ray_budget=0.2"]`` -> the options they set."""
-    import ast
-    out = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise ValueError(f"--set {item!r}: expected OPTION=VALUE")
-        try:
-            out[key] = ast.literal_eval(value)
-        except (ValueError, SyntaxError):
-            out[key] = value          # a bare word: a string option's value
-    return out
 
 
 def main(argv=None):

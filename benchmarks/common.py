@@ -111,3 +111,18 @@ def scene_with_reference(name, width, height, *, max_depth, ref_spp, seed=12345)
                        integrator={"type": "path", "max_depth": max_depth})
     ref = np.array(mi.render(scene, integrator=scene.integrator(), spp=ref_spp, seed=seed))
     return scene, ref
+
+
+def parse_sets(items: list[str]) -> dict:
+    """``["reorder='tiles'", "ray_budget=0.2"]`` -> the options they set."""
+    import ast
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ValueError(f"--set {item!r}: expected OPTION=VALUE")
+        try:
+            out[key] = ast.literal_eval(value)
+        except (ValueError, SyntaxError):
+            out[key] = value          # a bare word: a string option's value
+    return out
