@@ -53,19 +53,8 @@ def interleave_of(o: Options) -> int:
 
 
 def jitter_of(o: Options) -> float:
-    """``foveal_jitter``, which needs a history: a cell's value is the mean of the points its
-    history traced. Without one, every cell traces its centre (0).
-
-    Parameters
-    ----------
-    o : dict
-        The validated options.
-
-    Returns
-    -------
-    jitter : float
-        The jitter the plan uses.
-    """
+    """``foveal_jitter`` of validated options ``o``; 0 without a history, whose mean over
+    each cell is what the jitter builds."""
     return float(o["foveal_jitter"]) if o["history"] else 0.0
 
 

@@ -10,27 +10,15 @@ import numpy as np
 import pytest
 
 import tolerances
+from still_cells import periphery_mse, still_frames
 from gradcheck import forward_and_reverse
 
 from foveated_mi.frame import buffer_space
-from foveated_mi.frame.foveal import SEAM, fill_cells
+from foveated_mi.frame.foveal import fill_cells
 from foveated_mi.frame.sampling import gaze_position
-from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.kernels.buffers import Resolved
 from foveated_mi.options import validate_options
-from foveated_mi.scenes import load_scene
 from foveated_mi.validate import ParameterError
-
-
-class Albedo(mi.SamplingIntegrator):
-    """The diffuse albedo at the primary hit (0 on a miss): no noise but the ray's place in
-    its pixel, so that a still view's error is the cells' resolution alone."""
-
-    def sample(self, scene, sampler, ray, medium=None, active=True):
-        si = scene.ray_intersect(mi.Ray3f(ray), active)
-        ok = si.is_valid() & active
-        return dr.select(ok, mi.Spectrum(si.bsdf().eval_diffuse_reflectance(si, ok)), 0.0), \
-            mi.Bool(True), []
 
 
 def _layout(n, size=(96, 64), budget=0.1):
@@ -128,32 +116,12 @@ def test_the_fill_reverse_mode_is_the_transpose_of_its_forward_mode():
     np.testing.assert_array_equal(jdx[:, held], dx[:, held])
 
 
-def _still_frames(n, frames, size=(128, 96)):
-    scene = load_scene("eye-exam", width=size[0], height=size[1], spp=1)
-    integ = FoveatedIntegrator(nested=Albedo(mi.Properties()), preset="vr", denoiser="none",
-                               foveal_disc="resolved", foveal_interleave=n, max_history=0)
-    images, rays = [], []
-    for k in range(frames):
-        images.append(np.array(mi.render(scene, integrator=integ, seed=k)))
-        rays.append(integ.stats["rays"])
-    ref = np.array(mi.render(scene, integrator=Albedo(mi.Properties()), spp=64, seed=7))
-    return images, rays, ref, integ
-
-
-def _periphery_mse(images, ref, integ):
-    W, H = ref.shape[1], ref.shape[0]
-    r0 = buffer_space.layout(W, H, integ.options["theta"], integ.options["ray_budget"]).grid.fovea
-    yy, xx = np.mgrid[0:H, 0:W]
-    out = np.hypot(xx + 0.5 - W / 2, yy + 0.5 - H / 2) > r0 + SEAM
-    return [float(np.mean((im[out] - ref[out]) ** 2)) for im in images]
-
-
 def test_a_still_view_keeps_converging_below_what_the_coarse_cells_hold():
     frames = 24
-    coarse, coarse_rays, ref, ci = _still_frames(1, frames)
-    fine, fine_rays, _, fi = _still_frames(2, frames)
-    c = _periphery_mse(coarse, ref, ci)
-    f = _periphery_mse(fine, ref, fi)
+    coarse, coarse_rays, ref, ci = still_frames(frames, foveal_interleave=1)
+    fine, fine_rays, _, fi = still_frames(frames, foveal_interleave=2)
+    c = periphery_mse(coarse, ref, ci)
+    f = periphery_mse(fine, ref, fi)
     # The coarse cells converge to their centres' values within a few frames; the
     # interleaved buffer keeps falling as each finer cell gathers samples, and ends below.
     assert f[-1] < 0.8 * c[-1], (f[-1], c[-1])

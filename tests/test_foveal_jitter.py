@@ -8,8 +8,9 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
+from still_cells import periphery_mse, still_frames
+
 from foveated_mi.frame import buffer_space
-from foveated_mi.frame.foveal import SEAM
 from foveated_mi.frame.sampling import gaze_position
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.options import validate_options
@@ -17,17 +18,6 @@ from foveated_mi.scenes import load_scene
 from foveated_mi.validate import ParameterError
 
 SIZE = (96, 64)
-
-
-class Albedo(mi.SamplingIntegrator):
-    """The diffuse albedo at the primary hit (0 on a miss): no noise but the ray's place, so
-    that a still view's error is what its cells resolve."""
-
-    def sample(self, scene, sampler, ray, medium=None, active=True):
-        si = scene.ray_intersect(mi.Ray3f(ray), active)
-        ok = si.is_valid() & active
-        return dr.select(ok, mi.Spectrum(si.bsdf().eval_diffuse_reflectance(si, ok)), 0.0), \
-            mi.Bool(True), []
 
 
 def _samples(gaze=(0.5, 0.5), size=SIZE):
@@ -105,17 +95,9 @@ def test_the_sequence_covers_each_cell_evenly():
         assert np.abs(q - frames / 4).max() <= 4, q
 
 
-def _still(jitter, frames, size=(128, 96)):
-    scene = load_scene("eye-exam", width=size[0], height=size[1], spp=1)
-    integ = FoveatedIntegrator(nested=Albedo(mi.Properties()), preset="vr", denoiser="none",
-                               foveal_disc="resolved", foveal_jitter=jitter, max_history=0)
-    images = [np.array(mi.render(scene, integrator=integ, seed=k)) for k in range(frames)]
-    ref = np.array(mi.render(scene, integrator=Albedo(mi.Properties()), spp=64, seed=7))
-    W, H = size
-    r0 = buffer_space.layout(W, H, integ.options["theta"], integ.options["ray_budget"]).grid.fovea
-    yy, xx = np.mgrid[0:H, 0:W]
-    out = np.hypot(xx + 0.5 - W / 2, yy + 0.5 - H / 2) > r0 + SEAM
-    return [float(np.mean((im[out] - ref[out]) ** 2)) for im in images]
+def _still(jitter, frames):
+    images, _, ref, integ = still_frames(frames, foveal_jitter=jitter)
+    return periphery_mse(images, ref, integ)
 
 
 def test_a_still_view_keeps_converging_below_what_the_cells_centres_hold():
