@@ -26,7 +26,8 @@ Then the periphery's ceiling for each ``--budgets`` (default: the first foveated
 ``polar_cells = "log"``, at that row's ``theta``) filled from that frame's reference,
 taken at the cell's centre pixel (what the preset traces) or as the mean of its pixels, warped
 to the film, the disc from the reference. No noise and no history: the most that the buffer's
-warp can score in motion at that budget.
+warp can score in motion at that budget, and the flicker its cells' resolution alone leaves
+(the study's periphery flicker, ring by ring in the JSON).
 """
 from __future__ import annotations
 
@@ -129,9 +130,23 @@ def ceiling(task, refs: np.ndarray, budget: float) -> dict:
             shown[key].append(to_display(image * (1.0 - t) + ref * t))
     ref_d = np.stack([to_display(r) for r in refs])
     score = _scorer(scene, task)
-    return {"budget": budget, "cells": grid.size,
-            "cell_centres": score(ref_d, np.stack(shown["centre"])),
-            "cell_means": score(ref_d, np.stack(shown["mean"]))}
+    out = {"budget": budget, "cells": grid.size}
+    for key in ("centre", "mean"):
+        out[f"cell_{key}s"] = score(ref_d, np.stack(shown[key]))
+        out[f"cell_{key}s_flicker"] = _flicker(scene, task, shown[key], ref_d)
+    return out
+
+
+def _flicker(scene, task, shown: list, ref_d: np.ndarray) -> dict:
+    """The study's flicker columns of ``shown`` (display values) against ``ref_d``, in the
+    rings of each frame's eccentricity from its gaze
+    (:func:`~foveated_mi.metrics.temporal_instability`)."""
+    from foveated_mi.metrics import FLICKER_RINGS_DEG, temporal_instability
+    from foveated_mi.study.scoring import _viewing
+    eccs = [_viewing(scene, dict(task, gaze=g))["eccentricity"]
+            for g in task["motion"]["gazes"]]
+    return temporal_instability(list(shown), list(ref_d), eccs, FLICKER_RINGS_DEG,
+                                fovea_deg=task["metrics"].get("fovea_deg", 5.0)).columns()
 
 
 def _name(task) -> str:
@@ -222,12 +237,14 @@ def main(argv=None) -> int:
             print(f"| {_name(tasks[r])} | {_name(tasks[d])} | {got['jod_video']:.2f} |",
                   flush=True)
     budgets = args.budgets or [float(first["ray_budget"])]
-    print("\n| rays | cells | cell centres | cell means |\n|---|---|---|---|")
+    print("\n| rays | cells | cell centres | cell means | periphery flicker: centres, means |"
+          "\n|---|---|---|---|---|")
     for b in budgets:
         c = ceiling(tasks[0], refs, b)
         out["ceilings"].append(c)
-        print(f"| {b:g} | {c['cells']} | {c['cell_centres']:.2f} | {c['cell_means']:.2f} |",
-              flush=True)
+        print(f"| {b:g} | {c['cells']} | {c['cell_centres']:.2f} | {c['cell_means']:.2f} | "
+              f"{c['cell_centres_flicker']['flicker_periphery']:.4f}, "
+              f"{c['cell_means_flicker']['flicker_periphery']:.4f} |", flush=True)
     if args.json:
         with open(args.json, "w") as f:
             json.dump(out, f, indent=1)
