@@ -458,7 +458,9 @@ _SCHEMA: tuple[Option, ...] = (
            "still view a little at 0.5 and costs video JOD with the head turning; across "
            "whole cells, the first frame after a camera move that ends a long still view "
            "trails a fresh frame by more than 0.5 dB "
-           "(``docs/results.md#each-cells-ray-through-a-moving-point-of-the-cell``)"),
+           "(``docs/results.md#each-cells-ray-through-a-moving-point-of-the-cell``). A "
+           "small bright emitter inside a cell lights the whole cell in the frames whose "
+           "point falls on it, until the history averages it in"),
     Option("foveal_taa", 1.0, "float", "this frame's weight in what each cell of the foveal "
            "buffer shows: 1 shows its denoised value; below 1, blended with what it showed "
            "last frame, clamped to its neighbours' range", lo=0.0, hi=1.0, lo_open=True,
