@@ -84,6 +84,7 @@ def test_the_sequence_covers_each_cell_evenly():
     offs = np.stack([_points(lay, g, pixels, on, 1.0, k)[2] for k in range(frames)])
     idx = np.arange(lay.cells)[np.array(on)[:lay.cells]][::37]
     ring, angle = idx // lay.grid.width, idx % lay.grid.width
+    checked = 0
     for i, a, r in zip(idx, angle, ring):
         u = offs[:, i, 0] - a
         v = offs[:, i, 1] - r
@@ -93,6 +94,8 @@ def test_the_sequence_covers_each_cell_evenly():
         # the sequence's discrepancy (a few points of 64).
         q = np.histogram2d(u, v, bins=2, range=[[0, 1], [0, 1]])[0]
         assert np.abs(q - frames / 4).max() <= 4, q
+        checked += 1
+    assert checked >= len(idx) // 2, (checked, len(idx))
 
 
 def _still(jitter, frames):
