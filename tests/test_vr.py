@@ -355,8 +355,9 @@ def test_the_filter_skips_the_cells_off_the_film(space, denoiser, monkeypatch):
 
     images, skipped, on = run()
     monkeypatch.setattr(foveal, "_denoise",
-                        lambda image, res, cgb, grid, o, grad_pass, region=None, ds=None:
-                        real(image, res, cgb, grid, o, grad_pass, None, ds))
+                        lambda image, res, cgb, grid, o, grad_pass, region=None, ds=None,
+                        kept=None, keep=False:
+                        real(image, res, cgb, grid, o, grad_pass, None, ds, kept, keep))
     everywhere, filtered, _ = run()
     assert 0 < on.sum() < on.size * 3 // 4
     assert all(np.isfinite(a).all() for a in images)

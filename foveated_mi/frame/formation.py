@@ -21,9 +21,9 @@ tracing costs more than the kernels run (``benchmarks/bench_overhead.py`` report
 :class:`FrozenFormation` records a formation once per configuration with ``dr.freeze`` and
 afterwards launches the recorded kernels on the frame's buffers without tracing them. A
 recording is keyed on what decides the kernels: the formation, the film size, ``spp``, the
-formation's settings, and which buffers exist; the buffers, the history
-and the fill's seed are inputs. A key not seen before records again (the most recent
-``RECORDINGS`` are kept). The replay serves frames that are not differentiated, with stage
+formation's settings, which buffers exist, and whether the G-buffer holds; the buffers, the
+history, the fill's seed and what the formation kept of a still view's G-buffer are inputs.
+A key not seen before records again (the most recent ``RECORDINGS`` are kept). The replay serves frames that are not differentiated, with stage
 timing off (timing synchronises between passes) and a denoiser registered as ``replayable``
 (OIDN runs on the host between kernels). Option ``freeze = false`` traces every frame.
 """
@@ -67,6 +67,12 @@ class FormationInput(NamedTuple):
     #: the foveal disc's samples per pixel where below ``spp`` (``foveal_disc_spp``): each
     #: sample's history then weighs the samples it traced; 0: every one ``spp``
     disc_spp: int = 0
+    #: what the formation kept of this G-buffer on an earlier frame (its ``Formed.kept``),
+    #: given back while the G-buffer holds (a still view); None: nothing kept
+    kept: dict | None = None
+    #: the G-buffer is the last frame's and holds: what the formation derives from it alone
+    #: may be returned as ``Formed.kept``, to be given back next frame
+    keep: bool = False
 
 
 class Formed(NamedTuple):
@@ -78,6 +84,9 @@ class Formed(NamedTuple):
     #: the image interleaved (RGB per pixel, as the frame returns it), where a replay wrote
     #: it so; ``image`` is then a lazy view of it
     flat: mi.Float | None = None
+    #: what it derived from the G-buffer alone (``FormationInput.keep``), for the next
+    #: frames while the G-buffer holds; None: nothing
+    kept: dict | None = None
 
 
 class Formation(NamedTuple):
@@ -235,14 +244,16 @@ def _form_frame(arrays: dict, key: dict) -> dict:
                          _reproject.ReprojectionMap(**arrays["reprojection"]), history,
                          key["width"], key["height"], key["spp"], arrays["fill_seed"],
                          arrays["emission_edges"], arrays["gaze"],
-                         space_of(key["space"], arrays["space"]), key["disc_spp"])
+                         space_of(key["space"], arrays["space"]), key["disc_spp"],
+                         arrays["kept"], key["keep"])
     fn = FORMATIONS[key["formation"]].fn
     formed = fn(ShadingBuffer(**arrays["shading"]), inp, key["settings"], StageTimer(False))
     # The image leaves the recording interleaved, as the frame returns it: the last pass
     # writes it so, with no copy after the replay (its planes are read lazily, if at all).
     # (The frame's outputs name the image "image" themselves.)
     buffers = {k: v for k, v in formed.buffers.items() if k != "image"}
-    return {"buffers": buffers, "history": formed.history, "flat": dr.ravel(formed.image)}
+    return {"buffers": buffers, "history": formed.history, "flat": dr.ravel(formed.image),
+            "kept": formed.kept}
 
 
 @contextmanager
@@ -290,12 +301,13 @@ class FrozenFormation:
                                                "moment2": h.moment2, "shown": h.shown},
             "fill_seed": _sampling.opaque_seed(inp.fill_seed),
             "emission_edges": inp.emission_edges, "gaze": inp.gaze,
-            "space": inp.space.arrays(),
+            "space": inp.space.arrays(), "kept": inp.kept,
         }
         key = {"formation": fs.name, "width": inp.width, "height": inp.height,
                "spp": inp.spp, "settings": fs.settings, "space": inp.space.key(),
-               "disc_spp": inp.disc_spp}
+               "disc_spp": inp.disc_spp, "keep": inp.keep}
         with _no_collection():          # a collection inside a recording aborts (above)
             out = self._frozen(arrays, key)
         image = dr.unravel(mi.Color3f, out["flat"])
-        return Formed(image, {**out["buffers"], "image": image}, out["history"], out["flat"])
+        return Formed(image, {**out["buffers"], "image": image}, out["history"], out["flat"],
+                      out["kept"])

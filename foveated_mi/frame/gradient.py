@@ -95,9 +95,15 @@ def form_primal(plan: FramePlan, shading: ShadingBuffer, fs: FormationSettings,
     """
     inp = formation_input(plan)
     if not record:
-        if frozen is not None:
-            return frozen(shading, inp, fs), None, True
-        return form(shading, inp, fs, timer), None, False
+        # A still view's formation reads what it kept of the G-buffer on its first frame.
+        store = plan.kept
+        if store is not None:
+            inp = inp._replace(kept=store.get(fs), keep=True)
+        formed = frozen(shading, inp, fs) if frozen is not None else form(shading, inp, fs,
+                                                                           timer)
+        if store is not None and formed.kept is not None:
+            store[fs] = formed.kept
+        return formed, None, frozen is not None
     x, formed = _adjoint.record(
         lambda v: form(shading._replace(value=v), inp, fs, timer, grad_pass=True),
         shading.value)

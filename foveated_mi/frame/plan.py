@@ -80,6 +80,10 @@ class FramePlan:
     #: a cell's point with ``foveal_jitter`` (:func:`~.buffer_space.ray_shifts`), which
     #: moves every frame while the cell's pixel and launch stay; else None
     ray_shift: mi.Vector2f | None = None
+    #: while the G-buffer holds (a still view of a foveal buffer), the formation's store
+    #: of what it derives from it alone, kept with the samples (formation settings -> its
+    #: ``Formed.kept``); None where the G-buffer is new
+    kept: dict | None = None
 
 
 @dataclass(eq=False)
@@ -96,6 +100,8 @@ class _Samples:
     #: sampling map, each sample's ray)
     traced: dict = dataclasses.field(default_factory=dict)
     launch: dict = dataclasses.field(default_factory=dict)
+    #: what the formation derived from their G-buffer alone (:attr:`FramePlan.kept`)
+    kept: dict = dataclasses.field(default_factory=dict)
 
 
 class Planner:
@@ -257,7 +263,7 @@ class Planner:
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=None, gaze=gaze,
                          space=dataclasses.replace(space, rays=rays, traced=traced),
                          disc_rays=disc if disc_spp else None, disc_spp=disc_spp,
-                         ray_shift=shift)
+                         ray_shift=shift, kept=sm.kept if reused else None)
 
     @staticmethod
     def _traced(sm: _Samples, lay, turn: int, borrowing: bool) -> mi.Bool:

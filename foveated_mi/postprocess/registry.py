@@ -43,6 +43,12 @@ class DenoiseInput(NamedTuple):
     #: the cells whose result the formation reads (None: all); a denoiser may leave the
     #: others as they are (the foveal buffer's cells off the film)
     region: mi.Bool | None = None
+    #: what the denoiser kept of this G-buffer on an earlier frame (its ``Denoised.kept``),
+    #: given back while the G-buffer holds (a still view); None: none kept
+    kept: Any = None
+    #: the G-buffer is the last frame's and holds: what the denoiser derives from it alone
+    #: may be returned as ``Denoised.kept``, to be given back next frame
+    keep: bool = False
 
 
 class Denoised(NamedTuple):
@@ -51,6 +57,9 @@ class Denoised(NamedTuple):
     filtered: mi.Color3f | None = None
     tonemapped: mi.Color3f | None = None
     variance: mi.Float | None = None
+    #: what it derived from the G-buffer alone, for the next frames while it holds
+    #: (``DenoiseInput.keep``); None: nothing
+    kept: Any = None
 
 
 class Denoiser(NamedTuple):

@@ -37,6 +37,13 @@ adjoint requires. Non-finite colours get weight 0 as neighbours, and a pixel wit
 value (a hole of the foveal buffer: the trace rejects non-finite samples) keeps it: the filter
 fills no hole, so that a hole's neighbours read no value it made up at an earlier level. The
 variance's 3 x 3 prefilter averages the pixels that hold a value.
+
+**A G-buffer that holds.** The normal and plane terms read the G-buffer alone: two packets a
+tap, a third of a level's time. :func:`surface_energies` computes them once, every level's
+25 taps of every cell, and ``svgf(..., energies=...)`` reads one value a tap instead, with
+the same arithmetic, so that its image is bit for bit the same. A still view, whose G-buffer
+is the last frame's, filters so from its second frame on. A colour that carries a gradient
+reads the G-buffer as before: the transpose walks the taps from the other end.
 """
 from __future__ import annotations
 
@@ -48,12 +55,15 @@ import mitsuba as mi
 from ..kernels import variance as _variance
 from ..kernels.grid import Grid, grid_of
 from ..kernels import HeldLevel, Surface, gather4, held_filter, packet, pixel_xy, surface_energy
+from ..kernels.taps import for_each_tap
 from ..validate import ParameterError, check_int, check_range
 from .registry import DenoiseInput, Denoised, register_denoiser
 
 _G3 = (0.25, 0.5, 0.25)
 #: Floor of the colour weight's denominator (keeps the zero-variance case finite).
 EPSILON = 1e-10
+#: Taps of a cell at each level (5 x 5).
+TAPS = 25
 
 
 def _prefilter(src: mi.Float, grid: Grid) -> mi.Float:
@@ -78,7 +88,8 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
          hit: mi.Bool, width: int, height: int, *, iterations: int = 5,
          sigma_luminance: float = 4.0, sigma_normal: float = 0.3,
          sigma_plane: float = 0.1, grid: Grid | None = None,
-         active: mi.Bool | None = None) -> mi.Color3f:
+         active: mi.Bool | None = None,
+         energies: tuple[mi.Float, ...] | None = None) -> mi.Color3f:
     """Variance-guided à-trous filter of ``color`` (see the module docstring).
 
     Parameters
@@ -103,6 +114,9 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
         The buffers' grid (None: the film of ``width`` x ``height``).
     active : mi.Bool or None, optional
         The pixels whose result is read (None: all); the others keep their value, no taps.
+    energies : tuple of mi.Float or None, optional
+        :func:`surface_energies` of this G-buffer, grid, ``active`` and sigmas, one per level
+        (None: the taps read the G-buffer). The image is the same either way.
 
     Returns
     -------
@@ -110,30 +124,150 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
         The filtered values (``color`` itself for ``iterations = 0``).
     """
     grid = grid_of(width, height, grid)
-    n = grid.size
     iterations = check_int("iterations", iterations, 0, 16)
     sl = (math.inf if sigma_luminance == math.inf else
           check_range("sigma_luminance", sigma_luminance, 0.0, None, lo_open=True))
-    inv_n = 1.0 / check_range("sigma_normal", sigma_normal, 0.0, None, lo_open=True) ** 2
-    inv_x = 1.0 / check_range("sigma_plane", sigma_plane, 0.0, None, lo_open=True) ** 2
-    for name, value in (("color", color), ("variance", variance), ("normal", normal),
-                        ("position", position), ("hit", hit)) + \
-            ((("active", active),) if active is not None else ()):
-        if not (dr.is_array_v(value) and dr.width(value) == n):
-            raise ParameterError(name, f"{type(value).__name__} of width {dr.width(value)}",
-                                 f"a buffer with width*height = {n} entries")
+    inv_n, inv_x = _inverse_sigmas(sigma_normal, sigma_plane)
+    _check_buffers(grid.size, (("color", color), ("variance", variance), ("normal", normal),
+                               ("position", position), ("hit", hit), ("active", active)))
+    _check_energies(energies, iterations, grid.size)
     if iterations == 0:
         return color
-    c = mi.Color3f(color)
+    return _levels(mi.Color3f(color), variance, (normal, position, hit), grid, iterations,
+                   sl, inv_n, inv_x, active, energies, keep=False)[0]
+
+
+def svgf_kept(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f,
+              position: mi.Vector3f, hit: mi.Bool, width: int, height: int, *,
+              iterations: int = 5, sigma_luminance: float = 4.0, sigma_normal: float = 0.3,
+              sigma_plane: float = 0.1, grid: Grid | None = None,
+              active: mi.Bool | None = None) -> tuple[mi.Color3f, tuple[mi.Float, ...]]:
+    """:func:`svgf`, keeping the G-buffer terms its taps compute: for a G-buffer that will
+    hold, whose next frames pass them back as ``energies``.
+
+    Parameters
+    ----------
+    color, variance, normal, position, hit, width, height, iterations, sigma_luminance, \
+sigma_normal, sigma_plane, grid, active
+        As :func:`svgf`'s.
+
+    Returns
+    -------
+    color : mi.Color3f
+        The filtered values, as :func:`svgf` returns them.
+    energies : tuple of mi.Float
+        :func:`surface_energies` of this G-buffer (empty for ``iterations = 0``), written by
+        the filter's own kernels as its taps compute them.
+    """
+    grid = grid_of(width, height, grid)
+    iterations = check_int("iterations", iterations, 0, 16)
+    sl = (math.inf if sigma_luminance == math.inf else
+          check_range("sigma_luminance", sigma_luminance, 0.0, None, lo_open=True))
+    inv_n, inv_x = _inverse_sigmas(sigma_normal, sigma_plane)
+    _check_buffers(grid.size, (("color", color), ("variance", variance), ("normal", normal),
+                               ("position", position), ("hit", hit), ("active", active)))
+    if iterations == 0:
+        return color, ()
+    return _levels(mi.Color3f(color), variance, (normal, position, hit), grid, iterations,
+                   sl, inv_n, inv_x, active, None, keep=True)
+
+
+def _levels(c: mi.Color3f, variance: mi.Float, gbuffer: tuple, grid: Grid, iterations: int,
+            sl: float, inv_n: float, inv_x: float, active, energies, keep: bool
+            ) -> tuple[mi.Color3f, tuple[mi.Float, ...]]:
+    """Every level; its G-buffer terms read from ``energies`` where given, else computed
+    (and with ``keep`` written out, one buffer per level, returned beside the image)."""
     var = _initial_variance(c, variance)
-    surface = Surface.of(normal, position, hit)
+    if energies is not None and dr.grad_enabled(c):
+        energies = None      # the transpose walks the taps from the other end: the G-buffer
+    surface = Surface.of(*gbuffer) if energies is None else None
+    kept = []
     for level in range(iterations):
+        record = dr.zeros(mi.Float, TAPS * grid.size) if keep else None
         c, var = _level(c, var, surface, grid,
                         step=dr.opaque(mi.Int32, 1 << level),
                         sl=None if math.isinf(sl) else dr.opaque(mi.Float, sl),
                         inv_n=dr.opaque(mi.Float, inv_n), inv_x=dr.opaque(mi.Float, inv_x),
-                        active=active)
-    return c
+                        active=active, energy=None if energies is None else energies[level],
+                        record=record)
+        if keep:
+            kept.append(record)
+    return c, tuple(kept)
+
+
+def _inverse_sigmas(sigma_normal: float, sigma_plane: float) -> tuple[float, float]:
+    """1 / σn² and 1 / σx², validated."""
+    return (1.0 / check_range("sigma_normal", sigma_normal, 0.0, None, lo_open=True) ** 2,
+            1.0 / check_range("sigma_plane", sigma_plane, 0.0, None, lo_open=True) ** 2)
+
+
+def _check_buffers(n: int, named: tuple) -> None:
+    """Each named buffer (None: not given) holds one entry per cell."""
+    for name, value in named:
+        if value is not None and not (dr.is_array_v(value) and dr.width(value) == n):
+            raise ParameterError(name, f"{type(value).__name__} of width {dr.width(value)}",
+                                 f"a buffer with width*height = {n} entries")
+
+
+def _check_energies(energies, iterations: int, n: int) -> None:
+    """``energies``: None, or one buffer of 25 values a cell per level."""
+    if energies is None:
+        return
+    if not (isinstance(energies, (tuple, list)) and len(energies) == iterations and all(
+            dr.is_array_v(e) and dr.width(e) == TAPS * n for e in energies)):
+        raise ParameterError("energies", f"<{type(energies).__name__}>",
+                             f"None or {iterations} buffers (one per level) of 25 x {n} "
+                             "values, from surface_energies")
+
+
+def surface_energies(normal: mi.Vector3f, position: mi.Vector3f, hit: mi.Bool, width: int,
+                     height: int, *, iterations: int = 5, sigma_normal: float = 0.3,
+                     sigma_plane: float = 0.1, grid: Grid | None = None,
+                     active: mi.Bool | None = None) -> tuple[mi.Float, ...]:
+    """The G-buffer's part of every tap's weight, level by level, for :func:`svgf`'s
+    ``energies`` (module docstring).
+
+    Parameters
+    ----------
+    normal, position, hit, width, height, iterations, sigma_normal, sigma_plane, grid, active
+        As :func:`svgf`'s.
+
+    Returns
+    -------
+    energies : tuple of mi.Float
+        Per level, ``25 * size`` values: entry ``t * size + p`` is the normal and plane
+        energy between cell ``p`` and its tap ``t = 5 (dy + 2) + dx + 2``; inf where the two
+        never mix (a tap outside the grid, a hit beside a miss); 0 for a cell not ``active``.
+    """
+    grid = grid_of(width, height, grid)
+    iterations = check_int("iterations", iterations, 0, 16)
+    inv_n, inv_x = _inverse_sigmas(sigma_normal, sigma_plane)
+    _check_buffers(grid.size, (("normal", normal), ("position", position), ("hit", hit),
+                               ("active", active)))
+    surface = Surface.of(normal, position, hit)
+    own = dr.arange(mi.UInt32, grid.size)
+    P = surface.at(own, mi.Bool(True))
+    inv_n, inv_x = dr.opaque(mi.Float, inv_n), dr.opaque(mi.Float, inv_x)
+    out = []
+    for level in range(iterations):
+        def visit(tap, energy):
+            Q = surface.at(tap.q, tap.inside)
+            e = surface_energy(P, Q, inv_n, inv_x)
+            dr.scatter(energy, dr.select(tap.inside & (P[2] == Q[2]), e, dr.inf),
+                       _tap_index(tap) * grid.size + own)
+            return (energy,)
+
+        energy, = for_each_tap(grid, dr.opaque(mi.Int32, 1 << level), visit,
+                               (dr.zeros(mi.Float, TAPS * grid.size),), "svgf_surface",
+                               active=active)
+        dr.schedule(energy)
+        out.append(energy)
+    return tuple(out)
+
+
+def _tap_index(tap) -> mi.UInt32:
+    """The tap's place ``5 (dy + 2) + dx + 2`` among its cell's 25."""
+    return mi.UInt32((tap.dy + 2) * 5 + tap.dx + 2)
 
 
 def _initial_variance(c: mi.Color3f, variance: mi.Float) -> mi.Float:
@@ -145,10 +279,13 @@ def _initial_variance(c: mi.Color3f, variance: mi.Float) -> mi.Float:
     return dr.select(dr.isfinite(cd.x) & dr.isfinite(cd.y) & dr.isfinite(cd.z), var, -1.0)
 
 
-def _level(c: mi.Color3f, var: mi.Float, surface: Surface, grid: Grid, *, step,
-           sl, inv_n, inv_x, active=None) -> tuple[mi.Color3f, mi.Float]:
+def _level(c: mi.Color3f, var: mi.Float, surface: Surface | None, grid: Grid, *, step,
+           sl, inv_n, inv_x, active=None, energy: mi.Float | None = None,
+           record: mi.Float | None = None) -> tuple[mi.Color3f, mi.Float]:
     """One level, its weights held (:func:`~foveated_mi.kernels.held.held_filter`), the variance
-    filtered alongside with the squared weights."""
+    filtered alongside with the squared weights; its G-buffer terms read from ``energy``
+    where given, else computed from ``surface`` (and written to ``record``, if given, as
+    :func:`surface_energies` lays them out)."""
     n = grid.size
     dr.schedule(c, var)
     cd = dr.detach(c)
@@ -161,20 +298,29 @@ def _level(c: mi.Color3f, var: mi.Float, surface: Surface, grid: Grid, *, step,
     # the colour weight off: a purely geometric filter).
     centre = () if sl is None else (sl * dr.sqrt(_prefilter(src, grid)) + EPSILON,)
 
+    own = dr.arange(mi.UInt32, n)
+
     def at(q, active):
         v4 = gather4(src, q, active)
         return (mi.Color3f(v4.x, v4.y, v4.z), v4.w >= 0.0, dr.maximum(v4.w, 0.0),
-                *surface.at(q, active))
+                *(() if surface is None else surface.at(q, active)))
 
     def weight(P, Q, tap):
-        e_geo = surface_energy(P[3:6], Q[3:6], inv_n, inv_x)
         if sl is None:
             e_col = mi.Float(0.0)
         else:
             diff = dr.abs(P[0] - Q[0])
-            e_col = (diff.x + diff.y + diff.z) / P[6]
+            e_col = (diff.x + diff.y + diff.z) / P[-1]
         # A cell without a value (a buffer's hole) reads no tap: the filter fills nothing.
-        use = tap.inside & P[1] & Q[1] & (P[5] == Q[5])
+        if energy is None:
+            e_geo = surface_energy(P[3:6], Q[3:6], inv_n, inv_x)
+            mix = tap.inside & (P[5] == Q[5])
+            use = mix & P[1] & Q[1]
+            if record is not None:
+                dr.scatter(record, dr.select(mix, e_geo, dr.inf), _tap_index(tap) * n + own)
+        else:
+            e_geo = dr.gather(mi.Float, energy, _tap_index(tap) * n + own)
+            use = P[1] & Q[1] & (e_geo != dr.inf)
         return dr.select(use, tap.b3 * dr.exp(-(e_col + e_geo)), 0.0)
 
     y, v_acc, w_acc = held_filter(c, HeldLevel(
@@ -199,7 +345,8 @@ def svgf_stage(ctx: DenoiseInput) -> Denoised:
     -------
     denoised : Denoised
         The filtered image (also as ``filtered``) and the variance it used; the image as is
-        with 0 levels.
+        with 0 levels. With ``ctx.keep`` and nothing kept yet, also :func:`surface_energies`
+        (``kept``), which ``ctx.kept`` gives back while the G-buffer holds.
     """
     o, gb, res = ctx.options, ctx.gbuffer, ctx.resolved
     levels = o["atrous_iterations"]
@@ -212,10 +359,17 @@ def svgf_stage(ctx: DenoiseInput) -> Denoised:
         res.count, res.mask, ctx.nearest,
         samples=ctx.samples,
         albedo=gb.albedo if o["demodulate"] else None)
-    filtered = svgf(ctx.image, variance, gb.normal, gb.position, gb.hit, width, height,
-                    iterations=levels, sigma_luminance=o["sigma_luminance"], grid=ctx.grid,
-                    active=ctx.region)
-    return Denoised(filtered, filtered=filtered, variance=variance)
+    # A still view's G-buffer terms, computed on its first frame and read from then on.
+    energies = None if ctx.grad_pass else ctx.kept
+    args = (ctx.image, variance, gb.normal, gb.position, gb.hit, width, height)
+    kw = dict(iterations=levels, sigma_luminance=o["sigma_luminance"], grid=ctx.grid,
+              active=ctx.region)
+    kept = None
+    if energies is None and ctx.keep and not ctx.grad_pass:
+        filtered, kept = svgf_kept(*args, **kw)
+    else:
+        filtered = svgf(*args, **kw, energies=energies)
+    return Denoised(filtered, filtered=filtered, variance=variance, kept=kept)
 
 
 # Models the noise of radiance, so not on display values (tonemap_samples).
