@@ -188,21 +188,21 @@ def _padded(fn, grid: Grid):
 
 
 def _disc_patch(resolved: Resolved, gb: GBuffer, index: mi.UInt32, on: mi.Bool, side: int,
-                s: FovealSettings, grad_pass: bool, kept=None, keep: bool = False
-                ) -> tuple[mi.Color3f, object]:
+                s: FovealSettings, grad_pass: bool) -> mi.Color3f:
     """``foveal_disc = "denoised"``: the disc's square patch of ``side`` x ``side`` pixels
     (``index`` into ``resolved`` and ``gb``; ``on`` where the pixel's centre lies in the
-    disc) through the frame's denoiser, as the cells are; radiance, in patch order, and what
-    the denoiser kept of the patch's G-buffer (``kept``, ``keep``: as :func:`_denoise`'s).
-    The patch is a plain image of full-resolution pixels: no seam, no padding."""
+    disc) through the frame's denoiser, as the cells are; radiance, in patch order. The
+    patch is a plain image of full-resolution pixels: no seam, no padding. It keeps nothing
+    of a still view's G-buffer: at 1024² its four levels would gain about 0.3 ms a frame for
+    19 MB (``benchmarks/bench_still_filter.py``), where the cells' gain 1.3 ms for 42 MB."""
     pr = _gather(resolved, index, on)
     has = on & pr.mask
     pgb = _gather(gb, index, on)
     pgb = pgb._replace(hit=pgb.hit & has)
     res = Resolved(pr.shading, has, pr.count, dr.zeros(mi.Bool, side * side), pr.moment2)
     out = _denoise(_working(res, pgb, s.domain), res, pgb, Grid(side, side), s, grad_pass, on,
-                   s.disc_denoise, kept, keep)
-    return domain.to_radiance(out.image, pgb, s.domain, clamp=True), out.kept
+                   s.disc_denoise)
+    return domain.to_radiance(out.image, pgb, s.domain, clamp=True)
 
 
 def fill_cells(res: Resolved, grid: Grid, radius: int, targets: mi.Bool | bool = True
@@ -502,7 +502,7 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
         # The disc's pixels through the denoiser, on their square patch of the film.
         lay = s.layout
         pixels, on = _buffer_space.patch_pixels(lay, inp.gaze, width, height)
-        disc, _ = _disc_patch(resolved, gb, pixels, on, lay.side, s, grad_pass)
+        disc = _disc_patch(resolved, gb, pixels, on, lay.side, s, grad_pass)
         _, x, y = film.cells()
         k, in_disc = _buffer_space.disc_sample(lay, mi.Int32(x), mi.Int32(y), inp.gaze)
         own &= in_disc
@@ -529,31 +529,22 @@ def _last_shown(inp: FormationInput, c: mi.UInt32) -> mi.Color3f | None:
 
 
 def _disc_values(resolved: Resolved, inp: FormationInput, s: FovealSettings,
-                 grad_pass: bool) -> tuple[mi.Color3f, mi.Bool, object]:
+                 grad_pass: bool) -> tuple[mi.Color3f, mi.Bool]:
     """Each sample of the disc's square patch as the disc shows it: resolved, or through the
     denoiser on the patch (``foveal_disc = "denoised"``), and with ``foveal_taa`` blended
-    with what it showed last frame; which hold a value; and what the denoiser kept of the
-    patch's G-buffer (:func:`_kept`)."""
+    with what it showed last frame; and which hold a value."""
     lay = s.layout
     patch = lay.cells + dr.arange(mi.UInt32, lay.side * lay.side)
     on = dr.gather(mi.Bool, inp.space.on, patch)
-    kept = None
     if s.disc == "denoised":
-        values, kept = _disc_patch(resolved, inp.gbuffer, patch, on, lay.side, s, grad_pass,
-                                   _kept(inp, "disc"), inp.keep)
+        values = _disc_patch(resolved, inp.gbuffer, patch, on, lay.side, s, grad_pass)
     else:
         values = dr.gather(mi.Color3f, resolved.shading, patch)
     held = on & dr.gather(mi.Bool, resolved.mask, patch)
     previous = _last_shown(inp, patch) if s.taa < 1.0 else None
     if previous is not None:
         values = stabilize(values, held, Grid(lay.side, lay.side), previous, s.taa)
-    return values, held, kept
-
-
-def _kept(inp: FormationInput, name: str):
-    """What the denoiser of buffer ``name`` (``cells``, ``disc``) kept of the G-buffer on an
-    earlier frame of this still view, or None."""
-    return None if inp.kept is None else inp.kept.get(name)
+    return values, held
 
 
 def _disc_samples(values: mi.Color3f, held: mi.Bool, inp: FormationInput, s: FovealSettings
@@ -596,7 +587,7 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
     # Denoising in the buffer (§3.5); each cell's albedo multiplied back before the warp:
     # there is no full-resolution albedo to take it from.
     out = _denoise(cells, res, cgb, grid, s, grad_pass, dr.gather(mi.Bool, on, c),
-                   kept=_kept(inp, "cells"), keep=inp.keep)
+                   kept=None if inp.kept is None else inp.kept["cells"], keep=inp.keep)
     radiance = domain.to_radiance(out.image, cgb, d, clamp=True)
     previous = _last_shown(inp, c) if s.taa < 1.0 else None
     if previous is not None:
@@ -605,7 +596,7 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
     shown = sharpen(radiance, has, grid, s.contrast) if s.contrast > 0.0 else radiance
     warped = warp(shown, has, grid, inp.gaze, width, height, kernel=s.upsampling)
     # The disc shows its own samples, blended into the warp across the seam.
-    disc, held, disc_kept = _disc_values(resolved, inp, s, grad_pass)
+    disc, held = _disc_values(resolved, inp, s, grad_pass)
     own, mine, t = _disc_samples(disc, held, inp, s)
     image = dr.select(own, dr.lerp(warped, mine, t), warped)
     timer.mark("post", image)
@@ -623,10 +614,10 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
         dr.scatter(shown, dr.detach(disc), nc + dr.arange(mi.UInt32, lay.side * lay.side),
                    held)
         history["shown"] = shown
-    # What the denoisers derived from this G-buffer alone, for the next frames while it holds.
-    kept = {"cells": out.kept, "disc": disc_kept}
+    # What the cells' denoiser derived from their G-buffer alone, for the next frames while
+    # it holds (a still view).
     return Formed(image, buffers, history,
-                  kept=kept if any(v is not None for v in kept.values()) else None)
+                  kept=None if out.kept is None else {"cells": out.kept})
 
 
 def _buffer_cells(resolved: Resolved, gb: GBuffer, s: FovealSettings, targets: mi.Bool

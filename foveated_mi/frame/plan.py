@@ -120,6 +120,10 @@ class Planner:
         self._filter_samplers: dict[tuple, FilterSampler] = {}
         self._gaze = None                      # the last frame's gaze (options' tuple)
         self._samples_cache: _Samples | None = None
+        #: Keep what the formation derives from a still view's G-buffer alone with its
+        #: samples (:attr:`FramePlan.kept`); False derives it every frame, as a moving
+        #: view does (the images are the same: ``benchmarks/bench_still_filter.py``).
+        self.keep_formation = True
         #: Another view's planner whose samples of the same frame this one's reuse, where
         #: they saw the same diffuse surface (the second eye of a headset:
         #: :class:`foveated_mi.stereo.Stereo`); its frame comes first, and is rendered as it
@@ -263,7 +267,7 @@ class Planner:
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=None, gaze=gaze,
                          space=dataclasses.replace(space, rays=rays, traced=traced),
                          disc_rays=disc if disc_spp else None, disc_spp=disc_spp,
-                         ray_shift=shift, kept=sm.kept if reused else None)
+                         ray_shift=shift, kept=sm.kept if reused and self.keep_formation else None)
 
     @staticmethod
     def _traced(sm: _Samples, lay, turn: int, borrowing: bool) -> mi.Bool:
