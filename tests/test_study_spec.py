@@ -326,6 +326,8 @@ def test_uniform_history_rows_and_seeds_expand(tmp_path):
     assert den == {("guided", True): "svgf", ("paper", True): "atrous",
                    ("guided", False): "none", ("paper", False): "none"}
     assert all(u["options"]["denoiser"] == u["denoiser"] for u in hist)
+    # Every pixel traced: guided's reconstruction, which averages them, is not run there.
+    assert {u["options"]["reconstruction"] for u in hist} == {"sibson"}
     tasks = expand_tasks(spec, "llvm_ad_rgb")
     per_seed = 2 + 2 * 2 + len(hist)          # foveated, uniform (+ OIDN), with history
     assert len(tasks) == 3 * per_seed and len({t["task_id"] for t in tasks}) == len(tasks)
@@ -377,6 +379,40 @@ def test_a_vr_study_s_uniform_history_rows_trace_every_pixel(tmp_path):
         mi.render(sc, integrator=integ, spp=1)
         fractions[name] = integ.stats["ray_fraction"]
     assert fractions["row"] == 1.0 and fractions["vr"] < 0.9, fractions
+
+
+def test_a_uniform_history_row_holds_the_history_and_no_filter(tmp_path):
+    """The ``uniform + history`` row of a preset whose reconstruction averages traced pixels
+    (``guided``): its frames are the traced pixels blended with their history, as the same
+    integrator shows them with the paper's interpolation, and not the guided average."""
+    import mitsuba as mi
+    import numpy as np
+    from foveated_mi.integrators.foveated import FoveatedIntegrator
+    spec = load_study(write(tmp_path, """
+        [[scenes]]
+        scene = "cornell-box"
+        [[foveated.configs]]
+        preset = "guided"
+        [uniform]
+        denoise = false
+        history = [true]
+    """))
+    row, = spec.uniform
+    d = mi.cornell_box()
+    d["sensor"]["film"].update(width=32, height=24)
+    sc = mi.load_dict(d)
+
+    def frames(**opts):
+        integ = FoveatedIntegrator(nested=sc.integrator(), **opts)
+        return [np.array(mi.render(sc, integrator=integ, spp=1, seed=k)) for k in range(3)]
+
+    shown = frames(**row["options"])
+    plain = frames(preset="guided", sigma_p=1.0, history=True, denoiser="none",
+                   reconstruction="sibson")
+    averaged = frames(preset="guided", sigma_p=1.0, history=True, denoiser="none")
+    for a, b, c in zip(shown, plain, averaged):
+        np.testing.assert_array_equal(a, b)
+        assert np.abs(a - c).mean() > 1e-3          # the guided average would differ
 
 
 def test_one_seed_keeps_the_task_ids_of_studies_without_seeds():

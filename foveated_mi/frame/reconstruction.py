@@ -67,10 +67,11 @@ def reconstruction_pass(values: mi.Color3f, resolved: Resolved, gb: GBuffer, wid
     radiance = values
     method = rec.RECONSTRUCTIONS[r.method]
     guided = method.guided
-    # A law that traces every pixel (sigma_p = 1): a paper interpolation is then the identity
-    # (a pixel whose samples were all rejected stays 0, or keeps its history); a guided
+    # A law that traces every pixel (sigma_p = 1): a method that keeps its sites (the paper's
+    # interpolations, the stochastic fill) is then the identity and does not run (a pixel
+    # whose samples were all rejected stays 0, or keeps its history); the guided
     # reconstruction still averages noisy samples.
-    every_pixel = r.every_pixel and not guided
+    every_pixel = r.every_pixel and method.keeps_sites
     nearest = _nearest_sites(resolved.mask, width, height, r.jfa, every_pixel, max_gap)
     if every_pixel:
         filled = interpolated = radiance

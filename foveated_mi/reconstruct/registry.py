@@ -10,7 +10,9 @@ max_radius=32, ...) -> mi.Color3f``. It registers beside its code with what it r
 sample counts) as ``guide``; ``seeded``: it takes the fill's ``seed``; ``options``: its keyword
 parameters, each set from the option named (the reconstruction pass passes exactly these);
 ``averages``: the option whose value is the number of samples it averages per pixel, which a
-variance-guided denoiser reads. The options, the CLI and the docs learn of a method from
+variance-guided denoiser reads; ``keeps_sites``: a guided method that leaves every traced
+pixel its own value, so that with every pixel traced it is the identity and does not run
+(an unguided method is the identity there by construction). The options, the CLI and the docs learn of a method from
 :data:`RECONSTRUCTIONS`.
 """
 from __future__ import annotations
@@ -29,6 +31,8 @@ class Method(NamedTuple):
     seeded: bool
     options: dict[str, str]        #: keyword parameter -> the option that sets it
     averages: str | None
+    #: a traced pixel keeps its own value (with every pixel traced: the identity)
+    keeps_sites: bool = False
 
     @property
     def keywords(self) -> set[str]:
@@ -43,7 +47,7 @@ RECONSTRUCTIONS: dict[str, Method] = {}
 
 def register_reconstruction(name: str, fn: Callable[..., mi.Color3f], *, guided: bool = False,
                             seeded: bool = False, options: dict[str, str] | None = None,
-                            averages: str | None = None) -> None:
+                            averages: str | None = None, keeps_sites: bool = False) -> None:
     """Make ``fn`` the reconstruction method ``name`` (``reconstruction = name``), with what it
     reads (module docstring).
 
@@ -62,9 +66,12 @@ def register_reconstruction(name: str, fn: Callable[..., mi.Color3f], *, guided:
         Its keyword parameters, each mapped to the option that sets it.
     averages : str or None, optional
         The option whose value is the number of samples it averages per pixel.
+    keeps_sites : bool, optional
+        A guided method that leaves every traced pixel its own value: with every pixel
+        traced the reconstruction pass skips it.
     """
     RECONSTRUCTIONS[name] = Method(fn, bool(guided), bool(seeded), dict(options or {}),
-                                   averages)
+                                   averages, bool(keeps_sites) or not guided)
 
 
 def uses_guide(method: str) -> bool:

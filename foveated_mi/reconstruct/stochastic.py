@@ -137,5 +137,6 @@ def stochastic(shading: mi.Color3f, site_mask: mi.Bool, nearest: mi.UInt32, widt
     return dr.gather(mi.Color3f, value, chosen, has_site)
 
 
-register_reconstruction("stochastic", stochastic, guided=True, seeded=True,
+# A traced pixel keeps its own value: with every pixel traced the pass skips it.
+register_reconstruction("stochastic", stochastic, guided=True, seeded=True, keeps_sites=True,
                         options={"jitter": "stochastic_jitter", "tries": "stochastic_tries"})

@@ -118,7 +118,8 @@ each frame would flicker).
 Uniform rows without history render one frame with ``mi.render`` (+ Intel OIDN when
 denoised); a frame does not depend on its number, so they are recorded at frame 1 only.
 Uniform rows with history run the ``foveated`` integrator itself at ``sigma_p = 1`` (P = 1 at
-every pixel: every pixel traced, reconstruction a no-op) with the preset's options, so they
+every pixel: every pixel traced, no reconstruction: a preset whose reconstruction averages
+traced pixels, ``guided``, takes the identity there) with the preset's options, so they
 accumulate the same reprojection history; ``denoise = true`` keeps the preset's denoiser
 (method ``uniform+history+<denoiser>``), ``false`` sets ``denoiser = "none"``
 (``uniform+history``).
@@ -939,12 +940,19 @@ def _uniform_history_rows(ctx: TableContext, s: int, d: bool, presets: list[str]
     """The uniform history rows of ``spp = s`` and ``denoise = d``, one per preset (a preset
     that resolves to the same options as an earlier one runs once). A foveal-buffer preset's
     rows run its film-space counterpart, which sigma_p = 1 makes uniform
-    (:func:`foveated_mi.options.uniform_counterpart`: ``vr`` -> ``guided``)."""
+    (:func:`foveated_mi.options.uniform_counterpart`: ``vr`` -> ``guided``). Every pixel is
+    traced, so a row reconstructs nothing: a preset whose reconstruction averages traced
+    pixels (``guided``) takes the paper's interpolation there, the identity, so that its
+    rows hold the history (and the denoiser) and no filter besides."""
     from ..options import DEFAULTS, PRESETS, resolve_pixel_filter, uniform_counterpart
+    from ..reconstruct import RECONSTRUCTIONS
     out, seen = [], set()
     for i, p in enumerate(presets):
         given = {"preset": uniform_counterpart(p), "sigma_p": 1.0, "history": True,
                  "denoiser": "none"}
+        own = PRESETS[given["preset"]].get("reconstruction", DEFAULTS["reconstruction"])
+        if not RECONSTRUCTIONS[own].keeps_sites:
+            given["reconstruction"] = DEFAULTS["reconstruction"]
         where = {k: f"uniform.presets[{i}]" for k in given}
         # validated without the denoiser (OIDN may be missing here: the row is then
         # skipped with a note, like uniform+oidn), which is then the preset's own
