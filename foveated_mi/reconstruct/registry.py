@@ -12,8 +12,8 @@ parameters, each set from the option named (the reconstruction pass passes exact
 ``averages``: the option whose value is the number of samples it averages per pixel, which a
 variance-guided denoiser reads; ``keeps_sites``: a guided method that leaves every traced
 pixel its own value, so that with every pixel traced it is the identity and does not run
-(an unguided method is the identity there by construction). The options, the CLI and the docs learn of a method from
-:data:`RECONSTRUCTIONS`.
+(an unguided method is the identity there by construction). The options, the CLI and the
+docs learn of a method from :data:`RECONSTRUCTIONS`.
 """
 from __future__ import annotations
 
