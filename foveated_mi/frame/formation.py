@@ -23,9 +23,10 @@ afterwards launches the recorded kernels on the frame's buffers without tracing 
 recording is keyed on what decides the kernels: the formation, the film size, ``spp``, the
 formation's settings, which buffers exist, and whether the G-buffer holds; the buffers, the
 history, the fill's seed and what the formation kept of a still view's G-buffer are inputs.
-A key not seen before records again (the most recent ``RECORDINGS`` are kept). The replay serves frames that are not differentiated, with stage
-timing off (timing synchronises between passes) and a denoiser registered as ``replayable``
-(OIDN runs on the host between kernels). Option ``freeze = false`` traces every frame.
+A key not seen before records again (the most recent ``RECORDINGS`` are kept). The replay
+serves frames that are not differentiated, with stage timing off (timing synchronises
+between passes) and a denoiser registered as ``replayable`` (OIDN runs on the host between
+kernels). Option ``freeze = false`` traces every frame.
 """
 from __future__ import annotations
 

@@ -193,8 +193,8 @@ def _disc_patch(resolved: Resolved, gb: GBuffer, index: mi.UInt32, on: mi.Bool, 
     (``index`` into ``resolved`` and ``gb``; ``on`` where the pixel's centre lies in the
     disc) through the frame's denoiser, as the cells are; radiance, in patch order. The
     patch is a plain image of full-resolution pixels: no seam, no padding. It keeps nothing
-    of a still view's G-buffer: at 1024² its four levels would gain about 0.3 ms a frame for
-    19 MB (``benchmarks/bench_still_filter.py``), where the cells' gain 1.3 ms for 42 MB."""
+    of a still view's G-buffer: its levels are a small share of a still frame's filter, and
+    their energies would hold 19 MB more at 1024² (the cells' hold 42 MB)."""
     pr = _gather(resolved, index, on)
     has = on & pr.mask
     pgb = _gather(gb, index, on)

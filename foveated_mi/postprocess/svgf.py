@@ -123,13 +123,9 @@ def svgf(color: mi.Color3f, variance: mi.Float, normal: mi.Vector3f, position: m
     color : mi.Color3f
         The filtered values (``color`` itself for ``iterations = 0``).
     """
-    grid = grid_of(width, height, grid)
-    iterations = check_int("iterations", iterations, 0, 16)
-    sl = (math.inf if sigma_luminance == math.inf else
-          check_range("sigma_luminance", sigma_luminance, 0.0, None, lo_open=True))
-    inv_n, inv_x = _inverse_sigmas(sigma_normal, sigma_plane)
-    _check_buffers(grid.size, (("color", color), ("variance", variance), ("normal", normal),
-                               ("position", position), ("hit", hit), ("active", active)))
+    grid, iterations, sl, inv_n, inv_x = _validated(
+        color, variance, normal, position, hit, width, height, iterations, sigma_luminance,
+        sigma_normal, sigma_plane, grid, active)
     _check_energies(energies, iterations, grid.size)
     if iterations == 0:
         return color
@@ -159,13 +155,9 @@ sigma_normal, sigma_plane, grid, active
         :func:`surface_energies` of this G-buffer (empty for ``iterations = 0``), written by
         the filter's own kernels as its taps compute them.
     """
-    grid = grid_of(width, height, grid)
-    iterations = check_int("iterations", iterations, 0, 16)
-    sl = (math.inf if sigma_luminance == math.inf else
-          check_range("sigma_luminance", sigma_luminance, 0.0, None, lo_open=True))
-    inv_n, inv_x = _inverse_sigmas(sigma_normal, sigma_plane)
-    _check_buffers(grid.size, (("color", color), ("variance", variance), ("normal", normal),
-                               ("position", position), ("hit", hit), ("active", active)))
+    grid, iterations, sl, inv_n, inv_x = _validated(
+        color, variance, normal, position, hit, width, height, iterations, sigma_luminance,
+        sigma_normal, sigma_plane, grid, active)
     if iterations == 0:
         return color, ()
     return _levels(mi.Color3f(color), variance, (normal, position, hit), grid, iterations,
@@ -193,6 +185,19 @@ def _levels(c: mi.Color3f, variance: mi.Float, gbuffer: tuple, grid: Grid, itera
         if keep:
             kept.append(record)
     return c, tuple(kept)
+
+
+def _validated(color, variance, normal, position, hit, width: int, height: int,
+               iterations: int, sigma_luminance: float, sigma_normal: float,
+               sigma_plane: float, grid: Grid | None, active) -> tuple:
+    """:func:`svgf`'s arguments checked: ``(grid, iterations, sl, 1 / σn², 1 / σx²)``."""
+    grid = grid_of(width, height, grid)
+    iterations = check_int("iterations", iterations, 0, 16)
+    sl = (math.inf if sigma_luminance == math.inf else
+          check_range("sigma_luminance", sigma_luminance, 0.0, None, lo_open=True))
+    _check_buffers(grid.size, (("color", color), ("variance", variance), ("normal", normal),
+                               ("position", position), ("hit", hit), ("active", active)))
+    return (grid, iterations, sl, *_inverse_sigmas(sigma_normal, sigma_plane))
 
 
 def _inverse_sigmas(sigma_normal: float, sigma_plane: float) -> tuple[float, float]:
@@ -251,10 +256,8 @@ def surface_energies(normal: mi.Vector3f, position: mi.Vector3f, hit: mi.Bool, w
     out = []
     for level in range(iterations):
         def visit(tap, energy):
-            Q = surface.at(tap.q, tap.inside)
-            e = surface_energy(P, Q, inv_n, inv_x)
-            dr.scatter(energy, dr.select(tap.inside & (P[2] == Q[2]), e, dr.inf),
-                       _tap_index(tap) * grid.size + own)
+            e, mix = _tap_energy(P, surface.at(tap.q, tap.inside), tap, inv_n, inv_x)
+            dr.scatter(energy, dr.select(mix, e, dr.inf), _tap_index(tap) * grid.size + own)
             return (energy,)
 
         energy, = for_each_tap(grid, dr.opaque(mi.Int32, 1 << level), visit,
@@ -263,6 +266,12 @@ def surface_energies(normal: mi.Vector3f, position: mi.Vector3f, hit: mi.Bool, w
         dr.schedule(energy)
         out.append(energy)
     return tuple(out)
+
+
+def _tap_energy(P: tuple, Q: tuple, tap, inv_n, inv_x) -> tuple[mi.Float, mi.Bool]:
+    """The G-buffer's energy between a cell and its tap (``(normal, position, hit)`` each),
+    and whether the two may mix at all (the tap inside the grid, both hits or both misses)."""
+    return surface_energy(P, Q, inv_n, inv_x), tap.inside & (P[2] == Q[2])
 
 
 def _tap_index(tap) -> mi.UInt32:
@@ -313,8 +322,7 @@ def _level(c: mi.Color3f, var: mi.Float, surface: Surface | None, grid: Grid, *,
             e_col = (diff.x + diff.y + diff.z) / P[-1]
         # A cell without a value (a buffer's hole) reads no tap: the filter fills nothing.
         if energy is None:
-            e_geo = surface_energy(P[3:6], Q[3:6], inv_n, inv_x)
-            mix = tap.inside & (P[5] == Q[5])
+            e_geo, mix = _tap_energy(P[3:6], Q[3:6], tap, inv_n, inv_x)
             use = mix & P[1] & Q[1]
             if record is not None:
                 dr.scatter(record, dr.select(mix, e_geo, dr.inf), _tap_index(tap) * n + own)
