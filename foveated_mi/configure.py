@@ -103,7 +103,7 @@ def frame_settings(o: Options) -> FrameSettings:
                         float(o["reprojection_tolerance"])),
         space=formation_space(o),
         materials=bool(o["demodulate"] or o["emission_edges"]
-                       or DENOISERS[o["denoiser"]].materials),
+                       or any(DENOISERS[n].materials for n in denoisers_used(o))),
         pixel_filter=o["pixel_filter"])
     trace = TraceSettings(float(o["clamp"]), o["pixel_filter"], bool(o["tonemap_samples"]),
                           o["tonemap"], float(o["exposure"]))
@@ -127,6 +127,13 @@ def domain_settings(o: Options) -> DomainSettings:
     """
     return DomainSettings(bool(o["demodulate"]), bool(o["tonemap_samples"]), o["tonemap"],
                           float(o["exposure"]), float(o["clamp"]))
+
+
+def denoisers_used(o: Options) -> tuple[str, ...]:
+    """The registered denoisers a frame of validated options ``o`` runs: ``denoiser``, and the
+    foveal disc's own (``foveal_disc_denoiser``) where it is set."""
+    disc = o.get("foveal_disc_denoiser", "same")
+    return (o["denoiser"],) if disc in ("same", o["denoiser"]) else (o["denoiser"], disc)
 
 
 def denoise_settings(o: Options) -> DenoiseSettings:
@@ -248,6 +255,8 @@ def disc_denoise_settings(o: Options) -> DenoiseSettings:
         disc["atrous_iterations"] = o["foveal_disc_iterations"]
     if o["foveal_disc_sigma_luminance"] > 0.0:
         disc["sigma_luminance"] = o["foveal_disc_sigma_luminance"]
+    if o["foveal_disc_denoiser"] != "same":
+        disc["denoiser"] = o["foveal_disc_denoiser"]
     return denoise_settings(disc)
 
 

@@ -425,6 +425,20 @@ _SCHEMA: tuple[Option, ...] = (
            doc="With ``foveal_disc = 'denoised'`` and ``denoiser = 'svgf'``: the colour test "
            "on the disc's patch, in noise standard deviations, apart from the buffer's cells "
            "(0: ``sigma_luminance``, as the cells)"),
+    Option("foveal_disc_denoiser", "same", "string", "the denoiser on the foveal disc's "
+           "patch (same: the frame's denoiser, as the cells)",
+           choices=lambda: ("same", *denoisers()),
+           differentiable=lambda v: v == "same" or denoisers()[v].differentiable,
+           gradient="a differentiable denoiser",
+           doc="With ``foveal_disc = 'denoised'``: the denoiser on the disc's square patch of "
+           "full-resolution pixels, apart from the buffer's cells (``same``: ``denoiser``, "
+           "as the cells). ``oidn`` (at ``oidn_quality``) gives the disc a network that "
+           "denoises a disc without history (a view's first frames) from its few samples: on a "
+           "still head at 8.4 pixels per degree it raised the fovea's PSNR by about 1 dB and "
+           "the video JOD by 0.05-0.10, for about 24 ms a frame at ``fast`` on a 2-core CPU, "
+           "which with the head turning cost more than it bought "
+           "(``docs/results.md#the-disc-through-a-network``). A frame whose denoisers "
+           "include one that runs on the host is formed without replay"),
     Option("foveal_disc_spp", 0, "int", "samples per pixel of the foveal disc's rays (0: "
            "the frame's spp, as the cells)", lo=0, hi=1 << 16,
            doc="With ``formation = 'foveal'`` and ``foveal_space = 'buffer'``: the disc's "
@@ -727,10 +741,12 @@ def _check_combination(out: dict[str, Any]) -> None:
         if out[name] != neutral and not in_buffer:
             raise ParameterError(name, out[name], f"{neutral:g} unless formation = 'foveal' "
                                  "and foveal_space = 'buffer'")
-    for name, unset in (("foveal_disc_iterations", -1), ("foveal_disc_sigma_luminance", 0.0)):
+    for name, unset in (("foveal_disc_iterations", -1), ("foveal_disc_sigma_luminance", 0.0),
+                        ("foveal_disc_denoiser", "same")):
         if out[name] != unset and (out["formation"] != "foveal"
                                    or out["foveal_disc"] != "denoised"):
-            raise ParameterError(name, out[name], f"{unset:g} unless formation = 'foveal' "
+            shown = repr(unset) if isinstance(unset, str) else f"{unset:g}"
+            raise ParameterError(name, out[name], f"{shown} unless formation = 'foveal' "
                                  "and foveal_disc = 'denoised'")
     if out["foveal_contrast"] > 0.0 and out["formation"] != "foveal":
         raise ParameterError("foveal_contrast", out["foveal_contrast"],
@@ -762,9 +778,11 @@ def _check_combination(out: dict[str, Any]) -> None:
             ok = [n for n, d in denoisers().items() if d.display_values and n != "none"]
             raise ParameterError("denoiser", out["denoiser"], ", ".join(ok) + " or none with "
                                  "tonemap_samples = True")
-    if entry.available is not None and not entry.available():
-        raise ParameterError("denoiser", out["denoiser"], f"{entry.requirement}, or another "
-                             "of " + ", ".join(denoisers()))
+    for name in ("denoiser", "foveal_disc_denoiser"):
+        entry = denoisers().get(out[name])
+        if entry is not None and entry.available is not None and not entry.available():
+            raise ParameterError(name, out[name], f"{entry.requirement}, or another "
+                                 "of " + ", ".join(denoisers()))
 
 
 # -- what a gradient pass cannot differentiate ----------------------------------------------

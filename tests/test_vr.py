@@ -317,10 +317,54 @@ def test_the_disc_s_own_filter_changes_the_disc_only():
             assert not np.array_equal(a[inner], b[inner]), o
 
 
+def test_the_disc_s_own_denoiser_changes_the_disc_only():
+    # 'same' is the frame's denoiser; 'none' shows the disc's resolved pixels; OIDN changes
+    # the disc alone and, on its 1-spp pixels, brings it nearer a converged reference.
+    from foveated_mi.denoise import oidn_available
+    W, H = 64, 48
+    scene = _scene((W, H), spp=1)
+    ref = np.array(mi.render(scene, integrator=scene.integrator(), spp=1024, seed=99))
+
+    def frames(**o):
+        integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", history=False, **o)
+        return integ, [np.array(mi.render(scene, integrator=integ, seed=s, spp=1))
+                       for s in range(3)]
+
+    integ, default = frames()
+    assert integ.options["foveal_disc_denoiser"] == "same"
+    for a, b in zip(default, frames(foveal_disc_denoiser=integ.options["denoiser"])[1]):
+        np.testing.assert_array_equal(a, b)
+    for a, b in zip(frames(foveal_disc="resolved")[1], frames(foveal_disc_denoiser="none")[1]):
+        np.testing.assert_array_equal(a, b)
+    if not oidn_available():
+        pytest.skip("pyoidn not installed")
+    inner, outer = _disc_masks(integ, W, H, 1.0)
+    _, resolved = frames(foveal_disc="resolved")
+    _, oidn = frames(foveal_disc_denoiser="oidn")
+    for a, b in zip(default, oidn):
+        np.testing.assert_array_equal(a[outer], b[outer])
+        assert not np.allclose(a[inner], b[inner])
+    err = {k: np.mean([np.mean((f[inner] - ref[inner]) ** 2) for f in v])
+           for k, v in (("resolved", resolved), ("oidn", oidn))}
+    # As the SVGF disc's test: the 1-spp noise falls by far more than the network's bias adds.
+    assert err["oidn"] < 0.7 * err["resolved"], err
+
+
+def test_a_disc_denoiser_that_cuts_gradients_is_refused_for_them():
+    from foveated_mi.options import check_differentiable
+    check_differentiable({"foveal_disc_denoiser": "same"})
+    check_differentiable({"foveal_disc_denoiser": "svgf"})
+    with pytest.raises(ParameterError) as e:
+        check_differentiable({"foveal_disc_denoiser": "oidn"})
+    assert "\n" not in str(e.value) and "foveal_disc_denoiser" in str(e.value)
+
+
 @pytest.mark.parametrize("options", [
     {"preset": "vr", "foveal_disc": "resolved", "foveal_disc_iterations": 2},
     {"preset": "guided", "foveal_disc_sigma_luminance": 2.0},
-    {"preset": "vr", "foveal_disc_iterations": 17}])
+    {"preset": "vr", "foveal_disc_iterations": 17},
+    {"preset": "vr", "foveal_disc": "resolved", "foveal_disc_denoiser": "svgf"},
+    {"preset": "vr", "foveal_disc_denoiser": "bogus"}])
 def test_the_disc_s_own_filter_outside_a_denoised_disc_gets_one_line(options):
     name = next(k for k in options if k.startswith("foveal_disc_"))
     with pytest.raises(ParameterError, match=name) as e:

@@ -210,16 +210,16 @@ def form(shading: ShadingBuffer, inp: FormationInput, fs: FormationSettings, tim
     return fs.entry.fn(shading, inp, fs.settings, timer, grad_pass)
 
 
-def replayable(freeze: bool, denoiser: str, timer: StageTimer) -> bool:
+def replayable(freeze: bool, denoisers: tuple[str, ...], timer: StageTimer) -> bool:
     """Whether :class:`FrozenFormation` may form a frame that is not differentiated (module
-    docstring): ``freeze`` on, no stage timing, and a denoiser registered ``replayable``.
+    docstring): ``freeze`` on, no stage timing, and denoisers registered ``replayable``.
 
     Parameters
     ----------
     freeze : bool
         The option ``freeze``.
-    denoiser : str
-        The registered denoiser's name.
+    denoisers : tuple of str
+        The registered denoisers the frame runs (:func:`~foveated_mi.configure.denoisers_used`).
     timer : StageTimer
         The frame's stage timer (replay needs it disabled).
 
@@ -228,7 +228,7 @@ def replayable(freeze: bool, denoiser: str, timer: StageTimer) -> bool:
     replayable : bool
         Whether the frame may be replayed.
     """
-    return bool(freeze) and not timer.enabled and DENOISERS[denoiser].replayable
+    return bool(freeze) and not timer.enabled and all(DENOISERS[d].replayable for d in denoisers)
 
 
 def _fields(t) -> dict | None:

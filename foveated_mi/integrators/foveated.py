@@ -54,7 +54,7 @@ from ..frame import gradient as _gradient
 from ..frame import pipeline as _pipeline
 from ..frame import trace as _trace
 from ..frame.adjoint import NestedAdjoint
-from ..configure import formation_settings, frame_settings, viewer_options
+from ..configure import denoisers_used, formation_settings, frame_settings, viewer_options
 from ..frame.formation import FrozenFormation, replayable
 from ..frame.gbuffer import film_size
 from ..frame.reproject import History
@@ -214,7 +214,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         fs = formation_settings(viewer_options(o, sensor), *film_size(sensor))
         return _pipeline.Frame(scene, sensor, seed, spp, state, o["gaze"], fs,
                                freeze=o["freeze"],
-                               replay_formation=replayable(o["freeze"], o["denoiser"], timer),
+                               replay_formation=replayable(o["freeze"], denoisers_used(o), timer),
                                record=record)
 
     # -- differentiation ------------------------------------------------------------------
