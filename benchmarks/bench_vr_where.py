@@ -65,6 +65,12 @@ def _scorer(scene, task):
     return score
 
 
+def per_frame(refs: np.ndarray, frames: int) -> np.ndarray:
+    """(F, H, W, 3): a study's references, one per frame; a still view's one reference
+    (H, W, 3) stands for each of its ``frames``."""
+    return refs if refs.ndim == 4 else np.broadcast_to(refs, (frames, *refs.shape))
+
+
 def sequence(task, refs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The row rendered again as the study renders it: its references and its frames as
     shown, (F, H, W, 3) display values each."""
@@ -236,11 +242,11 @@ def main(argv=None) -> int:
             out.setdefault("disc_from", []).append(got)
             print(f"| {_name(tasks[r])} | {_name(tasks[d])} | {got['jod_video']:.2f} |",
                   flush=True)
-    budgets = args.budgets or [float(first["ray_budget"])]
+    budgets = [float(first["ray_budget"])] if args.budgets is None else args.budgets
     print("\n| rays | cells | cell centres | cell means | periphery flicker: centres, means |"
           "\n|---|---|---|---|---|")
     for b in budgets:
-        c = ceiling(tasks[0], refs, b)
+        c = ceiling(tasks[0], per_frame(refs, frames), b)
         out["ceilings"].append(c)
         print(f"| {b:g} | {c['cells']} | {c['cell_centres']:.2f} | {c['cell_means']:.2f} | "
               f"{c['cell_centres_flicker']['flicker_periphery']:.4f}, "

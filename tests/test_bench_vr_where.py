@@ -72,3 +72,14 @@ def test_a_disc_from_another_row_takes_that_row_inside_the_disc_only(where, monk
     disc = where._disc(task, ref, 0.1)
     assert disc.any() and not disc.all()
     np.testing.assert_array_equal(seen["test"], np.broadcast_to(disc, ref.shape))
+
+
+def test_a_still_view_s_one_reference_stands_for_each_frame(where):
+    # A still study caches one reference (H, W, 3); the ceiling reads one a frame.
+    still = np.arange(2 * 3 * 3, dtype=float).reshape(2, 3, 3)
+    frames = where.per_frame(still, 4)
+    assert frames.shape == (4, 2, 3, 3)
+    for f in frames:
+        np.testing.assert_array_equal(f, still)
+    moving = np.zeros((4, 2, 3, 3))
+    assert where.per_frame(moving, 4) is moving
