@@ -350,6 +350,29 @@ def test_the_disc_s_own_denoiser_changes_the_disc_only():
     assert err["oidn"] < 0.7 * err["resolved"], err
 
 
+def test_the_frame_reads_what_each_of_its_denoisers_needs():
+    # The disc's own denoiser counts as the frame's: OIDN reads the G-buffer's materials and
+    # runs on the host, so such a frame carries materials and forms without replay.
+    from foveated_mi.configure import denoisers_used, frame_settings
+    from foveated_mi.denoise import oidn_available
+    from foveated_mi.frame.formation import replayable
+    from foveated_mi.postprocess import DENOISERS
+    from foveated_mi.timing import StageTimer
+    if not oidn_available():
+        pytest.skip("pyoidn not installed")
+    plain = FoveatedIntegrator(preset="vr").options
+    disc = FoveatedIntegrator(preset="vr", foveal_disc_denoiser="oidn").options
+    assert denoisers_used(plain) == ("svgf",)
+    assert denoisers_used(FoveatedIntegrator(preset="vr", foveal_disc_denoiser="svgf").options) \
+        == ("svgf",)
+    assert denoisers_used(disc) == ("svgf", "oidn")
+    assert not DENOISERS["svgf"].materials and DENOISERS["oidn"].materials
+    assert not frame_settings(plain).plan.materials and frame_settings(disc).plan.materials
+    timer = StageTimer(False)
+    assert replayable(True, denoisers_used(plain), timer)
+    assert not replayable(True, denoisers_used(disc), timer)
+
+
 def test_a_disc_denoiser_that_cuts_gradients_is_refused_for_them():
     from foveated_mi.options import check_differentiable
     check_differentiable({"foveal_disc_denoiser": "same"})
