@@ -435,8 +435,8 @@ _SCHEMA: tuple[Option, ...] = (
            "as the cells). ``oidn`` (at ``oidn_quality``) gives the disc a network that "
            "denoises a disc without history (a view's first frames) from its few samples: on a "
            "still head at 8.4 pixels per degree it raised the fovea's PSNR by about 1 dB and "
-           "the video JOD by 0.05-0.10, for about 24 ms a frame at ``fast`` on a 2-core CPU, "
-           "which with the head turning cost more than it bought "
+           "the video JOD by 0.05-0.10; with the head turning, side by side, ``fast`` added "
+           "20-23 ms a frame on a 2-core CPU, more than it bought "
            "(``docs/results.md#the-disc-through-a-network``). A frame whose denoisers "
            "include one that runs on the host is formed without replay"),
     Option("foveal_disc_spp", 0, "int", "samples per pixel of the foveal disc's rays (0: "
