@@ -159,6 +159,41 @@ def _look(origin):
     return mi.ScalarTransform4f().look_at(origin=origin, target=[0, 0, 0], up=[0, 1, 0])
 
 
+def test_a_moving_camera_under_a_still_gaze_keeps_its_samples_launch(monkeypatch):
+    """The samples' pixels, and so the launch, depend on the gaze alone: a camera that moves
+    under a still gaze casts a new G-buffer at them but builds no launch, and traces the
+    frames that a launch built afresh every frame traces, bit for bit."""
+    from foveated_mi.frame import plan as _plan
+    scene = _scene()
+    params = mi.traverse(scene)
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
+    calls = []
+    real = _plan._reorder.launch_of_pixels
+    monkeypatch.setattr(_plan._reorder, "launch_of_pixels",
+                        lambda *a, **k: calls.append(1) or real(*a, **k))
+
+    def frames(integrator, drop: bool, gazes):
+        out = []
+        for k, gaze in enumerate(gazes):
+            a = np.radians(0.6 * k)
+            params["sensor.to_world"] = _look([3.9 * np.sin(a), 0.0, 3.9 * np.cos(a)])
+            params.update()
+            integrator.gaze = gaze
+            if drop:
+                integrator.views[0].planner._samples_cache = None
+            out.append(np.array(mi.render(scene, integrator=integrator, seed=k)))
+        return out
+
+    gazes = [(0.5, 0.5)] * 4 + [(0.3, 0.4)] * 2
+    images = frames(integ, False, gazes)
+    assert len(calls) == 2, calls          # the first gaze, then the second
+    assert integ.stats["history_hits"] > 0
+    fresh = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
+    for image, again in zip(images, frames(fresh, True, gazes)):
+        np.testing.assert_array_equal(again, image)
+    assert len(calls) == 2 + len(gazes)
+
+
 @pytest.mark.parametrize("interleave", [1, 2])
 def test_a_moving_head_keeps_its_history_and_the_frame_is_no_worse_than_a_fresh_one(interleave):
     """A camera orbiting 0.6 degrees a frame with the gaze drifting: the samples find their

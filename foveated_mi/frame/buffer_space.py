@@ -533,6 +533,9 @@ def reprojection_map(gb: GBuffer, on: mi.Bool, history: History | None, lay: Sam
     # that sample's pixel, never a coarser cell's value from a pixel beside it.
     pixel = (dr.abs(uv.x - centre.x) <= 0.5) & (dr.abs(uv.y - centre.y) <= 0.5)
     hits &= (dr.arange(mi.UInt32, n) < lay.cells) | pixel
+    # Evaluated with the claims' launch, so that the launches after it (the claims' test,
+    # the cut's count) read these rather than project every sample again.
+    dr.schedule(uv, j, centre, agree, hits)
     if mode == "exclusive":
         # Exclusive within each part: a cell and a disc pixel on one pixel (the rings at the
         # disc's edge) both read it; the denoiser sees the cells alone.

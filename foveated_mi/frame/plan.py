@@ -302,13 +302,23 @@ class Planner:
         """The samples' pixels and G-buffer, made again unless the camera, the scene, the
         gaze and the other eye's samples are those of the last frame; and whether reused."""
         ls = settings.launch
-        key = (state.camera, state.scene, gaze_key, lay, settings.materials, width, height,
-               ls.reorder, ls.block_height, ls.disc_spp > 0, partner is not None,
-               self.partner_disc)
+        placed = (gaze_key, lay, width, height, ls.reorder, ls.block_height, ls.disc_spp > 0)
+        key = (state.camera, state.scene, settings.materials, partner is not None,
+               self.partner_disc, placed)
         mark = None if partner is None else partner.position
         cached = self._samples_cache
         if cached is not None and cached.key == key and cached.partner is mark:
             return cached, True
+        if partner is None and cached is not None and cached.partner is None \
+                and cached.key[-1] == placed:
+            # A moving camera under a still gaze: the samples' pixels, and so the frame's
+            # launch, depend on the gaze alone; only their G-buffer is new.
+            self._samples_cache = _Samples(key, None, cached.pixels, cached.on,
+                                           self._gbuffer_at(scene, sensor, cached.pixels,
+                                                            cached.on, settings, width,
+                                                            height),
+                                           traced=cached.traced, launch=cached.launch)
+            return self._samples_cache, False
         pixels, on = _buffer_space.sample_pixels(lay, gaze, width, height)
         claimed = None
         if partner is not None:
@@ -316,12 +326,19 @@ class Planner:
             pixels, took, source, at = _buffer_space.toward(
                 lay, pixels, partner, _reproject.camera_state(sensor), gaze, width, height)
             claimed = (took, source)
-        y = pixels // width
-        gb = _gbuffer.gbuffer_at(scene, sensor, pixels - y * width, y, width, height, on,
-                                 materials=settings.materials, lobes=partner is not None,
-                                 at=None if partner is None else at)
+        gb = self._gbuffer_at(scene, sensor, pixels, on, settings, width, height,
+                              None if partner is None else at)
         self._samples_cache = _Samples(key, mark, pixels, on, gb, claimed)
         return self._samples_cache, False
+
+    @staticmethod
+    def _gbuffer_at(scene, sensor, pixels: mi.UInt32, on: mi.Bool, settings: PlanSettings,
+                    width: int, height: int, at=None) -> GBuffer:
+        """The G-buffer at the samples' ``pixels`` (with a partner, ``at`` the other eye's
+        points that the cells took, whose lobes it also reads)."""
+        y = pixels // width
+        return _gbuffer.gbuffer_at(scene, sensor, pixels - y * width, y, width, height, on,
+                                   materials=settings.materials, lobes=at is not None, at=at)
 
     @staticmethod
     def _launch(pixels: mi.UInt32, traced: mi.Bool, width: int, height: int, ls, lay) -> tuple:
