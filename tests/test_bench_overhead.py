@@ -27,6 +27,9 @@ def test_tiny_run_reports_stages_kernels_and_speedup(bench, tmp_path, capsys):
     # With one frame its median longest launch is that frame's, over the full frame's time.
     assert r["longest_kernel_ms"] == longest[0]
     assert r["longest_kernel_x_full"] == pytest.approx(longest[0] / r["full_ms"])
+    # The untimed frame's wall time outside that launch, over the full frame's.
+    assert r["untimed_overhead_x_full"] == pytest.approx(
+        (r["frame_ms"] - longest[0]) / r["full_ms"])
     assert r["image_to_host"] is False and r["freeze"] is True
     assert "voxel-static" in capsys.readouterr().out
 
