@@ -318,7 +318,13 @@ _SCHEMA: tuple[Option, ...] = (
            ":mod:`foveated_mi.frame.sampling`"),
     Option("ray_budget", 0.1, "float",
            "rays per frame as a fraction of the film's pixels (sampling_law = acuity or polar)",
-           lo=0.0, hi=1.0, lo_open=True),
+           lo=0.0, hi=1.0, lo_open=True,
+           doc="With ``sampling_law = 'polar'`` the cells outside the disc grow with the "
+           "distance from it, so only cells far below a pixel near the disc reach the whole "
+           "film; the buffer stops at cells of a quarter pixel at the disc's edge "
+           "(:data:`foveated_mi.frame.sampling.MIN_PITCH`), which trace about 0.85 of the "
+           "film with ``vr``'s disc, and a budget above that gets them with a warning that "
+           "says what the frame traces."),
     Option("acuity_floor", 0.01, "float", "smallest probability of the acuity law "
            "(at most ray_budget)", lo=0.0, hi=1.0),
     _choice("polar_cells", ("log", "acuity"), "the cells of the polar law's buffer outside "

@@ -61,6 +61,33 @@ def test_the_whole_film_as_budget_is_the_frame_that_traces_every_pixel():
     np.testing.assert_array_equal(image, plain)
 
 
+def test_a_budget_beyond_the_finest_cells_gets_them_and_one_warning():
+    """The whole film as budget with the preset's disc: no log-polar buffer reaches it short
+    of cells a tiny fraction of a pixel (89 million of them at 1152x648), so the buffer stops
+    at cells of MIN_PITCH at the disc's edge, one warning names the budget and what the frame
+    traces, and the frame traces that."""
+    import re
+    import warnings
+    from foveated_mi.frame import buffer_space, sampling
+    scene = _scene((64, 48), spp=1)
+    with pytest.warns(UserWarning, match=r"ray_budget = 1\.0 is above the 0\.\d+ of the film") \
+            as caught:
+        integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", ray_budget=1.0)
+        image = np.array(mi.render(scene, integrator=integ, seed=1))
+    said = [str(w.message) for w in caught if "is above the" in str(w.message)]
+    assert len(said) == 1, said
+    reach = float(re.search(r"traces ([0-9.]+) of it", said[0]).group(1))
+    lay = buffer_space.layout(64, 48, integ.options["theta"], 1.0)
+    assert lay.grid.pitch == sampling.MIN_PITCH
+    # Sized on the host in float64, placed on the device in float32 (as the budget's test).
+    assert 0.5 < reach < 1.0
+    assert integ.stats["ray_fraction"] == pytest.approx(reach, rel=0.02)
+    assert np.isfinite(image).all()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")             # once: the next frame says nothing
+        mi.render(scene, integrator=integ, seed=2)
+
+
 def test_the_error_falls_as_the_budget_rises():
     scene = _scene((64, 48), spp=4)
     ref = np.array(mi.render(scene, integrator=scene.integrator(), spp=256, seed=9))

@@ -565,6 +565,13 @@ def fovea_radius(width: int, height: int, theta: float) -> float:
     return float(theta) * 0.5 * math.hypot(width, height)
 
 
+#: The finest cells at the disc's edge, in pixels: a quarter of a pixel, some four cells a
+#: film pixel over the whole buffer. Finer cells add rays only where cells already share
+#: pixels, and their number grows without bound as the budget nears the whole film (a
+#: budget of 1 at 1152x648 asked for 89 million).
+MIN_PITCH = 0.25
+
+
 @functools.lru_cache(maxsize=16)
 def foveal_grid(width: int, height: int, budget: float, fovea: float,
                 offset: float = 0.0) -> PolarGrid:
@@ -574,6 +581,8 @@ def foveal_grid(width: int, height: int, budget: float, fovea: float,
     The pixels :func:`polar_map` traces number ``budget`` of the film with the gaze at its
     centre (host, once per film, budget, disc and offset). A disc that alone needs more than
     the budget is traced whole, with the coarsest cells outside it, and a warning says so once.
+    A budget above what cells of :data:`MIN_PITCH` at the disc's edge reach gets those
+    cells, and a warning says what they trace.
 
     Parameters
     ----------
@@ -597,18 +606,23 @@ def foveal_grid(width: int, height: int, budget: float, fovea: float,
     def grid(pitch: float) -> PolarGrid:
         return polar_grid_of(width, height, fovea, pitch, offset=offset)
 
+    import warnings
     n = width * height
     target = budget * n
     lo, hi = 0.05, math.hypot(width, height)      # the cells' size at the disc's edge
     disc = _traced_pixels(None, width, height, fovea)
     if disc > target:
-        import warnings
         warnings.warn(f"ray_budget = {budget!r} is below the {disc / n:.4g} of the film that "
                       f"the full-resolution disc (theta) traces: the frame traces the disc "
                       f"and the coarsest cells around it", UserWarning, stacklevel=2)
         return grid(hi)
-    if _traced_pixels(grid(lo), width, height) <= target:
-        return grid(lo)
+    reach = _traced_pixels(grid(MIN_PITCH), width, height)
+    if reach < target:
+        warnings.warn(f"ray_budget = {budget!r} is above the {reach / n:.4g} of the film that "
+                      f"the foveal buffer's finest cells reach ({MIN_PITCH} pixel at the "
+                      f"disc's edge): the frame traces {reach / n:.4g} of it", UserWarning,
+                      stacklevel=2)
+        return grid(MIN_PITCH)
     for _ in range(40):       # larger cells, fewer traced pixels: bisection
         mid = (lo * hi) ** 0.5
         if _traced_pixels(grid(mid), width, height) > target:
