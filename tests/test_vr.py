@@ -69,6 +69,7 @@ def test_a_budget_beyond_the_finest_cells_gets_them_and_one_warning():
     import re
     import warnings
     from foveated_mi.frame import buffer_space, sampling
+    sampling.foveal_grid.cache_clear()          # it warns once per film, budget and disc
     scene = _scene((64, 48), spp=1)
     with pytest.warns(UserWarning, match=r"ray_budget = 1\.0 is above the 0\.\d+ of the film") \
             as caught:
