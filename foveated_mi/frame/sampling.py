@@ -74,6 +74,7 @@ the pixel under the gaze (clamped to the film), so a frame never has an empty wa
 from __future__ import annotations
 
 import math
+import warnings
 
 import drjit as dr
 import mitsuba as mi
@@ -606,7 +607,6 @@ def foveal_grid(width: int, height: int, budget: float, fovea: float,
     def grid(pitch: float) -> PolarGrid:
         return polar_grid_of(width, height, fovea, pitch, offset=offset)
 
-    import warnings
     n = width * height
     target = budget * n
     lo, hi = 0.05, math.hypot(width, height)      # the cells' size at the disc's edge
