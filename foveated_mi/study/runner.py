@@ -364,11 +364,28 @@ def _progress(ex, jobs, unit: str, desc: str, progress: bool):
         bar.close()
 
 
+def timing_order(tasks: list[dict]) -> list[dict]:
+    """``tasks`` in the order a study runs them: scene by scene, seed by seed, each seed's
+    configurations in the study's order for the first seed, reversed for the second, and so
+    on. A machine whose speed drifts during a run then slows each configuration early in one
+    seed and late in the next: a steady drift cancels from the mean over an even number of
+    seeds, and shows in the spread over an odd one, where configuration by configuration
+    (each one's seeds together) it would move the ratios between configurations unseen.
+    What a task computes does not depend on when it runs (:mod:`.tasks`)."""
+    order = []
+    for label in dict.fromkeys(t["label"] for t in tasks):
+        scene = [t for t in tasks if t["label"] == label]
+        for i, seed in enumerate(dict.fromkeys(t["seed"] for t in scene)):
+            rows = [t for t in scene if t["seed"] == seed]
+            order += rows if i % 2 == 0 else rows[::-1]
+    return order
+
+
 def _run_tasks(pending, refs, ex, results, progress, result, say) -> None:
     from . import tasks as T
 
     jobs = []
-    for t in pending:
+    for t in timing_order(pending):
         if t["label"] not in refs:
             result.failed.append(f"task {t['task_id']} ({_describe(t)}) not run: its "
                                  "reference failed")
