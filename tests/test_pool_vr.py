@@ -1,0 +1,78 @@
+"""Pooling a VR study's per-seed speed-ups across runs (benchmarks/pool_vr.py)."""
+import json
+import math
+import statistics
+
+BENCH_MODULE = "pool_vr"  # the conftest's ``bench`` fixture imports it
+
+
+def _run(folder, per_seed, *, frames=36, size=(1152, 648), seeds=(0, 1, 2), config="vr 2 spp"):
+    folder.mkdir()
+    speedups = [{"scene": "voxel-city", "configuration": config,
+                 "family": "every uniform family", "per_seed": per_seed},
+                {"scene": "voxel-city", "configuration": config, "family": "uniform",
+                 "per_seed": [[9.0, "="]] * len(per_seed)}]
+    (folder / "vr.json").write_text(json.dumps({
+        "size": list(size), "frames": frames, "seeds": list(seeds), "date": "2026-12-05",
+        "conditions": {"headset": {"speedups": speedups}}}))
+    return str(folder)
+
+
+def test_the_pool_is_every_seed_of_every_run(bench, tmp_path, capsys):
+    a = _run(tmp_path / "a", [[2.7, "="], [2.5, "="], [3.3, "="]])
+    b = _run(tmp_path / "b", [[2.9, "="], [3.0, "="], [2.8, "="]], seeds=(3, 4, 5))
+    assert bench.main([a, b, "--threshold", "2.5"]) == 0
+    xs = [2.7, 2.5, 3.3, 2.9, 3.0, 2.8]
+    pool, = bench.pooled([bench.load_run(a), bench.load_run(b)], "headset",
+                         "every uniform family")
+    assert pool["seeds"] == 6 and pool["lowest"] == 2.5
+    assert math.isclose(pool["mean"], statistics.fmean(xs), rel_tol=1e-12)
+    assert math.isclose(pool["sd"], statistics.stdev(xs), rel_tol=1e-12)
+    out = capsys.readouterr().out
+    # The uniform family's 9.0 is not pooled into the envelope's row.
+    assert f"x{statistics.fmean(xs):.2f} ± {statistics.stdev(xs):.2f} (6 seeds)" in out
+    assert "2.70, 2.50, 3.30" in out and "2.90, 3.00, 2.80" in out
+
+
+def test_the_verdict_reads_the_margin_against_the_spread(bench):
+    pool = {"relation": "=", "mean": 2.83, "sd": 0.42}
+    assert bench.verdict(pool, 2.5).startswith("a tie with x2.5")
+    assert bench.verdict({**pool, "sd": 0.2}, 2.5).startswith("over x2.5")
+    assert bench.verdict({**pool, "mean": 2.0, "sd": 0.2}, 2.5).startswith("under x2.5")
+    assert bench.verdict({**pool, "relation": ">"}, 2.5).startswith("no verdict")
+
+
+def test_a_bound_among_the_seeds_makes_the_pool_that_bound(bench, tmp_path):
+    a = _run(tmp_path / "a", [[2.7, "="], [2.5, ">"]])
+    b = _run(tmp_path / "b", [[2.9, "="], [3.0, "="]])
+    pool, = bench.pooled([bench.load_run(a), bench.load_run(b)], "headset",
+                         "every uniform family")
+    assert pool["relation"] == ">"
+    c = _run(tmp_path / "c", [[2.7, "<"]])
+    pool, = bench.pooled([bench.load_run(a), bench.load_run(c)], "headset",
+                         "every uniform family")
+    assert pool["relation"] == "mixed"
+
+
+def test_runs_of_different_studies_are_refused_in_one_line(bench, tmp_path, capsys):
+    a = _run(tmp_path / "a", [[2.7, "="]])
+    b = _run(tmp_path / "b", [[2.9, "="]], frames=12)
+    assert bench.main([a, b]) == 2
+    assert capsys.readouterr().out.strip() == (
+        f"pool_vr: {b!r} has frames 12, {a!r} 36: expected runs of one study")
+
+
+def test_a_folder_without_results_is_refused_in_one_line(bench, tmp_path, capsys):
+    a = _run(tmp_path / "a", [[2.7, "="]])
+    assert bench.main([a, str(tmp_path)]) == 2
+    assert capsys.readouterr().out.strip() == (
+        f"pool_vr: {str(tmp_path)!r} holds no vr.json: expected a folder that bench_vr.py "
+        "--results wrote")
+
+
+def test_configurations_not_in_every_run_are_left_out(bench, tmp_path, capsys):
+    a = _run(tmp_path / "a", [[2.7, "="]], config="vr 4 spp")
+    b = _run(tmp_path / "b", [[2.9, "="]])
+    assert bench.main([a, b]) == 2
+    assert capsys.readouterr().out.strip() == (
+        "pool_vr: no configuration against 'every uniform family' is in every run")
