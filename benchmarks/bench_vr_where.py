@@ -2,7 +2,8 @@
 first frames or after them.
 
     python benchmarks/bench_vr_where.py --study configs/studies/vr_periphery_screen.toml \
-        --out out/vr_periphery_screen [--rows 0 10] [--after 4] [--budgets 0.1 0.25]
+        --out out/vr_periphery_screen [--rows 0 10] [--after 4] [--budgets 0.1 0.25] \
+        [--frames 36]
 
 Run it after the study, whose references it reads from ``--out``. Each chosen row
 (``--rows``: indices among the study's rows of its first scene and seed, the foveated rows
@@ -187,14 +188,24 @@ def main(argv=None) -> int:
                     help="ray budgets of the noise-free ceiling (default: the row's)")
     ap.add_argument("--disc-from", type=int, nargs="*", default=[], dest="disc_from",
                     help="also score each row with its disc from these rows")
+    ap.add_argument("--frames", type=int, default=None,
+                    help="frames per sequence, as bench_vr.py's --frames (default: the study's)")
     ap.add_argument("--json", default=None, help="also write the figures here")
     args = ap.parse_args(argv)
     import foveated_mi
     from foveated_mi.perceptual import available
     from foveated_mi.study.pictures import cached_reference
-    from foveated_mi.study.spec import load_study
+    from foveated_mi.config import read_toml
+    from foveated_mi.study.spec import parse_study
     variant = foveated_mi.set_variant(None)
-    spec = load_study(args.study)
+    if args.frames is not None and args.frames < 3:
+        print(f"bench_vr_where: --frames {args.frames} is invalid: expected 3 or more")
+        return 2
+    data, path = read_toml("study", args.study)
+    if args.frames:
+        data.setdefault("motion", {})["frames"] = args.frames
+    spec = parse_study(data, base_dir=os.path.dirname(os.path.abspath(path)), source=path,
+                       name=os.path.splitext(os.path.basename(path))[0])
     tasks = study_rows(spec, variant)
     if args.list:
         for i, t in enumerate(tasks):

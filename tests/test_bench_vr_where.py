@@ -53,6 +53,27 @@ def test_a_disc_from_a_row_past_the_study_s_is_refused_in_one_line(where, capsys
         "foveated row")
 
 
+def test_too_few_frames_are_refused_in_one_line(where, capsys):
+    code = where.main(["--study", STUDY, "--out", "unused", "--frames", "2"])
+    assert code == 2
+    assert capsys.readouterr().out.strip() == (
+        "bench_vr_where: --frames 2 is invalid: expected 3 or more")
+
+
+def test_frames_sets_the_rows_sequence_length(where, monkeypatch):
+    # The rows are built from the study with the command line's frames, as bench_vr.py's.
+    seen = {}
+
+    def rows(spec, variant):
+        seen["frames"] = len(spec.scenes[0].motion["gazes"])
+        return []
+    monkeypatch.setattr(where, "study_rows", rows)
+    where.main(["--study", STUDY, "--out", "unused", "--frames", "7", "--list"])
+    assert seen["frames"] == 7
+    where.main(["--study", STUDY, "--out", "unused", "--list"])
+    assert seen["frames"] != 7
+
+
 def test_a_disc_from_another_row_takes_that_row_inside_the_disc_only(where, monkeypatch):
     # A fake scorer returns what it was given; the row's frames are 0, the other row's 1.
     seen = {}
