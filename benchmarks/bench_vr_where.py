@@ -195,17 +195,18 @@ def main(argv=None) -> int:
     import foveated_mi
     from foveated_mi.perceptual import available
     from foveated_mi.study.pictures import cached_reference
+    from bench_vr import overridden
     from foveated_mi.config import read_toml
     from foveated_mi.study.spec import parse_study
     variant = foveated_mi.set_variant(None)
     if args.frames is not None and args.frames < 3:
         print(f"bench_vr_where: --frames {args.frames} is invalid: expected 3 or more")
         return 2
+    # The study with bench_vr.py's --frames, as bench_vr_look.py reads it.
+    opts = argparse.Namespace(size=None, frames=args.frames, seeds=None, scenes=None)
     data, path = read_toml("study", args.study)
-    if args.frames:
-        data.setdefault("motion", {})["frames"] = args.frames
-    spec = parse_study(data, base_dir=os.path.dirname(os.path.abspath(path)), source=path,
-                       name=os.path.splitext(os.path.basename(path))[0])
+    spec = parse_study(overridden(data, opts), base_dir=os.path.dirname(os.path.abspath(path)),
+                       source=path, name=os.path.splitext(os.path.basename(path))[0])
     tasks = study_rows(spec, variant)
     if args.list:
         for i, t in enumerate(tasks):
