@@ -400,6 +400,31 @@ def pictures(spec, out: str, results: str, variant: str) -> dict:
             "video": os.path.basename(mp4), "panels": ["reference", fov_name, uni_name]}
 
 
+def timed_again(spec, rows: list[dict], a, report: dict, lines: list[str]
+                ) -> tuple[list[dict], list[str]]:
+    """``--timing-passes``: the rows with their times measured again
+    (:func:`foveated_mi.study.retime.retime`), said in the tables' preamble and kept in the
+    report."""
+    import mitsuba as mi
+    from foveated_mi.study.retime import retime, runs_oidn
+
+    def say(done, total):
+        if not a.no_progress:
+            print(f"\rtiming passes: {done}/{total}", end="\n" if done == total else "",
+                  flush=True)
+    keep = (lambda t: not runs_oidn(t)) if a.timing_skip_oidn else None
+    rows, times = retime(spec, rows, mi.variant(), a.timing_passes, keep=keep, progress=say)
+    report["timing_passes"] = {"passes": a.timing_passes, "skip_oidn": a.timing_skip_oidn,
+                               "times_ms": times}
+    kept = " Rows that run OIDN keep their scored time." if a.timing_skip_oidn else ""
+    lines = lines + [f"Times: each row's sequence rendered {a.timing_passes} more times "
+                     "unscored, seed by seed, each seed's rows in the study's order and then "
+                     "in reverse; a row's time is the median of those passes (the scored "
+                     "pass's times stay in results.csv, each pass's in vr.json under "
+                     f"`timing_passes`).{kept}", ""]
+    return rows, lines
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--size", type=int, nargs=2, default=None, metavar=("W", "H"),
@@ -431,6 +456,12 @@ def main(argv=None) -> int:
                     help="a stereo study's left eye alone (two eyes against one)")
     ap.add_argument("--latency-ms", type=float, default=None, dest="latency_ms",
                     help="the eye tracker's latency (viewer.gaze_latency_ms)")
+    ap.add_argument("--timing-passes", type=int, default=0, dest="timing_passes",
+                    help="render each row's sequence this many times more, unscored, seed by "
+                    "seed in alternating order, and give it the median of their times "
+                    "(default 0: the scored pass's time)")
+    ap.add_argument("--timing-skip-oidn", action="store_true", dest="timing_skip_oidn",
+                    help="with --timing-passes: rows that run OIDN keep their scored time")
     ap.add_argument("--no-pictures", action="store_true")
     ap.add_argument("--no-progress", action="store_true")
     a = ap.parse_args(argv)
@@ -461,7 +492,9 @@ def main(argv=None) -> int:
                      ("study", None if a.study == STUDY else os.path.relpath(a.study))) if v)
     cmd += (" --stereo" if a.stereo else "") + (" --one-eye" if a.one_eye else "") + \
         (f" --reuse {a.reuse}" if a.reuse else "") + \
-        (f" --first-eye {a.first_eye}" if a.first_eye else "")
+        (f" --first-eye {a.first_eye}" if a.first_eye else "") + \
+        (f" --timing-passes {a.timing_passes}" if a.timing_passes else "") + \
+        (" --timing-skip-oidn" if a.timing_passes and a.timing_skip_oidn else "")
     viewer = data.get("viewer", {})
     camera = (f"the {viewer['headset']} headset's {'eyes' if stereo else 'left eye'} "
               f"({viewer.get('eye_width', 'render-target')} px wide)"
@@ -484,8 +517,11 @@ def main(argv=None) -> int:
     spec = parse_study(data, base_dir=os.path.dirname(os.path.abspath(a.study)), source=a.study,
                        name="vr")
     res = run_study(spec, out=a.out, progress=not a.no_progress, variant=a.variant)
+    rows = res.rows
+    if a.timing_passes:
+        rows, lines = timed_again(spec, rows, a, report, lines)
     for cond, column in conditions.items():
-        sps = speedups(res.rows, column)
+        sps = speedups(rows, column)
         report["conditions"][cond] = {"column": column, "speedups": sps}
         lines += [f"## {cond.capitalize()} (`{column}`)", "",
                   "Speed-up at equal " + column + " against each uniform family (mean over "
@@ -498,8 +534,8 @@ def main(argv=None) -> int:
         first = viewer.get("first_eye", "left")
         worse, alone = ("jod_video_min", f"jod_video_{first}") if perceptual.available() \
             else ("psnr_worse", f"psnr_{first}")
-        rows = [dict(r, psnr_worse=min(r["psnr_left"], r["psnr_right"])) for r in res.rows
-                if "psnr_left" in r]
+        eye_rows = [dict(r, psnr_worse=min(r["psnr_left"], r["psnr_right"])) for r in rows
+                    if "psnr_left" in r]
         lines += ["## Two eyes against one", "",
                   f"Both eyes' time against the {first} eye's own (it renders first, as it "
                   "would alone; the other eye "
@@ -507,19 +543,19 @@ def main(argv=None) -> int:
                      "its own disc", False: "traces its own"}[viewer.get("reuse", True)]
                   + "), at equal per-eye quality: the one-eye curve read at the worse eye's "
                   f"`{worse}` (mean over seeds; per seed in brackets):", "",
-                  *eyes_table(rows, first, worse, alone), ""]
-    lines += ["## Every cell", "", *cells_table(res.rows, list(conditions.values()) + eyes), "",
+                  *eyes_table(eye_rows, first, worse, alone), ""]
+    lines += ["## Every cell", "", *cells_table(rows, list(conditions.values()) + eyes), "",
               "## Temporal instability", "",
               "Flicker of each cell (display values; the root mean square over frames and "
               "pixels of the change of its error from frame to frame, against a reference "
               "per frame), over the whole frame, outside the fovea and per ring of "
-              "eccentricity from each frame's gaze:", "", *flicker_table(res.rows), ""]
+              "eccentricity from each frame's gaze:", "", *flicker_table(rows), ""]
     column = conditions.get("headset")
     if column:
         lines += ["Each foveated cell's flicker against the uniform cell just above it on the "
                   f"envelope of every uniform family (the cheapest that reaches its `{column}`; "
                   "`≤`: it flickers no more, `>`: more, `≈`: within the seeds' spread):", "",
-                  *flicker_against_envelope(res.rows, column), ""]
+                  *flicker_against_envelope(rows, column), ""]
     # Rows whose frames ran differently (replayed, traced): their ratios were refused above.
     report["warnings"] = res.warnings
     if res.warnings:

@@ -246,3 +246,31 @@ def test_every_family_is_the_lower_envelope_of_each_family_s_curve(bench):
     front = 100.0 * (266.0 / 100.0) ** (1.0 / 1.21) / 50.0
     assert sps[("vr 1 spp", bench.ENVELOPE)]["ratio"] == pytest.approx(front, rel=1e-9)
     assert front < min(sps[("vr 1 spp", f)]["ratio"] for f in ("uniform", "uniform+history"))
+
+
+def test_timing_passes_replace_the_times_and_say_so(bench, monkeypatch):
+    """--timing-passes: the tables read the rows that retime gives back; the preamble says
+    how the times were measured, the report keeps each pass; --timing-skip-oidn keeps the
+    scored time of the rows that run OIDN."""
+    import argparse
+    from foveated_mi.study import retime as R
+    seen = {}
+
+    def fake(spec, rows, variant, passes, keep=None, progress=None):
+        seen.update(passes=passes, keep=keep)
+        return [dict(r, time_ms=1.0) for r in rows], {"t": [1.0, 1.0]}
+    monkeypatch.setattr(R, "retime", fake)
+    for skip in (False, True):
+        a = argparse.Namespace(timing_passes=4, timing_skip_oidn=skip, no_progress=True)
+        report = {}
+        rows, lines = bench.timed_again(None, [{"time_ms": 9.0}], a, report, ["# t"])
+        assert rows == [{"time_ms": 1.0}] and seen["passes"] == 4
+        assert lines[0] == "# t" and "rendered 4 more times" in lines[1]
+        assert ("keep their scored time" in lines[1]) == skip
+        assert report["timing_passes"] == {"passes": 4, "skip_oidn": skip,
+                                           "times_ms": {"t": [1.0, 1.0]}}
+        if skip:
+            assert not seen["keep"]({"method": "uniform+oidn", "options": {}})
+            assert seen["keep"]({"method": "uniform+history", "options": {}})
+        else:
+            assert seen["keep"] is None

@@ -481,6 +481,70 @@ def test_a_study_in_motion_scores_sequences(tmp_path):
     assert "1 replayed, 1 traced" in warning and warning in said
 
 
+def test_timing_passes_render_each_chosen_sequence_again_unscored(tmp_path, monkeypatch):
+    """retime: each chosen sequence row rendered once a pass, every frame, with no scoring;
+    its time the median of the passes; the other rows, and every quality column, as
+    scored; the camera back where it was."""
+    import statistics
+    import mitsuba as mi
+    from foveated_mi.scenes import camera_of
+    from foveated_mi.study import retime as R
+    res = run_study(study_file(tmp_path, MOTION, "motion.toml"), out=str(tmp_path / "o"),
+                    progress=False, echo=None)
+    frames, scored = [], []
+    real_renderer = T._sequence_renderer
+
+    def counted(scene, task, gaze):
+        render, integ = real_renderer(scene, task, gaze)
+        return (lambda g: frames.append(task["method"]) or render(g)), integ
+    monkeypatch.setattr(T, "_sequence_renderer", counted)
+    monkeypatch.setattr(T, "_quality", lambda *a, **k: scored.append(1))
+    done = []
+    rows, times = R.retime(res.spec, res.rows, mi.variant(), 2,
+                           keep=lambda t: t["method"] == "foveated",
+                           progress=lambda d, n: done.append((d, n)))
+    assert frames == ["foveated"] * 12 and scored == [] and done == [(1, 2), (2, 2)]
+    before = {r["method"]: r for r in res.rows}
+    after = {r["method"]: r for r in rows}
+    fov = after["foveated"]
+    assert len(times[fov["task_id"]]) == 2 and all(t > 0 for t in times[fov["task_id"]])
+    assert fov["time_ms"] == statistics.median(times[fov["task_id"]])
+    assert fov["time_ms_scored"] == before["foveated"]["time_ms"]
+    assert after["uniform"] == before["uniform"] and list(times) == [fov["task_id"]]
+    same = lambda x, y: x == y or (x != x and y != y)        # noqa: E731 (nan is nan)
+    assert all(same(fov[k], before["foveated"][k]) for k in before["foveated"] if k != "time_ms")
+    scene = T.get_scene(res.spec.scenes[0].load_spec(), mi.variant())
+    assert camera_of(scene)["origin"] == pytest.approx([0.0, 0.0, 3.9], abs=1e-5)
+
+
+def test_timing_passes_alternate_their_order_seed_by_seed():
+    from foveated_mi.study.retime import retime_order, runs_oidn
+    from foveated_mi.validate import ParameterError
+    tasks = [{"label": s, "seed": seed, "method": m} for s in ("a", "b") for seed in (0, 1)
+             for m in ("foveated", "uniform")]
+    got = [(p, t["label"], t["seed"], t["method"][0]) for p, t in retime_order(tasks, 2)]
+    assert got == [(0, "a", 0, "f"), (0, "a", 0, "u"), (1, "a", 0, "u"), (1, "a", 0, "f"),
+                   (0, "a", 1, "f"), (0, "a", 1, "u"), (1, "a", 1, "u"), (1, "a", 1, "f"),
+                   (0, "b", 0, "f"), (0, "b", 0, "u"), (1, "b", 0, "u"), (1, "b", 0, "f"),
+                   (0, "b", 1, "f"), (0, "b", 1, "u"), (1, "b", 1, "u"), (1, "b", 1, "f")]
+    with pytest.raises(ParameterError) as e:
+        retime_order(tasks, 0)
+    assert "passes" in str(e.value) and "\n" not in str(e.value)
+    assert runs_oidn({"method": "uniform+history+oidn", "options": {}})
+    assert runs_oidn({"method": "foveated", "options": {"foveal_disc_denoiser": "oidn"}})
+    assert not runs_oidn({"method": "uniform+history", "options": {"denoiser": "svgf"}})
+
+
+def test_a_timing_pass_refuses_what_it_cannot_render():
+    from foveated_mi.study.retime import sequence_time
+    from foveated_mi.validate import ParameterError
+    for motion in (None, {"stereo": {"ipd": 0.063}}):
+        with pytest.raises(ParameterError) as e:
+            sequence_time({"method": "foveated", "task_id": "x1", "motion": motion})
+        assert "x1" in str(e.value) and "one eye" in str(e.value) \
+            and "\n" not in str(e.value)
+
+
 @pytest.mark.slow   # the EXR study above keeps a Dask run in `make test`
 @needs_dask
 def test_a_study_in_motion_gives_the_same_quality_on_dask(tmp_path):
