@@ -532,7 +532,10 @@ def test_timing_passes_alternate_their_order_seed_by_seed():
     assert "passes" in str(e.value) and "\n" not in str(e.value)
     assert runs_oidn({"method": "uniform+history+oidn", "options": {}})
     assert runs_oidn({"method": "foveated", "options": {"foveal_disc_denoiser": "oidn"}})
-    assert not runs_oidn({"method": "uniform+history", "options": {"denoiser": "svgf"}})
+    assert runs_oidn({"method": "foveated", "options": {"preset": "oidn"}})
+    # uniform + history: the oidn preset's history, without its denoiser
+    assert not runs_oidn({"method": "uniform+history",
+                          "options": {"preset": "oidn", "denoiser": "none"}})
 
 
 def test_a_timing_pass_refuses_what_it_cannot_render():

@@ -48,10 +48,11 @@ def retime_order(tasks: list[dict], passes: int) -> list[tuple[int, dict]]:
 
 
 def runs_oidn(task: dict) -> bool:
-    """Whether a task's frames run OIDN (a ``+oidn`` family, or OIDN in its options)."""
+    """Whether a task's frames run OIDN: a ``+oidn`` family, or OIDN as its denoiser (given,
+    else its preset's) or its disc's."""
     o = task.get("options") or {}
     return task["method"].endswith("+oidn") or "oidn" in (
-        o.get("preset"), o.get("denoiser"), o.get("foveal_disc_denoiser"))
+        o.get("denoiser", o.get("preset")), o.get("foveal_disc_denoiser"))
 
 
 def sequence_time(task: dict) -> float:
