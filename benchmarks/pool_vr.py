@@ -13,7 +13,7 @@ pooled (mean ± sample standard deviation over the seeds, and the lowest). With
 a win, within the spread a tie, below it by more than the spread a loss. A seed whose ratio
 is a bound (``≥`` or ``≤``: the configuration scores beyond the family's rows) makes the pool
 a bound, and gets no verdict. Runs of different sizes or frame counts are refused, as they
-are different studies.
+are different studies, and so are runs timed differently (``bench_vr.py --timing-passes``).
 """
 from __future__ import annotations
 
@@ -38,13 +38,22 @@ def load_run(folder: str) -> dict:
         return json.load(f)
 
 
+def timing(run: dict) -> str:
+    """How a run's rows were timed: the scored pass, or ``bench_vr.py --timing-passes``."""
+    t = run.get("timing_passes")
+    if not t:
+        return "the scored pass"
+    return f"{t['passes']} timing passes" + (", OIDN rows as scored" if t["skip_oidn"] else "")
+
+
 def check_same_study(runs: list[dict], folders: list[str]) -> None:
-    """``ValueError`` naming the first run whose film size or frame count differs."""
-    for key in ("size", "frames"):
+    """``ValueError`` naming the first run whose film size, frame count or timing differs."""
+    for key, of in (("size", lambda r: r.get("size")), ("frames", lambda r: r.get("frames")),
+                    ("timing", timing)):
         for run, folder in zip(runs[1:], folders[1:]):
-            if run.get(key) != runs[0].get(key):
-                raise ValueError(f"{folder!r} has {key} {run.get(key)}, {folders[0]!r} "
-                                 f"{runs[0].get(key)}: expected runs of one study")
+            if of(run) != of(runs[0]):
+                raise ValueError(f"{folder!r} has {key} {of(run)}, {folders[0]!r} "
+                                 f"{of(runs[0])}: expected runs of one study, timed alike")
 
 
 def pooled(runs: list[dict], condition: str, family: str) -> list[dict]:
@@ -129,7 +138,7 @@ def main(argv=None) -> int:
         return 2
     for i, f in enumerate(a.results):
         print(f"run {i + 1}: {f} (seeds {', '.join(map(str, runs[i].get('seeds', [])))}, "
-              f"{runs[i].get('date', '?')})")
+              f"{runs[i].get('date', '?')}, timed by {timing(runs[i])})")
     print(f"\nspeed-up at equal {a.condition} quality against {a.family}:\n")
     print("\n".join(table(pools, a.results, a.threshold)))
     return 0

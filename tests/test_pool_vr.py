@@ -6,7 +6,8 @@ import statistics
 BENCH_MODULE = "pool_vr"  # the conftest's ``bench`` fixture imports it
 
 
-def _run(folder, per_seed, *, frames=36, size=(1152, 648), seeds=(0, 1, 2), config="vr 2 spp"):
+def _run(folder, per_seed, *, frames=36, size=(1152, 648), seeds=(0, 1, 2), config="vr 2 spp",
+         passes=None):
     folder.mkdir()
     speedups = [{"scene": "voxel-city", "configuration": config,
                  "family": "every uniform family", "per_seed": per_seed},
@@ -14,7 +15,9 @@ def _run(folder, per_seed, *, frames=36, size=(1152, 648), seeds=(0, 1, 2), conf
                  "per_seed": [[9.0, "="]] * len(per_seed)}]
     (folder / "vr.json").write_text(json.dumps({
         "size": list(size), "frames": frames, "seeds": list(seeds), "date": "2026-12-05",
-        "conditions": {"headset": {"speedups": speedups}}}))
+        "conditions": {"headset": {"speedups": speedups}},
+        **({"timing_passes": {"passes": passes, "skip_oidn": True, "times_ms": {}}}
+           if passes else {})}))
     return str(folder)
 
 
@@ -59,7 +62,16 @@ def test_runs_of_different_studies_are_refused_in_one_line(bench, tmp_path, caps
     b = _run(tmp_path / "b", [[2.9, "="]], frames=12)
     assert bench.main([a, b]) == 2
     assert capsys.readouterr().out.strip() == (
-        f"pool_vr: {b!r} has frames 12, {a!r} 36: expected runs of one study")
+        f"pool_vr: {b!r} has frames 12, {a!r} 36: expected runs of one study, timed alike")
+    # runs timed by other passes measure time otherwise: refused too, and said how
+    c = _run(tmp_path / "c", [[2.9, "="]], passes=4)
+    assert bench.main([a, c]) == 2
+    assert capsys.readouterr().out.strip() == (
+        f"pool_vr: {c!r} has timing 4 timing passes, OIDN rows as scored, {a!r} the scored "
+        "pass: expected runs of one study, timed alike")
+    d = _run(tmp_path / "d", [[2.8, "="]], passes=4, seeds=(3,))
+    assert bench.main([c, d]) == 0
+    assert "timed by 4 timing passes, OIDN rows as scored" in capsys.readouterr().out
 
 
 def test_a_folder_without_results_is_refused_in_one_line(bench, tmp_path, capsys):
