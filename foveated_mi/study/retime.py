@@ -36,14 +36,12 @@ def retime_order(tasks: list[dict], passes: int) -> list[tuple[int, dict]]:
     order : list of (int, dict)
         Each pass of each task, in the order to run them.
     """
+    from .runner import seed_groups
     passes = check_int("passes", passes, 1, 1000)
     order = []
-    for label in dict.fromkeys(t["label"] for t in tasks):
-        scene = [t for t in tasks if t["label"] == label]
-        for seed in dict.fromkeys(t["seed"] for t in scene):
-            rows = [t for t in scene if t["seed"] == seed]
-            for p in range(passes):
-                order += [(p, t) for t in (rows if p % 2 == 0 else rows[::-1])]
+    for _, rows in seed_groups(tasks):
+        for p in range(passes):
+            order += [(p, t) for t in (rows if p % 2 == 0 else rows[::-1])]
     return order
 
 

@@ -373,12 +373,20 @@ def timing_order(tasks: list[dict]) -> list[dict]:
     (each one's seeds together) it would move the ratios between configurations unseen.
     What a task computes does not depend on when it runs (:mod:`.tasks`)."""
     order = []
+    for i, rows in seed_groups(tasks):
+        order += rows if i % 2 == 0 else rows[::-1]
+    return order
+
+
+def seed_groups(tasks: list[dict]) -> list[tuple[int, list[dict]]]:
+    """``tasks`` grouped scene by scene, then seed by seed, each group in the given order:
+    ``(i, tasks)``, ``i`` the seed's place among its scene's seeds."""
+    groups = []
     for label in dict.fromkeys(t["label"] for t in tasks):
         scene = [t for t in tasks if t["label"] == label]
         for i, seed in enumerate(dict.fromkeys(t["seed"] for t in scene)):
-            rows = [t for t in scene if t["seed"] == seed]
-            order += rows if i % 2 == 0 else rows[::-1]
-    return order
+            groups.append((i, [t for t in scene if t["seed"] == seed]))
+    return groups
 
 
 def _run_tasks(pending, refs, ex, results, progress, result, say) -> None:
