@@ -232,10 +232,10 @@ def foveal_settings(width: int, height: int, o: Options) -> FovealSettings:
     return FovealSettings(float(o["max_history"]), domain_settings(o), denoise_settings(o),
                           o["foveal_upsampling"], o["foveal_space"], o["foveal_disc"], lay,
                           grid, float(o["foveal_taa"]), float(o["foveal_contrast"]),
-                          disc_denoise_settings(o))
+                          disc_denoise_settings(o), disc_denoise_settings(o, moving=True))
 
 
-def disc_denoise_settings(o: Options) -> DenoiseSettings:
+def disc_denoise_settings(o: Options, moving: bool = False) -> DenoiseSettings | None:
     """The denoiser of the foveal disc's patch: the frame's, with ``foveal_disc_iterations``
     and ``foveal_disc_sigma_luminance`` in place of the buffer's levels and colour test where
     they are set.
@@ -244,15 +244,22 @@ def disc_denoise_settings(o: Options) -> DenoiseSettings:
     ----------
     o : dict
         The validated options.
+    moving : bool, optional
+        The denoiser of a frame whose camera moved: ``foveal_disc_iterations_moving`` levels.
 
     Returns
     -------
-    settings : DenoiseSettings
-        As :func:`denoise_settings` gives for the disc's values of those two options.
+    settings : DenoiseSettings or None
+        As :func:`denoise_settings` gives for the disc's values of those options; with
+        ``moving``, None where ``foveal_disc_iterations_moving`` is unset (-1: as still).
     """
     disc = dict(o)
+    if moving and o["foveal_disc_iterations_moving"] < 0:
+        return None
     if o["foveal_disc_iterations"] >= 0:
         disc["atrous_iterations"] = o["foveal_disc_iterations"]
+    if moving:
+        disc["atrous_iterations"] = o["foveal_disc_iterations_moving"]
     if o["foveal_disc_sigma_luminance"] > 0.0:
         disc["sigma_luminance"] = o["foveal_disc_sigma_luminance"]
     if o["foveal_disc_denoiser"] != "same":

@@ -425,6 +425,17 @@ _SCHEMA: tuple[Option, ...] = (
            "the disc's patch of full-resolution pixels, apart from the buffer's cells (-1: "
            "``atrous_iterations``, as the cells). A cell spans many pixels, a disc pixel one: "
            "the filter that the cells need reaches further than a converged fovea wants"),
+    Option("foveal_disc_iterations_moving", -1, "int", "levels of the denoiser on the "
+           "foveal disc's patch in a frame whose camera moved (-1: foveal_disc_iterations, "
+           "as a still frame)", lo=-1, hi=16,
+           doc="With ``foveal_disc = 'denoised'``: the levels of the à-trous / SVGF filter on "
+           "the disc's patch in a frame whose camera moved since the view's last, where its "
+           "history is reprojected (-1: ``foveal_disc_iterations``, as a still frame; "
+           "setting the camera's parameters, even to the same values, is a move). The motion "
+           "hides what fewer levels leave: the ``vr`` preset's 2 scored the video JOD of 4 "
+           "with the head turning and took the orbiting frame outside its trace from 0.16x "
+           "to 0.15x of a full render (``docs/results.md#the-discs-levels-where-the-camera-"
+           "moved``)"),
     Option("foveal_disc_sigma_luminance", 0.0, "float", "SVGF's colour sigma on the foveal "
            "disc's patch, in noise deviations (0: sigma_luminance, the buffer's)",
            lo=0.0, hi=1e9,
@@ -626,11 +637,13 @@ PRESETS: dict[str, dict[str, Any]] = {
     # colour test at 8 noise deviations: a periphery seen at a few pixels per degree scores
     # higher smooth than with its cells' noise (docs/results.md#the-buffers-filter-strength).
     # Its disc at most 2 samples a pixel: above that its rays cost more than the fovea's video
-    # JOD gains (docs/results.md#the-disc-at-a-sample-rate-of-its-own).
+    # JOD gains (docs/results.md#the-disc-at-a-sample-rate-of-its-own). The disc at 2 levels
+    # where the camera moved: the same video JOD, a moving frame's cost lower
+    # (docs/results.md#the-discs-levels-where-the-camera-moved).
     "vr": {"sampling_law": "polar", "formation": "foveal", "ray_budget": 0.1, "theta": 0.15,
            "reorder": "tiles", "edge_threshold": 0.0, "denoiser": "svgf",
            "atrous_iterations": 4, "sigma_luminance": 8.0, "foveal_disc": "denoised",
-           "foveal_disc_spp": 2},
+           "foveal_disc_spp": 2, "foveal_disc_iterations_moving": 2},
 }
 PRESET_NAMES = ("auto", *PRESETS)
 
@@ -725,6 +738,9 @@ def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[s
     if "foveal_disc_spp" not in options and (out["formation"] != "foveal"
                                              or out["foveal_space"] != "buffer"):
         out["foveal_disc_spp"] = 0      # the preset's disc rate needs the buffer's samples
+    if "foveal_disc_iterations_moving" not in options and (out["formation"] != "foveal"
+                                                           or out["foveal_disc"] != "denoised"):
+        out["foveal_disc_iterations_moving"] = -1   # the preset's, for a disc it denoises
     _check_combination(out)
     return out
 
@@ -747,8 +763,8 @@ def _check_combination(out: dict[str, Any]) -> None:
         if out[name] != neutral and not in_buffer:
             raise ParameterError(name, out[name], f"{neutral:g} unless formation = 'foveal' "
                                  "and foveal_space = 'buffer'")
-    for name, unset in (("foveal_disc_iterations", -1), ("foveal_disc_sigma_luminance", 0.0),
-                        ("foveal_disc_denoiser", "same")):
+    for name, unset in (("foveal_disc_iterations", -1), ("foveal_disc_iterations_moving", -1),
+                        ("foveal_disc_sigma_luminance", 0.0), ("foveal_disc_denoiser", "same")):
         if out[name] != unset and (out["formation"] != "foveal"
                                    or out["foveal_disc"] != "denoised"):
             shown = repr(unset) if isinstance(unset, str) else f"{unset:g}"

@@ -345,6 +345,43 @@ def test_the_disc_s_own_filter_changes_the_disc_only():
             assert not np.array_equal(a[inner], b[inner]), o
 
 
+def test_a_moving_camera_s_disc_takes_its_own_levels():
+    # foveal_disc_iterations_moving (the preset's: 2) holds where the camera moved since the
+    # last frame: that frame is the one foveal_disc_iterations renders at that count, since
+    # the history holds the samples before any filter. A still camera, and the first frame,
+    # keep the still levels (-1: those in every frame); outside the disc nothing changes.
+    W, H = 64, 48
+    scene = _scene((W, H), spp=1)
+    params = mi.traverse(scene)
+
+    def frames(turn: float, **o):
+        integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", **o)
+        out = []
+        for k in range(3):
+            if k == 0 or turn:                # a still camera is set once
+                a = np.radians(turn * k)
+                params["sensor.to_world"] = mi.ScalarTransform4f().look_at(
+                    origin=[3.9 * np.sin(a), 0.0, 3.9 * np.cos(a)], target=[0, 0, 0],
+                    up=[0, 1, 0])
+                params.update()
+            out.append(np.array(mi.render(scene, integrator=integ, seed=k)))
+        return integ, out
+
+    assert FoveatedIntegrator(preset="vr").options["foveal_disc_iterations_moving"] == 2
+    integ, default = frames(0.6, foveal_disc_iterations_moving=-1)
+    _, moving = frames(0.6, foveal_disc_iterations_moving=1)
+    _, one = frames(0.6, foveal_disc_iterations=1, foveal_disc_iterations_moving=-1)
+    np.testing.assert_array_equal(moving[0], default[0])
+    inner, outer = _disc_masks(integ, W, H, 1.0)
+    for k in (1, 2):
+        np.testing.assert_array_equal(moving[k], one[k])
+        np.testing.assert_array_equal(moving[k][outer], default[k][outer])
+        assert not np.array_equal(moving[k][inner], default[k][inner]), k
+    for a, b in zip(frames(0.0, foveal_disc_iterations_moving=-1)[1],
+                    frames(0.0, foveal_disc_iterations_moving=1)[1]):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_the_disc_s_own_denoiser_changes_the_disc_only():
     # 'same' is the frame's denoiser; 'none' shows the disc's resolved pixels; OIDN changes
     # the disc alone and, on its 1-spp pixels, brings it nearer a converged reference.
@@ -412,6 +449,8 @@ def test_a_disc_denoiser_that_cuts_gradients_is_refused_for_them():
 
 @pytest.mark.parametrize("options", [
     {"preset": "vr", "foveal_disc": "resolved", "foveal_disc_iterations": 2},
+    {"preset": "vr", "foveal_disc": "resolved", "foveal_disc_iterations_moving": 2},
+    {"preset": "vr", "foveal_disc_iterations_moving": -2},
     {"preset": "guided", "foveal_disc_sigma_luminance": 2.0},
     {"preset": "vr", "foveal_disc_iterations": 17},
     {"preset": "vr", "foveal_disc": "resolved", "foveal_disc_denoiser": "svgf"},

@@ -74,6 +74,9 @@ class FormationInput(NamedTuple):
     #: the G-buffer is the last frame's and holds: what the formation derives from it alone
     #: may be returned as ``Formed.kept``, to be given back next frame
     keep: bool = False
+    #: the camera moved since the view's last frame, whose history this frame reprojects
+    #: (a host value: a formation may run lighter passes where motion hides their loss)
+    moving: bool = False
 
 
 class Formed(NamedTuple):
@@ -246,7 +249,7 @@ def _form_frame(arrays: dict, key: dict) -> dict:
                          key["width"], key["height"], key["spp"], arrays["fill_seed"],
                          arrays["emission_edges"], arrays["gaze"],
                          space_of(key["space"], arrays["space"]), key["disc_spp"],
-                         arrays["kept"], key["keep"])
+                         arrays["kept"], key["keep"], key["moving"])
     fn = FORMATIONS[key["formation"]].fn
     formed = fn(ShadingBuffer(**arrays["shading"]), inp, key["settings"], StageTimer(False))
     # The image leaves the recording interleaved, as the frame returns it: the last pass
@@ -306,7 +309,7 @@ class FrozenFormation:
         }
         key = {"formation": fs.name, "width": inp.width, "height": inp.height,
                "spp": inp.spp, "settings": fs.settings, "space": inp.space.key(),
-               "disc_spp": inp.disc_spp, "keep": inp.keep}
+               "disc_spp": inp.disc_spp, "keep": inp.keep, "moving": inp.moving}
         with _no_collection():          # a collection inside a recording aborts (above)
             out = self._frozen(arrays, key)
         image = dr.unravel(mi.Color3f, out["flat"])

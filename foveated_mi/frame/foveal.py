@@ -40,7 +40,7 @@ and held filter levels).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import drjit as dr
@@ -95,6 +95,8 @@ class FovealSettings:
     contrast: float = 0.0
     #: the denoiser on the disc's patch (``foveal_disc_iterations``, ...; None: ``denoise``)
     disc_denoise: DenoiseSettings | None = None
+    #: the same where the camera moved (``foveal_disc_iterations_moving``; None: as still)
+    disc_denoise_moving: DenoiseSettings | None = None
 
 
 def foveal_buffer_grid(width: int, height: int, s: FovealSettings) -> PolarGrid:
@@ -537,6 +539,9 @@ def _disc_values(resolved: Resolved, inp: FormationInput, s: FovealSettings,
     patch = lay.cells + dr.arange(mi.UInt32, lay.side * lay.side)
     on = dr.gather(mi.Bool, inp.space.on, patch)
     if s.disc == "denoised":
+        if inp.moving and s.disc_denoise_moving is not None:
+            # The camera moved: the motion hides what the disc's lighter filter leaves.
+            s = replace(s, disc_denoise=s.disc_denoise_moving)
         values = _disc_patch(resolved, inp.gbuffer, patch, on, lay.side, s, grad_pass)
     else:
         values = dr.gather(mi.Color3f, resolved.shading, patch)

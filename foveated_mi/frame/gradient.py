@@ -53,12 +53,12 @@ def formation_input(plan: FramePlan) -> FormationInput:
     Returns
     -------
     inp : FormationInput
-        Its G-buffer, reprojection, history, size, spp, fill seed, emission edges, gaze and
-        sample space.
+        Its G-buffer, reprojection, history, size, spp, fill seed, emission edges, gaze,
+        sample space, and whether the camera moved.
     """
     return FormationInput(plan.gbuffer, plan.reprojection, plan.history, plan.width,
                           plan.height, plan.spp, plan.fill_seed, plan.emission_edges, plan.gaze,
-                          plan.space, plan.disc_spp)
+                          plan.space, plan.disc_spp, moving=plan.moving)
 
 
 def form_primal(plan: FramePlan, shading: ShadingBuffer, fs: FormationSettings,

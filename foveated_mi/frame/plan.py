@@ -84,6 +84,8 @@ class FramePlan:
     #: of what it derives from it alone, kept with the samples (formation settings -> its
     #: ``Formed.kept``); None where the G-buffer is new
     kept: dict | None = None
+    #: the camera moved since the view's last frame, whose history this frame reprojects
+    moving: bool = False
 
 
 @dataclass(eq=False)
@@ -180,9 +182,8 @@ class Planner:
             # A still camera over an unchanged scene reuses the last G-buffer.
             gb, reused = self._geometry.gbuffer(
                 scene, sensor, materials=settings.materials, state=state)
-            # Everything the G-buffer holds is evaluated with the pass: a lazy albedo would
-            # re-run the BSDF dispatch in every later kernel, and would point into the scene
-            # after the scene is gone (a gradient pass can outlive it).
+            # All of it evaluated with the pass: a lazy albedo would re-run the BSDF dispatch in
+            # later kernels, and point into the scene once it is gone (a gradient pass can).
             timer.mark("gbuffer", gb.position, gb.normal, gb.depth, gb.hit, gb.direction,
                        gb.albedo, gb.emission)
             history = self.history if hs.keep else None
@@ -206,15 +207,15 @@ class Planner:
                          probability=prob, reprojection=reproj, reordered=ro, history=history,
                          filter_sampler=self._filter_sampler(sensor, settings.pixel_filter),
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=emitting,
-                         gaze=_sampling.gaze_position(gaze, width, height), space=space)
+                         gaze=_sampling.gaze_position(gaze, width, height), space=space,
+                         moving=self._camera_moved)
 
     def _plan_samples(self, scene, sensor, seed: int, spp: int, settings: PlanSettings,
                       gaze_at: tuple[float, float], timer: StageTimer, state: SceneState,
                       width: int, height: int) -> FramePlan:
-        """The plan of a foveal buffer that keeps nothing on the film
-        (:mod:`foveated_mi.frame.buffer_space`): the G-buffer at its samples only, the
-        history reprojected sample to sample (and the other eye's samples, with a
-        :attr:`partner`), the polar map and its launch."""
+        """The plan of a foveal buffer that keeps nothing on the film (:mod:`.buffer_space`):
+        the G-buffer at its samples only, the history reprojected sample to sample (and the
+        other eye's samples, with a :attr:`partner`), the polar map and its launch."""
         ss, hs = settings.sampling, settings.history
         lay = _buffer_space.layout(width, height, ss.theta, ss.ray_budget,
                                    _sampling.cell_offset(ss, sensor), ss.interleave)
@@ -267,7 +268,8 @@ class Planner:
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=None, gaze=gaze,
                          space=dataclasses.replace(space, rays=rays, traced=traced),
                          disc_rays=disc if disc_spp else None, disc_spp=disc_spp,
-                         ray_shift=shift, kept=sm.kept if reused and self.keep_formation else None)
+                         ray_shift=shift, kept=sm.kept if reused and self.keep_formation else None,
+                         moving=self._camera_moved)
 
     @staticmethod
     def _traced(sm: _Samples, lay, turn: int, borrowing: bool) -> mi.Bool:
@@ -395,7 +397,8 @@ class Planner:
                 or state.scene != self._scene_state:
             self.reset()
             self._scene_ref = id(scene)
-        self._camera_moved = state.camera != self._camera_state
+        # (A view's first frame follows no camera.)
+        self._camera_moved = self._camera_state is not None and state.camera != self._camera_state
         self._scene_state, self._camera_state = state.scene, state.camera
         self._held = state.held
 
