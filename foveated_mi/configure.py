@@ -254,12 +254,11 @@ def disc_denoise_settings(o: Options, moving: bool = False) -> DenoiseSettings |
         ``moving``, None where ``foveal_disc_iterations_moving`` is unset (-1: as still).
     """
     disc = dict(o)
-    if moving and o["foveal_disc_iterations_moving"] < 0:
+    levels = o["foveal_disc_iterations_moving" if moving else "foveal_disc_iterations"]
+    if moving and levels < 0:
         return None
-    if o["foveal_disc_iterations"] >= 0:
-        disc["atrous_iterations"] = o["foveal_disc_iterations"]
-    if moving:
-        disc["atrous_iterations"] = o["foveal_disc_iterations_moving"]
+    if levels >= 0:
+        disc["atrous_iterations"] = levels
     if o["foveal_disc_sigma_luminance"] > 0.0:
         disc["sigma_luminance"] = o["foveal_disc_sigma_luminance"]
     if o["foveal_disc_denoiser"] != "same":

@@ -735,12 +735,13 @@ def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[s
     out = {name: opt.validate(merged[name]) for name, opt in SCHEMA.items()}
     out["preset"] = preset
     out["pixel_filter"] = resolve_pixel_filter(out["pixel_filter"], out["denoiser"])
-    if "foveal_disc_spp" not in options and (out["formation"] != "foveal"
-                                             or out["foveal_space"] != "buffer"):
-        out["foveal_disc_spp"] = 0      # the preset's disc rate needs the buffer's samples
-    if "foveal_disc_iterations_moving" not in options and (out["formation"] != "foveal"
-                                                           or out["foveal_disc"] != "denoised"):
-        out["foveal_disc_iterations_moving"] = -1   # the preset's, for a disc it denoises
+    # The preset's disc rate needs the buffer's samples, its disc levels a denoised disc.
+    foveal = out["formation"] == "foveal"
+    for name, off, needed in (("foveal_disc_spp", 0, out["foveal_space"] == "buffer"),
+                              ("foveal_disc_iterations_moving", -1,
+                               out["foveal_disc"] == "denoised")):
+        if name not in options and not (foveal and needed):
+            out[name] = off
     _check_combination(out)
     return out
 

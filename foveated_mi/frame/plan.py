@@ -183,7 +183,7 @@ class Planner:
             gb, reused = self._geometry.gbuffer(
                 scene, sensor, materials=settings.materials, state=state)
             # All of it evaluated with the pass: a lazy albedo would re-run the BSDF dispatch in
-            # later kernels, and point into the scene once it is gone (a gradient pass can).
+            # later kernels, and point into a scene that a gradient pass can outlive.
             timer.mark("gbuffer", gb.position, gb.normal, gb.depth, gb.hit, gb.direction,
                        gb.albedo, gb.emission)
             history = self.history if hs.keep else None
