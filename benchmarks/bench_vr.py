@@ -184,12 +184,13 @@ def cells_table(rows: list[dict], columns: list[str]) -> list[str]:
     from foveated_mi.study.aggregate import aggregate
     cells = aggregate(rows)
     cols = [c for c in dict.fromkeys(columns) if c != "psnr_fovea"]
-    names = ["scene", "configuration", "seeds", "time ms", "rays", "PSNR", "fovea", "periphery",
-             "flicker, periphery", *cols]
+    names = ["scene", "configuration", "seeds", "time ms", "mean / longest ms", "rays", "PSNR",
+             "fovea", "periphery", "flicker, periphery", *cols]
     out = ["| " + " | ".join(names) + " |", "|" + "---|" * len(names)]
     for r in sorted(cells, key=lambda r: (r["scene"], r["method"] != "foveated", label(r))):
         out.append("| " + " | ".join([
             r["scene"], label(r), str(r["seeds"]), _pm(r, "time_ms", ".0f"),
+            f"{_pm(r, 'time_mean_ms', '.0f')} / {_pm(r, 'time_max_ms', '.0f')}",
             f"{r['ray_fraction']:.0%}", _pm(r, "psnr"), _pm(r, "psnr_fovea"),
             _pm(r, "psnr_periphery"), _pm(r, "flicker_periphery", ".4f"),
             *(_pm(r, c) for c in cols)]) + " |")

@@ -455,6 +455,9 @@ def test_a_study_in_motion_scores_sequences(tmp_path):
     assert ref.shape == (6, 16, 24, 3) and not np.allclose(ref[0], ref[-1])
     assert all(0 < float(r["psnr"]) < math.inf for r in raw)
     assert all(("jod_video" in r and float(r["jod_video"]) <= 10.0) == jod for r in raw)
+    # the frames after the first: their median, mean and longest
+    assert all(0 < float(r["time_ms"]) <= float(r["time_max_ms"])
+               and 0 < float(r["time_mean_ms"]) <= float(r["time_max_ms"]) for r in raw)
     parsed = read_rows(str(tmp_path / "local" / "results.csv"))
     assert all(isinstance(r.get("jod_video", 0.0), float) for r in parsed)   # a number column
     from foveated_mi.study import load_study

@@ -27,7 +27,8 @@ from typing import Any, Iterable
 from ..metrics import COMPARE_KEYS, FLICKER_KEYS
 
 __all__ = ["columns", "ResultsFile", "read_rows", "format_value", "parse_value",
-           "NUMERIC_COLUMNS", "OPTIONAL_COLUMNS", "STEREO_KEYS"]
+           "NUMERIC_COLUMNS", "OPTIONAL_COLUMNS", "STEREO_KEYS",
+           "SEQUENCE_TIME_KEYS"]
 
 _HEAD = ("task_id", "scene", "method", "seed", "theta", "sigma_p", "reconstruction", "spp",
          "frame",
@@ -79,9 +80,12 @@ NUMERIC_COLUMNS = frozenset(("seed", "theta", "sigma_p", "spp", "frame", "rays",
                              "history_hit_rate", "width", "height", "repeats"))
 
 
-#: Columns only some rows carry (a sequence row's flicker, a stereo row's eyes): a file gains
-#: them from the first row that brings them (:meth:`ResultsFile.append`).
-OPTIONAL_COLUMNS = frozenset((*FLICKER_KEYS, *STEREO_KEYS))
+#: A sequence row's frame times after the first besides their median (``time_ms``).
+SEQUENCE_TIME_KEYS = ("time_mean_ms", "time_max_ms")
+
+#: Columns only some rows carry (a sequence row's flicker and frame times, a stereo row's
+#: eyes): a file gains them from the first row that brings them (:meth:`ResultsFile.append`).
+OPTIONAL_COLUMNS = frozenset((*FLICKER_KEYS, *STEREO_KEYS, *SEQUENCE_TIME_KEYS))
 
 
 def format_value(v: Any) -> str:

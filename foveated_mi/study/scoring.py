@@ -123,8 +123,9 @@ def rendered_gazes(scene, task: dict) -> list:
 
 def _sequence_summary(task: dict, n: int, times: list, rays: list,
                       size: tuple[int, int] | None = None) -> dict:
-    """The row's identity, rays and time (the median frame time after the first); its film
-    is the scene's, or ``size`` (a stereo row's eye buffer)."""
+    """The row's identity, rays and time (the median frame time after the first; their mean
+    and the longest beside it, for frames whose cost varies); its film is the scene's, or
+    ``size`` (a stereo row's eye buffer)."""
     spp, seed = task["spp"], task["seed"]
     w, h = size if size is not None else (task["scene"]["width"], task["scene"]["height"])
     return {"task_id": task["task_id"], "scene": task["label"], "method": task["method"],
@@ -132,7 +133,15 @@ def _sequence_summary(task: dict, n: int, times: list, rays: list,
             "variant": task["variant"], "config": task["config"], "frame": n,
             "rays": float(np.mean(rays)) * w * h, "ray_fraction": float(np.mean(rays)),
             "samples": float(np.mean(rays)) * w * h * spp,
-            "time_ms": _median(times[1:])}
+            "time_ms": _median(times[1:]), **_spread_ms(times[1:])}
+
+
+def _spread_ms(times: list) -> dict:
+    """The mean and the longest of frame times (None where a frame has none)."""
+    xs = [float(t) for t in times if t is not None]
+    if not xs:
+        return {}
+    return {"time_mean_ms": float(np.mean(xs)), "time_max_ms": max(xs)}
 
 
 #: How a uniform row's frames run: ``mi.render`` of the nested integrator, traced by Python
