@@ -98,9 +98,10 @@ def frame_settings(o: Options) -> FrameSettings:
     """
     plan = PlanSettings(
         sampling_settings(o), LaunchSettings(o["reorder"], int(o["block_height"]),
-                                            int(o["foveal_disc_spp"])),
+                                            int(o["foveal_disc_spp"]),
+                                            int(o["foveal_still_spp"])),
         HistorySettings(bool(o["history"]), o["reprojection"],
-                        float(o["reprojection_tolerance"])),
+                        float(o["reprojection_tolerance"]), float(o["max_history"])),
         space=formation_space(o),
         materials=bool(o["demodulate"] or o["emission_edges"]
                        or any(DENOISERS[n].materials for n in denoisers_used(o))),

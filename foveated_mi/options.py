@@ -492,6 +492,19 @@ _SCHEMA: tuple[Option, ...] = (
            "(``docs/results.md#each-cells-ray-through-a-moving-point-of-the-cell``). A "
            "small bright emitter inside a cell lights the whole cell in the frames whose "
            "point falls on it, until the history averages it in"),
+    Option("foveal_still_spp", 0, "int", "samples per pixel of a still view's rays once "
+           "their history holds its cap (0: the frame's spp, always)", lo=0, hi=1 << 16,
+           doc="With ``formation = 'foveal'`` in ``foveal_space = 'buffer'`` and ``history``: "
+           "once a view's camera, gaze and scene have held still for as many frames as its "
+           "cells take to fill the history's cap (``max_history`` samples, 32 where it is "
+           "uncapped, at the frame's spp; times the interleave's turns), each cell's ray "
+           "traces this many samples a frame, and the disc's rays once they have filled it "
+           "at their own rate (``foveal_disc_spp``), until the view moves. At its cap the "
+           "history is an exponential average whose noise hardly depends on the samples a "
+           "frame brings, so a still view's frames cost less once they have converged; a "
+           "view in motion never settles (its frames are the same). The first settled frame "
+           "traces kernels of its own once. A value of the frame's spp or more traces the "
+           "frame's (``docs/results.md#a-still-view-that-settles``)"),
     Option("foveal_taa", 1.0, "float", "this frame's weight in what each cell of the foveal "
            "buffer shows: 1 shows its denoised value; below 1, blended with what it showed "
            "last frame, clamped to its neighbours' range", lo=0.0, hi=1.0, lo_open=True,
@@ -639,11 +652,13 @@ PRESETS: dict[str, dict[str, Any]] = {
     # Its disc at most 2 samples a pixel: above that its rays cost more than the fovea's video
     # JOD gains (docs/results.md#the-disc-at-a-sample-rate-of-its-own). The disc at 2 levels
     # where the camera moved: the same video JOD, a moving frame's cost lower
-    # (docs/results.md#the-discs-levels-where-the-camera-moved).
+    # (docs/results.md#the-discs-levels-where-the-camera-moved). A still view settles to one
+    # sample a ray once its history is full: at the cap a sample a frame keeps the same
+    # noise for a quarter of the rays (docs/results.md#a-still-view-that-settles).
     "vr": {"sampling_law": "polar", "formation": "foveal", "ray_budget": 0.1, "theta": 0.15,
            "reorder": "tiles", "edge_threshold": 0.0, "denoiser": "svgf",
            "atrous_iterations": 4, "sigma_luminance": 8.0, "foveal_disc": "denoised",
-           "foveal_disc_spp": 2, "foveal_disc_iterations_moving": 2},
+           "foveal_disc_spp": 2, "foveal_disc_iterations_moving": 2, "foveal_still_spp": 1},
 }
 PRESET_NAMES = ("auto", *PRESETS)
 
@@ -735,9 +750,11 @@ def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[s
     out = {name: opt.validate(merged[name]) for name, opt in SCHEMA.items()}
     out["preset"] = preset
     out["pixel_filter"] = resolve_pixel_filter(out["pixel_filter"], out["denoiser"])
-    # The preset's disc rate needs the buffer's samples, its disc levels a denoised disc.
+    # The preset's disc and still rates need the buffer's samples, its disc levels a
+    # denoised disc.
     foveal = out["formation"] == "foveal"
     for name, off, needed in (("foveal_disc_spp", 0, out["foveal_space"] == "buffer"),
+                              ("foveal_still_spp", 0, out["foveal_space"] == "buffer"),
                               ("foveal_disc_iterations_moving", -1,
                                out["foveal_disc"] == "denoised")):
         if name not in options and not (foveal and needed):
@@ -748,7 +765,7 @@ def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[s
 
 #: Options of the foveal buffer's own samples, and the value that leaves them off.
 _BUFFER_ONLY = (("foveal_interleave", 1), ("foveal_disc_spp", 0), ("foveal_jitter", 0.0),
-                ("foveal_taa", 1.0))
+                ("foveal_taa", 1.0), ("foveal_still_spp", 0))
 
 
 def _check_combination(out: dict[str, Any]) -> None:

@@ -47,7 +47,8 @@ class FrameOutputs:
             if s:
                 s["ray_fraction"] = s["rays"] / s["pixels"]
                 if "disc_rays" in s:     # the disc's rays traced disc_spp samples each
-                    s["lanes_active"] -= s["disc_rays"] * (s["spp"] - s["disc_spp"])
+                    s["lanes_active"] = s["disc_rays"] * s["disc_spp"] \
+                        + (s["rays"] - s["disc_rays"]) * s["cell_spp"]
                 s["edge_fraction"] = s["edge_rays"] / s["pixels"]
                 # The share of the positions reprojected (the film's pixels, or the foveal
                 # buffer's samples on the film) that found their history.
@@ -127,9 +128,13 @@ def trace_mode(trace_replayed: bool, formation_replayed: bool) -> str:
 
 
 def _disc_stats(plan: FramePlan) -> dict[str, Any]:
-    """The foveal disc's rays and their samples, where it has a rate of its own."""
-    return {} if plan.disc_rays is None else {"disc_rays": plan.disc_rays,
-                                              "disc_spp": plan.disc_spp}
+    """The foveal disc's rays and the samples of its rays and of the cells', where the two
+    differ (``spp`` is the larger)."""
+    if plan.disc_rays is None:
+        return {}
+    if plan.cells_low:
+        return {"disc_rays": ~plan.disc_rays, "disc_spp": plan.spp, "cell_spp": plan.disc_spp}
+    return {"disc_rays": plan.disc_rays, "disc_spp": plan.disc_spp, "cell_spp": plan.spp}
 
 
 def frame_outputs(plan: FramePlan, samples, formed: Formed, fs: FormationSettings,

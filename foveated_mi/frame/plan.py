@@ -44,6 +44,9 @@ from .space import BufferSpace, FilmSpace
 #: A camera move after which fewer pixels than this fraction see the surface they saw in the
 #: previous frame is a cut: no pixel of the frame reads the history.
 CUT_HIT_FRACTION = 0.1
+#: The samples after which a still view settles (``foveal_still_spp``) where the history is
+#: uncapped: the default cap's.
+UNCAPPED_SETTLE = 32.0
 
 
 @dataclass
@@ -72,10 +75,12 @@ class FramePlan:
     #: where the G-buffer, shading buffer, reprojection map and history live: the film's
     #: pixels, or the foveal buffer's samples (:mod:`.space`)
     space: FilmSpace | BufferSpace | None = None
-    #: the launch's rays traced at ``disc_spp`` samples (the foveal disc's), when a disc
-    #: rate below ``spp`` is set (``foveal_disc_spp``); else None and 0
+    #: the launch's rays traced at ``disc_spp`` samples, fewer than ``spp``: the foveal
+    #: disc's (``foveal_disc_spp``), or with ``cells_low`` the cells' (a still view's cells
+    #: settled below the disc's rate, ``foveal_still_spp``); else None and 0
     disc_rays: mi.Bool | None = None
     disc_spp: int = 0
+    cells_low: bool = False
     #: per ray of the launch, where it goes through its pixel's film position (pixels):
     #: a cell's point with ``foveal_jitter`` (:func:`~.buffer_space.ray_shifts`), which
     #: moves every frame while the cell's pixel and launch stay; else None
@@ -117,6 +122,7 @@ class Planner:
         self._scene_state = self._camera_state = None
         self._held: tuple = ()     # keeps the variables the states above name alive
         self._camera_moved = False
+        self._still_frames = 0                 # frames a still view has held (samples reused)
         self._geometry = GeometryCache()
         self._emission_cache: tuple | None = None
         self._filter_samplers: dict[tuple, FilterSampler] = {}
@@ -235,8 +241,8 @@ class Planner:
             if history is not None and history.layout != lay:
                 history = None        # kept on the film, or on another buffer's samples
             # Still while the samples, the camera and the gaze hold.
-            reproj, cut = self._reprojection(gb, history, space, sensor, hs,
-                                             reused and self._gaze == gaze_key)
+            still = reused and self._gaze == gaze_key
+            reproj, cut = self._reprojection(gb, history, space, sensor, hs, still)
             self._gaze = gaze_key
             frame_seed = self._frame_seed(seed, cut, hs.keep)
             if partner is not None:
@@ -257,8 +263,8 @@ class Planner:
                 lay, sm.pixels, traced, rays, dr.width(ro.wavefront), gaze, width, height,
                 ss.jitter, _buffer_space.jitter_phase(self.index), reproj.hit)
             timer.mark("reorder", ro.wavefront, rays, disc, shift)
-            rate = settings.launch.disc_spp
-            disc_spp = rate if disc is not None and 0 < rate < spp else 0
+            spp, low, low_spp, cells_low = self._rates(
+                spp, disc, still and history is not None, settings, lay.phases)
         return FramePlan(sensor=sensor, width=width, height=height, spp=spp, seed=frame_seed,
                          map_seed=ss.map_seed if ss.map_seed >= 0 else frame_seed,
                          gbuffer=gb._replace(view_dependent=None), edges=None,
@@ -267,9 +273,31 @@ class Planner:
                          filter_sampler=self._filter_sampler(sensor, settings.pixel_filter),
                          gbuffer_reused=reused, fill_seed=seed, emission_edges=None, gaze=gaze,
                          space=dataclasses.replace(space, rays=rays, traced=traced),
-                         disc_rays=disc if disc_spp else None, disc_spp=disc_spp,
+                         disc_rays=low, disc_spp=low_spp, cells_low=cells_low,
                          ray_shift=shift, kept=sm.kept if reused and self.keep_formation else None,
                          moving=self._camera_moved)
+
+    def _rates(self, spp: int, disc: mi.Bool | None, still: bool, settings: PlanSettings,
+               turns: int) -> tuple[int, mi.Bool | None, int, bool]:
+        """The samples of this frame's rays: ``(spp, rays at a lower rate, that rate, whether
+        they are the cells)``. The disc's rays trace ``foveal_disc_spp`` where it is lower.
+        A still view's cells trace ``foveal_still_spp`` once their history holds its cap at
+        ``spp`` (each cell traced once in ``turns`` frames), its disc once the disc's does at
+        its own rate. Counted on the host, so the trace's kernels are known before it."""
+        self._still_frames = n = self._still_frames + 1 if still else 0
+        ls, hs = settings.launch, settings.history
+        cap = hs.cap if hs.cap > 0 else UNCAPPED_SETTLE
+        own = ls.disc_spp if disc is not None and 0 < ls.disc_spp < spp else spp
+        cells, low = spp, ls.still_spp
+        if 0 < low < cells and n * spp >= cap * turns:
+            cells = low
+        if 0 < low < own and n * own >= cap:
+            own = low
+        if disc is None or own == cells:
+            return cells, None, 0, False
+        # The launch traces every ray's first samples at the lower rate, then the other
+        # rays' rest (shading.lanes_of): the disc's, where the cells settled below it.
+        return (cells, disc, own, False) if own < cells else (own, ~disc, cells, True)
 
     @staticmethod
     def _traced(sm: _Samples, lay, turn: int, borrowing: bool) -> mi.Bool:

@@ -48,6 +48,8 @@ class LaunchSettings:
     block_height: int          #: rows per block of Strategy 2
     #: samples of the foveal disc's rays (``foveal_disc_spp``; 0: the frame's spp)
     disc_spp: int = 0
+    #: samples of a still view's rays once their history is full (``foveal_still_spp``)
+    still_spp: int = 0
 
 
 @dataclass(frozen=True)
@@ -56,6 +58,7 @@ class HistorySettings:
     keep: bool                 #: the option ``history``
     reprojection: str          #: ``exclusive`` or ``nearest`` reads
     tolerance: float           #: relative depth (or plane) tolerance of the reprojection test
+    cap: float = 0.0           #: the samples a history holds at most (0: uncapped)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,96 @@
+"""A still view's rays settle to fewer samples once their history is full (foveal_still_spp)."""
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from foveated_mi.integrators.foveated import FoveatedIntegrator
+from foveated_mi.scenes import load_scene
+from foveated_mi.validate import ParameterError
+
+
+def _scene(size=(64, 48)):
+    return load_scene("cornell-box", width=size[0], height=size[1], spp=4,
+                      integrator={"type": "path", "max_depth": 3})
+
+
+def _sequence(scene, frames, gazes=None, turn=0.0, **o):
+    """Each frame's image, the samples of its cells' and its disc's rays, and its samples'
+    history counts."""
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", ray_budget=0.3, **o)
+    params = mi.traverse(scene)
+    out = []
+    for k in range(frames):
+        if turn and k:
+            a = np.radians(turn * k)
+            params["sensor.to_world"] = mi.ScalarTransform4f().look_at(
+                origin=[3.9 * np.sin(a), 0.0, 3.9 * np.cos(a)], target=[0, 0, 0], up=[0, 1, 0])
+            params.update()
+        if gazes is not None:
+            integ.gaze = gazes[k]
+        image = np.array(mi.render(scene, integrator=integ, spp=4, seed=k))
+        on = np.array(integ.buffers["sample_on"], dtype=bool)
+        count = np.array(integ.buffers["history_count"]).reshape(-1)[:on.size][on]
+        s = integ.stats
+        rates = (s.get("cell_spp", s["spp"]), s.get("disc_spp", s["spp"]))
+        assert s["lanes_active"] == (s["rays"] - s.get("disc_rays", 0)) * rates[0] \
+            + s.get("disc_rays", 0) * rates[1]
+        out.append((image, rates, count))
+    return out
+
+
+def test_a_still_view_settles_once_its_history_is_full_and_keeps_averaging():
+    # Uncapped, a sample settles after 32 samples: the cells after 8 frames at 4 spp, the
+    # disc after 16 at the preset's 2. Each settled frame then adds one sample: 3 frames
+    # past the cells' settling leave 35 in every cell and 22 in every disc pixel (2 a frame
+    # still); 2 past the disc's, 42 and 34.
+    seq = _sequence(_scene(), 18, max_history=0.0, foveal_still_spp=1)
+    assert [r for _, r, _ in seq] == [(4, 2)] * 8 + [(1, 2)] * 8 + [(1, 1)] * 2
+    np.testing.assert_array_equal(np.unique(seq[7][2]), [16, 32])
+    np.testing.assert_array_equal(np.unique(seq[10][2]), [22, 35])
+    np.testing.assert_array_equal(np.unique(seq[17][2]), [34, 42])
+    assert all(np.isfinite(image).all() for image, _, _ in seq)
+
+
+def test_the_cap_decides_when_a_still_view_settles():
+    # A cap of 12 samples is full after 3 frames at 4 spp; the disc's 2 samples are no more
+    # than the settled rate. At the cap each frame's samples replace a share of the history,
+    # which stays at the cap.
+    seq = _sequence(_scene(), 6, max_history=12.0, foveal_still_spp=2)
+    assert [r for _, r, _ in seq] == [(4, 2)] * 3 + [(2, 2)] * 3
+    assert seq[-1][2].max() == 12.0
+
+
+def test_a_gaze_that_moves_traces_the_frame_s_samples_again():
+    gazes = [(0.5, 0.5)] * 4 + [(0.4, 0.45)] * 4
+    seq = _sequence(_scene(), 8, gazes=gazes, max_history=8.0, foveal_still_spp=1)
+    assert [r for _, r, _ in seq] == [(4, 2), (4, 2), (1, 2), (1, 2)] * 2
+
+
+@pytest.mark.parametrize("case", ["moving camera", "as many samples"])
+def test_frames_that_never_settle_are_the_same_frames(case):
+    # A camera that moves every frame never settles; a settled rate of the frame's spp or
+    # more is the frame's: both render what the option left unset renders.
+    scene = _scene()
+    o = dict(turn=0.5) if case == "moving camera" else {}
+    still = 1 if case == "moving camera" else 4
+    base = _sequence(scene, 5, max_history=4.0, foveal_still_spp=0, **o)
+    scene = _scene()
+    other = _sequence(scene, 5, max_history=4.0, foveal_still_spp=still, **o)
+    for (a, ra, _), (b, rb, _) in zip(base, other):
+        assert ra == rb == (4, 2)
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("options", [dict(foveal_still_spp=-1),
+                                     dict(foveal_still_spp=1, foveal_space="film"),
+                                     dict(foveal_still_spp=1, preset="guided")])
+def test_a_settled_rate_outside_the_buffer_or_below_zero_is_refused(options):
+    o = dict(preset="vr", **options) if "preset" not in options else options
+    with pytest.raises(ParameterError, match="foveal_still_spp"):
+        FoveatedIntegrator(**o)
+
+
+def test_the_vr_preset_settles_to_one_sample_in_its_buffer_only():
+    assert FoveatedIntegrator(preset="vr").options["foveal_still_spp"] == 1
+    assert FoveatedIntegrator(preset="vr", foveal_space="film").options["foveal_still_spp"] == 0
+    assert FoveatedIntegrator(preset="guided").options["foveal_still_spp"] == 0
