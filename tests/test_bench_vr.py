@@ -57,16 +57,16 @@ def test_a_tiny_vr_study_runs_end_to_end(bench, tmp_path):
                        "--no-progress"]) == 0
     report = json.loads((res / "vr.json").read_text())
     sps = [s for c in report["conditions"].values() for s in c["speedups"]]
-    # every foveated configuration of the study file against every uniform family, per
-    # condition (without pyoidn, those that need OIDN are left out)
+    # every foveated configuration of the study file against each uniform family and their
+    # envelope, per condition (without pyoidn, those that need OIDN are left out)
     from foveated_mi.config import read_toml
     from foveated_mi.denoise import oidn_available
     configs = read_toml("study", bench.STUDY)[0]["foveated"]["configs"]
     if not oidn_available():
         configs = [c for c in configs if "oidn" not in (c.get("preset"), c.get("denoiser"))]
     assert len(sps) == len(report["conditions"]) * len(configs) * \
-        (4 if oidn_available() else 2)
-    assert all(s["family"] in bench.FAMILIES for s in sps)
+        ((4 if oidn_available() else 2) + 1)
+    assert all(s["family"] in (*bench.FAMILIES, bench.ENVELOPE) for s in sps)
     assert (res / "vr_eccentricity.png").stat().st_size > 0
     assert (res / "vr_side_by_side.mp4").stat().st_size > 0
     assert "Speed-up at equal" in (res / "vr.md").read_text()
