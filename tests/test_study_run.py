@@ -455,6 +455,8 @@ def test_a_study_in_motion_scores_sequences(tmp_path):
     assert ref.shape == (6, 16, 24, 3) and not np.allclose(ref[0], ref[-1])
     assert all(0 < float(r["psnr"]) < math.inf for r in raw)
     assert all(("jod_video" in r and float(r["jod_video"]) <= 10.0) == jod for r in raw)
+    # the samples traced, frame by frame (a foveated row's: its rays' at most)
+    assert all(0 < float(r["samples"]) <= float(r["rays"]) * float(r["spp"]) for r in raw)
     # the frames after the first: their median, mean and longest
     assert all(0 < float(r["time_ms"]) <= float(r["time_max_ms"])
                and 0 < float(r["time_mean_ms"]) <= float(r["time_max_ms"]) for r in raw)

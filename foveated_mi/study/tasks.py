@@ -372,6 +372,8 @@ def _sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = False):
     render, integ = _sequence_renderer(scene, task, rendered[0])
     times, rays, shown, quality, eccs = _sequence_frames(scene, task, refs, render, rendered)
     row = _sequence_summary(task, n, times, rays)
+    if getattr(render, "samples", None):       # as traced, frame by frame
+        row["samples"] = float(np.mean(render.samples))
     modes = getattr(render, "modes", None)      # the row's time: the frames after the first
     row["trace_mode"] = _mode(modes[1:] or modes) if modes else UNIFORM_MODE
     if integ is not None:
@@ -414,8 +416,10 @@ def _sequence_renderer(scene, task: dict, gaze):
                              dtype=np.float32)
             stats = integ.stats
             render_foveated.modes.append(stats["trace_mode"])
+            render_foveated.samples.append(stats["lanes_active"])
             return image, stats["timings_ms"]["total"], stats["ray_fraction"]
         render_foveated.modes = []          # each frame's trace_mode
+        render_foveated.samples = []        # and samples traced (a still view's settle)
         return render_foveated, integ
     from ..baselines import render_uniform
     den = bool(task["options"]["denoise"])
