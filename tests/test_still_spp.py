@@ -94,3 +94,23 @@ def test_the_vr_preset_settles_to_one_sample_in_its_buffer_only():
     assert FoveatedIntegrator(preset="vr").options["foveal_still_spp"] == 1
     assert FoveatedIntegrator(preset="vr", foveal_space="film").options["foveal_still_spp"] == 0
     assert FoveatedIntegrator(preset="guided").options["foveal_still_spp"] == 0
+
+
+def test_both_eyes_of_a_still_head_settle_with_the_second_reusing_the_first():
+    # The second eye traces only what the first eye's samples do not stand for; each eye
+    # counts its own still frames and settles as one eye alone would.
+    from foveated_mi.stereo import Stereo, StereoRig
+    scene = _scene()
+    integ = FoveatedIntegrator(preset="vr", nested=scene.integrator(), ray_budget=0.3,
+                               max_history=8.0)
+    stereo = Stereo(scene, integ, StereoRig(width=40))
+    seen = []
+    for k in range(5):
+        frame = stereo.render(seed=10 * k, spp=4)
+        for eye in ("left", "right"):
+            s = stereo.views[eye].stats
+            seen.append((eye, s.get("cell_spp", s["spp"]), s.get("disc_spp", s["spp"])))
+            assert np.isfinite(np.array(getattr(frame, eye))).all()
+    # Cells full after 2 frames at 4 spp (8 samples), the disc after 4 at 2.
+    rates = [(4, 2), (4, 2), (1, 2), (1, 2), (1, 1)]
+    assert seen == [(eye, *r) for r in rates for eye in ("left", "right")]
