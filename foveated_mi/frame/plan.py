@@ -109,6 +109,8 @@ class _Samples:
     launch: dict = dataclasses.field(default_factory=dict)
     #: what the formation derived from their G-buffer alone (:attr:`FramePlan.kept`)
     kept: dict = dataclasses.field(default_factory=dict)
+    #: per turn: the launch's rays that are not the disc's (cells settled below its rate)
+    cells: dict = dataclasses.field(default_factory=dict)
 
 
 class Planner:
@@ -264,7 +266,7 @@ class Planner:
                 ss.jitter, _buffer_space.jitter_phase(self.index), reproj.hit)
             timer.mark("reorder", ro.wavefront, rays, disc, shift)
             spp, low, low_spp, cells_low = self._rates(
-                spp, disc, still and history is not None, settings, lay.phases)
+                spp, disc, still and history is not None, settings, lay.phases, sm, turn)
         return FramePlan(sensor=sensor, width=width, height=height, spp=spp, seed=frame_seed,
                          map_seed=ss.map_seed if ss.map_seed >= 0 else frame_seed,
                          gbuffer=gb._replace(view_dependent=None), edges=None,
@@ -278,7 +280,7 @@ class Planner:
                          moving=self._camera_moved)
 
     def _rates(self, spp: int, disc: mi.Bool | None, still: bool, settings: PlanSettings,
-               turns: int) -> tuple[int, mi.Bool | None, int, bool]:
+               turns: int, sm: _Samples, turn: int) -> tuple[int, mi.Bool | None, int, bool]:
         """The samples of this frame's rays: ``(spp, rays at a lower rate, that rate, whether
         they are the cells)``. The disc's rays trace ``foveal_disc_spp`` where it is lower.
         A still view's cells trace ``foveal_still_spp`` once their history holds its cap at
@@ -295,9 +297,12 @@ class Planner:
             own = low
         if disc is None or own == cells:
             return cells, None, 0, False
+        if own < cells:
+            return cells, disc, own, False
         # The launch traces every ray's first samples at the lower rate, then the other
-        # rays' rest (shading.lanes_of): the disc's, where the cells settled below it.
-        return (cells, disc, own, False) if own < cells else (own, ~disc, cells, True)
+        # rays' rest (shading.lanes_of): the disc's, where the cells settled below it. The
+        # cells' mask is kept with the launch, so settled frames read one evaluated mask.
+        return own, sm.cells.setdefault(turn, ~disc), cells, True
 
     @staticmethod
     def _traced(sm: _Samples, lay, turn: int, borrowing: bool) -> mi.Bool:
