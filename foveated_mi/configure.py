@@ -24,6 +24,7 @@ from .frame.settings import (DenoiseSettings, DomainSettings, FrameSettings, His
                              SamplingSettings, TraceSettings)
 from .frame.space import SPACES
 from .postprocess import DENOISERS
+from .options import still_rate
 from .validate import check_choice
 
 Options = dict[str, Any]
@@ -99,7 +100,7 @@ def frame_settings(o: Options) -> FrameSettings:
     plan = PlanSettings(
         sampling_settings(o), LaunchSettings(o["reorder"], int(o["block_height"]),
                                             int(o["foveal_disc_spp"]),
-                                            int(o["foveal_still_spp"])),
+                                            *still_rate(o["foveal_still_spp"])),
         HistorySettings(bool(o["history"]), o["reprojection"],
                         float(o["reprojection_tolerance"]), float(o["max_history"])),
         space=formation_space(o),

@@ -279,6 +279,39 @@ def _check_max_history(name: str, value) -> float:
     return v
 
 
+#: The periods over which a still view's settled rays may take turns
+#: (``foveal_still_spp = 1 / k``).
+STILL_PERIODS = range(2, 17)
+_STILL_ALLOWED = (f"0 (off), a whole number of samples in [1, 65536], or 1/k for a whole k "
+                  f"in [{STILL_PERIODS[0]}, {STILL_PERIODS[-1]}] (one sample every k frames)")
+
+
+def _check_still_spp(name: str, value) -> int | float:
+    """0 (off), whole samples in [1, 65536], or ``1 / k`` (one sample every ``k`` frames,
+    :data:`STILL_PERIODS`; given to within float rounding, returned exactly)."""
+    try:
+        v = check_range(name, value, 0.0, 65536.0)
+    except ParameterError:
+        raise ParameterError(name, value, _STILL_ALLOWED) from None
+    if v >= 1.0 or v == 0.0:
+        try:
+            return check_int(name, value, 0, 65536)
+        except ParameterError:
+            raise ParameterError(name, value, _STILL_ALLOWED) from None
+    k = round(1.0 / v)
+    if k not in STILL_PERIODS or abs(k * v - 1.0) > 1e-6:
+        raise ParameterError(name, value, _STILL_ALLOWED)
+    return 1.0 / k
+
+
+def still_rate(value: int | float) -> tuple[int, int]:
+    """``(samples, period)`` of a validated ``foveal_still_spp``: a settled ray traces
+    ``samples`` once in ``period`` frames (``(0, 1)``: off)."""
+    if value >= 1 or value == 0:
+        return int(value), 1
+    return 1, round(1.0 / value)
+
+
 def _choice(name: str, choices: tuple[str, ...], help: str, doc: str | None = None) -> Option:
     """A ``string`` option among the fixed ``choices``, the first of them its default."""
     return Option(name, choices[0], "string", help, choices=choices, doc=doc)
@@ -492,8 +525,10 @@ _SCHEMA: tuple[Option, ...] = (
            "(``docs/results.md#each-cells-ray-through-a-moving-point-of-the-cell``). A "
            "small bright emitter inside a cell lights the whole cell in the frames whose "
            "point falls on it, until the history averages it in"),
-    Option("foveal_still_spp", 0, "int", "samples per pixel of a still view's rays once "
-           "their history holds its cap (0: the frame's spp, always)", lo=0, hi=1 << 16,
+    Option("foveal_still_spp", 0, "float", "samples per pixel of a still view's rays once "
+           "their history holds its cap, a frame (0: the frame's spp, always; 1/k: one "
+           "sample every k frames, the rays in turn)", check=_check_still_spp,
+           allowed=_STILL_ALLOWED,
            doc="With ``formation = 'foveal'`` in ``foveal_space = 'buffer'`` and ``history``: "
            "once a view's camera, gaze and scene have held still for as many frames as its "
            "cells take to fill the history's cap (``max_history`` samples, 32 where it is "
@@ -504,7 +539,12 @@ _SCHEMA: tuple[Option, ...] = (
            "frame brings, so a still view's frames cost less once they have converged; a "
            "view in motion never settles (its frames are the same). The first settled frame "
            "traces kernels of its own once. A value of the frame's spp or more traces the "
-           "frame's (``docs/results.md#a-still-view-that-settles``)"),
+           "frame's (``docs/results.md#a-still-view-that-settles``). Below one, ``1/k`` "
+           "traces one sample every ``k`` frames at each settled ray, a ``k``-th of them "
+           "each frame on an even lattice (:func:`foveated_mi.frame.buffer_space."
+           "settled_turn`), the others showing their history, whose noise at its cap falls "
+           "toward the same floor, ``k`` times more slowly; the disc traces every frame "
+           "until it settles (``docs/results.md#settled-rays-in-turn``)"),
     Option("foveal_taa", 1.0, "float", "this frame's weight in what each cell of the foveal "
            "buffer shows: 1 shows its denoised value; below 1, blended with what it showed "
            "last frame, clamped to its neighbours' range", lo=0.0, hi=1.0, lo_open=True,

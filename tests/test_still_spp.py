@@ -51,6 +51,40 @@ def test_a_still_view_settles_once_its_history_is_full_and_keeps_averaging():
     assert all(np.isfinite(image).all() for image, _, _ in seq)
 
 
+def test_settled_rays_below_one_sample_a_frame_take_turns_each_traced_once_a_period():
+    # foveal_still_spp = 1/4: once settled (frame 8 for the cells, 16 for the disc, as
+    # above), each sample is traced once in every 4 frames, a quarter of them a frame. The
+    # disc traces its 2 samples every frame until it settles, and the cells on its pixels
+    # with it. Uncapped, each traced sample adds exactly one: 4 frames past the cells'
+    # settling leave 33 in every cell and 24 in every disc pixel; 8, 34 and 32; 12, 35, 33.
+    seq = _sequence(_scene(), 20, max_history=0.0, foveal_still_spp=0.25)
+    assert [r for _, r, _ in seq] == [(4, 2)] * 8 + [(1, 2)] * 8 + [(1, 1)] * 4
+    for frame, values in ((11, [24, 33]), (15, [32, 34]), (19, [33, 35])):
+        np.testing.assert_array_equal(np.unique(seq[frame][2]), values)
+    # Within a period, every cell has been traced once by its last frame, and a quarter
+    # of them (to within the lattice's edges) each frame.
+    cells = seq[7][2] == 32
+    done = [np.mean(seq[k][2][cells] == 33) for k in (8, 9, 10)]
+    for k, share in enumerate(done, start=1):
+        assert abs(share - k / 4) < 0.05, done
+    assert all(np.isfinite(image).all() for image, _, _ in seq)
+
+
+@pytest.mark.parametrize("value", [0.3, 1.5, 1 / 32, "half"])
+def test_a_still_rate_that_is_neither_whole_nor_one_in_k_frames_is_refused(value):
+    with pytest.raises(ParameterError, match="foveal_still_spp.*1/k"):
+        FoveatedIntegrator(preset="vr", foveal_still_spp=value)
+
+
+def test_one_sample_in_k_frames_is_read_exactly():
+    from foveated_mi.options import still_rate
+    for given, rate in ((1 / 3, (1, 3)), (0.3333333, (1, 3)), (0.125, (1, 8)), (2, (2, 1)),
+                        (0, (0, 1))):
+        value = FoveatedIntegrator(preset="vr", foveal_still_spp=given).options[
+            "foveal_still_spp"]
+        assert still_rate(value) == rate
+
+
 def test_the_cap_decides_when_a_still_view_settles():
     # A cap of 12 samples is full after 3 frames at 4 spp; the disc's 2 samples are no more
     # than the settled rate. At the cap each frame's samples replace a share of the history,

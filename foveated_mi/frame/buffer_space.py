@@ -191,6 +191,64 @@ def interleaved(lay: SampleLayout, index: int) -> mi.Bool | None:
     return (idx >= lay.cells) | (rank == turn)
 
 
+def settled_turn(lay: SampleLayout, period: int, turn: int, disc: bool) -> mi.Bool:
+    r"""The samples that a settled still view traces on frame ``turn`` of ``period``
+    (``foveal_still_spp = 1 / period``): one in ``period`` of the cells, and of the disc's
+    patch with ``disc`` (else all of it), on the lattice :math:`(x + m y) \bmod p`,
+    :math:`m = \operatorname{round}(\sqrt p)`, so that each frame's samples spread evenly
+    and ``period`` frames trace each sample once (the cells by angle and ring, the patch by
+    column and row). A sample not traced shows its history, which a settled view holds.
+
+    Parameters
+    ----------
+    lay : SampleLayout
+        The samples.
+    period : int
+        Frames in which each sample is traced once (>= 1).
+    turn : int
+        The frame's turn, modulo ``period``.
+    disc : bool
+        Whether the disc's patch takes turns too.
+
+    Returns
+    -------
+    traced : mi.Bool
+        Per sample.
+    """
+    idx = dr.arange(mi.UInt32, lay.size)
+    in_patch = idx >= lay.cells
+    k = dr.select(in_patch, idx - lay.cells, idx)
+    width = dr.select(in_patch, lay.side, lay.grid.width)
+    y = k // width
+    m = max(1, round(math.sqrt(period)))
+    own = (k - y * width + m * y) % period == dr.opaque(mi.UInt32, turn % period)
+    return own | in_patch if not disc else own
+
+
+def on_disc_pixels(lay: SampleLayout, pixels: mi.UInt32, on: mi.Bool,
+                   n_pixels: int) -> mi.Bool:
+    """The samples whose pixel is one of the disc's (the disc's own, and the cells of the
+    rings at its edge that share a pixel with it, and so its ray).
+
+    Parameters
+    ----------
+    lay : SampleLayout
+        The samples.
+    pixels, on : mi.UInt32, mi.Bool
+        Each sample's film pixel, and whether it is on.
+    n_pixels : int
+        The film's pixel count.
+
+    Returns
+    -------
+    mask : mi.Bool
+        Per sample.
+    """
+    disc = dr.zeros(mi.Bool, n_pixels)
+    dr.scatter(disc, True, pixels, on & (dr.arange(mi.UInt32, lay.size) >= lay.cells))
+    return dr.gather(mi.Bool, disc, pixels, on)
+
+
 #: The two-dimensional golden ratio's sequence (Roberts' R2): frame ``k`` of a cell's jitter
 #: is ``frac(h + k * R2)``, ``h`` the cell's own rotation, so that any run of frames covers
 #: the cell evenly, and neighbouring cells do not move in step.

@@ -103,13 +103,14 @@ class _Samples:
     gb: GBuffer
     claimed: tuple | None = None             #: the cells at the other eye's points, whose
     other: ReprojectionMap | None = None     #: the other eye's samples standing for them
-    #: per turn of the interleave: the samples traced, and their launch (reordered,
-    #: sampling map, each sample's ray)
+    #: per turn of the interleave (and of a settled view's period, :meth:`Planner._turn_key`):
+    #: the samples traced, and their launch (reordered, sampling map, each sample's ray)
     traced: dict = dataclasses.field(default_factory=dict)
     launch: dict = dataclasses.field(default_factory=dict)
     #: what the formation derived from their G-buffer alone (:attr:`FramePlan.kept`)
     kept: dict = dataclasses.field(default_factory=dict)
-    #: per turn: the launch's rays that are not the disc's (cells settled below its rate)
+    #: per turn (as above): the launch's rays that are not the disc's (cells settled below
+    #: its rate)
     cells: dict = dataclasses.field(default_factory=dict)
 
 
@@ -252,21 +253,21 @@ class Planner:
                 # the rest is traced.
                 reproj, history = self._borrow(scene, sm, partner, lay, hs, reproj, history,
                                                width, height)
-            turn = self.index % lay.phases
-            if turn not in sm.traced:
-                sm.traced[turn] = self._traced(sm, lay, turn, partner is not None)
-            traced = sm.traced[turn]
+            settled = self._settled(spp, still and history is not None, settings, lay.phases)
+            key = self._turn_key(settled, settings.launch, lay.phases)
+            traced = self._traced_of(sm, lay, key, partner is not None, settings.launch,
+                                     width * height)
             timer.mark("sampling", reproj.hit, reproj.index, traced)
-            if turn not in sm.launch:
-                sm.launch[turn] = self._launch(sm.pixels, traced, width, height,
-                                               settings.launch, lay)
-            ro, smap, rays, disc = sm.launch[turn]
+            if key not in sm.launch:
+                sm.launch[key] = self._launch(sm.pixels, traced, width, height,
+                                              settings.launch, lay)
+            ro, smap, rays, disc = sm.launch[key]
             shift = None if ss.jitter == 0 else _buffer_space.ray_shifts(
                 lay, sm.pixels, traced, rays, dr.width(ro.wavefront), gaze, width, height,
                 ss.jitter, _buffer_space.jitter_phase(self.index), reproj.hit)
             timer.mark("reorder", ro.wavefront, rays, disc, shift)
-            spp, low, low_spp, cells_low = self._rates(
-                spp, disc, still and history is not None, settings, lay.phases, sm, turn)
+            spp, low, low_spp, cells_low = self._rates(spp, disc, settled, settings.launch,
+                                                       sm, key)
         return FramePlan(sensor=sensor, width=width, height=height, spp=spp, seed=frame_seed,
                          map_seed=ss.map_seed if ss.map_seed >= 0 else frame_seed,
                          gbuffer=gb._replace(view_dependent=None), edges=None,
@@ -279,22 +280,40 @@ class Planner:
                          ray_shift=shift, kept=sm.kept if reused and self.keep_formation else None,
                          moving=self._camera_moved)
 
-    def _rates(self, spp: int, disc: mi.Bool | None, still: bool, settings: PlanSettings,
-               turns: int, sm: _Samples, turn: int) -> tuple[int, mi.Bool | None, int, bool]:
-        """The samples of this frame's rays: ``(spp, rays at a lower rate, that rate, whether
-        they are the cells)``. The disc's rays trace ``foveal_disc_spp`` where it is lower.
-        A still view's cells trace ``foveal_still_spp`` once their history holds its cap at
-        ``spp`` (each cell traced once in ``turns`` frames), its disc once the disc's does at
-        its own rate. Counted on the host, so the trace's kernels are known before it."""
+    def _settled(self, spp: int, still: bool, settings: PlanSettings,
+                 turns: int) -> tuple[bool, bool]:
+        """Whether a still view's cells, and its disc, have settled (``foveal_still_spp``):
+        the cells once their history holds its cap at ``spp`` (each cell traced once in
+        ``turns`` frames), the disc once it does at its own rate. Counted on the host, so
+        that the launch and the trace's kernels are known before they run."""
         self._still_frames = n = self._still_frames + 1 if still else 0
         ls, hs = settings.launch, settings.history
         cap = hs.cap if hs.cap > 0 else UNCAPPED_SETTLE
+        own = ls.disc_spp if 0 < ls.disc_spp < spp else spp
+        rate = ls.still_spp / ls.still_period
+        return (0 < rate < spp and n * spp >= cap * turns,
+                0 < rate < own and n * own >= cap)
+
+    def _turn_key(self, settled: tuple[bool, bool], ls, turns: int) -> tuple:
+        """The frame's samples traced, as a key of their cache: the interleave's turn (of
+        ``turns``) and, once a still view's cells have settled to one sample in ``foveal_still_spp``'s
+        period, that period's turn (advanced once every interleave cycle, so that every
+        pair of turns comes round) and whether the disc takes turns too."""
+        turn = self.index % turns
+        if ls.still_period == 1 or not settled[0]:
+            return (turn,)
+        return (turn, self._still_frames // turns % ls.still_period, settled[1])
+
+    @staticmethod
+    def _rates(spp: int, disc: mi.Bool | None, settled: tuple[bool, bool], ls, sm: _Samples,
+               key: tuple) -> tuple[int, mi.Bool | None, int, bool]:
+        """The samples of this frame's rays: ``(spp, rays at a lower rate, that rate, whether
+        they are the cells)``. The disc's rays trace ``foveal_disc_spp`` where it is lower, a
+        settled view's (:meth:`_settled`) ``foveal_still_spp`` (one, below one a frame)."""
         own = ls.disc_spp if disc is not None and 0 < ls.disc_spp < spp else spp
-        cells, low = spp, ls.still_spp
-        if 0 < low < cells and n * spp >= cap * turns:
-            cells = low
-        if 0 < low < own and n * own >= cap:
-            own = low
+        low = max(ls.still_spp, 1)
+        cells = low if settled[0] else spp
+        own = low if settled[1] else own
         if disc is None or own == cells:
             return cells, None, 0, False
         if own < cells:
@@ -302,17 +321,30 @@ class Planner:
         # The launch traces every ray's first samples at the lower rate, then the other
         # rays' rest (shading.lanes_of): the disc's, where the cells settled below it. The
         # cells' mask is kept with the launch, so settled frames read one evaluated mask.
-        return own, sm.cells.setdefault(turn, ~disc), cells, True
+        return own, sm.cells.setdefault(key, ~disc), cells, True
 
     @staticmethod
-    def _traced(sm: _Samples, lay, turn: int, borrowing: bool) -> mi.Bool:
-        """The samples a frame traces: those on, with interleave only this ``turn``'s cells
-        (the rest show their history), and none that the other eye's samples stand for."""
+    def _traced_of(sm: _Samples, lay, key: tuple, borrowing: bool, ls,
+                   n_pixels: int) -> mi.Bool:
+        """The samples a frame traces (its ``key``: :meth:`_turn_key`), kept with the
+        samples: those on, with interleave only this turn's cells (the rest show their
+        history), once settled to one sample in a period only that period's turn, and none
+        that the other eye's samples stand for."""
+        if key in sm.traced:
+            return sm.traced[key]
         traced = sm.on
-        phase = _buffer_space.interleaved(lay, turn)
+        phase = _buffer_space.interleaved(lay, key[0])
         if phase is not None:
             traced = traced & phase
-        return traced & ~sm.other.hit if borrowing else traced
+        if len(key) > 1:
+            turn = _buffer_space.settled_turn(lay, ls.still_period, key[1], key[2])
+            if not key[2]:
+                # A cell on a disc pixel holds the disc's rate of samples, not the cells':
+                # traced with the disc while the disc traces every frame.
+                turn |= _buffer_space.on_disc_pixels(lay, sm.pixels, sm.on, n_pixels)
+            traced = traced & turn
+        sm.traced[key] = traced & ~sm.other.hit if borrowing else traced
+        return sm.traced[key]
 
     def _borrow(self, scene, sm: _Samples, partner: History, lay, hs, reproj, history,
                 width: int, height: int):

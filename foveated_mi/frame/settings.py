@@ -48,8 +48,11 @@ class LaunchSettings:
     block_height: int          #: rows per block of Strategy 2
     #: samples of the foveal disc's rays (``foveal_disc_spp``; 0: the frame's spp)
     disc_spp: int = 0
-    #: samples of a still view's rays once their history is full (``foveal_still_spp``)
+    #: samples of a still view's rays once their history is full (``foveal_still_spp``;
+    #: 1 where it is below one)
     still_spp: int = 0
+    #: frames in which a settled ray traces them once (1 / ``foveal_still_spp`` below one)
+    still_period: int = 1
 
 
 @dataclass(frozen=True)
