@@ -693,12 +693,13 @@ PRESETS: dict[str, dict[str, Any]] = {
     # JOD gains (docs/results.md#the-disc-at-a-sample-rate-of-its-own). The disc at 2 levels
     # where the camera moved: the same video JOD, a moving frame's cost lower
     # (docs/results.md#the-discs-levels-where-the-camera-moved). A still view settles to one
-    # sample a ray once its history is full: at the cap a sample a frame keeps the same
-    # noise for a quarter of the rays (docs/results.md#a-still-view-that-settles).
+    # sample every eight frames a ray, in turn, once its history is full: the same video
+    # JOD or more, less flicker, an eighth of the rays
+    # (docs/results.md#settled-rays-in-turn).
     "vr": {"sampling_law": "polar", "formation": "foveal", "ray_budget": 0.1, "theta": 0.15,
            "reorder": "tiles", "edge_threshold": 0.0, "denoiser": "svgf",
            "atrous_iterations": 4, "sigma_luminance": 8.0, "foveal_disc": "denoised",
-           "foveal_disc_spp": 2, "foveal_disc_iterations_moving": 2, "foveal_still_spp": 1},
+           "foveal_disc_spp": 2, "foveal_disc_iterations_moving": 2, "foveal_still_spp": 0.125},
 }
 PRESET_NAMES = ("auto", *PRESETS)
 

@@ -83,8 +83,10 @@ def test_a_still_view_flickers_less_and_ends_no_worse():
     ref = to_display(np.array(mi.render(scene, spp=512, seed=99)))
     out = {}
     for taa in (1.0, 0.2):
+        # The disc as the cells, and every frame tracing its samples (a settled view's
+        # rays take turns: most samples bring no new noise to blend).
         integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", foveal_taa=taa,
-                                   foveal_disc_spp=0)   # the disc as the cells
+                                   foveal_disc_spp=0, foveal_still_spp=0)
         frames = [to_display(np.array(mi.render(scene, integrator=integ, seed=k)))
                   for k in range(16)]
         per = _periphery(W, H, integ)

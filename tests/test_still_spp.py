@@ -124,8 +124,8 @@ def test_a_settled_rate_outside_the_buffer_or_below_zero_is_refused(options):
         FoveatedIntegrator(**o)
 
 
-def test_the_vr_preset_settles_to_one_sample_in_its_buffer_only():
-    assert FoveatedIntegrator(preset="vr").options["foveal_still_spp"] == 1
+def test_the_vr_preset_settles_to_one_sample_in_eight_frames_in_its_buffer_only():
+    assert FoveatedIntegrator(preset="vr").options["foveal_still_spp"] == 0.125
     assert FoveatedIntegrator(preset="vr", foveal_space="film").options["foveal_still_spp"] == 0
     assert FoveatedIntegrator(preset="guided").options["foveal_still_spp"] == 0
 
