@@ -34,7 +34,8 @@ def _add_frame_options(p: argparse.ArgumentParser) -> None:
         elif opt.kind == "point":
             kwargs.update(type=float, nargs=2, metavar=("X", "Y"))
         elif opt.kind in ("float", "sigma"):
-            kwargs["type"] = float
+            # An option with a check of its own reads the text itself (``1/8``).
+            kwargs["type"] = str if opt.check is not None else float
         elif opt.kind == "int":
             kwargs["type"] = int
         p.add_argument("--" + name.replace("_", "-"), **kwargs)

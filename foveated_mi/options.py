@@ -288,18 +288,20 @@ _STILL_ALLOWED = (f"0 (off), a whole number of samples in [1, 65536], or 1/k for
 
 def _check_still_spp(name: str, value) -> int | float:
     """0 (off), whole samples in [1, 65536], or ``1 / k`` (one sample every ``k`` frames,
-    :data:`STILL_PERIODS`; given to within float rounding, returned exactly)."""
+    :data:`STILL_PERIODS`; a number to within float rounding, or the text ``"1/k"``;
+    returned exactly). An error names the value as given."""
+    v = value
+    if isinstance(value, str) and value.replace(" ", "").startswith("1/"):
+        k = value.replace(" ", "")[2:]
+        v = 1.0 / int(k) if k.isdigit() and int(k) > 0 else value
     try:
-        v = check_range(name, value, 0.0, 65536.0)
+        f = check_range(name, v, 0.0, 65536.0)
+        if f >= 1.0 or f == 0.0:
+            return check_int(name, v, 0, 65536)
     except ParameterError:
         raise ParameterError(name, value, _STILL_ALLOWED) from None
-    if v >= 1.0 or v == 0.0:
-        try:
-            return check_int(name, value, 0, 65536)
-        except ParameterError:
-            raise ParameterError(name, value, _STILL_ALLOWED) from None
-    k = round(1.0 / v)
-    if k not in STILL_PERIODS or abs(k * v - 1.0) > 1e-6:
+    k = round(1.0 / f)
+    if k not in STILL_PERIODS or abs(k * f - 1.0) > 1e-6:
         raise ParameterError(name, value, _STILL_ALLOWED)
     return 1.0 / k
 

@@ -60,6 +60,8 @@ def test_render_writes_exr_layers_png_and_stats(tmp_path, capsys):
     (["--reconstruction", "cubic"], "reconstruction = 'cubic' is invalid"),
     (["--map-seed", "-2"], "map_seed = -2 is invalid"),
     (["--stereo", "--ipd", "0"], "--ipd = 0.0 is invalid"),
+    (["--preset", "vr", "--foveal-still-spp", "1/32"], "foveal_still_spp = '1/32' is invalid"),
+    (["--preset", "vr", "--max-history", "0.5"], "max_history = '0.5' is invalid"),
 ])
 def test_bad_flags_one_line_exit_2(args, needle, capsys, tmp_path):
     out = tmp_path / "x.exr"

@@ -70,7 +70,7 @@ def test_settled_rays_below_one_sample_a_frame_take_turns_each_traced_once_a_per
     assert all(np.isfinite(image).all() for image, _, _ in seq)
 
 
-@pytest.mark.parametrize("value", [0.3, 1.5, 1 / 32, "half"])
+@pytest.mark.parametrize("value", [0.3, 1.5, 1 / 32, "half", "1/32", "1/0", "2/8"])
 def test_a_still_rate_that_is_neither_whole_nor_one_in_k_frames_is_refused(value):
     with pytest.raises(ParameterError, match="foveal_still_spp.*1/k"):
         FoveatedIntegrator(preset="vr", foveal_still_spp=value)
@@ -78,8 +78,8 @@ def test_a_still_rate_that_is_neither_whole_nor_one_in_k_frames_is_refused(value
 
 def test_one_sample_in_k_frames_is_read_exactly():
     from foveated_mi.options import still_rate
-    for given, rate in ((1 / 3, (1, 3)), (0.3333333, (1, 3)), (0.125, (1, 8)), (2, (2, 1)),
-                        (0, (0, 1))):
+    for given, rate in ((1 / 3, (1, 3)), (0.3333333, (1, 3)), (0.125, (1, 8)), ("1/8", (1, 8)),
+                        ("1 / 16", (1, 16)), (2, (2, 1)), (0, (0, 1))):
         value = FoveatedIntegrator(preset="vr", foveal_still_spp=given).options[
             "foveal_still_spp"]
         assert still_rate(value) == rate
