@@ -386,6 +386,17 @@ _SCHEMA: tuple[Option, ...] = (
            doc="Gaze in normalised film coordinates, origin top-left; outside [0, 1]^2 is "
            "legal (the viewer looks off-screen). Mitsuba's XML ``<point>`` needs a ``z`` "
            "attribute, which is ignored"),
+    Option("gaze_hold_deg", 0.0, "float", "the rendered gaze holds while the given one "
+           "stays within this many degrees of it (0: every gaze is rendered as it comes)",
+           lo=0.0, hi=30.0,
+           doc="A fixation filter for an eye tracker's jitter: each view renders the gaze it "
+           "rendered last while the given gaze (the tracker's) stays within this radius of "
+           "it, in degrees at the film's centre (its pixels per degree there, from the "
+           "sensor's projection), and the given gaze as soon as it leaves, so that a "
+           "saccade moves the samples at once and a fixation is a still view: its samples, "
+           "disc and history stay, and with ``foveal_still_spp`` it settles. The rendered "
+           "gaze is then up to this far from the true one. Stats: ``gaze`` (rendered) and "
+           "``gaze_tracked`` (given)"),
     Option("reorder", "compact", "string", "ray reordering (§3.2): the trace wavefront's "
            "layout", choices=_reorder_modes),
     Option("pixel_filter", "auto", "string", "how samples honour the film's filter (auto: "
@@ -697,11 +708,14 @@ PRESETS: dict[str, dict[str, Any]] = {
     # (docs/results.md#the-discs-levels-where-the-camera-moved). A still view settles to one
     # sample every eight frames a ray, in turn, once its history is full: the same video
     # JOD or more, less flicker, an eighth of the rays
-    # (docs/results.md#settled-rays-in-turn).
+    # (docs/results.md#settled-rays-in-turn). The gaze held within 1 degree: a tracker's
+    # jitter of 0.25 degrees would keep a fixation from ever settling, and a hold of 0.5
+    # does not absorb it (docs/results.md#an-eye-trackers-jitter-held).
     "vr": {"sampling_law": "polar", "formation": "foveal", "ray_budget": 0.1, "theta": 0.15,
            "reorder": "tiles", "edge_threshold": 0.0, "denoiser": "svgf",
            "atrous_iterations": 4, "sigma_luminance": 8.0, "foveal_disc": "denoised",
-           "foveal_disc_spp": 2, "foveal_disc_iterations_moving": 2, "foveal_still_spp": 0.125},
+           "foveal_disc_spp": 2, "foveal_disc_iterations_moving": 2, "foveal_still_spp": 0.125,
+           "gaze_hold_deg": 1.0},
 }
 PRESET_NAMES = ("auto", *PRESETS)
 

@@ -46,6 +46,8 @@ class View:
         self.index = index
         self.planner = Planner()                 #: history, frame count, caches
         self._gaze: tuple[float, float] | None = None
+        self._held: tuple[float, float] | None = None   # the gaze frames render (a hold)
+        self._landing = False         # the last frame's gaze left the hold: a saccade
         self._last = Hidden()                    # the last primal frame (gradient pass)
         self.outputs = FrameOutputs({}, {}, {})  #: the last frame's buffers and stats
 
@@ -68,9 +70,45 @@ class View:
     def primal(self, frame) -> None:
         self._last.value = frame
 
+    def held_gaze(self, gaze, hold_px: float, width: int, height: int,
+                  commit: bool = True) -> tuple[float, float]:
+        """The gaze this view's frame renders under ``gaze_hold_deg``: the one it rendered
+        last while ``gaze`` (the tracker's) lies within ``hold_px`` film pixels of it, else
+        ``gaze``, which is then held. A tracker's jitter then moves neither the samples nor
+        the disc, so a fixation is a still view; a saccade moves them at once, and the
+        frame after it renders its landing (a gaze within the hold of the saccade's last
+        one) rather than holding a point of its flight.
+
+        Parameters
+        ----------
+        gaze : tuple of float
+            The tracked gaze, a normalised film position.
+        hold_px : float
+            The hold's radius in film pixels (0: every gaze is rendered as it comes).
+        width, height : int
+            The film's size.
+        commit : bool, optional
+            Hold what it returns (False: the gaze a frame would render, the hold unchanged).
+
+        Returns
+        -------
+        gaze : tuple of float
+            The gaze to render.
+        """
+        g, h = (float(gaze[0]), float(gaze[1])), self._held
+        inside = h is not None and \
+            ((g[0] - h[0]) * width) ** 2 + ((g[1] - h[1]) * height) ** 2 <= hold_px * hold_px
+        if inside and not self._landing:
+            return h
+        if commit:
+            self._held, self._landing = g, h is not None and not inside
+        return g
+
     def reset(self) -> None:
-        """Forget the history (this view's next frame starts fresh, as frame 0)."""
+        """Forget the history (this view's next frame starts fresh, as frame 0) and the
+        gaze it held."""
         self.planner.reset()
+        self._held, self._landing = None, False
 
     @property
     def frame(self) -> int:

@@ -58,6 +58,7 @@ from ..configure import denoisers_used, formation_settings, frame_settings, view
 from ..frame.formation import FrozenFormation, replayable
 from ..frame.gbuffer import film_size
 from ..frame.reproject import History
+from ..frame.sampling import sensor_ppd
 from ..frame.scene_state import scene_state
 from ..frame.settings import FrameSettings
 from ..frame.shading import is_ad_integrator
@@ -186,18 +187,28 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             # mi.render(scene, params) with parameters that need gradients: 'auto' becomes
             # the exact preset before this primal frame, which the gradient pass reuses.
             self._prepare_gradients()
-        o, timer = self._view_options(view), StageTimer(self._options["timing"])
+        o, timer = self._view_options(view, sensor), StageTimer(self._options["timing"])
         # The graph is kept when mi.render will differentiate the frame.
         record = state.differentiated and gradient_refusal(o) is None
         frame = self._frame(scene, sensor, seed, spp, state, o, record, timer)
         stats = {k: (list(v) if k == "gaze" else v) for k, v in o.items() if k != "timing"}
+        stats["gaze_tracked"] = list(self._tracked_gaze(view))
         # Plan, trace, form, commit (foveated_mi.frame.pipeline).
         return _pipeline.primal_frame(view, self._passes(), frame, self._settings, timer, stats)
 
-    def _view_options(self, view) -> dict[str, Any]:
-        """The options as ``view`` reads them: its own gaze, where it has one."""
-        o = self._options
-        return o if view.gaze is None else {**o, "gaze": view.gaze}
+    def _tracked_gaze(self, view) -> tuple[float, float]:
+        """``view``'s gaze as given: its own, else the ``gaze`` option."""
+        return self._options["gaze"] if view.gaze is None else view.gaze
+
+    def _view_options(self, view, sensor: mi.Sensor, commit: bool = True) -> dict[str, Any]:
+        """The options as ``view`` reads them: its own gaze where it has one, held within
+        ``gaze_hold_deg`` of the gaze it rendered last (:meth:`~.View.held_gaze`; degrees
+        at the film's centre; ``commit``: a frame that is rendered, not only planned)."""
+        o, gaze = self._options, self._tracked_gaze(view)
+        if o["gaze_hold_deg"] > 0:
+            gaze = view.held_gaze(gaze, o["gaze_hold_deg"] * sensor_ppd(sensor),
+                                  *film_size(sensor), commit=commit)
+        return o if gaze == o["gaze"] else {**o, "gaze": gaze}
 
     @staticmethod
     def _compile(o: dict[str, Any]) -> FrameSettings:
@@ -265,7 +276,8 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         if p is not None and p.scene_id == id(scene) and p.plan.sensor is sensor:
             return p
         frame = self._frame(scene, sensor, seed, spp, scene_state(scene, sensor),
-                            self._view_options(view), False, StageTimer(False))
+                            self._view_options(view, sensor, commit=False), False,
+                            StageTimer(False))
         return _pipeline.uncommitted_frame(view, self._passes(), frame, self._settings)
 
     # -- results: the view rendered last (``views[i]`` holds each view's) --------------------
