@@ -296,9 +296,9 @@ class Planner:
 
     def _turn_key(self, settled: tuple[bool, bool], ls, turns: int) -> tuple:
         """The frame's samples traced, as a key of their cache: the interleave's turn (of
-        ``turns``) and, once a still view's cells have settled to one sample in ``foveal_still_spp``'s
-        period, that period's turn (advanced once every interleave cycle, so that every
-        pair of turns comes round) and whether the disc takes turns too."""
+        ``turns``) and, once a still view's cells have settled to one sample in a period of
+        ``foveal_still_spp``, that period's turn (advanced once every interleave cycle, so
+        that every pair of turns comes round) and whether the disc takes turns too."""
         turn = self.index % turns
         if ls.still_period == 1 or not settled[0]:
             return (turn,)
