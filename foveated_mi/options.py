@@ -291,9 +291,9 @@ def _check_still_spp(name: str, value) -> int | float:
     :data:`STILL_PERIODS`; a number to within float rounding, or the text ``"1/k"``;
     returned exactly). An error names the value as given."""
     v = value
-    if isinstance(value, str) and value.replace(" ", "").startswith("1/"):
-        k = value.replace(" ", "")[2:]
-        v = 1.0 / int(k) if k.isdigit() and int(k) > 0 else value
+    text = value.replace(" ", "") if isinstance(value, str) else ""
+    if text.startswith("1/") and text[2:].isdigit() and int(text[2:]) > 0:
+        v = 1.0 / int(text[2:])
     try:
         f = check_range(name, v, 0.0, 65536.0)
         if f >= 1.0 or f == 0.0:

@@ -289,7 +289,7 @@ class Planner:
         self._still_frames = n = self._still_frames + 1 if still else 0
         ls, hs = settings.launch, settings.history
         cap = hs.cap if hs.cap > 0 else UNCAPPED_SETTLE
-        own = ls.disc_spp if 0 < ls.disc_spp < spp else spp
+        own = self._disc_rate(ls, spp)
         rate = ls.still_spp / ls.still_period
         return (0 < rate < spp and n * spp >= cap * turns,
                 0 < rate < own and n * own >= cap)
@@ -305,12 +305,17 @@ class Planner:
         return (turn, self._still_frames // turns % ls.still_period, settled[1])
 
     @staticmethod
-    def _rates(spp: int, disc: mi.Bool | None, settled: tuple[bool, bool], ls, sm: _Samples,
-               key: tuple) -> tuple[int, mi.Bool | None, int, bool]:
+    def _disc_rate(ls, spp: int) -> int:
+        """The samples of the disc's rays: ``foveal_disc_spp`` where it is below ``spp``."""
+        return ls.disc_spp if 0 < ls.disc_spp < spp else spp
+
+    @classmethod
+    def _rates(cls, spp: int, disc: mi.Bool | None, settled: tuple[bool, bool], ls,
+               sm: _Samples, key: tuple) -> tuple[int, mi.Bool | None, int, bool]:
         """The samples of this frame's rays: ``(spp, rays at a lower rate, that rate, whether
         they are the cells)``. The disc's rays trace ``foveal_disc_spp`` where it is lower, a
         settled view's (:meth:`_settled`) ``foveal_still_spp`` (one, below one a frame)."""
-        own = ls.disc_spp if disc is not None and 0 < ls.disc_spp < spp else spp
+        own = cls._disc_rate(ls, spp) if disc is not None else spp
         low = max(ls.still_spp, 1)
         cells = low if settled[0] else spp
         own = low if settled[1] else own
