@@ -189,25 +189,33 @@ def test_history_resets_on_a_cut(live):
     assert not m["cut"] and m["history_frame"] == 1
 
 
-def _green(d):
-    """Mean green excess of the shown frame (the traced overlay tints pixels green)."""
-    px = js(d, "Array.from(document.getElementById('view').getContext('2d')"
-               ".getImageData(0, 0, 64, 36).data)")
+def _shown(d):
+    """Mean green excess of the shown frame (the traced overlay tints pixels green) and that
+    frame's meta, read in one script: the page draws a frame and sets its meta in one task,
+    so the two always belong to the same frame."""
+    px, m = d.execute_script(
+        "return [Array.from(document.getElementById('view').getContext('2d')"
+        ".getImageData(0, 0, 64, 36).data), window.live.meta]")
     a = np.array(px, dtype=float).reshape(-1, 4)
-    return float(np.mean(a[:, 1] - 0.5 * (a[:, 0] + a[:, 2])))
+    return float(np.mean(a[:, 1] - 0.5 * (a[:, 0] + a[:, 2]))), m
+
+
+def _green(d):
+    return _shown(d)[0]
 
 
 def test_an_overlay_toggles(page):
     g0 = _green(page)
     page.find_element("id", "ov-traced").click()
-    m = wait_for(lambda: "traced" in meta(page)["overlays"] and meta(page), 5, "the overlay")
+    g, m = wait_for(lambda: (s := _shown(page)) and "traced" in s[1]["overlays"] and s, 5,
+                    "the overlay")
     assert js(page, "window.live.state.overlays") == ["traced"]
     # Each traced pixel tinted 60 % toward (40, 255, 90) gains about 0.6 * (255 - 65) = 114
     # of green excess; a settled still view traces a turn of its rays (foveal_still_spp),
-    # so the rise follows the frame's rays: at least a quarter of that, for the scene's own
-    # green wall and the frames that differ.
+    # so the rise follows the shown frame's rays: at least a quarter of that, for the scene's
+    # own green wall and the frames that differ.
     assert m["rays"] > 0
-    assert _green(page) - g0 > 0.25 * 114.0 * m["rays"] / (W * H)
+    assert g - g0 > 0.25 * 114.0 * m["rays"] / (W * H)
     page.find_element("id", "ov-traced").click()
     wait_for(lambda: meta(page)["overlays"] == [] and meta(page)["frame"] > m["frame"], 5,
              "the overlay off")
