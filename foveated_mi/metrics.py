@@ -53,7 +53,8 @@ normalised to sum 1. :func:`eccentricity_weighted_psnr` is the PSNR of the weigh
 a reference sequence of its own (one reference per frame, so a camera's own motion cancels):
 the root mean square of :math:`(t_k - t_{k-1}) - (r_k - r_{k-1})` per ring of eccentricity
 in degrees, over the periphery and over the whole frame. A still error is no flicker; noise
-that changes from frame to frame is.
+that changes from frame to frame is. :func:`temporal_instability_map` gives the same figure
+per pixel, to see where a sequence flickers.
 """
 from __future__ import annotations
 
@@ -67,6 +68,7 @@ from .validate import ParameterError, check_point2, check_range
 __all__ = ["psnr", "ssim", "flip", "compare", "fovea_mask", "eccentricity_weights",
            "eccentricity_weighted_psnr", "normalized_distance", "ssim_win_size",
            "temporal_instability", "TemporalInstability", "flicker_ring_columns",
+           "temporal_instability_map",
            "COMPARE_KEYS", "SSIM_WIN_SIZE", "FLICKER_RINGS_DEG", "FLICKER_KEYS"]
 
 SSIM_WIN_SIZE = 7
@@ -714,6 +716,36 @@ def temporal_instability(test_frames, ref_frames, eccentricity_deg=None,
     ring_rms = np.array([_rms(a, b) for a, b in zip(sums.ring_se, sums.ring_n)])
     periphery = _rms(sums.per_se, sums.per_n) if eccs is not None else math.nan
     return TemporalInstability(ring_rms, periphery, _rms(sums.all_se, sums.all_n), edges)
+
+
+def temporal_instability_map(test_frames, ref_frames) -> np.ndarray:
+    r"""Where a sequence flickers: :func:`temporal_instability` per pixel, the root mean
+    square over the channels and every pair of consecutive frames of
+    :math:`(t_k - t_{k-1}) - (r_k - r_{k-1})`, so that the square root of the mean of the map's
+    squares over the frame is ``temporal_instability(...).frame``.
+
+    Parameters
+    ----------
+    test_frames, ref_frames : (F, H, W) or (F, H, W, C) array_like, or sequences of F frames
+        As :func:`temporal_instability`'s: display-referred, finite, F >= 2, one shape.
+
+    Returns
+    -------
+    numpy.ndarray
+        (H, W) float64, in display values; 0 where the test changes as the reference does.
+
+    Bad input raises :func:`temporal_instability`'s one-line ``ParameterError``.
+    """
+    test, ref, _, _, _ = _flicker_inputs(test_frames, ref_frames, None, FLICKER_RINGS_DEG,
+                                         5.0)
+    total = np.zeros(test[0].shape[:2])
+    prev = test[0].astype(np.float64) - ref[0]
+    for k in range(1, len(test)):
+        err = test[k].astype(np.float64) - ref[k]
+        sq = np.square(err - prev)
+        prev = err
+        total += sq.mean(axis=-1) if sq.ndim == 3 else sq
+    return np.sqrt(total / (len(test) - 1))
 
 
 def _flicker_inputs(test_frames, ref_frames, eccentricity_deg, rings, fovea_deg):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from foveated_mi.metrics import (FLICKER_KEYS, FLICKER_RINGS_DEG, flicker_ring_columns,
-                                 temporal_instability)
+                                 temporal_instability, temporal_instability_map)
 from foveated_mi.validate import ParameterError
 
 from tolerances import U64, gamma
@@ -83,6 +83,30 @@ def test_periphery_flicker_raises_the_periphery_and_leaves_the_fovea_at_zero():
     noisy = ref + outside * rng.normal(0.0, 0.02, ref.shape)
     fn = temporal_instability(noisy, ref, ecc)
     assert fn.rings[0] == 0.0 and fn.periphery > 0.02 and np.all(fn.rings[1:] > 0.02)
+
+
+def test_the_map_shows_where_it_flickers_and_squares_to_the_frames_figure():
+    """Alternating +-a outside the fovea over a moving reference: the map is 2a exactly there
+    and 0 exactly inside (dyadic values), and the root mean square of the map over the frame
+    is the whole frame's figure, to float64 roundings over the sums."""
+    rng = np.random.default_rng(5)
+    ref = _moving(rng)
+    ecc = _ecc()
+    a = 1.0 / 16.0
+    outside = ecc >= 5.0
+    sign = np.where(np.arange(F) % 2 == 0, 1.0, -1.0)[:, None, None, None]
+    test = ref + outside[None, :, :, None] * sign * a
+    m = temporal_instability_map(test, ref)
+    assert m.shape == (H, W)
+    assert np.all(m[outside] == 2 * a) and np.all(m[~outside] == 0.0)
+    noisy = ref + rng.normal(0.0, 0.02, ref.shape)
+    m = temporal_instability_map(list(noisy), list(ref))
+    n = (F - 1) * H * W * 3
+    assert math.sqrt(np.mean(m * m)) == pytest.approx(
+        temporal_instability(noisy, ref).frame, rel=gamma(n + 8, U64))
+    assert np.array_equal(temporal_instability_map(ref, ref.copy()), np.zeros((H, W)))
+    with pytest.raises(ParameterError, match=r"^test_frames = .*a change needs two frames"):
+        temporal_instability_map(ref[:1], ref[:1])
 
 
 def test_a_pixel_is_in_the_ring_of_the_later_frame_of_each_pair():
