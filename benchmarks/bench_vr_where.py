@@ -3,7 +3,7 @@ first frames or after them.
 
     python benchmarks/bench_vr_where.py --study configs/studies/vr_periphery_screen.toml \
         --out out/vr_periphery_screen [--rows 0 10] [--after 4] [--budgets 0.1 0.25] \
-        [--frames 36]
+        [--frames 36] [--flicker-map PNG [--crop X Y W H]]
 
 Run it after the study, whose references it reads from ``--out``. Each chosen row
 (``--rows``: indices among the study's rows of its first scene and seed, the foveated rows
@@ -17,6 +17,9 @@ references:
   seam) taken from the reference: what a perfect fovea would add;
 * with everything outside that disc taken from the reference: what a perfect periphery
   would add.
+
+With ``--flicker-map PNG`` (and ``--crop X Y W H``), a picture of where each chosen row
+flickers, pixel by pixel, above its middle frame, beside the reference's own change.
 
 With ``--disc-from``, each chosen row is also scored with the disc around each frame's gaze
 taken from another row of the same seed (say the same preset at fewer spp): what its disc's
@@ -156,6 +159,34 @@ def _flicker(scene, task, shown: list, ref_d: np.ndarray) -> dict:
                                 fovea_deg=task["metrics"].get("fovea_deg", 5.0)).columns()
 
 
+def flicker_picture(path: str, seqs: list, names: list[str], crop=None,
+                    full_scale: float = 0.2) -> None:
+    """Where each sequence flickers: a column per sequence, its temporal instability per
+    pixel (:func:`foveated_mi.metrics.temporal_instability_map`; white at ``full_scale``
+    display values) above its middle frame as shown; a last column with the reference's own
+    change per pixel (the RMS of :math:`r_k - r_{k-1}`: where the scene moves) above the
+    reference's middle frame. ``crop``: ``(x, y, width, height)`` in pixels, each panel
+    shown at twice its size."""
+    import imageio.v3 as iio
+    from foveated_mi.metrics import temporal_instability_map
+    ref = seqs[0][0]
+    k = len(ref) // 2
+    still = np.repeat(ref[:1], len(ref), axis=0)       # a still test: the reference's change
+    maps = [temporal_instability_map(test, ref) for _, test in seqs]
+    maps.append(temporal_instability_map(still, ref))
+    frames = [test[k] for _, test in seqs] + [ref[k]]
+    x, y, w, h = crop if crop else (0, 0, ref.shape[2], ref.shape[1])
+    cols = []
+    for m, f in zip(maps, frames):
+        grey = np.repeat(np.clip(m / full_scale, 0.0, 1.0)[..., None], 3, axis=-1)
+        cols.append(np.concatenate([grey[y:y + h, x:x + w], f[y:y + h, x:x + w]], axis=0))
+    img = (np.clip(np.concatenate(cols, axis=1), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    if crop:
+        img = img.repeat(2, axis=0).repeat(2, axis=1)
+    iio.imwrite(path, img)
+    print(f"flicker picture: {path} (columns: {', '.join(names)}, the reference)")
+
+
 def _name(task) -> str:
     """A row as the study's tables name it: its preset, spp and the options set beside."""
     if task["method"] != "foveated":
@@ -191,6 +222,10 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=None,
                     help="frames per sequence, as bench_vr.py's --frames (default: the study's)")
     ap.add_argument("--json", default=None, help="also write the figures here")
+    ap.add_argument("--flicker-map", default=None, dest="flicker_map",
+                    help="write where each of --rows flickers, per pixel, to this PNG")
+    ap.add_argument("--crop", type=int, nargs=4, default=None, metavar=("X", "Y", "W", "H"),
+                    help="the flicker picture's crop, in pixels (shown at twice its size)")
     args = ap.parse_args(argv)
     import foveated_mi
     from foveated_mi.perceptual import available
@@ -245,6 +280,9 @@ def main(argv=None) -> int:
         out["rows"].append(got)
         print(f"| {got['name']} | {got['as_shown']:.2f} | {got['after']:.2f} "
               f"| {got['reference_disc']:.2f} | {got['reference_periphery']:.2f} |", flush=True)
+    if args.flicker_map:
+        flicker_picture(args.flicker_map, [seq(r) for r in args.rows],
+                        [_name(tasks[r]) for r in args.rows], args.crop)
     if args.disc_from:
         print("\n| row | its disc from | video JOD |\n|---|---|---|")
     for r in args.rows if args.disc_from else ():

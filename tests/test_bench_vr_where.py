@@ -104,3 +104,32 @@ def test_a_still_view_s_one_reference_stands_for_each_frame(where):
         np.testing.assert_array_equal(f, still)
     moving = np.zeros((4, 2, 3, 3))
     assert where.per_frame(moving, 4) is moving
+
+
+def test_the_flicker_picture_shows_where_each_row_flickers(where, tmp_path):
+    """Two rows over a moving reference: one exact, one flickering in a 4x4 block only. Each
+    column's map is black where the row changes as the reference does, white where it
+    flickers by the full scale; the last column shows the reference's own change."""
+    import imageio.v3 as iio
+    F, H, W = 4, 12, 16
+    rng = np.random.default_rng(0)
+    wide = rng.integers(0, 5, size=(H, W + F, 3)) / 8.0
+    ref = np.stack([wide[:, k:k + W] for k in range(F)])        # shifting a pixel a frame
+    flicker = ref.copy()
+    sign = np.where(np.arange(F) % 2 == 0, 0.1, -0.1)[:, None, None, None]
+    flicker[:, 4:8, 4:8] += sign                                 # changes by 0.2 a frame
+    path = tmp_path / "where.png"
+    where.flicker_picture(str(path), [(ref, ref), (ref, flicker)], ["exact", "flicker"])
+    img = iio.imread(path)
+    assert img.shape == (2 * H, 3 * W, 3)
+    maps = img[:H, :, 0]
+    assert (maps[:, :W] == 0).all()                              # the exact row
+    block = np.zeros((H, W), bool)
+    block[4:8, 4:8] = True
+    assert (maps[:, W:2 * W][block] == 255).all() and (maps[:, W:2 * W][~block] == 0).all()
+    assert maps[:, 2 * W:].max() > 0                             # the reference moves
+    cropped = tmp_path / "crop.png"
+    where.flicker_picture(str(cropped), [(ref, flicker)], ["flicker"], crop=(4, 4, 4, 4))
+    img = iio.imread(cropped)
+    assert img.shape == (2 * 2 * 4, 2 * 2 * 4, 3)
+    assert (img[:8, :8, 0] == 255).all()                         # the block, twice its size
