@@ -116,14 +116,11 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     import foveated_mi
     from bench_vr_where import _name, study_rows
-    from foveated_mi.config import read_toml
     from foveated_mi.metrics import FLICKER_RINGS_DEG
     from foveated_mi.study.pictures import cached_reference
-    from foveated_mi.study.spec import parse_study
+    from foveated_mi.study.spec import load_study
     variant = foveated_mi.set_variant(None)
-    data, path = read_toml("study", args.study)
-    spec = parse_study(data, base_dir=os.path.dirname(os.path.abspath(path)), source=path,
-                       name=os.path.splitext(os.path.basename(path))[0])
+    spec = load_study(args.study)
     tasks = [t for t in study_rows(spec, variant) if t["method"] == "foveated"]
     bad = [r for r in args.rows if not 0 <= r < len(tasks)]
     if bad:

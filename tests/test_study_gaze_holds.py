@@ -1,8 +1,5 @@
 """benchmarks/study_gaze_holds.py: the frames of a study whose gaze a hold renders otherwise."""
-import importlib.util
-import os
-
-BENCH = os.path.join(os.path.dirname(__file__), "..", "benchmarks", "study_gaze_holds.py")
+BENCH_MODULE = "study_gaze_holds"  # the conftest's ``bench`` fixture imports it
 
 STUDY = """
 description = "saccades on a tiny film"
@@ -26,17 +23,9 @@ spp = [1]
 """
 
 
-def _bench():
-    spec = importlib.util.spec_from_file_location("study_gaze_holds", BENCH)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-def test_no_hold_renders_every_gaze_and_a_wide_one_holds_the_saccades(tmp_path):
+def test_no_hold_renders_every_gaze_and_a_wide_one_holds_the_saccades(bench, tmp_path):
     path = tmp_path / "study.toml"
     path.write_text(STUDY)
-    bench = _bench()
     assert bench.held_frames(str(path), 0.0) == (12, 0)
     frames, changed = bench.held_frames(str(path), 30.0)   # wider than any saccade here
     assert frames == 12 and changed > 0

@@ -316,7 +316,7 @@ class Planner:
         they are the cells)``. The disc's rays trace ``foveal_disc_spp`` where it is lower, a
         settled view's (:meth:`_settled`) ``foveal_still_spp`` (one, below one a frame)."""
         own = cls._disc_rate(ls, spp) if disc is not None else spp
-        low = max(ls.still_spp, 1)
+        low = ls.still_spp          # settled only where it is set: 1 or more
         cells = low if settled[0] else spp
         own = low if settled[1] else own
         if disc is None or own == cells:
