@@ -206,7 +206,8 @@ def film_settings(width: int, height: int, o: Options) -> FilmSettings:
     """
     return FilmSettings(float(o["max_history"]), domain_settings(o), reconstruction_settings(o),
                         denoise_settings(o),
-                        jfa_bound(width, height, sampling_settings(o), o["gaze"]))
+                        jfa_bound(width, height, sampling_settings(o), o["gaze"]),
+                        moving_denoise_settings(o))
 
 
 def foveal_settings(width: int, height: int, o: Options) -> FovealSettings:
@@ -231,13 +232,52 @@ def foveal_settings(width: int, height: int, o: Options) -> FovealSettings:
     grid = lay.grid if o["foveal_space"] == "buffer" else foveal_grid(
         width, height, float(o["ray_budget"]), fovea_radius(width, height, o["theta"]),
         offset)
+    disc, disc_moving = disc_denoise_settings(o), disc_denoise_settings(o, moving=True)
     return FovealSettings(float(o["max_history"]), domain_settings(o), denoise_settings(o),
                           o["foveal_upsampling"], o["foveal_space"], o["foveal_disc"], lay,
-                          grid, float(o["foveal_taa"]), float(o["foveal_contrast"]),
-                          disc_denoise_settings(o), disc_denoise_settings(o, moving=True))
+                          grid, float(o["foveal_taa"]), float(o["foveal_contrast"]), disc,
+                          None if disc_moving == disc else disc_moving,
+                          moving_denoise_settings(o))
 
 
-def disc_denoise_settings(o: Options, moving: bool = False) -> DenoiseSettings | None:
+def moving_options(o: Options) -> Options:
+    """The options a frame whose camera moved reads: ``sigma_luminance_moving`` in place of
+    ``sigma_luminance`` where it is set.
+
+    Parameters
+    ----------
+    o : dict
+        The validated options.
+
+    Returns
+    -------
+    options : dict
+        ``o`` itself, or a copy with the moving frame's colour test.
+    """
+    if float(o["sigma_luminance_moving"]) <= 0.0:
+        return o
+    return {**o, "sigma_luminance": o["sigma_luminance_moving"]}
+
+
+def moving_denoise_settings(o: Options) -> DenoiseSettings | None:
+    """The denoiser of a frame whose camera moved, where it differs from a still frame's.
+
+    Parameters
+    ----------
+    o : dict
+        The validated options.
+
+    Returns
+    -------
+    settings : DenoiseSettings or None
+        :func:`denoise_settings` of :func:`moving_options`; None where it is the still
+        frame's (``sigma_luminance_moving`` unset, or a denoiser that does not read it).
+    """
+    moving = denoise_settings(moving_options(o))
+    return None if moving == denoise_settings(o) else moving
+
+
+def disc_denoise_settings(o: Options, moving: bool = False) -> DenoiseSettings:
     """The denoiser of the foveal disc's patch: the frame's, with ``foveal_disc_iterations``
     and ``foveal_disc_sigma_luminance`` in place of the buffer's levels and colour test where
     they are set.
@@ -247,18 +287,20 @@ def disc_denoise_settings(o: Options, moving: bool = False) -> DenoiseSettings |
     o : dict
         The validated options.
     moving : bool, optional
-        The denoiser of a frame whose camera moved: ``foveal_disc_iterations_moving`` levels.
+        The denoiser of a frame whose camera moved: ``foveal_disc_iterations_moving`` levels
+        where set, and the moving frame's colour test (:func:`moving_options`).
 
     Returns
     -------
-    settings : DenoiseSettings or None
-        As :func:`denoise_settings` gives for the disc's values of those options; with
-        ``moving``, None where ``foveal_disc_iterations_moving`` is unset (-1: as still).
+    settings : DenoiseSettings
+        As :func:`denoise_settings` gives for the disc's values of those options.
     """
+    levels = o["foveal_disc_iterations"]
+    if moving:
+        if o["foveal_disc_iterations_moving"] >= 0:
+            levels = o["foveal_disc_iterations_moving"]
+        o = moving_options(o)
     disc = dict(o)
-    levels = o["foveal_disc_iterations_moving" if moving else "foveal_disc_iterations"]
-    if moving and levels < 0:
-        return None
     if levels >= 0:
         disc["atrous_iterations"] = levels
     if o["foveal_disc_sigma_luminance"] > 0.0:

@@ -597,6 +597,15 @@ _SCHEMA: tuple[Option, ...] = (
     Option("sigma_normal", 0.1, "sigma", "à-trous normal sigma"),
     Option("sigma_position", 0.5, "sigma", "à-trous position sigma"),
     Option("sigma_luminance", 4.0, "sigma", "SVGF colour sigma, in noise standard deviations"),
+    Option("sigma_luminance_moving", 0.0, "float", "SVGF colour sigma in a frame whose "
+           "camera moved, in noise standard deviations (0: sigma_luminance, as a still frame)",
+           lo=0.0, hi=1e9,
+           doc="With ``denoiser = 'svgf'``: the colour test of a frame whose camera moved "
+           "since the view's last (setting the camera's parameters, even to the same values, "
+           "is a move), on the frame and on the foveal disc where it has no colour test of "
+           "its own (0: ``sigma_luminance``, as a still frame). A still view's history "
+           "averages its noise away where a moving view's starts afresh; smoothing across "
+           "edges that slide as the head turns is what flickers"),
     _choice("oidn_quality", ("high", "balanced", "fast"), "OIDN's quality setting"),
     Option("tonemap", "reinhard", "string", "tone-mapping operator (filter domain and PNG "
            "output)", choices=lambda: tonemappers()),

@@ -210,6 +210,8 @@ def test_a_still_view_accumulates_history_in_the_traced_pixels(space):
     ({"preset": "vr", "tonemap_samples": True},
      r"tonemap_samples = True is invalid: expected False with formation = 'foveal'"),
     ({"preset": "vr", "ray_budget": 0.0}, r"ray_budget = 0\.0 is invalid"),
+    ({"preset": "vr", "sigma_luminance_moving": -1.0},
+     r"sigma_luminance_moving = -1\.0 is invalid: expected a finite number >= 0"),
 ])
 def test_bad_combinations_get_one_line(bad, match):
     with pytest.raises(ParameterError, match=match) as e:
@@ -379,6 +381,43 @@ def test_a_moving_camera_s_disc_takes_its_own_levels():
         assert not np.array_equal(moving[k][inner], default[k][inner]), k
     for a, b in zip(frames(0.0, foveal_disc_iterations_moving=-1)[1],
                     frames(0.0, foveal_disc_iterations_moving=1)[1]):
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("base", [{"preset": "vr"},
+                                  {"preset": "vr", "foveal_space": "film"},
+                                  {"preset": "paper", "denoiser": "svgf"}],
+                         ids=["vr", "vr-film", "film-svgf"])
+def test_a_moving_camera_takes_its_own_colour_test(base):
+    # sigma_luminance_moving holds where the camera moved since the last frame, on the cells
+    # and the disc alike: that frame is the one sigma_luminance renders at that value, since
+    # the history holds the samples before any filter. A still camera, and the first frame,
+    # keep the still colour test.
+    W, H = 64, 48
+    scene = _scene((W, H), spp=1)
+    params = mi.traverse(scene)
+
+    def frames(turn: float, **o):
+        integ = FoveatedIntegrator(nested=scene.integrator(), **base, **o)
+        out = []
+        for k in range(3):
+            if k == 0 or turn:                # a still camera is set once
+                a = np.radians(turn * k)
+                params["sensor.to_world"] = mi.ScalarTransform4f().look_at(
+                    origin=[3.9 * np.sin(a), 0.0, 3.9 * np.cos(a)], target=[0, 0, 0],
+                    up=[0, 1, 0])
+                params.update()
+            out.append(np.array(mi.render(scene, integrator=integ, seed=k)))
+        return out
+
+    default = frames(0.6)
+    moving = frames(0.6, sigma_luminance_moving=1.0)
+    one = frames(0.6, sigma_luminance=1.0)
+    np.testing.assert_array_equal(moving[0], default[0])
+    for k in (1, 2):
+        np.testing.assert_array_equal(moving[k], one[k])
+        assert not np.array_equal(moving[k], default[k]), k
+    for a, b in zip(frames(0.0), frames(0.0, sigma_luminance_moving=1.0)):
         np.testing.assert_array_equal(a, b)
 
 

@@ -34,6 +34,8 @@ class FilmSettings:
     denoise: DenoiseSettings
     #: the longest Jump Flooding step the frame's sampling law needs (:func:`jfa_bound`)
     jfa_bound: int | None
+    #: the denoiser where the camera moved (``sigma_luminance_moving``; None: as still)
+    denoise_moving: DenoiseSettings | None = None
 
 
 def jfa_bound(width: int, height: int, law: SamplingSettings,
@@ -105,6 +107,7 @@ def form_film(shading: ShadingBuffer, inp: FormationInput, s: FilmSettings,
         ``moment2``).
     """
     gb, width, height, d = inp.gbuffer, inp.width, inp.height, s.domain
+    denoise = s.denoise_moving if inp.moving and s.denoise_moving is not None else s.denoise
     if d.demodulate and inp.emission_edges is not None:
         # At an emitter's edge the emission seen at the pixel's centre is not its footprint's
         # (a partial cover of the light): subtracting it could leave negative irradiance,
@@ -123,7 +126,7 @@ def form_film(shading: ShadingBuffer, inp: FormationInput, s: FilmSettings,
                            interpolated=domain.from_display_samples(recon.interpolated, d))
     timer.mark("reconstruct", recon.nearest, recon.filled, recon.interpolated)
     # Post-processing (§3.5): the registered denoiser, the albedo multiplied back.
-    post = post_pass(recon, resolved, gb, width, height, d, s.denoise, grad_pass)
+    post = post_pass(recon, resolved, gb, width, height, d, denoise, grad_pass)
     timer.mark("post", post.image)
     buffers = {"traced": shading.mask, "shading": resolved.shading,
                "shading_mask": resolved.mask, "history_count": resolved.count,

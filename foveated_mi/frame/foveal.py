@@ -95,8 +95,12 @@ class FovealSettings:
     contrast: float = 0.0
     #: the denoiser on the disc's patch (``foveal_disc_iterations``, ...; None: ``denoise``)
     disc_denoise: DenoiseSettings | None = None
-    #: the same where the camera moved (``foveal_disc_iterations_moving``; None: as still)
+    #: the same where the camera moved (``foveal_disc_iterations_moving``,
+    #: ``sigma_luminance_moving``; None: as still)
     disc_denoise_moving: DenoiseSettings | None = None
+    #: the buffer's denoiser where the camera moved (``sigma_luminance_moving``; None: as
+    #: still)
+    denoise_moving: DenoiseSettings | None = None
 
 
 def foveal_buffer_grid(width: int, height: int, s: FovealSettings) -> PolarGrid:
@@ -457,6 +461,29 @@ def _bilinear(cells: mi.Float, grid: PolarGrid, x0: mi.Float, y0: mi.Float, fx: 
     return dr.select(wsum > 0.0, acc / dr.select(wsum > 0.0, wsum, 1.0), 0.0)
 
 
+def moving_settings(s: FovealSettings, moving: bool) -> FovealSettings:
+    """The settings a frame reads: where the camera moved, the denoisers of a moving frame
+    (``sigma_luminance_moving``, ``foveal_disc_iterations_moving``) in place of a still one's.
+
+    Parameters
+    ----------
+    s : FovealSettings
+        The formation's settings.
+    moving : bool
+        Whether the frame's camera moved since the view's last.
+
+    Returns
+    -------
+    settings : FovealSettings
+        ``s``, or a copy with the moving frame's denoisers.
+    """
+    if not moving or (s.denoise_moving is None and s.disc_denoise_moving is None):
+        return s
+    # The motion hides what a lighter filter leaves.
+    return replace(s, denoise=s.denoise_moving or s.denoise,
+                   disc_denoise=s.disc_denoise_moving or s.disc_denoise)
+
+
 def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
                 timer: StageTimer, grad_pass: bool = False) -> Formed:
     """History resolve, denoising in the buffer, one warp (module docstring).
@@ -466,6 +493,7 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
     shading, inp, s, timer, grad_pass
         As :func:`~.film.form_film`'s, ``s`` a :class:`FovealSettings`. Returns the
         :class:`~.formation.Formed`: the image on the film, the buffers and the history."""
+    s = moving_settings(s, inp.moving)
     if inp.space.kind == "buffer":
         return _form_in_buffer(shading, inp, s, timer, grad_pass)
     width, height = inp.width, inp.height
@@ -495,9 +523,8 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
                                      s.upsampling), gb, d, clamp=True)
     # The fovea disc shows its own pixels, blended into the warp across the seam.
     film = Grid.film(width, height)
-    p = film.film_position(film.cells()[0])
-    r = dr.norm(p - inp.gaze)
-    t = dr.clip((grid.fovea - r) / SEAM, 0.0, 1.0)
+    t = dr.clip((grid.fovea - dr.norm(film.film_position(film.cells()[0]) - inp.gaze))
+                / SEAM, 0.0, 1.0)
     own = resolved.mask & (t > 0.0)
     mine = resolved.shading
     if s.disc == "denoised":
@@ -539,9 +566,6 @@ def _disc_values(resolved: Resolved, inp: FormationInput, s: FovealSettings,
     patch = lay.cells + dr.arange(mi.UInt32, lay.side * lay.side)
     on = dr.gather(mi.Bool, inp.space.on, patch)
     if s.disc == "denoised":
-        if inp.moving and s.disc_denoise_moving is not None:
-            # The camera moved: the motion hides what the disc's lighter filter leaves.
-            s = replace(s, disc_denoise=s.disc_denoise_moving)
         values = _disc_patch(resolved, inp.gbuffer, patch, on, lay.side, s, grad_pass)
     else:
         values = dr.gather(mi.Color3f, resolved.shading, patch)
