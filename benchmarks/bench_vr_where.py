@@ -3,7 +3,7 @@ first frames or after them.
 
     python benchmarks/bench_vr_where.py --study configs/studies/vr_periphery_screen.toml \
         --out out/vr_periphery_screen [--rows 0 10] [--after 4] [--budgets 0.1 0.25] \
-        [--frames 36] [--flicker-map PNG [--crop X Y W H]]
+        [--frames 36] [--flicker-map PNG [--crop X Y W H]] [--per-frame]
 
 Run it after the study, whose references it reads from ``--out``. Each chosen row
 (``--rows``: indices among the study's rows of its first scene and seed, the foveated rows
@@ -20,6 +20,10 @@ references:
 
 With ``--flicker-map PNG`` (and ``--crop X Y W H``), a picture of where each chosen row
 flickers, pixel by pixel, above its middle frame, beside the reference's own change.
+
+With ``--per-frame``, each chosen row's flicker per ring of eccentricity for each pair of
+consecutive frames, with how far the gaze moved: which frames a row's flicker comes from
+(say, those after a saccade).
 
 With ``--disc-from``, each chosen row is also scored with the disc around each frame's gaze
 taken from another row of the same seed (say the same preset at fewer spp): what its disc's
@@ -159,6 +163,35 @@ def _flicker(scene, task, shown: list, ref_d: np.ndarray) -> dict:
                                 fovea_deg=task["metrics"].get("fovea_deg", 5.0)).columns()
 
 
+def per_frame_flicker(shown, ref, eccs, fovea_deg: float = 5.0) -> np.ndarray:
+    """(F - 1, rings): the study's flicker in each ring of eccentricity, for each pair of
+    consecutive frames of ``shown`` against ``ref`` (display values), each pair's rings at
+    its later frame's eccentricities ``eccs`` (:func:`~foveated_mi.metrics.
+    temporal_instability` of that pair alone; nan where no pixel falls in a ring)."""
+    from foveated_mi.metrics import FLICKER_RINGS_DEG, temporal_instability
+    return np.array([temporal_instability([shown[k - 1], shown[k]], [ref[k - 1], ref[k]],
+                                          [eccs[k - 1], eccs[k]], FLICKER_RINGS_DEG,
+                                          fovea_deg=fovea_deg).rings
+                     for k in range(1, len(shown))])
+
+
+def _per_frame_table(scene, task, seq, name: str) -> list[list[float]]:
+    """Prints a row's :func:`per_frame_flicker`, each pair with how far the gaze moved into
+    its later frame (in film widths); returns the rings' figures."""
+    from foveated_mi.metrics import FLICKER_RINGS_DEG
+    from foveated_mi.study.scoring import _viewing
+    gazes = np.asarray(task["motion"]["gazes"], dtype=float)
+    eccs = [_viewing(scene, dict(task, gaze=g))["eccentricity"] for g in task["motion"]["gazes"]]
+    rings = per_frame_flicker(seq[1], seq[0], eccs, task["metrics"].get("fovea_deg", 5.0))
+    heads = " | ".join(f"{a:g}-{b:g}°" for a, b in zip(FLICKER_RINGS_DEG, FLICKER_RINGS_DEG[1:]))
+    print(f"\n{name}, flicker per frame\n\n| frame | gaze step | {heads} |\n|---|---|"
+          + "---|" * rings.shape[1])
+    for k, r in enumerate(rings, start=1):
+        step = float(np.hypot(*(gazes[k] - gazes[k - 1])))
+        print(f"| {k} | {step:.3f} | " + " | ".join(f"{v:.4f}" for v in r) + " |")
+    return rings.tolist()
+
+
 def flicker_picture(path: str, seqs: list, names: list[str], crop=None,
                     full_scale: float = 0.2) -> None:
     """Where each sequence flickers: a column per sequence, its temporal instability per
@@ -224,6 +257,8 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None, help="also write the figures here")
     ap.add_argument("--flicker-map", default=None, dest="flicker_map",
                     help="write where each of --rows flickers, per pixel, to this PNG")
+    ap.add_argument("--per-frame", action="store_true", dest="per_frame",
+                    help="print each row's flicker per ring for each pair of frames")
     ap.add_argument("--crop", type=int, nargs=4, default=None, metavar=("X", "Y", "W", "H"),
                     help="the flicker picture's crop, in pixels (shown at twice its size)")
     args = ap.parse_args(argv)
@@ -283,6 +318,12 @@ def main(argv=None) -> int:
     if args.flicker_map:
         flicker_picture(args.flicker_map, [seq(r) for r in args.rows],
                         [_name(tasks[r]) for r in args.rows], args.crop)
+    if args.per_frame:
+        from foveated_mi.study.tasks import get_scene
+        scene = get_scene(tasks[0]["scene"], variant)
+        out["per_frame"] = {_name(tasks[r]): _per_frame_table(scene, tasks[r], seq(r),
+                                                              _name(tasks[r]))
+                            for r in args.rows}
     if args.disc_from:
         print("\n| row | its disc from | video JOD |\n|---|---|---|")
     for r in args.rows if args.disc_from else ():

@@ -133,3 +133,20 @@ def test_the_flicker_picture_shows_where_each_row_flickers(where, tmp_path):
     img = iio.imread(cropped)
     assert img.shape == (2 * 2 * 4, 2 * 2 * 4, 3)
     assert (img[:8, :8, 0] == 255).all()                         # the block, twice its size
+
+
+def test_per_frame_flicker_names_the_pairs_and_rings_that_flicker(where):
+    """A moving reference copied exactly but for one frame's change in the pixels at 20-35°:
+    only the two pairs that frame belongs to flicker, in that ring only, by the change."""
+    F, H, W = 5, 8, 10
+    rng = np.random.default_rng(1)
+    ref = rng.random((F, H, W, 3))
+    ecc = np.tile(np.linspace(0.0, 60.0, W), (H, 1))            # 0-60° left to right
+    ring = (ecc >= 20.0) & (ecc < 35.0)
+    shown = ref.copy()
+    shown[2][ring] += 0.1
+    got = where.per_frame_flicker(shown, ref, [ecc] * F)
+    assert got.shape == (F - 1, 5)
+    flick = np.zeros_like(got)
+    flick[1:3, 3] = 0.1                                          # pairs (1, 2) and (2, 3)
+    np.testing.assert_allclose(got, flick, atol=1e-12)
