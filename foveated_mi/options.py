@@ -603,9 +603,12 @@ _SCHEMA: tuple[Option, ...] = (
            doc="With ``denoiser = 'svgf'``: the colour test of a frame whose camera moved "
            "since the view's last (setting the camera's parameters, even to the same values, "
            "is a move), on the frame and on the foveal disc where it has no colour test of "
-           "its own (0: ``sigma_luminance``, as a still frame). A still view's history "
-           "averages its noise away where a moving view's starts afresh; smoothing across "
-           "edges that slide as the head turns is what flickers"),
+           "its own (0: ``sigma_luminance``, as a still frame; a ``sigma_luminance`` given "
+           "without it holds in every frame, whatever the preset sets). The ``vr`` preset's "
+           "6, against 8 still: smoothing across the edges that slide as the head turns is "
+           "what flickers, and with 6 the periphery at 10-20 degrees flickered no more than "
+           "uniform + history's at the same video JOD, where a still head scores its best "
+           "at 8 (``docs/results.md#svgfs-colour-test-where-the-camera-moved``)"),
     _choice("oidn_quality", ("high", "balanced", "fast"), "OIDN's quality setting"),
     Option("tonemap", "reinhard", "string", "tone-mapping operator (filter domain and PNG "
            "output)", choices=lambda: tonemappers()),
@@ -710,7 +713,9 @@ PRESETS: dict[str, dict[str, Any]] = {
     # its samples built in tile order costs what compact's does, and its scattered rays
     # trace faster in 2D packets (docs/results.md#the-vr-preset). SVGF four levels wide, its
     # colour test at 8 noise deviations: a periphery seen at a few pixels per degree scores
-    # higher smooth than with its cells' noise (docs/results.md#the-buffers-filter-strength).
+    # higher smooth than with its cells' noise (docs/results.md#the-buffers-filter-strength);
+    # at 6 where the camera moved: the edges that slide as the head turns flicker less, at the
+    # same video JOD (docs/results.md#svgfs-colour-test-where-the-camera-moved).
     # Its disc at most 2 samples a pixel: above that its rays cost more than the fovea's video
     # JOD gains (docs/results.md#the-disc-at-a-sample-rate-of-its-own). The disc at 2 levels
     # where the camera moved: the same video JOD, a moving frame's cost lower
@@ -722,9 +727,9 @@ PRESETS: dict[str, dict[str, Any]] = {
     # does not absorb it (docs/results.md#an-eye-trackers-jitter-held).
     "vr": {"sampling_law": "polar", "formation": "foveal", "ray_budget": 0.1, "theta": 0.15,
            "reorder": "tiles", "edge_threshold": 0.0, "denoiser": "svgf",
-           "atrous_iterations": 4, "sigma_luminance": 8.0, "foveal_disc": "denoised",
-           "foveal_disc_spp": 2, "foveal_disc_iterations_moving": 2, "foveal_still_spp": 0.125,
-           "gaze_hold_deg": 1.0},
+           "atrous_iterations": 4, "sigma_luminance": 8.0, "sigma_luminance_moving": 6.0,
+           "foveal_disc": "denoised", "foveal_disc_spp": 2, "foveal_disc_iterations_moving": 2,
+           "foveal_still_spp": 0.125, "gaze_hold_deg": 1.0},
 }
 PRESET_NAMES = ("auto", *PRESETS)
 
@@ -825,6 +830,9 @@ def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[s
                                out["foveal_disc"] == "denoised")):
         if name not in options and not (foveal and needed):
             out[name] = off
+    if "sigma_luminance" in options and "sigma_luminance_moving" not in options:
+        # A colour test given is the one every frame reads, not the preset's moving one.
+        out["sigma_luminance_moving"] = 0.0
     _check_combination(out)
     return out
 

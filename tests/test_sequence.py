@@ -88,13 +88,15 @@ def test_sequence_end_to_end_with_cut(tmp_path, capsys):
     assert stats[cut - 1]["history_hit_rate"] > 0 and stats[cut + 1]["history_hit_rate"] > 0
     assert stats[cut]["history_hit_rate"] == 0.0
     # The frame after the cut is a fresh first frame at that camera, its disc filtered at a
-    # moving camera's levels (a cut moves the camera).
+    # moving camera's levels and its colour test a moving camera's (a cut moves the camera).
     scene = load_scene(cfg.scene, width=32, height=24, spp=1, integrator=cfg.integrator,
                        camera=cfg.camera_at(cut), **cfg.scene_params)
     fr = FrameRenderer(scene, dict(cfg.foveated), spp=1)
     moving = fr.integrator.options["foveal_disc_iterations_moving"]
     assert moving >= 0
-    fr.integrator.set_options(foveal_disc_iterations=moving)
+    sigma = fr.integrator.options["sigma_luminance_moving"]
+    assert sigma > 0.0
+    fr.integrator.set_options(foveal_disc_iterations=moving, sigma_luminance=sigma)
     fr.integrator.gaze = cfg.gaze_at(cut)
     fresh = fr.render_frame(seed=cfg.seed)
     np.testing.assert_array_equal(read_exr(frames[cut])["image"], fresh.image)

@@ -410,6 +410,11 @@ def test_a_moving_camera_takes_its_own_colour_test(base):
             out.append(np.array(mi.render(scene, integrator=integ, seed=k)))
         return out
 
+    vr = FoveatedIntegrator(preset="vr").options
+    assert (vr["sigma_luminance"], vr["sigma_luminance_moving"]) == (8.0, 6.0)
+    # A colour test given holds in every frame, the preset's moving one yielding to it.
+    assert FoveatedIntegrator(preset="vr", sigma_luminance=5.0).options[
+        "sigma_luminance_moving"] == 0.0
     default = frames(0.6)
     moving = frames(0.6, sigma_luminance_moving=1.0)
     one = frames(0.6, sigma_luminance=1.0)
