@@ -151,15 +151,20 @@ def ceiling(task, refs: np.ndarray, budget: float) -> dict:
     return out
 
 
+def _eccentricities(scene, task) -> list[np.ndarray]:
+    """Each frame's eccentricity map from its gaze, as the study scores it."""
+    from foveated_mi.study.scoring import _viewing
+    return [_viewing(scene, dict(task, gaze=g))["eccentricity"]
+            for g in task["motion"]["gazes"]]
+
+
 def _flicker(scene, task, shown: list, ref_d: np.ndarray) -> dict:
     """The study's flicker columns of ``shown`` (display values) against ``ref_d``, in the
     rings of each frame's eccentricity from its gaze
     (:func:`~foveated_mi.metrics.temporal_instability`)."""
     from foveated_mi.metrics import FLICKER_RINGS_DEG, temporal_instability
-    from foveated_mi.study.scoring import _viewing
-    eccs = [_viewing(scene, dict(task, gaze=g))["eccentricity"]
-            for g in task["motion"]["gazes"]]
-    return temporal_instability(list(shown), list(ref_d), eccs, FLICKER_RINGS_DEG,
+    return temporal_instability(list(shown), list(ref_d), _eccentricities(scene, task),
+                                FLICKER_RINGS_DEG,
                                 fovea_deg=task["metrics"].get("fovea_deg", 5.0)).columns()
 
 
@@ -179,10 +184,9 @@ def _per_frame_table(scene, task, seq, name: str) -> list[list[float]]:
     """Prints a row's :func:`per_frame_flicker`, each pair with how far the gaze moved into
     its later frame (in film widths); returns the rings' figures."""
     from foveated_mi.metrics import FLICKER_RINGS_DEG
-    from foveated_mi.study.scoring import _viewing
     gazes = np.asarray(task["motion"]["gazes"], dtype=float)
-    eccs = [_viewing(scene, dict(task, gaze=g))["eccentricity"] for g in task["motion"]["gazes"]]
-    rings = per_frame_flicker(seq[1], seq[0], eccs, task["metrics"].get("fovea_deg", 5.0))
+    rings = per_frame_flicker(seq[1], seq[0], _eccentricities(scene, task),
+                              task["metrics"].get("fovea_deg", 5.0))
     heads = " | ".join(f"{a:g}-{b:g}°" for a, b in zip(FLICKER_RINGS_DEG, FLICKER_RINGS_DEG[1:]))
     print(f"\n{name}, flicker per frame\n\n| frame | gaze step | {heads} |\n|---|---|"
           + "---|" * rings.shape[1])

@@ -347,6 +347,23 @@ def test_the_disc_s_own_filter_changes_the_disc_only():
             assert not np.array_equal(a[inner], b[inner]), o
 
 
+def _turning_frames(scene, turn: float, n: int = 3, **options):
+    """``n`` frames of a view whose camera turns by ``turn`` degrees a frame about the scene
+    (0: a still camera, set once), and its integrator."""
+    params = mi.traverse(scene)
+    integ = FoveatedIntegrator(nested=scene.integrator(), **options)
+    out = []
+    for k in range(n):
+        if k == 0 or turn:
+            a = np.radians(turn * k)
+            params["sensor.to_world"] = mi.ScalarTransform4f().look_at(
+                origin=[3.9 * np.sin(a), 0.0, 3.9 * np.cos(a)], target=[0, 0, 0],
+                up=[0, 1, 0])
+            params.update()
+        out.append(np.array(mi.render(scene, integrator=integ, seed=k)))
+    return integ, out
+
+
 def test_a_moving_camera_s_disc_takes_its_own_levels():
     # foveal_disc_iterations_moving (the preset's: 2) holds where the camera moved since the
     # last frame: that frame is the one foveal_disc_iterations renders at that count, since
@@ -354,20 +371,9 @@ def test_a_moving_camera_s_disc_takes_its_own_levels():
     # keep the still levels (-1: those in every frame); outside the disc nothing changes.
     W, H = 64, 48
     scene = _scene((W, H), spp=1)
-    params = mi.traverse(scene)
 
     def frames(turn: float, **o):
-        integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", **o)
-        out = []
-        for k in range(3):
-            if k == 0 or turn:                # a still camera is set once
-                a = np.radians(turn * k)
-                params["sensor.to_world"] = mi.ScalarTransform4f().look_at(
-                    origin=[3.9 * np.sin(a), 0.0, 3.9 * np.cos(a)], target=[0, 0, 0],
-                    up=[0, 1, 0])
-                params.update()
-            out.append(np.array(mi.render(scene, integrator=integ, seed=k)))
-        return integ, out
+        return _turning_frames(scene, turn, preset="vr", **o)
 
     assert FoveatedIntegrator(preset="vr").options["foveal_disc_iterations_moving"] == 2
     integ, default = frames(0.6, foveal_disc_iterations_moving=-1)
@@ -393,22 +399,10 @@ def test_a_moving_camera_takes_its_own_colour_test(base):
     # and the disc alike: that frame is the one sigma_luminance renders at that value, since
     # the history holds the samples before any filter. A still camera, and the first frame,
     # keep the still colour test.
-    W, H = 64, 48
-    scene = _scene((W, H), spp=1)
-    params = mi.traverse(scene)
+    scene = _scene((64, 48), spp=1)
 
     def frames(turn: float, **o):
-        integ = FoveatedIntegrator(nested=scene.integrator(), **base, **o)
-        out = []
-        for k in range(3):
-            if k == 0 or turn:                # a still camera is set once
-                a = np.radians(turn * k)
-                params["sensor.to_world"] = mi.ScalarTransform4f().look_at(
-                    origin=[3.9 * np.sin(a), 0.0, 3.9 * np.cos(a)], target=[0, 0, 0],
-                    up=[0, 1, 0])
-                params.update()
-            out.append(np.array(mi.render(scene, integrator=integ, seed=k)))
-        return out
+        return _turning_frames(scene, turn, **base, **o)[1]
 
     vr = FoveatedIntegrator(preset="vr").options
     assert (vr["sigma_luminance"], vr["sigma_luminance_moving"]) == (8.0, 6.0)
