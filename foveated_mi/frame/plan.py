@@ -26,6 +26,7 @@ from typing import Any
 import drjit as dr
 import mitsuba as mi
 
+from ..options import DEFAULTS
 from ..timing import StageTimer
 from ..validate import check_int
 from . import buffer_space as _buffer_space
@@ -46,7 +47,7 @@ from .space import BufferSpace, FilmSpace
 CUT_HIT_FRACTION = 0.1
 #: The samples after which a still view settles (``foveal_still_spp``) where the history is
 #: uncapped: the default cap's.
-UNCAPPED_SETTLE = 32.0
+UNCAPPED_SETTLE = float(DEFAULTS["max_history"])
 
 
 @dataclass
