@@ -2,14 +2,14 @@
 first frames or after them.
 
     python benchmarks/bench_vr_where.py --study configs/studies/vr_periphery_screen.toml \
-        --out out/vr_periphery_screen [--rows 0 10] [--after 4] [--budgets 0.1 0.25] \
+        --out out/vr_periphery_screen [--rows [0 10 ...]] [--after 4] [--budgets 0.1 0.25] \
         [--frames 36] [--flicker-map PNG [--crop X Y W H]] [--per-frame]
 
 Run it after the study, whose references it reads from ``--out``. Each chosen row
 (``--rows``: indices among the study's rows of its first scene and seed, the foveated rows
-first, as ``--list`` prints them) is rendered again as the study renders it, and its video JOD
-in the headset (the study's viewing geometry and display) is scored against the same
-references:
+first, as ``--list`` prints them; ``--rows`` alone: none, only the ceilings) is rendered
+again as the study renders it, and its video JOD in the headset (the study's viewing
+geometry and display) is scored against the same references:
 
 * as shown;
 * from frame ``--after`` on: without the first frames, where a history is still filling;
@@ -23,7 +23,8 @@ flickers, pixel by pixel, above its middle frame, beside the reference's own cha
 
 With ``--per-frame``, each chosen row's flicker per ring of eccentricity for each pair of
 consecutive frames, with how far the gaze moved: which frames a row's flicker comes from
-(say, those after a saccade).
+(say, those after a saccade); and the ceilings' (below) cell centres', which tell the
+cells' resolution from the samples' noise there.
 
 With ``--disc-from``, each chosen row is also scored with the disc around each frame's gaze
 taken from another row of the same seed (say the same preset at fewer spp): what its disc's
@@ -117,8 +118,9 @@ def disc_from(task, seq: tuple[np.ndarray, np.ndarray], other: np.ndarray,
     return _scorer(get_scene(task["scene"], task["variant"]), task)(ref, mixed)
 
 
-def ceiling(task, refs: np.ndarray, budget: float) -> dict:
-    """The buffer's noise-free warp in motion at ``budget`` (module docstring)."""
+def ceiling(task, refs: np.ndarray, budget: float, per_frame: bool = False) -> dict:
+    """The buffer's noise-free warp in motion at ``budget`` (module docstring); with
+    ``per_frame``, its centres' flicker per ring for each pair of frames too."""
     import mitsuba as mi
     from bench_cell_prefilter import cells_both_ways
     from foveated_mi.frame import buffer_space
@@ -148,6 +150,9 @@ def ceiling(task, refs: np.ndarray, budget: float) -> dict:
     for key in ("centre", "mean"):
         out[f"cell_{key}s"] = score(ref_d, np.stack(shown[key]))
         out[f"cell_{key}s_flicker"] = _flicker(scene, task, shown[key], ref_d)
+    if per_frame:
+        out["cell_centres_per_frame"] = _per_frame_table(
+            scene, task, (ref_d, shown["centre"]), f"the cells alone at {budget:g} of the rays")
     return out
 
 
@@ -247,8 +252,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--study", required=True, help="the study file")
     ap.add_argument("--out", required=True, help="the study's output folder (its references)")
-    ap.add_argument("--rows", type=int, nargs="+", default=[0],
-                    help="rows, by index (default: the first foveated row)")
+    ap.add_argument("--rows", type=int, nargs="*", default=[0],
+                    help="rows, by index (default: the first foveated row; none: only the "
+                    "ceilings)")
     ap.add_argument("--list", action="store_true", help="print the rows' indices and stop")
     ap.add_argument("--after", type=int, default=4,
                     help="also score from this frame on (default 4)")
@@ -341,7 +347,7 @@ def main(argv=None) -> int:
     print("\n| rays | cells | cell centres | cell means | periphery flicker: centres, means |"
           "\n|---|---|---|---|---|")
     for b in budgets:
-        c = ceiling(tasks[0], per_frame(refs, frames), b)
+        c = ceiling(tasks[0], per_frame(refs, frames), b, args.per_frame)
         out["ceilings"].append(c)
         print(f"| {b:g} | {c['cells']} | {c['cell_centres']:.2f} | {c['cell_means']:.2f} | "
               f"{c['cell_centres_flicker']['flicker_periphery']:.4f}, "

@@ -150,3 +150,26 @@ def test_per_frame_flicker_names_the_pairs_and_rings_that_flicker(where):
     flick = np.zeros_like(got)
     flick[1:3, 3] = 0.1                                          # pairs (1, 2) and (2, 3)
     np.testing.assert_allclose(got, flick, atol=1e-12)
+
+
+def test_the_ceiling_s_cells_flicker_frame_by_frame(where, monkeypatch):
+    """The noise-free cells of a reference that holds still but for one frame, where a block
+    far from the gaze brightens: their flicker per pair of frames is nought but in the two
+    pairs that frame belongs to."""
+    import mitsuba as mi  # noqa: F401  (the variant is set by the conftest)
+    import foveated_mi.study.tasks as tasks
+    F, H, W = 4, 24, 48
+    monkeypatch.setattr(tasks, "get_scene", lambda scene, variant: None)
+    monkeypatch.setattr(where, "_scorer", lambda scene, task: lambda ref, test: 0.0)
+    ecc = np.tile(np.linspace(0.0, 60.0, W), (H, 1))
+    monkeypatch.setattr(where, "_eccentricities", lambda scene, task: [ecc] * F)
+    task = {"scene": None, "variant": None, "options": {"theta": 0.1},
+            "motion": {"gazes": [(0.2, 0.5)] * F}, "metrics": {}}
+    refs = np.full((F, H, W, 3), 0.2)
+    refs[2, 4:20, 30:46] = 0.6
+    got = where.ceiling(task, refs, 0.3, per_frame=True)
+    rings = np.array(got["cell_centres_per_frame"])
+    assert rings.shape == (F - 1, 5)
+    assert np.nan_to_num(rings[0]).max() < 1e-6                  # pair (0, 1): all still
+    # (1, 2) and (2, 3): the cells hold the block at their resolution, not as it is.
+    assert np.nanmax(rings[1]) > 1e-3 and np.nanmax(rings[2]) > 1e-3
