@@ -207,7 +207,7 @@ def film_settings(width: int, height: int, o: Options) -> FilmSettings:
     return FilmSettings(float(o["max_history"]), domain_settings(o), reconstruction_settings(o),
                         denoise_settings(o),
                         jfa_bound(width, height, sampling_settings(o), o["gaze"]),
-                        moving_denoise_settings(o))
+                        moving_denoise_settings(o), float(o["max_history_moving"]))
 
 
 def foveal_settings(width: int, height: int, o: Options) -> FovealSettings:
@@ -237,7 +237,7 @@ def foveal_settings(width: int, height: int, o: Options) -> FovealSettings:
                           o["foveal_upsampling"], o["foveal_space"], o["foveal_disc"], lay,
                           grid, float(o["foveal_taa"]), float(o["foveal_contrast"]), disc,
                           None if disc_moving == disc else disc_moving,
-                          moving_denoise_settings(o))
+                          moving_denoise_settings(o), float(o["max_history_moving"]))
 
 
 def moving_options(o: Options) -> Options:

@@ -212,6 +212,8 @@ def test_a_still_view_accumulates_history_in_the_traced_pixels(space):
     ({"preset": "vr", "ray_budget": 0.0}, r"ray_budget = 0\.0 is invalid"),
     ({"preset": "vr", "sigma_luminance_moving": -1.0},
      r"sigma_luminance_moving = -1\.0 is invalid: expected a finite number >= 0"),
+    ({"preset": "vr", "max_history_moving": 0.5},
+     r"max_history_moving = 0\.5 is invalid: expected 0 \(as still\) or a number in \[1, 1e9\]"),
 ])
 def test_bad_combinations_get_one_line(bad, match):
     with pytest.raises(ParameterError, match=match) as e:
@@ -417,6 +419,34 @@ def test_a_moving_camera_takes_its_own_colour_test(base):
         np.testing.assert_array_equal(moving[k], one[k])
         assert not np.array_equal(moving[k], default[k]), k
     for a, b in zip(frames(0.0), frames(0.0, sigma_luminance_moving=1.0)):
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("base", [{"preset": "vr"},
+                                  {"preset": "vr", "foveal_space": "film"},
+                                  {"preset": "paper", "denoiser": "svgf"}],
+                         ids=["vr", "vr-film", "film-svgf"])
+def test_a_moving_camera_takes_its_own_history_cap(base):
+    # max_history_moving caps the history where the camera moved since the last frame: that
+    # frame is the one max_history renders at that cap (a first frame holds only its own
+    # samples, whatever the cap). A still camera keeps the still cap.
+    scene = _scene((64, 48), spp=1)
+
+    def frames(turn: float, **o):
+        return _turning_frames(scene, turn, **base, **o)[1]
+
+    vr = FoveatedIntegrator(preset="vr").options
+    assert (vr["max_history"], vr["max_history_moving"]) == (32.0, 8.0)
+    # A cap given holds in every frame, the preset's moving one yielding to it.
+    assert FoveatedIntegrator(preset="vr", max_history=16.0).options[
+        "max_history_moving"] == 0.0
+    moving = frames(0.6, max_history_moving=2.0)
+    capped = frames(0.6, max_history=2.0)
+    for a, b in zip(moving, capped):
+        np.testing.assert_array_equal(a, b)
+    # By the third frame a history of one sample a frame holds more than two.
+    assert not np.array_equal(moving[2], frames(0.6, max_history_moving=0.0)[2])
+    for a, b in zip(frames(0.0), frames(0.0, max_history_moving=2.0)):
         np.testing.assert_array_equal(a, b)
 
 

@@ -36,6 +36,8 @@ class FilmSettings:
     jfa_bound: int | None
     #: the denoiser where the camera moved (``sigma_luminance_moving``; None: as still)
     denoise_moving: DenoiseSettings | None = None
+    #: the history's cap where the camera moved (``max_history_moving``; 0: as still)
+    max_history_moving: float = 0.0
 
 
 def jfa_bound(width: int, height: int, law: SamplingSettings,
@@ -108,6 +110,7 @@ def form_film(shading: ShadingBuffer, inp: FormationInput, s: FilmSettings,
     """
     gb, width, height, d = inp.gbuffer, inp.width, inp.height, s.domain
     denoise = s.denoise_moving if inp.moving and s.denoise_moving is not None else s.denoise
+    cap = s.max_history_moving if inp.moving and s.max_history_moving > 0 else s.max_history
     if d.demodulate and inp.emission_edges is not None:
         # At an emitter's edge the emission seen at the pixel's centre is not its footprint's
         # (a partial cover of the light): subtracting it could leave negative irradiance,
@@ -115,7 +118,7 @@ def form_film(shading: ShadingBuffer, inp: FormationInput, s: FilmSettings,
         gb = gb._replace(emission=dr.select(inp.emission_edges, 0.0, gb.emission))
     # History resolve (Fig. 4): this frame's samples blended with the reprojected history.
     resolved = _reproject.resolve(shading.value, shading.mask, inp.spp, inp.reprojection,
-                                  inp.history, s.max_history, shading.moment2)
+                                  inp.history, cap, shading.moment2)
     timer.mark("reconstruct", resolved.shading, resolved.mask, resolved.count)
     # Reconstruction (§3.4): nearest sites, Voronoi fill and interpolation, on irradiance
     # with demodulate; a reconstruction of tone-mapped samples back to linear values.

@@ -101,6 +101,8 @@ class FovealSettings:
     #: the buffer's denoiser where the camera moved (``sigma_luminance_moving``; None: as
     #: still)
     denoise_moving: DenoiseSettings | None = None
+    #: the history's cap where the camera moved (``max_history_moving``; 0: as still)
+    max_history_moving: float = 0.0
 
 
 def foveal_buffer_grid(width: int, height: int, s: FovealSettings) -> PolarGrid:
@@ -462,8 +464,9 @@ def _bilinear(cells: mi.Float, grid: PolarGrid, x0: mi.Float, y0: mi.Float, fx: 
 
 
 def moving_settings(s: FovealSettings, moving: bool) -> FovealSettings:
-    """The settings a frame reads: where the camera moved, the denoisers of a moving frame
-    (``sigma_luminance_moving``, ``foveal_disc_iterations_moving``) in place of a still one's.
+    """The settings a frame reads: where the camera moved, the denoisers and the history's
+    cap of a moving frame (``sigma_luminance_moving``, ``foveal_disc_iterations_moving``,
+    ``max_history_moving``) in place of a still one's.
 
     Parameters
     ----------
@@ -475,13 +478,15 @@ def moving_settings(s: FovealSettings, moving: bool) -> FovealSettings:
     Returns
     -------
     settings : FovealSettings
-        ``s``, or a copy with the moving frame's denoisers.
+        ``s``, or a copy with the moving frame's denoisers and cap.
     """
-    if not moving or (s.denoise_moving is None and s.disc_denoise_moving is None):
+    if not moving or (s.denoise_moving is None and s.disc_denoise_moving is None
+                      and s.max_history_moving <= 0):
         return s
-    # The motion hides what a lighter filter leaves.
+    # The motion hides what a lighter filter leaves, and a shorter history lags it less.
     return replace(s, denoise=s.denoise_moving or s.denoise,
-                   disc_denoise=s.disc_denoise_moving or s.disc_denoise)
+                   disc_denoise=s.disc_denoise_moving or s.disc_denoise,
+                   max_history=s.max_history_moving or s.max_history)
 
 
 def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
