@@ -271,16 +271,17 @@ def tonemappers() -> dict:
     return _registry(".postprocess", "TONEMAPPERS")
 
 
+#: What ``max_history`` and ``max_history_moving`` accept, as their error line says it.
+_HISTORY_ALLOWED = {"max_history": "0 (no cap) or a number in [1, 1e9]",
+                    "max_history_moving": "0 (as still) or a number in [1, 1e9]"}
+
+
 def _check_max_history(name: str, value) -> float:
     """0 (no cap, the paper; where the camera moved: as still) or a cap in [1, 1e9]."""
     v = check_range(name, value, 0.0, 1e9)
     if 0.0 < v < 1.0:
         raise ParameterError(name, value, _HISTORY_ALLOWED[name])
     return v
-
-
-_HISTORY_ALLOWED = {"max_history": "0 (no cap) or a number in [1, 1e9]",
-                    "max_history_moving": "0 (as still) or a number in [1, 1e9]"}
 
 
 #: The periods over which a still view's settled rays may take turns

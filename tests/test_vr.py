@@ -396,57 +396,37 @@ def test_a_moving_camera_s_disc_takes_its_own_levels():
                                   {"preset": "vr", "foveal_space": "film"},
                                   {"preset": "paper", "denoiser": "svgf"}],
                          ids=["vr", "vr-film", "film-svgf"])
-def test_a_moving_camera_takes_its_own_colour_test(base):
-    # sigma_luminance_moving holds where the camera moved since the last frame, on the cells
-    # and the disc alike: that frame is the one sigma_luminance renders at that value, since
-    # the history holds the samples before any filter. A still camera, and the first frame,
-    # keep the still colour test.
+@pytest.mark.parametrize("still,preset,given,value,differs", [
+    # The colour test: from the first moving frame on.
+    ("sigma_luminance", (8.0, 6.0), 5.0, 1.0, 1),
+    # The history's cap: by the third frame a history of one sample a frame holds more
+    # than two (a first frame holds only its own samples, whatever the cap).
+    ("max_history", (32.0, 8.0), 16.0, 2.0, 2),
+], ids=["colour-test", "history-cap"])
+def test_a_moving_camera_takes_its_own_setting(base, still, preset, given, value, differs):
+    # <still>_moving holds where the camera moved since the last frame, on the cells and the
+    # disc alike: that frame is the one <still> renders at that value, since the history
+    # holds the samples before any filter. A still camera, and the first frame, keep the
+    # still setting.
+    moving_name = f"{still}_moving"
     scene = _scene((64, 48), spp=1)
 
     def frames(turn: float, **o):
         return _turning_frames(scene, turn, **base, **o)[1]
 
     vr = FoveatedIntegrator(preset="vr").options
-    assert (vr["sigma_luminance"], vr["sigma_luminance_moving"]) == (8.0, 6.0)
-    # A colour test given holds in every frame, the preset's moving one yielding to it.
-    assert FoveatedIntegrator(preset="vr", sigma_luminance=5.0).options[
-        "sigma_luminance_moving"] == 0.0
+    assert (vr[still], vr[moving_name]) == preset
+    # A setting given holds in every frame, the preset's moving one yielding to it.
+    assert FoveatedIntegrator(preset="vr", **{still: given}).options[moving_name] == 0.0
     default = frames(0.6)
-    moving = frames(0.6, sigma_luminance_moving=1.0)
-    one = frames(0.6, sigma_luminance=1.0)
+    moving = frames(0.6, **{moving_name: value})
+    one = frames(0.6, **{still: value})
     np.testing.assert_array_equal(moving[0], default[0])
     for k in (1, 2):
         np.testing.assert_array_equal(moving[k], one[k])
+    for k in range(differs, 3):
         assert not np.array_equal(moving[k], default[k]), k
-    for a, b in zip(frames(0.0), frames(0.0, sigma_luminance_moving=1.0)):
-        np.testing.assert_array_equal(a, b)
-
-
-@pytest.mark.parametrize("base", [{"preset": "vr"},
-                                  {"preset": "vr", "foveal_space": "film"},
-                                  {"preset": "paper", "denoiser": "svgf"}],
-                         ids=["vr", "vr-film", "film-svgf"])
-def test_a_moving_camera_takes_its_own_history_cap(base):
-    # max_history_moving caps the history where the camera moved since the last frame: that
-    # frame is the one max_history renders at that cap (a first frame holds only its own
-    # samples, whatever the cap). A still camera keeps the still cap.
-    scene = _scene((64, 48), spp=1)
-
-    def frames(turn: float, **o):
-        return _turning_frames(scene, turn, **base, **o)[1]
-
-    vr = FoveatedIntegrator(preset="vr").options
-    assert (vr["max_history"], vr["max_history_moving"]) == (32.0, 8.0)
-    # A cap given holds in every frame, the preset's moving one yielding to it.
-    assert FoveatedIntegrator(preset="vr", max_history=16.0).options[
-        "max_history_moving"] == 0.0
-    moving = frames(0.6, max_history_moving=2.0)
-    capped = frames(0.6, max_history=2.0)
-    for a, b in zip(moving, capped):
-        np.testing.assert_array_equal(a, b)
-    # By the third frame a history of one sample a frame holds more than two.
-    assert not np.array_equal(moving[2], frames(0.6, max_history_moving=0.0)[2])
-    for a, b in zip(frames(0.0), frames(0.0, max_history_moving=2.0)):
+    for a, b in zip(frames(0.0), frames(0.0, **{moving_name: value})):
         np.testing.assert_array_equal(a, b)
 
 
