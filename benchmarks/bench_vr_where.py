@@ -3,7 +3,7 @@ first frames or after them.
 
     python benchmarks/bench_vr_where.py --study configs/studies/vr_periphery_screen.toml \
         --out out/vr_periphery_screen [--rows [0 10 ...]] [--after 4] [--budgets 0.1 0.25] \
-        [--frames 36] [--flicker-map PNG [--crop X Y W H]] [--per-frame]
+        [--frames 36] [--flicker-map PNG [--crop X Y W H]] [--per-frame] [--blur 1 2 4]
 
 Run it after the study, whose references it reads from ``--out``. Each chosen row
 (``--rows``: indices among the study's rows of its first scene and seed, the foveated rows
@@ -37,6 +37,12 @@ taken at the cell's centre pixel (what the preset traces) or as the mean of its 
 to the film, the disc from the reference. No noise and no history: the most that the buffer's
 warp can score in motion at that budget, and the flicker its cells' resolution alone leaves
 (the study's periphery flicker, ring by ring in the JSON).
+
+With ``--blur SIGMA ...``, what the flicker figure asks of the periphery's detail: the flicker
+of each frame's reference blurred by a Gaussian of each ``SIGMA`` pixels (a periphery whose
+detail stops at that scale but moves exactly with the scene: no noise, no aliasing) and of
+the first frame's reference held still (the reference's own change), ring by ring; beside
+them the width in pixels of the buffer's cells at each ring's inner edge, for each budget.
 """
 from __future__ import annotations
 
@@ -238,6 +244,71 @@ def _name(task) -> str:
     return f"{opts.get('preset', 'auto')} {task['spp']} spp{rest}"
 
 
+def blurred_flicker(ref_d: np.ndarray, eccs, sigmas, fovea_deg: float = 5.0) -> dict:
+    """The flicker columns (display values, ring by ring at ``eccs``) of ``ref_d`` (F, H, W,
+    3) blurred by a Gaussian of each of ``sigmas`` pixels against itself, and of its first
+    frame held still (``"held"``: the reference's own change)."""
+    from scipy.ndimage import gaussian_filter
+    from foveated_mi.metrics import FLICKER_RINGS_DEG, temporal_instability
+
+    def columns(test) -> dict:
+        return temporal_instability(test, list(ref_d), eccs, FLICKER_RINGS_DEG,
+                                    fovea_deg=fovea_deg).columns()
+    out = {"held": columns([ref_d[0]] * len(ref_d))}
+    for s in sigmas:
+        out[f"{s:g}"] = columns([gaussian_filter(f, (s, s, 0)) for f in ref_d])
+    return out
+
+
+def cell_widths(grid, ecc_row: np.ndarray, width: int, r0: float) -> dict:
+    """The width in pixels of ``grid``'s log-polar cells (``pitch`` degrees of angle about
+    the gaze) at each ring's inner edge outside the disc of radius ``r0`` (pixels) and at the
+    film's side (``"side"``), the gaze at the film's centre: ``ecc_row`` is the eccentricity
+    (degrees) of the film's middle row, pixel by pixel."""
+    from foveated_mi.metrics import FLICKER_RINGS_DEG
+    right = ecc_row[width // 2:]
+    pitch = np.deg2rad(grid.pitch)
+    out = {}
+    for e in FLICKER_RINGS_DEG[1:-1]:
+        past = np.nonzero(right >= e)[0]
+        if len(past) and past[0] + 0.5 >= r0:  # the ring begins outside the disc, on the film
+            out[f"{e:g}"] = float((past[0] + 0.5) * pitch)
+    out["side"] = float(width / 2.0 * pitch)
+    return out
+
+
+def _blur_table(args, task, refs: np.ndarray, budgets) -> dict:
+    """Prints and returns :func:`blurred_flicker` and :func:`cell_widths` (``--blur``)."""
+    from foveated_mi.frame import buffer_space
+    from foveated_mi.frame.sampling import fovea_radius
+    from foveated_mi.metrics import FLICKER_RINGS_DEG
+    from foveated_mi.render import to_display
+    from foveated_mi.study.scoring import _viewing
+    from foveated_mi.study.tasks import get_scene
+    scene = get_scene(task["scene"], task["variant"])
+    ref_d = np.stack([to_display(r) for r in refs])
+    got = blurred_flicker(ref_d, _eccentricities(scene, task), args.blur,
+                          task["metrics"].get("fovea_deg", 5.0))
+    keys = [f"flicker_{a:g}_{b:g}" for a, b in zip(FLICKER_RINGS_DEG, FLICKER_RINGS_DEG[1:])]
+    heads = " | ".join(f"{a:g}-{b:g}°" for a, b in zip(FLICKER_RINGS_DEG, FLICKER_RINGS_DEG[1:]))
+    print(f"\n| the reference | periphery | {heads} |\n|---|---|" + "---|" * len(keys))
+    for name, cols in got.items():
+        label = "held still" if name == "held" else f"blurred, sigma {name} px"
+        print(f"| {label} | {cols['flicker_periphery']:.4f} | "
+              + " | ".join(f"{cols[k]:.4f}" for k in keys) + " |")
+    h, w = refs.shape[1:3]
+    ecc_row = _viewing(scene, dict(task, gaze=(0.5, 0.5)))["eccentricity"][h // 2]
+    widths = {}
+    r0 = fovea_radius(w, h, task["options"]["theta"])
+    for b in budgets:
+        grid = buffer_space.layout(w, h, task["options"]["theta"], b, 0.0, 1).grid
+        widths[f"{b:g}"] = cell_widths(grid, ecc_row, w, r0)
+        print(f"cells at {b:g} of the rays, px wide at "
+              + ", ".join(f"the side: {v:.1f}" if e == "side" else f"{e}°: {v:.1f}"
+                          for e, v in widths[f"{b:g}"].items()))
+    return {"flicker": got, "cell_widths": widths}
+
+
 def study_rows(spec, variant: str) -> list[dict]:
     """The tasks of the study's first scene and seed, the foveated rows first: the rows that
     ``--rows`` indexes and ``--list`` prints."""
@@ -269,6 +340,8 @@ def main(argv=None) -> int:
                     help="write where each of --rows flickers, per pixel, to this PNG")
     ap.add_argument("--per-frame", action="store_true", dest="per_frame",
                     help="print each row's flicker per ring for each pair of frames")
+    ap.add_argument("--blur", type=float, nargs="*", default=None,
+                    help="also the flicker of the reference blurred by these Gaussians (px)")
     ap.add_argument("--crop", type=int, nargs=4, default=None, metavar=("X", "Y", "W", "H"),
                     help="the flicker picture's crop, in pixels (shown at twice its size)")
     args = ap.parse_args(argv)
@@ -298,6 +371,10 @@ def main(argv=None) -> int:
         flag, value = bad[0] if bad else ("--rows", args.rows)
         print(f"bench_vr_where: {flag} {value} is invalid: expected "
               f"0 to {len(tasks) - 1} in a study with a foveated row")
+        return 2
+    if args.blur and min(args.blur) < 0.0:
+        print(f"bench_vr_where: --blur {min(args.blur):g} is invalid: expected 0 or more "
+              "pixels")
         return 2
     if not available():
         print("bench_vr_where: needs the perceptual extra (pip install -e '.[perceptual]')")
@@ -352,6 +429,8 @@ def main(argv=None) -> int:
         print(f"| {b:g} | {c['cells']} | {c['cell_centres']:.2f} | {c['cell_means']:.2f} | "
               f"{c['cell_centres_flicker']['flicker_periphery']:.4f}, "
               f"{c['cell_means_flicker']['flicker_periphery']:.4f} |", flush=True)
+    if args.blur is not None:
+        out["blur"] = _blur_table(args, tasks[0], per_frame(refs, frames), budgets)
     if args.json:
         with open(args.json, "w") as f:
             json.dump(out, f, indent=1)

@@ -173,3 +173,43 @@ def test_the_ceiling_s_cells_flicker_frame_by_frame(where, monkeypatch):
     assert np.nan_to_num(rings[0]).max() < 1e-6                  # pair (0, 1): all still
     # (1, 2) and (2, 3): the cells hold the block at their resolution, not as it is.
     assert np.nanmax(rings[1]) > 1e-3 and np.nanmax(rings[2]) > 1e-3
+
+
+def test_a_blurred_reference_flickers_by_the_detail_it_loses(where):
+    """A pattern sliding one pixel a frame: blurred by nothing it flickers 0; the more the
+    blur, the more of the pattern's motion it misses; held still, it misses all of it,
+    the root mean square of the reference's own change."""
+    F, H, W = 4, 16, 40
+    x = np.arange(W + F)
+    stripes = (np.sin(x * 1.3) > 0).astype(float)                 # fine detail
+    ref = np.stack([np.broadcast_to(stripes[k:k + W], (H, W)) for k in range(F)])
+    ref = np.repeat(ref[..., None], 3, axis=-1)
+    ecc = np.tile(np.linspace(0.0, 60.0, W), (H, 1))
+    got = where.blurred_flicker(ref, [ecc] * F, [0.0, 1.0, 3.0])
+    per = [got[k]["flicker_periphery"] for k in ("0", "1", "3", "held")]
+    assert per[0] == 0.0
+    assert 0.0 < per[1] < per[2] < per[3]
+    change = ref[1:] - ref[:-1]
+    in_periphery = np.broadcast_to((ecc >= 5.0)[None, ..., None], change.shape)
+    np.testing.assert_allclose(per[3], np.sqrt(np.mean(change[in_periphery] ** 2)), rtol=1e-12)
+
+
+def test_the_cells_widen_with_eccentricity_as_their_pitch_says(where):
+    """A log-polar cell is its radius times its pitch wide: on a film whose middle row's
+    eccentricity grows a degree a pixel, a ring beginning at e degrees is met e pixels out;
+    rings that begin inside the disc hold no cells."""
+    from types import SimpleNamespace
+    grid = SimpleNamespace(pitch=2.0)                             # degrees of angle a cell
+    ecc_row = np.abs(np.arange(200) + 0.5 - 100.0)                # 1 degree a pixel
+    got = where.cell_widths(grid, ecc_row, 200, r0=8.0)
+    assert set(got) == {"10", "20", "35", "side"}                 # 5° lies in the disc
+    for e, w in got.items():
+        radius = 100.0 if e == "side" else float(e) + 0.5
+        np.testing.assert_allclose(w, radius * np.deg2rad(2.0), rtol=1e-12)
+
+
+def test_a_negative_blur_is_refused_in_one_line(where, capsys):
+    code = where.main(["--study", STUDY, "--out", "unused", "--blur", "2", "-1"])
+    assert code == 2
+    assert capsys.readouterr().out.strip() == (
+        "bench_vr_where: --blur -1 is invalid: expected 0 or more pixels")
