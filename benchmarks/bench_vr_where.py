@@ -372,8 +372,9 @@ def main(argv=None) -> int:
         print(f"bench_vr_where: {flag} {value} is invalid: expected "
               f"0 to {len(tasks) - 1} in a study with a foveated row")
         return 2
-    if args.blur and min(args.blur) < 0.0:
-        print(f"bench_vr_where: --blur {min(args.blur):g} is invalid: expected 0 or more "
+    bad_blur = [s for s in args.blur or () if not 0.0 <= s < float("inf")]
+    if bad_blur:
+        print(f"bench_vr_where: --blur {bad_blur[0]:g} is invalid: expected 0 or more "
               "pixels")
         return 2
     if not available():

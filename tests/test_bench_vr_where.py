@@ -208,8 +208,9 @@ def test_the_cells_widen_with_eccentricity_as_their_pitch_says(where):
         np.testing.assert_allclose(w, radius * np.deg2rad(2.0), rtol=1e-12)
 
 
-def test_a_negative_blur_is_refused_in_one_line(where, capsys):
-    code = where.main(["--study", STUDY, "--out", "unused", "--blur", "2", "-1"])
+@pytest.mark.parametrize("bad", ["-1", "nan", "inf"])
+def test_a_blur_that_is_no_width_is_refused_in_one_line(where, capsys, bad):
+    code = where.main(["--study", STUDY, "--out", "unused", "--blur", "2", bad])
     assert code == 2
     assert capsys.readouterr().out.strip() == (
-        "bench_vr_where: --blur -1 is invalid: expected 0 or more pixels")
+        f"bench_vr_where: --blur {bad} is invalid: expected 0 or more pixels")
