@@ -191,14 +191,19 @@ def per_frame_flicker(shown, ref, eccs, fovea_deg: float = 5.0) -> np.ndarray:
                      for k in range(1, len(shown))])
 
 
+def _ring_heads() -> str:
+    """The rings of eccentricity as a table's headings ("0-5° | 5-10° | ...")."""
+    from foveated_mi.metrics import FLICKER_RINGS_DEG
+    return " | ".join(f"{a:g}-{b:g}°" for a, b in zip(FLICKER_RINGS_DEG, FLICKER_RINGS_DEG[1:]))
+
+
 def _per_frame_table(scene, task, seq, name: str) -> list[list[float]]:
     """Prints a row's :func:`per_frame_flicker`, each pair with how far the gaze moved into
     its later frame (in film widths); returns the rings' figures."""
-    from foveated_mi.metrics import FLICKER_RINGS_DEG
     gazes = np.asarray(task["motion"]["gazes"], dtype=float)
     rings = per_frame_flicker(seq[1], seq[0], _eccentricities(scene, task),
                               task["metrics"].get("fovea_deg", 5.0))
-    heads = " | ".join(f"{a:g}-{b:g}°" for a, b in zip(FLICKER_RINGS_DEG, FLICKER_RINGS_DEG[1:]))
+    heads = _ring_heads()
     print(f"\n{name}, flicker per frame\n\n| frame | gaze step | {heads} |\n|---|---|"
           + "---|" * rings.shape[1])
     for k, r in enumerate(rings, start=1):
@@ -281,7 +286,7 @@ def _blur_table(args, task, refs: np.ndarray, budgets) -> dict:
     """Prints and returns :func:`blurred_flicker` and :func:`cell_widths` (``--blur``)."""
     from foveated_mi.frame import buffer_space
     from foveated_mi.frame.sampling import fovea_radius
-    from foveated_mi.metrics import FLICKER_RINGS_DEG
+    from foveated_mi.metrics import flicker_ring_columns
     from foveated_mi.render import to_display
     from foveated_mi.study.scoring import _viewing
     from foveated_mi.study.tasks import get_scene
@@ -289,8 +294,8 @@ def _blur_table(args, task, refs: np.ndarray, budgets) -> dict:
     ref_d = np.stack([to_display(r) for r in refs])
     got = blurred_flicker(ref_d, _eccentricities(scene, task), args.blur,
                           task["metrics"].get("fovea_deg", 5.0))
-    keys = [f"flicker_{a:g}_{b:g}" for a, b in zip(FLICKER_RINGS_DEG, FLICKER_RINGS_DEG[1:])]
-    heads = " | ".join(f"{a:g}-{b:g}°" for a, b in zip(FLICKER_RINGS_DEG, FLICKER_RINGS_DEG[1:]))
+    keys = flicker_ring_columns()
+    heads = _ring_heads()
     print(f"\n| the reference | periphery | {heads} |\n|---|---|" + "---|" * len(keys))
     for name, cols in got.items():
         label = "held still" if name == "held" else f"blurred, sigma {name} px"

@@ -24,7 +24,7 @@ from .frame.settings import (DenoiseSettings, DomainSettings, FrameSettings, His
                              SamplingSettings, TraceSettings)
 from .frame.space import SPACES
 from .postprocess import DENOISERS
-from .options import still_rate
+from .options import DEFAULTS, still_rate
 from .validate import check_choice
 
 Options = dict[str, Any]
@@ -102,7 +102,8 @@ def frame_settings(o: Options) -> FrameSettings:
                                             int(o["foveal_disc_spp"]),
                                             *still_rate(o["foveal_still_spp"])),
         HistorySettings(bool(o["history"]), o["reprojection"],
-                        float(o["reprojection_tolerance"]), float(o["max_history"])),
+                        float(o["reprojection_tolerance"]),
+                        float(o["max_history"]) or float(DEFAULTS["max_history"])),
         space=formation_space(o),
         materials=bool(o["demodulate"] or o["emission_edges"]
                        or any(DENOISERS[n].materials for n in denoisers_used(o))),

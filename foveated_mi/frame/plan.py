@@ -26,7 +26,6 @@ from typing import Any
 import drjit as dr
 import mitsuba as mi
 
-from ..options import DEFAULTS
 from ..timing import StageTimer
 from ..validate import check_int
 from . import buffer_space as _buffer_space
@@ -45,9 +44,6 @@ from .space import BufferSpace, FilmSpace
 #: A camera move after which fewer pixels than this fraction see the surface they saw in the
 #: previous frame is a cut: no pixel of the frame reads the history.
 CUT_HIT_FRACTION = 0.1
-#: The samples after which a still view settles (``foveal_still_spp``) where the history is
-#: uncapped: the default cap's.
-UNCAPPED_SETTLE = float(DEFAULTS["max_history"])
 
 
 @dataclass
@@ -288,8 +284,7 @@ class Planner:
         ``turns`` frames), the disc once it does at its own rate. Counted on the host, so
         that the launch and the trace's kernels are known before they run."""
         self._still_frames = n = self._still_frames + 1 if still else 0
-        ls, hs = settings.launch, settings.history
-        cap = hs.cap if hs.cap > 0 else UNCAPPED_SETTLE
+        ls, cap = settings.launch, settings.history.settle
         own = self._disc_rate(ls, spp)
         rate = ls.still_spp / ls.still_period
         return (0 < rate < spp and n * spp >= cap * turns,

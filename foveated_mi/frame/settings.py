@@ -61,7 +61,9 @@ class HistorySettings:
     keep: bool                 #: the option ``history``
     reprojection: str          #: ``exclusive`` or ``nearest`` reads
     tolerance: float           #: relative depth (or plane) tolerance of the reprojection test
-    cap: float = 0.0           #: the samples a history holds at most (0: uncapped)
+    #: the samples after which a still view settles (``foveal_still_spp``): the history's
+    #: cap, or where it is uncapped the default cap's
+    settle: float
 
 
 @dataclass(frozen=True)
