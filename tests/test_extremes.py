@@ -1,13 +1,18 @@
-"""Numerical stability at the extremes (issue 5): tiny/huge theta, empty draws, one site,
-corner and off-screen gazes, odd film sizes, NaN/inf/huge samples, background depth."""
+"""Numerical stability at the extremes: tiny/huge theta, empty draws, one site, corner and
+off-screen gazes, odd film sizes, a launch of no rays, NaN/inf/huge samples, background depth;
+every preset, the default one included."""
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest
 
+from foveated_mi.cli import main
+from foveated_mi.frame import plan as _plan
 from foveated_mi.integrators.foveated import FoveatedIntegrator
+from foveated_mi.options import PRESET_NAMES
+from foveated_mi.validate import ParameterError
 
-#: Every pipeline: the paper's, and the two noise-aware presets.
+#: The film formation's pipelines: the paper's, and the two noise-aware presets.
 PRESETS = ["paper", "guided", "oidn"]
 
 
@@ -181,3 +186,80 @@ def test_static_camera_keeps_history_growing():
         rates.append(integ.stats["history_hit_rate"])
     assert rates[0] == 0 and rates[-1] > rates[1] > 0
     assert integ.buffer("history_count").max() <= 8
+
+
+# -- every preset at every extreme (``auto`` and ``vr``, the foveal buffer, included) ----------
+
+#: Each extreme the options allow, at its end: θ near 0 and huge, σp at both ends, gazes far
+#: off the film, a budget of every pixel and of almost none.
+EXTREMES = [dict(theta=1e-6), dict(theta=1e6), dict(theta=1e-6, sigma_p=1e-6),
+            dict(sigma_p=1.0), dict(sigma_p=1e-6), dict(gaze=(40.0, -25.0)),
+            dict(gaze=(1e6, -1e6)), dict(gaze=(-3.0, 7.5)), dict(ray_budget=1.0),
+            dict(ray_budget=1e-9)]
+
+
+def _frames(integ, w, h, n=2):
+    """``n`` frames (the second reprojects the first), each checked finite and film-shaped."""
+    scene = sphere_scene(w, h)
+    for k in range(n):
+        img = np.array(mi.render(scene, integrator=integ, seed=k))
+        assert img.shape == (h, w, 3) and np.all(np.isfinite(img))
+    return img
+
+
+@pytest.mark.filterwarnings("ignore:ray_budget")
+@pytest.mark.parametrize("preset", PRESET_NAMES)
+@pytest.mark.parametrize("extreme", EXTREMES, ids=lambda e: ",".join(f"{k}={v}" for k, v in
+                                                                     e.items()))
+def test_every_preset_at_the_extremes(preset, extreme):
+    """A finite frame that traces at least one ray: the polar law's disc holds a pixel
+    wherever the gaze is held on the film, however small θ."""
+    integ = FoveatedIntegrator(preset=preset, **extreme)
+    _frames(integ, 32, 24)
+    assert integ.stats["rays"] >= 1
+
+
+@pytest.mark.filterwarnings("ignore:ray_budget")
+@pytest.mark.parametrize("preset", PRESET_NAMES)
+@pytest.mark.parametrize("w,h", [(1, 1), (1, 17), (17, 1)])
+@pytest.mark.parametrize("extreme", [{}, dict(theta=1e-6), dict(theta=1e6),
+                                     dict(gaze=(40.0, -25.0))], ids=["default", "theta0",
+                                                                     "thetahuge", "offfilm"])
+def test_every_preset_on_one_pixel_and_one_row_films(preset, w, h, extreme):
+    integ = FoveatedIntegrator(preset=preset, **extreme)
+    _frames(integ, w, h)
+    assert integ.stats["rays"] >= 1
+
+
+@pytest.mark.parametrize("preset", PRESET_NAMES)
+@pytest.mark.parametrize("name,value", [("theta", 0.0), ("sigma_p", 0.0), ("sigma_p", 1.5),
+                                        ("ray_budget", 0.0), ("ray_budget", 1.01),
+                                        ("theta", float("nan"))])
+def test_every_preset_rejects_values_past_the_ends_in_one_line(preset, name, value):
+    with pytest.raises(ParameterError) as e:
+        FoveatedIntegrator(preset=preset, **{name: value})
+    msg = str(e.value)
+    assert msg.startswith(f"{name} = ") and "is invalid: expected" in msg and "\n" not in msg
+
+
+@pytest.mark.parametrize("preset", ["vr", "auto"])
+@pytest.mark.parametrize("reorder", ["tiles", "compact", "rows_blocks", "none"])
+def test_a_launch_of_no_rays_gives_a_finite_frame(preset, reorder, monkeypatch):
+    """Every sample borrowed, settled or off the film: the launch is one idle lane and the
+    frame shows what it holds (black, with no history), in every launch layout."""
+    monkeypatch.setattr(_plan.Planner, "_traced_of",
+                        staticmethod(lambda sm, *a: dr.zeros(mi.Bool, dr.width(sm.on))))
+    integ = FoveatedIntegrator(preset=preset, reorder=reorder)
+    img = _frames(integ, 24, 20)
+    assert integ.stats["rays"] == 0 and np.all(img == 0)
+
+
+@pytest.mark.parametrize("args", [["--theta", "1e-6"], ["--theta", "1e6"],
+                                  ["--gaze", "40", "-25"]])
+def test_the_default_preset_renders_the_extremes_from_the_command_line(args, tmp_path, capsys):
+    out = tmp_path / "f.exr"
+    code = main(["render", "cornell-box", "--size", "48", "48", "--warmup", "0", *args,
+                 "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert out.is_file() and "Traceback" not in err

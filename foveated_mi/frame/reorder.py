@@ -258,8 +258,9 @@ def _row_launch(sampling_map: mi.Bool, width: int, height: int, mode: str, block
             return reorder_rows_blocks(sampling_map, width, height, block_height)[0]
     # The launch is rows x slots: its width is the largest row count (a host read).
     slots = int(dr.max(final)[0]) if height > 0 else 0
-    if slots == 0:
-        return Reordered(mi.UInt32(), mi.Bool(), final, mode, swaps, build_map)
+    if slots == 0:         # no pixel to trace: one idle lane (:func:`_compacted`)
+        return Reordered(dr.zeros(mi.UInt32, 1), dr.zeros(mi.Bool, 1), final, mode, swaps,
+                         build_map)
     lane = dr.arange(mi.UInt32, height * slots)
     # An opaque width: a new largest row count compiles nothing new.
     width_k = dr.opaque(mi.UInt32, slots)
@@ -346,11 +347,11 @@ def reorder(sampling_map: mi.Bool, width: int, height: int, mode: str = "compact
     if mode == "none":
         return Reordered(dr.arange(mi.UInt32, n), mi.Bool(sampling_map), None, mode)
     if mode == "compact":
-        return Reordered(dr.compress(sampling_map), None, None, mode)
+        return _compacted(dr.compress(sampling_map), mode)
     if mode == "tiles":
         order = tile_order(width, height)
         at = dr.compress(dr.gather(mi.Bool, sampling_map, order))
-        return Reordered(dr.gather(mi.UInt32, order, at), None, None, mode)
+        return _compacted(at, mode, lambda: dr.gather(mi.UInt32, order, at))
     return _row_launch(sampling_map, width, height, mode, block_height)
 
 
@@ -399,9 +400,22 @@ def launch_of_pixels(pixels: mi.UInt32, on: mi.Bool, width: int, height: int,
     tmap = dr.zeros(mi.Bool, tiles_x * tiles_y * area)
     dr.scatter(tmap, mi.Bool(True), tile_index(pixels - y * width, y), on)
     at = dr.compress(tmap)
-    t, r = at // area, at % area
-    wavefront = ((t // tiles_x) * TILE + r // TILE) * width + (t % tiles_x) * TILE + r % TILE
+
+    def wavefront():
+        t, r = at // area, at % area
+        return ((t // tiles_x) * TILE + r // TILE) * width + (t % tiles_x) * TILE + r % TILE
     _, fx, fy = pixel_coords(width, height)
     smap = dr.gather(mi.Bool, tmap, tile_index(fx, fy))
-    return Reordered(wavefront, None, None, mode), smap
+    return _compacted(at, mode, wavefront), smap
+
+
+def _compacted(at: mi.UInt32, mode: str, wavefront: Callable[[], mi.UInt32] | None = None
+               ) -> Reordered:
+    """The launch of the compacted lanes ``at`` (their pixels: ``wavefront()``, else ``at``).
+    With none to trace (every sample borrowed, settled, or off the film) it is one idle lane:
+    Dr.Jit has no arithmetic on arrays of no entries, and a frame of no rays is still a frame
+    (its history, or black)."""
+    if dr.width(at) == 0:        # known on the host: dr.compress has synchronised
+        return Reordered(dr.zeros(mi.UInt32, 1), dr.zeros(mi.Bool, 1), None, mode)
+    return Reordered(at if wavefront is None else wavefront(), None, None, mode)
 

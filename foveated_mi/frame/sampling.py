@@ -548,8 +548,17 @@ def _traced_pixels(grid: PolarGrid | None, width: int, height: int,
     return int(traced.sum())
 
 
+#: The smallest disc the ``polar`` law lays out, in pixels: it holds a pixel centre wherever
+#: the gaze lies on the film (the nearest is at most half a pixel's diagonal, 0.707, away),
+#: so a frame always traces a ray. The cells grow as their distance over the disc's radius:
+#: a disc of no size would make every cell infinite.
+MIN_FOVEA = 0.75
+
+
 def fovea_radius(width: int, height: int, theta: float) -> float:
-    """The full-resolution disc of ``sampling_law = "polar"``, in pixels.
+    """The full-resolution disc of ``sampling_law = "polar"``, in pixels: ``theta`` of half
+    the diagonal, at least :data:`MIN_FOVEA` and at most the diagonal (a disc that wide
+    covers the film from any gaze on it, :func:`gaze_position`).
 
     Parameters
     ----------
@@ -563,7 +572,8 @@ def fovea_radius(width: int, height: int, theta: float) -> float:
     radius : float
         The disc's radius, in pixels.
     """
-    return float(theta) * 0.5 * math.hypot(width, height)
+    diagonal = math.hypot(width, height)
+    return min(max(float(theta) * 0.5 * diagonal, MIN_FOVEA), diagonal)
 
 
 #: The finest cells at the disc's edge, in pixels: a quarter of a pixel, some four cells a
@@ -708,7 +718,9 @@ def sensor_ppd(sensor: mi.Sensor) -> float:
 
 
 def gaze_position(gaze, width: int, height: int) -> mi.Point2f:
-    """The gaze's film position in pixels, opaque: a new gaze reuses every kernel.
+    """The gaze's film position in pixels, opaque: a new gaze reuses every kernel. A gaze off
+    the film is held at the film's nearest point: the polar buffer's rings reach the film's
+    diagonal from a point on it, and from no farther.
 
     Parameters
     ----------
@@ -722,8 +734,8 @@ def gaze_position(gaze, width: int, height: int) -> mi.Point2f:
     position : mi.Point2f
         The gaze's film position, in pixels.
     """
-    return mi.Point2f(dr.opaque(mi.Float, float(gaze[0]) * width),
-                      dr.opaque(mi.Float, float(gaze[1]) * height))
+    x, y = (min(max(float(g), 0.0), 1.0) for g in gaze[:2])
+    return mi.Point2f(dr.opaque(mi.Float, x * width), dr.opaque(mi.Float, y * height))
 
 
 def snapped_pixels(grid: PolarGrid, gaze: mi.Point2f, width: int, height: int
