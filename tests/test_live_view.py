@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import http.client
 import json
+import math
 import os
 import socket
 import subprocess
@@ -30,9 +31,12 @@ from foveated_mi.live.server import LiveView, check_bind  # noqa: E402
 from foveated_mi.validate import ParameterError  # noqa: E402
 
 W, H = 64, 36
+#: The longest wait for something that takes milliseconds (a frame, a message, the loop
+#: stopping): generous for a loaded machine; only an event that never comes reaches it.
+WAIT_S = 30.0
 
 
-def wait_for(fn, timeout=10.0, what="condition"):
+def wait_for(fn, timeout=WAIT_S, what="condition"):
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         v = fn()
@@ -78,7 +82,7 @@ def page(live, browser):
              90, "the first frames")           # a cold kernel cache compiles them
     yield browser
     browser.get("about:blank")
-    assert live.renderer.wait_stopped(10)
+    assert live.renderer.wait_stopped(WAIT_S)
 
 
 def js(d, expr):
@@ -124,7 +128,8 @@ def frames_after(d, n0):
 # -- the page -----------------------------------------------------------------------------
 
 def test_page_loads_and_frames_arrive(page):
-    m = wait_for(lambda: js(page, "window.live.received") >= 5 and meta(page), 10, "5 frames")
+    m = wait_for(lambda: js(page, "window.live.received") >= 5 and meta(page), WAIT_S,
+                 "5 frames")
     assert (m["width"], m["height"], m["panels"]) == (W, H, 1)
     assert 0.0 < m["ray_fraction"] <= 1.0 and m["frame_ms"] > 0 and m["rays"] > 0
     assert m["preset_resolved"] == "vr" and m["formation"] == "foveal"
@@ -135,17 +140,18 @@ def test_page_loads_and_frames_arrive(page):
 
 def test_mouse_in_left_third_moves_gaze_and_fovea_ring(page):
     move_mouse(page, 0.85, 0.5)
-    wait_for(lambda: meta(page)["gaze"][0] > 2 / 3, 5, "the gaze on the right")
+    wait_for(lambda: meta(page)["gaze"][0] > 2 / 3, WAIT_S, "the gaze on the right")
     assert ring(page)[0] > 2 / 3 * W
     n0 = meta(page)["frame"]
     move_mouse(page, 1 / 6, 0.4)
-    m = wait_for(lambda: meta(page)["gaze"][0] < 1 / 3 and meta(page), 5, "the gaze on the left")
+    m = wait_for(lambda: meta(page)["gaze"][0] < 1 / 3 and meta(page), WAIT_S,
+                 "the gaze on the left")
     assert m["frame"] > n0 and abs(m["gaze"][1] - 0.4) < 0.05
     cx, r = ring(page)
     assert cx < W / 3 and abs(cx - m["gaze"][0] * W) < 1e-3
     assert r == pytest.approx(m["fovea"]["px"])
     # Every later frame reports the new gaze too.
-    wait_for(lambda: len(frames_after(page, m["frame"])) >= 3, 5, "three more frames")
+    wait_for(lambda: len(frames_after(page, m["frame"])) >= 3, WAIT_S, "three more frames")
     assert all(f["gaze"][0] < 1 / 3 for f in frames_after(page, m["frame"]))
 
 
@@ -153,7 +159,7 @@ def test_key_press_moves_and_turns_the_camera(page, live):
     before = meta(page)["camera"]
     key(page, "w", 0.3)
     m = wait_for(lambda: meta(page)["camera"]["origin"] != before["origin"] and meta(page),
-                 5, "the camera to move")
+                 WAIT_S, "the camera to move")
     o0, o1 = np.array(before["origin"]), np.array(m["camera"]["origin"])
     fwd = np.array(before["target"]) - o0
     step = o1 - o0
@@ -161,8 +167,8 @@ def test_key_press_moves_and_turns_the_camera(page, live):
     assert np.linalg.norm(np.cross(step, fwd)) <= 1e-6 * np.linalg.norm(step) * np.linalg.norm(fwd)
     before = meta(page)["camera"]
     key(page, "right", 0.2)
-    m = wait_for(lambda: meta(page)["camera"]["target"] != before["target"] and meta(page), 5,
-                 "the camera to turn")
+    m = wait_for(lambda: meta(page)["camera"]["target"] != before["target"] and meta(page),
+                 WAIT_S, "the camera to turn")
     f0 = np.array(before["target"]) - np.array(before["origin"])
     f1 = np.array(m["camera"]["target"]) - np.array(m["camera"]["origin"])
     assert np.cross(f0, f1)[1] < 0        # y up: a turn to the right is clockwise seen from above
@@ -173,7 +179,7 @@ def test_history_resets_on_a_cut(live):
     """Small moves keep the history; going home from afar (the page's H key calls the same
     ``home``) or a jump is a cut, after which the frame starts afresh."""
     r = live.renderer
-    assert r.wait_stopped(5)
+    assert r.wait_stopped(WAIT_S)
     _reset(live)
     r.render_frame()
     for _ in range(4):
@@ -207,8 +213,8 @@ def _green(d):
 def test_an_overlay_toggles(page):
     g0 = _green(page)
     page.find_element("id", "ov-traced").click()
-    g, m = wait_for(lambda: (s := _shown(page)) and "traced" in s[1]["overlays"] and s, 5,
-                    "the overlay")
+    g, m = wait_for(lambda: (s := _shown(page)) and "traced" in s[1]["overlays"] and s,
+                    WAIT_S, "the overlay")
     assert js(page, "window.live.state.overlays") == ["traced"]
     # Each traced pixel tinted 60 % toward (40, 255, 90) gains about 0.6 * (255 - 65) = 114
     # of green excess; a settled still view traces a turn of its rays (foveal_still_spp),
@@ -217,8 +223,8 @@ def test_an_overlay_toggles(page):
     assert m["rays"] > 0
     assert g - g0 > 0.25 * 114.0 * m["rays"] / (W * H)
     page.find_element("id", "ov-traced").click()
-    wait_for(lambda: meta(page)["overlays"] == [] and meta(page)["frame"] > m["frame"], 5,
-             "the overlay off")
+    wait_for(lambda: meta(page)["overlays"] == [] and meta(page)["frame"] > m["frame"],
+             WAIT_S, "the overlay off")
     assert _green(page) < g0 + 2.0
     # The rings are the page's own: hidden at once, no frame needed.
     assert js(page, "document.getElementById('rings').style.display") == ""
@@ -235,7 +241,7 @@ def test_a_preset_change_takes_effect_and_a_bad_value_is_refused(page, capsys):
     m = wait_for(lambda: meta(page)["preset_resolved"] == "guided" and meta(page), 90,
                  "the guided preset")
     assert m["formation"] == "film" and m["denoiser"] == "svgf"
-    rebuild = wait_for(lambda: js(page, "window.live.rebuild"), 5, "the rebuild report")
+    rebuild = wait_for(lambda: js(page, "window.live.rebuild"), WAIT_S, "the rebuild report")
     assert rebuild["changed"] == {"preset": "guided"} and rebuild["ms"] > 0
     assert "rebuilt in" in page.find_element("id", "rebuild").text
     # A bad value: refused with the command line's own line, nothing changes.
@@ -243,7 +249,7 @@ def test_a_preset_change_takes_effect_and_a_bad_value_is_refused(page, capsys):
     box.clear()
     box.send_keys("2")
     page.find_element("id", "apply").click()
-    text = wait_for(lambda: page.find_element("id", "error").text, 5, "the error line")
+    text = wait_for(lambda: page.find_element("id", "error").text, WAIT_S, "the error line")
     assert main(["view", "cornell-box", "--ray-budget", "2"]) == 2
     cli_line = capsys.readouterr().err.strip()
     assert text == cli_line and text.startswith("foveated-mi: error: ray_budget = 2.0 is invalid")
@@ -267,19 +273,19 @@ def test_split_view_shows_uniform_rendering_with_the_same_rays(page):
 
 def test_gaze_lock_holds_the_gaze_while_the_mouse_moves(page):
     move_mouse(page, 0.25, 0.5)
-    held = wait_for(lambda: abs(meta(page)["gaze"][0] - 0.25) < 0.03 and meta(page)["gaze"], 5,
-                    "the gaze at the left")
+    held = wait_for(lambda: abs(meta(page)["gaze"][0] - 0.25) < 0.03 and meta(page)["gaze"],
+                    WAIT_S, "the gaze at the left")
     key(page, "l")
-    wait_for(lambda: meta(page)["locked"], 5, "the lock")
+    wait_for(lambda: meta(page)["locked"], WAIT_S, "the lock")
     n0 = meta(page)["frame"]
     for u in (0.5, 0.7, 0.9):
         move_mouse(page, u, 0.3)
         time.sleep(0.05)
-    wait_for(lambda: len(frames_after(page, n0)) >= 5, 5, "frames while locked")
+    wait_for(lambda: len(frames_after(page, n0)) >= 5, WAIT_S, "frames while locked")
     assert all(f["gaze"] == held for f in frames_after(page, n0))
     key(page, "l")
     move_mouse(page, 0.8, 0.3)
-    wait_for(lambda: meta(page)["gaze"][0] > 0.7, 5, "the gaze free again")
+    wait_for(lambda: meta(page)["gaze"][0] > 0.7, WAIT_S, "the gaze free again")
 
 
 def test_closing_the_tab_stops_the_loop(live, browser):
@@ -292,7 +298,7 @@ def test_closing_the_tab_stops_the_loop(live, browser):
     assert live.renderer.active
     browser.close()
     browser.switch_to.window(first)
-    assert live.renderer.wait_stopped(5), "the loop still renders with no page open"
+    assert live.renderer.wait_stopped(WAIT_S), "the loop still renders with no page open"
     n = live.renderer.frames_rendered
     time.sleep(0.5)
     assert live.renderer.frames_rendered == n
@@ -302,16 +308,26 @@ def test_closing_the_tab_stops_the_loop(live, browser):
 
 def test_recorded_walkthrough_replays_through_sequence(page, live, tmp_path):
     page.find_element("id", "record").click()
-    wait_for(lambda: js(page, "window.live.state.recording"), 5, "recording")
+    wait_for(lambda: js(page, "window.live.state.recording"), WAIT_S, "recording")
+    home = meta(page)["camera"]
     for u, v in ((0.3, 0.4), (0.6, 0.6), (0.45, 0.3)):
         move_mouse(page, u, v)
         time.sleep(0.05)
-    key(page, "w", 0.1)
+    from selenium.webdriver.common.action_chains import ActionChains
+    ActionChains(page).key_down("w").perform()        # held until the camera has moved
+    try:
+        wait_for(lambda: meta(page)["camera"] != home, WAIT_S, "the camera to move")
+    finally:
+        ActionChains(page).key_up("w").perform()
+    n0 = meta(page)["frame"]
     key(page, "h")                        # a jump: a cut in the recording
     move_mouse(page, 0.7, 0.5)
-    time.sleep(0.1)
+    # Frames come at the machine's pace: stop once a frame back home (the cut is the first
+    # of them) and five before it were recorded.
+    wait_for(lambda: (m := meta(page))["frame"] > n0 and m["camera"] == home
+             and (m["recording"] or 0) >= 5, WAIT_S, "the cut and five frames recorded")
     page.find_element("id", "record").click()
-    rec = wait_for(lambda: js(page, "window.live.recording"), 10, "the recording")
+    rec = wait_for(lambda: js(page, "window.live.recording"), WAIT_S, "the recording")
     assert os.path.isfile(rec["toml_path"]) and os.path.isfile(rec["csv_path"])
     assert rec["toml_name"] in page.find_element("id", "recording").text
     track = PoseTrack.read(rec["csv_path"])
@@ -335,12 +351,12 @@ def test_recorded_walkthrough_replays_through_sequence(page, live, tmp_path):
 def test_a_second_page_shares_the_renderer_or_is_refused(page, live):
     from foveated_mi.live.client import run_measure
     n0 = js(page, "window.live.received")
-    shared = run_measure(live.url, 0.5, warmup=0.2)
-    assert shared["frames"] > 0 and not shared["errors"]
-    assert js(page, "window.live.received") > n0
+    shared = run_measure(live.url, WAIT_S, warmup=0.2, frames=2)
+    assert shared["frames"] == 2 and not shared["errors"]
+    wait_for(lambda: js(page, "window.live.received") > n0, WAIT_S, "the page's frames")
     live.server.max_viewers = 1
-    try:
-        refused = run_measure(live.url, 0.3, warmup=0.0)
+    try:        # the server refuses and closes: the client ends there, not at WAIT_S
+        refused = run_measure(live.url, WAIT_S, warmup=0.0)
     finally:
         live.server.max_viewers = 4
     assert refused["frames"] == 0
@@ -366,7 +382,7 @@ def test_screenshot_of_the_page(live, browser, tmp_path):
         wait_for(lambda: meta(browser)["panels"] == 2 and "map" in meta(browser)["overlays"],
                  30, "the split view with the map")
         move_mouse(browser, 0.38, 0.55)
-        wait_for(lambda: abs(meta(browser)["gaze"][0] - 0.38) < 0.02, 10, "the gaze")
+        wait_for(lambda: abs(meta(browser)["gaze"][0] - 0.38) < 0.02, WAIT_S, "the gaze")
         time.sleep(0.5)
         path = target or str(tmp_path / "live_view.png")
         assert browser.save_screenshot(path)
@@ -375,7 +391,7 @@ def test_screenshot_of_the_page(live, browser, tmp_path):
         browser.set_window_size(1200, 760)
         if target:
             view.stop()
-        assert live.renderer.wait_stopped(10)
+        assert live.renderer.wait_stopped(WAIT_S)
     from PIL import Image
     img = np.asarray(Image.open(path).convert("RGB"))
     assert img.shape[1] >= 1000 and img.std() > 10      # a page, not a blank window
@@ -384,7 +400,7 @@ def test_screenshot_of_the_page(live, browser, tmp_path):
 # -- the server's checks (no browser) -----------------------------------------------------
 
 def _get(live, path, headers=None):
-    c = http.client.HTTPConnection("127.0.0.1", live.port, timeout=5)
+    c = http.client.HTTPConnection("127.0.0.1", live.port, timeout=WAIT_S)
     c.request("GET", path, headers=headers or {})
     r = c.getresponse()
     body = r.read().decode(errors="replace")
@@ -420,11 +436,11 @@ def test_foreign_origin_host_and_token_are_refused(live):
                                            host=f"attacker.example:{p}", port=p))[0] == 403
     assert _get(live, "/ws", _upgrade_headers(f"http://127.0.0.1:{p}", port=p))[0] == 403
     assert _get(live, ws, _upgrade_headers(f"http://127.0.0.1:{p}", port=p))[0] == 101
-    c = http.client.HTTPConnection("127.0.0.1", p, timeout=5)
+    c = http.client.HTTPConnection("127.0.0.1", p, timeout=WAIT_S)
     c.request("POST", "/" + tok, body="x")
     assert c.getresponse().status == 405
     c.close()
-    assert live.renderer.wait_stopped(5)
+    assert live.renderer.wait_stopped(WAIT_S)
 
 
 def test_a_non_local_bind_needs_the_flag(capsys):
@@ -493,7 +509,7 @@ def test_bad_messages_get_one_line_and_the_socket_stays_open(live):
     async def talk():
         async with aiohttp.ClientSession() as s:
             async with s.ws_connect(f"ws://127.0.0.1:{live.port}/ws?token={live.token}") as ws:
-                state = json.loads((await ws.receive(timeout=5)).data)
+                state = json.loads((await ws.receive(timeout=WAIT_S)).data)
                 assert state["type"] == "state" and state["width"] == W
                 replies = []
                 csv = json.dumps({"type": "gaze_source", "source": "csv",
@@ -502,7 +518,7 @@ def test_bad_messages_get_one_line_and_the_socket_stays_open(live):
                           '"preset": "fast"}', '{"type": "view", "latency_ms": 5000}', csv):
                     await ws.send_str(m)
                     while True:
-                        msg = await ws.receive(timeout=10)
+                        msg = await ws.receive(timeout=WAIT_S)
                         if msg.type == aiohttp.WSMsgType.TEXT and \
                                 json.loads(msg.data)["type"] == "error":
                             replies.append(json.loads(msg.data)["message"])
@@ -518,17 +534,24 @@ def test_bad_messages_get_one_line_and_the_socket_stays_open(live):
     assert replies[2] == ("foveated-mi: error: latency_ms = 5000 is invalid: expected a finite "
                           "number >= 0 and <= 1000")
     assert replies[3].startswith("foveated-mi: error: walk.csv:2 = '0,0.5' is invalid")
-    assert live.renderer.wait_stopped(5)
+    assert live.renderer.wait_stopped(WAIT_S)
 
 
 def test_python_client_measures_rate_and_latency(live):
+    """Counted, not timed: the client stops at 10 frames after its warm-up, and its rate is
+    those frames over the time they took (a speed figure: benchmarks/bench_live_view.py)."""
     from foveated_mi.live.client import run_measure
     _reset(live)
-    r = run_measure(live.url, 0.6, warmup=0.2)
-    assert r["frames"] > 5 and r["fps"] > 5 and not r["errors"]
+    r = run_measure(live.url, WAIT_S, warmup=0.2, frames=10)
+    assert r["frames"] == 10 and not r["errors"]
+    assert r["seconds"] > 0 and r["fps"] == (r["frames"] - 1) / r["seconds"]
+    # The gaze moves at 60 Hz and every frame renders the newest one: of 10 frames, some
+    # render a gaze sent after the warm-up, each giving a latency.
     assert r["latency_samples"] > 0 and r["latency_ms_median"] > 0
     assert r["last"]["gaze_seq"] > 0 and r["last"]["gaze_age_ms"] is not None
-    assert live.renderer.wait_stopped(5)
+    with pytest.raises(ParameterError, match=r"^frames = 1 is invalid: expected an integer >= 2"):
+        run_measure(live.url, WAIT_S, frames=1)
+    assert live.renderer.wait_stopped(WAIT_S)
 
 
 # -- the renderer's inputs (no browser, no server thread) ----------------------------------
@@ -540,24 +563,33 @@ def test_latency_renders_the_gaze_of_that_many_ms_ago(live):
     assert g.at(10.1)[:3] == (0.1, 0.1, 1) and g.at(10.25)[:3] == (0.9, 0.9, 2)
     assert g.at(9.0)[:3] == (0.5, 0.5, 0)
     r = live.renderer
-    assert r.wait_stopped(5)
+    assert r.wait_stopped(WAIT_S)
     _reset(live)
+    # A clock the test moves: the gaze samples and the frames are 350 ms apart whatever
+    # the machine's load, against a 300 ms latency.
+    t0 = time.perf_counter()
+    now = [t0]
     r.set_view(latency_ms=300.0)
+    r.clock = lambda: now[0]
     try:
         r.set_gaze(0.2, 0.3, 101)
-        time.sleep(0.35)
+        now[0] += 0.35
         r.set_gaze(0.8, 0.7, 102)
         m = r.render_frame().meta
         assert m["gaze"] == [0.2, 0.3] and m["gaze_seq"] == 101 and m["latency_ms"] == 300.0
-        time.sleep(0.35)
+        # (t0 + 0.35) - t0 in ms: the sum rounds by half an ulp of t0 + 0.35, the product
+        # by less, so within one ulp (s) times 1e3.
+        assert abs(m["gaze_age_ms"] - 350.0) <= 1e3 * math.ulp(t0 + 0.35)
+        now[0] += 0.35
         assert r.render_frame().meta["gaze"] == [0.8, 0.7]
     finally:
+        r.clock = time.perf_counter
         r.set_view(latency_ms=0.0)
 
 
 def test_gaze_replay_sources_and_a_bad_csv(live, tmp_path):
     r = live.renderer
-    assert r.wait_stopped(5)
+    assert r.wait_stopped(WAIT_S)
     r.set_gaze_source("saccades")
     seen = set()
     for _ in range(12):
@@ -574,7 +606,7 @@ def test_gaze_replay_sources_and_a_bad_csv(live, tmp_path):
 
 def test_still_split_converges_while_the_camera_rests(live):
     r = live.renderer
-    assert r.wait_stopped(5)
+    assert r.wait_stopped(WAIT_S)
     _reset(live)
     r.set_view(split="still")
     try:
@@ -595,7 +627,7 @@ def test_still_split_converges_while_the_camera_rests(live):
 def test_every_overlay_draws_for_both_formations(live, preset):
     """The buffer overlays on the foveated buffer's samples (vr) and on the film (guided)."""
     from foveated_mi.live.renderer import LiveRenderer
-    assert live.renderer.wait_stopped(5)
+    assert live.renderer.wait_stopped(WAIT_S)
     r = LiveRenderer(live.renderer.scene, options={"preset": preset})
     for _ in range(3):
         frame = r.render_frame()
@@ -612,7 +644,7 @@ def test_moving_gaze_and_camera_compile_nothing_after_warm_up(live):
     with the overlays and the uniform split view on, compile no kernel after the first."""
     from kernel_counts import compiled_by
     r = live.renderer
-    assert r.wait_stopped(5)
+    assert r.wait_stopped(WAIT_S)
     _reset(live)
     step = [0]
 

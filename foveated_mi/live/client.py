@@ -23,20 +23,24 @@ __all__ = ["measure", "run_measure"]
 
 async def measure(url: str, seconds: float = 5.0, *, move_hz: float = 60.0,
                   messages: list[dict] | None = None, warmup: float = 1.0,
-                  origin: str | None = None) -> dict[str, Any]:
+                  origin: str | None = None, frames: int | None = None) -> dict[str, Any]:
     """Connect to ``url`` (``http://host:port/?token=...`` or the ``ws://`` address), send
     ``messages`` first (e.g. ``{"type": "view", "split": "uniform"}``), move the gaze for
     ``warmup + seconds`` and measure over the last ``seconds``: frames received per second,
     the median and 95th percentile gaze latency (ms), the median render time, and the
-    frames' metadata."""
+    frames' metadata. With ``frames``, the measurement ends as soon as that many frames
+    arrived after the warm-up (``seconds`` then only bounds the wait for them)."""
     import aiohttp
+    from ..validate import check_int
+    if frames is not None:
+        frames = check_int("frames", frames, 2)     # a rate needs two arrivals
     headers = {"Origin": origin} if origin else {}
     async with aiohttp.ClientSession() as session:
         async with session.ws_connect(_ws_url(url), headers=headers,
                                       max_msg_size=1 << 26) as ws:
             for m in messages or ():
                 await ws.send_str(json.dumps(m))
-            run = _Run(ws, time.perf_counter(), warmup, seconds)
+            run = _Run(ws, time.perf_counter(), warmup, seconds, frames)
             task = asyncio.ensure_future(run.move(move_hz))
             try:
                 await run.receive()
@@ -48,9 +52,10 @@ async def measure(url: str, seconds: float = 5.0, *, move_hz: float = 60.0,
 class _Run:
     """One measurement: the gaze sent (time per seq), the frames received, the latencies."""
 
-    def __init__(self, ws, t0: float, warmup: float, seconds: float):
-        self.ws, self.t0, self.warmup = ws, t0, warmup
+    def __init__(self, ws, t0: float, warmup: float, seconds: float, count: int | None = None):
+        self.ws, self.t0, self.warmup, self.count = ws, t0, warmup, count
         self.end = t0 + warmup + seconds
+        self.counted = 0                # frames arrived after the warm-up
         self.frames: list[tuple[float, dict]] = []
         self.sent: dict[int, float] = {}
         self.pending: list[int] = []
@@ -83,6 +88,8 @@ class _Run:
                 meta, _ = unpack(msg.data)
                 await self.ws.send_str(json.dumps({"type": "ack", "frame": meta["frame"]}))
                 self.frames.append((now, meta))
+                if now >= self.t0 + self.warmup:
+                    self.counted += 1
                 while self.pending and self.pending[0] <= meta.get("gaze_seq", 0):
                     k = self.pending.pop(0)
                     if self.sent[k] >= self.t0 + self.warmup:
@@ -92,6 +99,8 @@ class _Run:
                 if m.get("type") in ("error", "refused"):
                     self.errors.append(m.get("message", ""))
             else:
+                break
+            if self.count is not None and self.counted >= self.count:
                 break
 
     def summary(self) -> dict[str, Any]:

@@ -216,14 +216,17 @@ class LiveRenderer:
     """The render loop of the live view (module docs). ``scene_ref`` (a built-in name or an
     XML path) and ``scene_params`` / ``integrator`` are what a recording's sequence config
     needs to load the same scene; ``options`` are the foveated options given (validated
-    here, as by the command line)."""
+    here, as by the command line). ``clock`` (a callable giving monotonic seconds; the
+    attribute :attr:`clock`) stamps the gaze samples, a gaze source's start and the frames:
+    a frame renders the gaze that had arrived ``latency_ms`` before it on that clock."""
 
     def __init__(self, scene, *, scene_ref: str | None = None,
                  scene_params: dict | None = None, integrator: dict | None = None,
                  spp: int = 1, options: dict | None = None, seed: int = 0,
                  jpeg_quality: int = 85, record_dir: str = os.path.join("out", "live"),
                  idle_frames: int = IDLE_FRAMES, gaze_csv: str | None = None,
-                 max_fps: float = MAX_FPS):
+                 max_fps: float = MAX_FPS,
+                 clock: Callable[[], float] = time.perf_counter):
         import mitsuba as mi
         from ..kernels import film_size
         from ..options import validate_options
@@ -243,6 +246,7 @@ class LiveRenderer:
         from ..validate import check_range
         self.max_fps = check_range("--max-fps", max_fps, 0.0, 1000.0)
         self._last_start = 0.0
+        self.clock = clock
         self._given = {k: v for k, v in dict(options or {}).items() if v is not None}
         validate_options(self._given)
         sensor = scene.sensors()[0]
@@ -274,7 +278,7 @@ class LiveRenderer:
         if gaze_csv is not None:
             from ..paths import GazeCSV
             self._source = ("csv", GazeCSV(gaze_csv, relative=True, name="--gaze-csv"),
-                            time.perf_counter())
+                            self.clock())
 
     def _init_loop(self) -> None:
         """What the loop keeps from frame to frame, and its links to the server."""
@@ -419,7 +423,7 @@ class LiveRenderer:
 
     def set_gaze(self, x: float, y: float, seq: int = 0) -> None:
         with self._cond:
-            self.gaze_input.add(time.perf_counter(), x, y, seq)
+            self.gaze_input.add(self.clock(), x, y, seq)
             self._input()
 
     def set_lock(self, on: bool) -> None:
@@ -495,7 +499,7 @@ class LiveRenderer:
         elif source == "csv":
             path = _csv_from_text(csv or "", name)
         with self._cond:
-            self._source = (source, path, time.perf_counter())
+            self._source = (source, path, self.clock())
             self._input()
 
     @property
@@ -618,7 +622,7 @@ class LiveRenderer:
     def _take_inputs(self) -> dict:
         """The inputs of the frame starting now, taken at once under the lock."""
         with self._cond:
-            now = time.perf_counter()
+            now = self.clock()
             cam = self.camera.as_dict()
             gx, gy, seq, arrival = self._pick_gaze(now)
             inputs = {"now": now, "version": self._version, "pending": self._pending,
@@ -689,7 +693,7 @@ class LiveRenderer:
 
     def _meta(self, inputs: dict, stats: dict, frame_ms: float, split_info, times) -> dict:
         """The frame's numbers, as the page receives them."""
-        end = time.perf_counter()
+        end = self.clock()
         if self._last_end is not None:
             dt = end - self._last_end
             rate = 1.0 / dt if dt > 0 else 0.0
