@@ -5,7 +5,6 @@ different loop structure (a loop over window offsets, vectorised over pixels, in
 never by calling the code under test.
 """
 import math
-import time
 
 import drjit as dr
 import mitsuba as mi
@@ -325,26 +324,21 @@ def test_non_finite_sites(method):
 
 @pytest.mark.parametrize("method", METHODS)
 def test_one_site(method):
-    """One site: the output is its colour everywhere; the radius bound keeps it quick."""
+    """One site: the output is its colour everywhere (its speed is a benchmark's, not a
+    test's: a loaded machine must not fail it)."""
     w, h = 64, 48
     mask = np.zeros(w * h, bool)
     mask[5 * w + 40] = True
     shading = np.zeros((3, w * h), np.float32)
     shading[:, mask] = np.array([[0.25], [2.0], [7.5]], np.float32)
     nearest = jump_flood(mi.Bool(mask), w, h)
-    t0 = time.perf_counter()
     out = reconstruct_any(method, mi.Color3f(shading), mi.Bool(mask), nearest, w, h, max_radius=32)
-    dr.eval(out)
-    dr.sync_thread()
-    elapsed = time.perf_counter() - t0
-    print(f"{method}: one site, {w}x{h}, max_radius 32: {elapsed * 1e3:.0f} ms (incl. compile)")
     expected = np.broadcast_to(shading[:, mask], (3, w * h))
     if method in EXACT:
         np.testing.assert_array_equal(out.numpy(), expected)
     else:   # guided: Float32 normalised sums, within their rounding
         tolerances.assert_within(out.numpy(), expected,
                                  tolerances.chain_bound(expected, GUIDED_DEPTH), method)
-    assert elapsed < 30
 
 
 # ----------------------------------------------------------------------------- summed-area table
