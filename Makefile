@@ -2,15 +2,20 @@
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+PSTAMP := $(VENV)/.perceptual
 export DRJIT_LIBLLVM_PATH ?= $(shell cat $(VENV)/llvm-path 2>/dev/null)
 RUN    = DRJIT_LIBLLVM_PATH=$$(cat $(VENV)/llvm-path) 
 
-.PHONY: demo test test-all test-slow bench notebooks setup clean wheelhouse
+.PHONY: demo test test-all test-slow test-perceptual bench notebooks setup clean wheelhouse
 
 $(STAMP): pyproject.toml scripts/setup.sh
 	bash scripts/setup.sh
 
 setup: $(STAMP)
+
+# The perceptual extra (pyfvvdp and a CPU build of torch; TORCH_SPEC picks another torch)
+$(PSTAMP): $(STAMP) scripts/setup_perceptual.sh
+	VENV=$(VENV) bash scripts/setup_perceptual.sh
 
 demo: $(STAMP)
 	$(RUN) $(VENV)/bin/foveated-mi demo
@@ -27,6 +32,10 @@ test-all: $(STAMP)        # everything, the slow checks included (before each re
 
 test-slow: $(STAMP)       # only the checks marked slow
 	$(RUN) $(PY) -m pytest -q -m slow
+
+# The checks that score FovVideoVDP's JOD, with the extra installed (once); one that skips fails.
+test-perceptual: $(PSTAMP)
+	$(RUN) FOVEATED_REQUIRE_PERCEPTUAL=1 $(PY) -m pytest -q $(XDIST) --durations=15 -m perceptual
 
 bench: $(STAMP)
 	$(RUN) $(PY) benchmarks/bench_reorder.py

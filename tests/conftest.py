@@ -69,3 +69,36 @@ def shared_scene():
             pytest.skip(f"shared scene {name!r} not found at {path}")
         return path
     return get
+
+
+#: ``make test-perceptual`` sets this: there a check marked ``perceptual`` that skips fails.
+REQUIRE_PERCEPTUAL = os.environ.get("FOVEATED_REQUIRE_PERCEPTUAL") == "1"
+
+
+def pytest_runtest_setup(item):
+    """A check marked ``perceptual`` needs FovVideoVDP (pyfvvdp, torch): without it, a skip
+    that says how to install it. Torch runs on one thread: the images are tiny and the test
+    workers already share the cores."""
+    if item.get_closest_marker("perceptual") is None:
+        return
+    from foveated_mi import perceptual
+    if not perceptual.available():
+        pytest.skip("needs the perceptual extra (pyfvvdp, torch): `make test-perceptual` "
+                    "installs it")
+    import torch
+    torch.set_num_threads(1)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """Under ``FOVEATED_REQUIRE_PERCEPTUAL=1`` a skipped ``perceptual`` check is a failure:
+    the run exists to score JOD, so a missing extra must not pass as a skip."""
+    outcome = yield
+    report = outcome.get_result()
+    if (REQUIRE_PERCEPTUAL and report.skipped and not hasattr(report, "wasxfail")
+            and item.get_closest_marker("perceptual") is not None):
+        reason = report.longrepr[2] if isinstance(report.longrepr, tuple) else report.longrepr
+        reason = str(reason).removeprefix("Skipped: ")
+        report.outcome = "failed"
+        report.longrepr = f"FOVEATED_REQUIRE_PERCEPTUAL=1 but this perceptual check skipped: " \
+                          f"{reason}"

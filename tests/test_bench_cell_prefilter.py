@@ -63,8 +63,7 @@ def test_jod_without_the_extra_says_so_in_one_line(bench, monkeypatch, capsys):
     assert err.startswith("--jod needs the perceptual extra") and "\n" not in err
 
 
-@pytest.mark.skipif(not __import__("foveated_mi.perceptual", fromlist=["x"]).available(),
-                    reason="needs the perceptual extra")
+@pytest.mark.perceptual
 def test_a_still_video_of_the_reference_scores_ten_and_a_blurred_one_less(bench):
     rng = np.random.default_rng(0)
     ref = rng.uniform(0.2, 0.8, (48, 64, 3)).astype(np.float32)

@@ -92,8 +92,9 @@ def test_a_lens_concentrates_pixels_and_a_pinhole_does_not():
     assert h.viewer_ppd(640) == pytest.approx(h.buffer_ppd(640)) and h.viewer_ppd(640) < 6
 
 
+@pytest.mark.perceptual
 def test_standard_hmd_is_fovvideovdp_s_own_geometry():
-    geometry = pytest.importorskip("pyfvvdp.fvvdp_display_model").fvvdp_display_geometry
+    from pyfvvdp.fvvdp_display_model import fvvdp_display_geometry as geometry
     g = geometry((1440, 1600), distance_m=3, fov_diagonal=110)
     h = headset("standard_hmd")
     assert h.display.ppd_centre == pytest.approx(g.ppd_centre, rel=1e-4)
