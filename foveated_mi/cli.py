@@ -9,6 +9,7 @@ import argparse
 import json
 import os
 import sys
+import warnings
 from typing import Any, Sequence
 
 EXIT_USAGE = 2
@@ -375,8 +376,21 @@ def cmd_view(args: argparse.Namespace) -> int:
     return 0
 
 
+def _one_line_warning(message, category, filename, lineno, line=None) -> str:
+    """A warning as the command line prints it: one line, without Python's source line."""
+    return f"foveated-mi: warning: {message}\n"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    shown, warnings.formatwarning = warnings.formatwarning, _one_line_warning
+    try:
+        return _run(args)
+    finally:
+        warnings.formatwarning = shown
+
+
+def _run(args) -> int:
     from .validate import ParameterError
     try:
         if args.command == "render":

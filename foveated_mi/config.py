@@ -149,8 +149,8 @@ class SequenceConfig:
 
 
 def read_toml(name: str, path: str | os.PathLike) -> tuple[dict, str]:
-    """``(table, path)`` of a TOML file; a missing file or a syntax error is a
-    :class:`ParameterError` naming ``name`` (``config``, ``study``)."""
+    """``(table, path)`` of a TOML file; a missing or unreadable file, text that is not UTF-8
+    or a syntax error is a :class:`ParameterError` naming ``name`` (``config``, ``study``)."""
     if not isinstance(path, (str, os.PathLike)) or not os.path.isfile(path):
         raise ParameterError(name, path if isinstance(path, str) else str(path),
                              "an existing TOML file")
@@ -160,6 +160,11 @@ def read_toml(name: str, path: str | os.PathLike) -> tuple[dict, str]:
             return tomllib.load(f), path
     except tomllib.TOMLDecodeError as e:
         raise ParameterError(name, path, f"valid TOML ({e})") from None
+    except UnicodeDecodeError as e:     # TOML is UTF-8 text
+        raise ParameterError(name, path, f"a UTF-8 text file (byte 0x{e.object[e.start]:02x} "
+                             f"at offset {e.start} is not UTF-8)") from None
+    except OSError as e:
+        raise ParameterError(name, path, f"a readable TOML file ({e.strerror or e})") from None
 
 
 def load_config(path: str | os.PathLike) -> SequenceConfig:
@@ -214,6 +219,10 @@ def parse_config(data: dict, *, base_dir: str = ".", source: str = "<config>",
     if "integrator" in data:
         integrator = dict(ctx.table("integrator", data["integrator"]))
         ctx.string("integrator.type", integrator.get("type"))
+        try:    # a misspelt plugin now, not when the scene loads
+            scenes.check_integrator_dict("integrator", integrator)
+        except ParameterError as e:
+            raise ctx.rename(e) from None
 
     foveated = _foveated(ctx, data.get("foveated", {}))
     camera = _camera(ctx, data.get("camera"), scene)

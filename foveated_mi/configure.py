@@ -24,7 +24,7 @@ from .frame.settings import (DenoiseSettings, DomainSettings, FrameSettings, His
                              SamplingSettings, TraceSettings)
 from .frame.space import SPACES
 from .postprocess import DENOISERS
-from .options import DEFAULTS, still_rate
+from .options import DEFAULTS, SCHEMA, still_rate
 from .validate import check_choice
 
 Options = dict[str, Any]
@@ -185,6 +185,130 @@ def reconstruction_settings(o: Options) -> ReconstructionSettings:
     return ReconstructionSettings(o["reconstruction"], every_pixel, o["jfa"],
                                   int(o["max_radius"]), params,
                                   None if method.averages is None else o[method.averages])
+
+
+# -- options that nothing reads ----------------------------------------------------------------
+
+#: Sampling law -> the options of :func:`sampling_settings` that only some laws read, and the
+#: laws that read them (:mod:`foveated_mi.frame.sampling`: ``sampling_pass``, and
+#: ``jfa_bound`` of :mod:`foveated_mi.frame.film`).
+LAW_OPTIONS: dict[str, tuple[str, ...]] = {
+    "theta": ("kwon", "polar"), "sigma_p": ("kwon",), "theta_deg": ("kwon",),
+    "ray_budget": ("acuity", "polar", "flat"), "acuity_floor": ("acuity",)}
+
+#: Options that only the ``film`` formation reads (:func:`film_settings`, through
+#: :func:`reconstruction_settings`), beside each reconstruction method's own.
+FILM_OPTIONS = ("reconstruction", "jfa", "max_radius")
+
+#: Options that only the ``foveal`` formation reads (:func:`foveal_settings`) and that no
+#: check of :func:`~foveated_mi.options.validate_options` refuses elsewhere.
+FOVEAL_OPTIONS = ("foveal_upsampling", "foveal_space", "foveal_disc")
+
+#: Options that only denoisers read (their registrations' ``reads``), beside the moving
+#: frame's colour test, which replaces ``sigma_luminance``.
+DENOISER_OPTIONS = ("atrous_iterations", "sigma_color", "sigma_normal", "sigma_position",
+                    "sigma_luminance", "sigma_luminance_moving", "oidn_quality")
+
+#: Where each setting is found (the hint of a warning).
+_WHERE = {"kwon": "preset 'paper'", "polar": "preset 'vr'", "film": "preset 'paper', "
+          "'guided' or 'oidn'", "foveal": "preset 'vr'"}
+
+
+def _among(key: str, values) -> str:
+    names = " or ".join(repr(v) for v in values)
+    hints = [_WHERE[v] for v in values if v in _WHERE]
+    return f"{key} {names}" + (f" (e.g. {hints[0]})" if hints else "")
+
+
+def _unread_by_law(o: Options) -> dict[str, tuple[str, str]]:
+    """Option -> (what excludes it, what reads it) for the sampling law's options."""
+    unread = {}
+    law = o["sampling_law"]
+    for name, laws in LAW_OPTIONS.items():
+        if law not in laws:
+            unread[name] = (f"sampling_law {law!r}", _among("sampling_law", laws))
+    if law == "kwon" and float(o["theta_deg"]) > 0:
+        unread["theta"] = (f"theta_deg = {o['theta_deg']:g}", "sampling_law 'kwon' with "
+                           "theta_deg = 0, or 'polar'")
+    if law == "polar" and o["polar_cells"] != "acuity":
+        unread["viewer_ppd"] = (f"polar_cells {o['polar_cells']!r}",
+                                "polar_cells 'acuity' (sampling_law 'polar')")
+    elif law != "polar":
+        unread["viewer_ppd"] = (f"sampling_law {law!r}", "polar_cells 'acuity' (sampling_law "
+                                "'polar', e.g. preset 'vr')")
+    return unread
+
+
+def _unread_by_formation(o: Options) -> dict[str, tuple[str, str]]:
+    """As :func:`_unread_by_law`, for the formation's and the reconstruction's options."""
+    from .reconstruct import RECONSTRUCTIONS
+    unread = {}
+    formation = o["formation"]
+    method_options = list(dict.fromkeys(n for r in RECONSTRUCTIONS.values()
+                                        for n in r.options.values()))
+    if formation != "film":
+        for name in (*FILM_OPTIONS, *method_options):
+            unread[name] = (f"formation {formation!r}", _among("formation", ("film",)))
+        return unread
+    used = RECONSTRUCTIONS[o["reconstruction"]].options.values()
+    for name in method_options:
+        if name not in used:
+            readers = [m for m, r in RECONSTRUCTIONS.items() if name in r.options.values()]
+            unread[name] = (f"reconstruction {o['reconstruction']!r}",
+                            _among("reconstruction", readers))
+    for name in FOVEAL_OPTIONS:
+        unread[name] = (f"formation {formation!r}", _among("formation", ("foveal",)))
+    return unread
+
+
+def _unread_by_denoiser(o: Options) -> dict[str, tuple[str, str]]:
+    """As :func:`_unread_by_law`, for the denoisers' options (their registrations' reads)."""
+    used = denoisers_used(o)
+    read = {n for d in used for n in DENOISERS[d].reads}
+    if "sigma_luminance" in read:
+        read.add("sigma_luminance_moving")
+    unread = {}
+    for name in DENOISER_OPTIONS:
+        if name not in read:
+            readers = [d for d, e in DENOISERS.items() if name in e.reads
+                       or (name == "sigma_luminance_moving" and "sigma_luminance" in e.reads)]
+            unread[name] = ("denoiser " + " and ".join(repr(d) for d in used),
+                            _among("denoiser", readers))
+    return unread
+
+
+def ignored_options(given: Options, o: Options) -> dict[str, str]:
+    """The options given explicitly that the frame of validated options ``o`` does not read,
+    each with a one-line warning.
+
+    An option that the preset sets but the user did not is never listed; nor is one that
+    :func:`~foveated_mi.options.validate_options` refuses where it has no effect; nor any
+    when ``given`` holds every option (options already resolved, passed on).
+
+    Parameters
+    ----------
+    given : dict
+        The options the user set.
+    o : dict
+        The validated options.
+
+    Returns
+    -------
+    warnings : dict
+        Option -> ``"NAME = VALUE has no effect under preset 'P' (WHAT); it is read by
+        ..."``, in the order of ``given``.
+    """
+    if set(SCHEMA) - {"gaze", "timing"} <= set(given):
+        return {}       # every option, resolved (a study's task): what the user set is unknown
+    unread = {**_unread_by_denoiser(o), **_unread_by_formation(o), **_unread_by_law(o)}
+    out = {}
+    for name, value in given.items():
+        if name in unread:
+            why, reader = unread[name]
+            shown = f"{value:g}" if isinstance(value, float) else repr(value)
+            out[name] = (f"{name} = {shown} has no effect under preset {o['preset']!r} "
+                         f"({why}); it is read by {reader}")
+    return out
 
 
 # -- the built-in formations' readers ----------------------------------------------------------

@@ -64,7 +64,7 @@ from ..frame.settings import FrameSettings
 from ..frame.shading import is_ad_integrator
 from ..frame.view import Views
 from ..options import (SCHEMA, from_properties, gradient_refusal, parameter_table,
-                       pixel_filter_warning, validate_options)
+                       pixel_filter_warning, validate_options, warn_ignored)
 from ..timing import StageTimer
 from ..validate import ParameterError
 
@@ -95,6 +95,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._options = validate_options(self._given, self._gradients)
         self._settings = self._compile(self._options)   # each pass's, read once
         self._pixel_filter_warned: str | None = None
+        self._ignored_warned: set[str] = set()
         self._warn_pixel_filter()
         # Per view (a sensor of the scene): gaze, history, caches, last frame.
         self._views = Views()
@@ -134,12 +135,13 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._warn_pixel_filter()
 
     def _warn_pixel_filter(self) -> None:
-        """Warn once for an explicit splat with a denoiser that needs independent noise;
-        again only when an option change makes that choice anew (not on every frame)."""
+        """Warn once for an explicit splat with a denoiser that needs independent noise, or an
+        option nothing reads; again only when an option change makes it anew (not per frame)."""
         msg = pixel_filter_warning(self._given, self._options)
         if msg is not None and msg != self._pixel_filter_warned:
             warnings.warn(msg, UserWarning, stacklevel=3)
         self._pixel_filter_warned = msg
+        self._ignored_warned = warn_ignored(self._given, self._options, self._ignored_warned)
 
     def __getattr__(self, name):
         opts = self.__dict__.get("_options")

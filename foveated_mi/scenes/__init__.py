@@ -27,6 +27,7 @@ line in :data:`SCENES` and its default camera in :data:`SCENE_CAMERAS`.
 from __future__ import annotations
 
 import contextlib
+import functools
 import inspect
 import os
 from typing import Any, Callable
@@ -34,7 +35,7 @@ from typing import Any, Callable
 import numpy as np
 import mitsuba as mi
 
-from ..validate import ParameterError, check_int
+from ..validate import ParameterError, check_int, unknown_name
 from .camera import (_camera_from_matrix, apply_camera, camera_of, check_camera, film_dict,
                      look_at, sensor_dict)
 from .cornell_box import _cornell_box
@@ -47,6 +48,7 @@ __all__ = [
     "SCENES", "SCENE_CAMERAS", "BLOCK_PITCH", "CITY_EXTENT", "CHART_ROWS", "scene_dict",
     "load_scene", "scene_camera", "sensor_dict", "film_dict", "look_at", "check_camera",
     "apply_camera", "camera_of", "voxel_city_heights", "voxel_city_triangle_count", "eye_chart",
+    "integrator_names", "check_integrator_type", "check_integrator_dict",
 ]
 
 #: Default camera of every built-in scene: origin, target, up (world space) and the
@@ -92,6 +94,124 @@ def _check_integrator(integrator: Any) -> dict:
     if not isinstance(integrator, dict) or not isinstance(integrator.get("type"), str):
         raise ParameterError("integrator", integrator,
                              "None or a Mitsuba plugin dict with a 'type' string")
+    check_integrator_dict("integrator", integrator)
+    return integrator
+
+
+#: Integrators Mitsuba 3 defines in Python (``mitsuba/python/ad/integrators``): registered in
+#: its AD variants only, and unknown to ``mi.PluginManager.plugin_type``.
+_AD_INTEGRATORS = ("prb", "prb_basic", "prb_projective", "direct_projective", "prbvolpath",
+                   "volprim_rf_basic")
+
+
+@functools.lru_cache(maxsize=None)
+def _plugin_types() -> dict[str, str]:
+    """Plugin name -> its kind (``integrator``, ``bsdf``, ...) of every plugin library that
+    Mitsuba ships (its ``plugins`` folder); needs no variant."""
+    folder = os.path.join(os.path.dirname(mi.__file__), "plugins")
+    manager = mi.PluginManager.instance()
+    out = {}
+    for entry in sorted(os.listdir(folder)) if os.path.isdir(folder) else ():
+        name, ext = os.path.splitext(entry)
+        if ext in (".so", ".dll", ".dylib"):
+            kind = manager.plugin_type(name)
+            if kind != mi.ObjectType.Unknown:
+                out[name] = kind.name.lower()
+    return out
+
+
+def integrator_names() -> tuple[str, ...]:
+    """The integrator plugins Mitsuba knows in the current variant.
+
+    Mitsuba's own plugin libraries of kind integrator, its Python integrators (``prb``, ...)
+    in an AD variant (or before any variant is set), and ``foveated``. An integrator that
+    another package registers (``mi.register_integrator``) is not listed; see
+    :func:`check_integrator_type`.
+
+    Returns
+    -------
+    names : tuple of str
+        The names, sorted.
+    """
+    variant = mi.variant()
+    names = {n for n, kind in _plugin_types().items() if kind == "integrator"}
+    if variant is None or "_ad_" in variant:
+        names.update(_AD_INTEGRATORS)
+    if variant is not None and "polarized" not in variant:
+        names.discard("stokes")     # it refuses to load outside a polarized variant
+    names.add("foveated")
+    return tuple(sorted(names))
+
+
+def check_integrator_type(name: str, value: Any) -> str:
+    """An integrator plugin's name, checked before any scene loads.
+
+    Known when :func:`integrator_names` lists it or, with a variant set, when Mitsuba finds a
+    plugin of that name (one registered from Python, say).
+
+    Parameters
+    ----------
+    name : str
+        The input's name, for the error message (e.g. ``integrator.type``).
+    value : object
+        The plugin's name.
+
+    Returns
+    -------
+    value : str
+        ``value`` itself.
+
+    Raises
+    ------
+    ParameterError
+        If ``value`` is not a string naming an integrator plugin: the closest known name
+        (:func:`difflib.get_close_matches`), or what kind of plugin ``value`` is.
+    """
+    if not isinstance(value, str):
+        raise ParameterError(name, value, "the name of a Mitsuba integrator plugin, e.g. 'path'")
+    names = integrator_names()
+    if value in names:
+        return value
+    kind = _plugin_types().get(value)
+    if kind is not None:
+        raise ParameterError(name, value, f"an integrator plugin, not a {kind} plugin "
+                             "(e.g. 'path')")
+    if mi.variant() is not None and _registered(value):
+        return value
+    raise ParameterError(name, value, unknown_name(value, names, "a Mitsuba integrator plugin"))
+
+
+def _registered(plugin: str) -> bool:
+    """Whether Mitsuba finds plugin ``plugin`` in the current variant (one registered from
+    Python): any failure but "not found" means it exists (properties it needs, say)."""
+    try:
+        mi.load_dict({"type": plugin})
+    except Exception as e:          # Mitsuba's loader error, or the plugin's own
+        return "not found" not in str(e)
+    return True
+
+
+def check_integrator_dict(name: str, integrator: dict) -> dict:
+    """Check the ``type`` of an integrator plugin dict, and of the nested integrator of a
+    ``foveated`` one (:func:`check_integrator_type`); errors name ``NAME.type``.
+
+    Parameters
+    ----------
+    name : str
+        The dict's name in the error message (e.g. ``integrator``).
+    integrator : dict
+        A Mitsuba plugin dict.
+
+    Returns
+    -------
+    integrator : dict
+        ``integrator`` itself.
+    """
+    kind = check_integrator_type(f"{name}.type", integrator.get("type"))
+    if kind == "foveated":
+        for key, value in integrator.items():
+            if isinstance(value, dict) and "type" in value:
+                check_integrator_dict(f"{name}.{key}", value)
     return integrator
 
 

@@ -385,6 +385,11 @@ def _integrator(ctx: TableContext, key: str, value: Any) -> dict:
     if table["type"] == "foveated":
         raise ctx.error(f"{key}.type", "foveated", "the nested integrator (e.g. 'path'); the "
                         "study wraps it in the foveated integrator itself")
+    from ..scenes import check_integrator_dict
+    try:    # a misspelt plugin now, not in every reference and task
+        check_integrator_dict(key, table)
+    except ParameterError as e:
+        raise ctx.rename(e) from None
     return table
 
 
