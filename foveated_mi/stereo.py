@@ -25,8 +25,10 @@ second reprojects the first eye's samples of that frame into its own, by its his
 the very point (:func:`foveated_mi.frame.buffer_space.partner_map`), and traces the rest:
 what the first eye did not see (the crescents, :func:`crescent`), the sky, and surfaces whose
 BSDF has a glossy or delta lobe, whose radiance differs between the eyes. With
-``reuse="periphery"`` it traces its own disc too: a reused disc pixel is the first eye's
-value of a point a sub-pixel off its own (measured: ``docs/results.md#two-eyes-in-a-headset``).
+``reuse="periphery"`` it traces its own disc too; otherwise a disc pixel reuses the first
+eye's value only of a point landing within an eighth of a pixel of its centre
+(:data:`foveated_mi.frame.buffer_space.DISC_REACH`), where it stands for that pixel, and
+traces the rest (measured: ``docs/results.md#two-eyes-in-a-headset``).
 Where a sample is reused, both eyes show the same estimate: their noise there is shared, not
 independent, which a per-eye metric cannot tell from independent noise (neither sees
 binocular rivalry). Reused values are constants to a gradient pass, as history is. Without
@@ -459,8 +461,8 @@ class Stereo:
         Where the eyes converge when the head's gaze ray meets nothing.
     reuse : bool or str, optional
         The second eye reuses the first eye's samples where it sees the same diffuse surface
-        (module docstring): True, or ``"periphery"`` (its disc traced: reused disc pixels are
-        the first eye's, resampled a sub-pixel off), or False.
+        (module docstring): True (a disc pixel only where the first eye's point lands within
+        an eighth of a pixel of its centre), or ``"periphery"`` (its disc traced), or False.
     first : str, optional
         The eye rendered first, whose samples the other reuses: ``"left"`` or ``"right"``.
     """

@@ -227,9 +227,38 @@ def test_the_second_eye_traces_only_what_it_does_not_borrow():
     assert (took & traced).sum() <= 0.05 * took.sum()
 
 
+#: A symmetric frustum (the eyes' principal points at their films' centres): a point at
+#: depth z lies ``FOCAL * ipd / z`` pixels apart in the two films, with no offset between them.
+SQUARE = Frustum(40.0, 40.0, 40.0, 40.0)
+FOCAL = WIDTH / (2.0 * np.tan(np.radians(40.0)))
+IPD = 0.063
+
+
+def _wall(depth: float):
+    """A flat-coloured wall facing the head at ``depth``, half as wide as the view: the sky
+    around it (by its edges, traced) keeps the second eye's frame from borrowing all."""
+    half = 0.5 * depth * np.tan(np.radians(40.0))
+    return mi.load_dict({**_head("test_albedo"),
+                         "wall": {"type": "rectangle", "bsdf": _diffuse([0.6, 0.4, 0.2]),
+                                  "to_world": mi.ScalarTransform4f().translate([0, 0, depth])
+                                  .scale([half, half, 1.0]).rotate([0, 1, 0], 180)}})
+
+
+def _on_wall(offset: float, reuse=True):
+    """Both eyes (symmetric frusta) fixating the wall at the depth where its points lie one
+    pixel and ``offset`` apart in the two films: each first-eye pixel centre's point lands
+    ``offset`` pixels beside a second-eye pixel's centre (the films' rows agree: the cameras
+    are parallel)."""
+    scene = _wall(FOCAL * IPD / (1.0 + offset))
+    stereo = Stereo(scene, FoveatedIntegrator(preset="vr", nested=scene.integrator()),
+                    StereoRig(SQUARE, ipd=IPD, width=WIDTH), reuse=reuse)
+    stereo.render((0.5, 0.5), seed=3)
+    return stereo
+
+
 def test_reuse_in_the_periphery_traces_the_second_eye_s_disc():
-    stereo = _rendered(_scene())
-    outside = _rendered(_scene(), reuse="periphery")
+    stereo = _on_wall(0.0)
+    outside = _on_wall(0.0, reuse="periphery")
     cells = stereo.views["right"].history.layout.cells
     for s, disc_borrowed in ((stereo, True), (outside, False)):
         took, _, _, on = _borrowed(s, "right")
@@ -237,6 +266,28 @@ def test_reuse_in_the_periphery_traces_the_second_eye_s_disc():
         assert took[cells:].sum() > 20 if disc_borrowed else not took[cells:].any()
         traced = np.array(s.views["right"].buffers["traced"], dtype=bool)
         assert traced[cells:][on[cells:]].all() != disc_borrowed
+
+
+@pytest.mark.parametrize("offset,borrowed", [(0.0, True), (0.05, True), (0.25, False),
+                                             (0.45, False)])
+def test_a_disc_pixel_borrows_only_a_point_on_its_centre(offset, borrowed):
+    """Each first-eye disc point lands ``offset`` pixels off a second-eye pixel's centre
+    (:func:`_on_wall`). The second eye's disc borrows it within an eighth of a pixel of the
+    centre (``DISC_REACH``) and traces the rest; anywhere in the pixel (up to half a pixel
+    off) its disc would show the first eye's image shifted by up to half a pixel. The cells,
+    free to move onto the points (``toward``), borrow whatever the offset."""
+    stereo = _on_wall(offset)
+    cells = stereo.views["right"].history.layout.cells
+    took, _, _, on = _borrowed(stereo, "right")
+    disc = on[cells:]
+    assert disc.sum() > 20
+    traced = np.array(stereo.views["right"].buffers["traced"], dtype=bool)[cells:]
+    if borrowed:
+        assert took[cells:][disc].mean() > 0.9, took[cells:][disc].mean()
+    else:
+        assert not took[cells:].any(), took[cells:].sum()
+        assert traced[disc].all()
+    assert took[:cells].sum() > 100
 
 
 def test_the_first_eye_is_rendered_as_without_reuse():

@@ -70,6 +70,13 @@ NORMAL_AGREEMENT = 0.9
 #: one point: a pixel's footprint is a few thousandths of the distance at a headset's
 #: resolution, float32 positions agree to about a millionth.
 SAME_POINT = 1e-3
+#: How far (pixels, each way) the other eye's point may land from a disc pixel's centre for
+#: the disc pixel to borrow it. A disc pixel's value is its filter's mean about its centre;
+#: a point ``d`` off holds that mean shifted by ``d``, wrong at an edge by up to ``d`` times
+#: the filtered edge's slope: 0.8 of the step a pixel under Mitsuba's default Gaussian
+#: (standard deviation 0.5 pixel), so a tenth of the step at an eighth of a pixel, two
+#: fifths at half a pixel (anywhere in the pixel).
+DISC_REACH = 0.125
 
 
 #: The order in which ``foveal_interleave = n`` traces the cells of each ``n`` x ``n``
@@ -551,7 +558,7 @@ def still_map(history: History, n: int) -> ReprojectionMap:
 
 def reprojection_map(gb: GBuffer, on: mi.Bool, history: History | None, lay: SampleLayout,
                      width: int, height: int, *, tolerance: float = 0.02,
-                     mode: str = "exclusive") -> ReprojectionMap:
+                     mode: str = "exclusive", reach: float = 0.5) -> ReprojectionMap:
     r"""Reverse-reproject the samples' G-buffer into the previous samples (module docstring).
 
     Parameters
@@ -565,6 +572,9 @@ def reprojection_map(gb: GBuffer, on: mi.Bool, history: History | None, lay: Sam
         The samples, and the film's size.
     tolerance, mode : float, str
         :math:`\tau` of the plane test; ``'exclusive'`` reads, or another mode (``'nearest'``).
+    reach : float, optional
+        How far (pixels, each way) from the previous sample's pixel centre a disc pixel
+        lands to read it: 0.5, anywhere in that pixel.
 
     Returns
     -------
@@ -589,7 +599,7 @@ def reprojection_map(gb: GBuffer, on: mi.Bool, history: History | None, lay: Sam
     hits = agree & (prev_count > 0)
     # A disc pixel's history is a pixel's: it reads a previous sample only when it lands in
     # that sample's pixel, never a coarser cell's value from a pixel beside it.
-    pixel = (dr.abs(uv.x - centre.x) <= 0.5) & (dr.abs(uv.y - centre.y) <= 0.5)
+    pixel = (dr.abs(uv.x - centre.x) <= reach) & (dr.abs(uv.y - centre.y) <= reach)
     hits &= (dr.arange(mi.UInt32, n) < lay.cells) | pixel
     # Evaluated with the claims' launch, so that the launches after it (the claims' test,
     # the cut's count) read these rather than project every sample again.
@@ -691,7 +701,9 @@ def partner_map(gb: GBuffer, on: mi.Bool, partner: History, lay: SampleLayout, w
     exclusive reads). A cell reads only the sample whose point it ``claimed``
     (:func:`toward`), where its own ray through that point sees the same surface: what it
     reads is a point of its own area, seen by both eyes. A disc pixel reads the other eye's
-    sample whose pixel it lands in, as from its own history.
+    sample whose pixel it lands in within :data:`DISC_REACH` of its centre (read anywhere in
+    the pixel, the disc would show the other eye's image up to half a pixel off); the rest
+    are traced.
 
     Only a surface seen by both is reused, and only where its BSDF has neither a glossy nor a
     delta lobe (``gb.view_dependent``): a diffuse surface's radiance is the same from both
@@ -728,9 +740,10 @@ def partner_map(gb: GBuffer, on: mi.Bool, partner: History, lay: SampleLayout, w
     if gb.view_dependent is not None:
         keep &= ~gb.view_dependent
     is_cell = dr.arange(mi.UInt32, lay.size) < lay.cells
-    # The disc's pixels by the history's rules (none without ``disc``), the cells by claim.
+    # The disc's pixels by the history's rules (none without ``disc``), on the point's pixel
+    # centre rather than anywhere in its pixel; the cells by claim.
     m = reprojection_map(gb, keep & ~is_cell if disc else mi.Bool(False), partner, lay, width,
-                         height, tolerance=tolerance, mode=mode)
+                         height, tolerance=tolerance, mode=mode, reach=DISC_REACH)
     took, source = claimed
     # A cell in open sky reads the other eye's sky sample whose direction it took, where
     # that one lies in open sky too (a near object's disparity can reach past a cell).
