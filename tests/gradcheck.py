@@ -36,6 +36,7 @@ OPTION_SETS = [
     ("svgf_every_pixel", {"preset": "guided", "denoiser": "svgf", "sigma_p": 1.0}),
     ("vr", {"preset": "vr"}),
     ("vr_atrous", {"preset": "vr", "denoiser": "atrous"}),
+    ("flat", {"sampling_law": "flat", "ray_budget": 0.25}),
 ]
 
 #: Variants of a formation in OPTION_SETS that change only weights or value domains: checked by
@@ -140,11 +141,12 @@ class Probe:
         tangent = image_forward(form, shading.value, (values[0] - values[1]) / (2.0 * eps))
         return float(dr.sum(dr.ravel(tangent) * self.weights.array)[0])
 
-    def reverse(self, seed: int, spp: int) -> float:
+    def reverse(self, seed: int, spp: int, integrator: mi.Integrator | None = None) -> float:
+        """Reverse mode through ``mi.render`` (the scene's integrator, or ``integrator``)."""
         t = mi.Float(0.0)
         dr.enable_grad(t)
         self.set(t)
-        image = mi.render(self.scene, self.params, seed=seed, spp=spp)
+        image = mi.render(self.scene, self.params, seed=seed, spp=spp, integrator=integrator)
         dr.backward(self.loss(image))
         g = float(dr.grad(t)[0])
         self.set(mi.Float(0.0))
@@ -160,6 +162,60 @@ class Probe:
         g = float(dr.grad(loss)[0])
         self.set(mi.Float(0.0))
         return g
+
+    def pulled_back(self) -> mi.TensorXf:
+        r"""The loss's weights pulled back through the last primal frame's image formation
+        onto the film's pixels: :math:`\delta S = J_F^{\mathsf T} w`, zero at untraced pixels.
+        The foveated image's derivative along :math:`v` is :math:`\sum_p \delta S(p)\,
+        \partial S(p)/\partial\pi` (:mod:`foveated_mi.frame.adjoint`), so Mitsuba's own
+        ``render_backward`` with this image as ``grad_in`` estimates the same derivative."""
+        from foveated_mi.frame.adjoint import image_backward
+        integ = self.scene.integrator()
+        form, shading = integ.formation()
+        w = dr.unravel(mi.Color3f, self.weights.array)
+        delta = integ._primal.plan.space.to_pixels(image_backward(form, shading.value, w),
+                                                   shading.mask)
+        return mi.TensorXf(dr.ravel(delta), shape=self.weights.shape)
+
+    def direct(self, integrator: mi.Integrator, grad_in: mi.TensorXf, seed: int, spp: int,
+               mode: str = "reverse") -> float:
+        """``integrator``'s own ``render_backward`` (``grad_in`` dotted with its gradient) or
+        ``render_forward`` (its tangent dotted with ``grad_in``) on the scene's sensor, with the
+        seed that ``mi.render(seed=seed)`` hands its gradient pass."""
+        seed_grad = mi.sample_tea_32(seed, 1)[0]
+        t = mi.Float(0.0)
+        dr.enable_grad(t)
+        self.set(t)
+        if mode == "reverse":
+            integrator.render_backward(self.scene, self.params, grad_in, 0, seed_grad, spp)
+            g = float(dr.grad(t)[0])
+        else:
+            # The tangent carried onto the scene's parameters first: the integrator
+            # propagates from them inside an isolated scope.
+            dr.forward_from(t, dr.ADFlag.ClearEdges)
+            tangent = integrator.render_forward(self.scene, self.params, 0, seed_grad, spp)
+            g = float(dr.sum(dr.ravel(tangent) * grad_in.array)[0])
+        self.set(mi.Float(0.0))
+        return g
+
+
+def mitsuba_integrator(nested: str, max_depth: int = 3, **attributes) -> mi.Integrator:
+    """Mitsuba's own ``nested`` integrator, as :func:`scene` nests it (same ``max_depth``),
+    with ``attributes`` set on it (a projective integrator's guiding settings)."""
+    integ = mi.load_dict({"type": nested, "max_depth": max_depth})
+    for k, v in attributes.items():
+        setattr(integ, k, v)
+    return integ
+
+
+def rounding_allowance(terms: int, *values: float) -> float:
+    """What float32 rounding alone may put between two evaluations of one sum of ``terms``
+    contributions taken in different orders (atomic scatter-adds): Higham's bound, ``terms``
+    times the unit roundoff times the sum of the contributions' magnitudes. That sum is not
+    known; the largest of ``values`` stands for it. The bound being a worst case (rounding
+    errors add up as a random walk, ``sqrt(terms)``), it still lies far above what rounding
+    does, and far below what a wrong term does (a fraction of the value)."""
+    return terms * 2.0 ** -24 * max(abs(v) for v in values)
 
 
 def agreement(rev, fd) -> tuple[bool, str]:
