@@ -378,8 +378,9 @@ _SCHEMA: tuple[Option, ...] = (
            "camera's field of view; 0 (the default, and ``paper``) uses ``theta`` in film "
            "units. See :mod:`foveated_mi.frame.sampling`"),
     Option("sampling_law", "kwon", "string", "the sampling probability: kwon (Eq. 1), "
-           "acuity (density following the eye's minimum angle of resolution, ray_budget) or "
-           "polar (the cells of a log-polar buffer, ray_budget)",
+           "acuity (density following the eye's minimum angle of resolution, ray_budget), "
+           "polar (the cells of a log-polar buffer, ray_budget) or flat (ray_budget spread "
+           "evenly over the film, whatever the gaze)",
            choices=lambda: _sampling_laws(),
            doc="``kwon``: Eq. 1 of the paper (in degrees with ``theta_deg``); ``acuity``: "
            "the density follows the minimum angle of resolution, "
@@ -387,10 +388,15 @@ _SCHEMA: tuple[Option, ...] = (
            "the floor ``acuity_floor``; ``polar``: every pixel within ``theta`` of the gaze "
            "(a full-resolution disc), and the pixel under each cell of a log-polar buffer "
            "outside it whose cells are as large as the rest of ``ray_budget`` allows "
-           "(:mod:`foveated_mi.kernels.polar`). See "
+           "(:mod:`foveated_mi.kernels.polar`); ``flat``: ``ray_budget`` of the pixels spread "
+           "evenly over the film by an ordered-dither pattern that moves on each frame, so "
+           "that a still view traces every pixel within ``ceil(1 / ray_budget)`` frames "
+           "(``theta``, ``sigma_p`` and the gaze play no part: the same rays as a foveated "
+           "law, without the gaze; film formation only). See "
            ":mod:`foveated_mi.frame.sampling`"),
     Option("ray_budget", 0.1, "float",
-           "rays per frame as a fraction of the film's pixels (sampling_law = acuity or polar)",
+           "rays per frame as a fraction of the film's pixels (sampling_law = acuity, polar "
+           "or flat)",
            lo=0.0, hi=1.0, lo_open=True,
            doc="With ``sampling_law = 'polar'`` the cells outside the disc grow with the "
            "distance from it, so only cells far below a pixel near the disc reach the whole "

@@ -71,6 +71,8 @@ def jfa_bound(width: int, height: int, law: SamplingSettings,
                                      _sampling.fovea_radius(width, height, law.theta),
                                      _sampling.cell_offset(law))
         gap = 2.0 * float(grid.cell_size(grid.reach))
+    elif law.law == "flat":
+        gap = _sampling.flat_gap(width, height, law.ray_budget)
     elif law.theta_deg > 0:
         gap = None        # the law's smallest P needs the sensor's projection: no bound
     else:

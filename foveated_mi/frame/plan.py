@@ -204,7 +204,7 @@ class Planner:
             emitting = self._emission_edges(gb, sensor, width, height) \
                 if ss.emission_edges else None
             edges, smap, prob = _sampling.sampling_pass(gb, width, height, ss, gaze, map_seed,
-                                                        emitting, sensor=sensor)
+                                                        emitting, sensor, hs.keep * self.index)
             timer.mark("sampling", smap, prob, reproj.hit, reproj.index, edges)
             ro = _reorder.reorder(smap, width, height, ls.reorder, ls.block_height)
             timer.mark("reorder", ro.wavefront)

@@ -70,6 +70,22 @@ the pixel under the gaze (clamped to the film), so a frame never has an empty wa
     :math:`c` fixed, the bisection sizes the cells at the disc's edge to the budget as for
     ``log``. Every pass that builds the grid (this map, the foveal buffer's samples, its
     formation) gets the same :math:`c`.
+``flat`` (the same rays spread evenly: dynamic resolution with temporal accumulation)
+    No draw and no gaze: :math:`P` = 1 where traced and 0 elsewhere (:func:`flat_map`).
+    Each pixel has a rank :math:`j` in an ordered-dither (Bayer) matrix of
+    :data:`FLAT_TILE` x :data:`FLAT_TILE` pixels tiled over the film, and a frame traces the
+    pixels whose rank lies in a window of :math:`t = \lceil b K \rceil` of the
+    :math:`K` = :data:`FLAT_TILE` squared ranks (:math:`b` = ``ray_budget``). The window
+    moves on by :math:`t` ranks each frame, so a still view traces every pixel within
+    :math:`\lceil 1/b \rceil` frames (each exactly once when :math:`t` divides :math:`K`).
+    Any aligned square of :math:`2^i` pixels holds one pixel in each :math:`4^{-i}` of the
+    ranks, so each frame's pixels are spread evenly at every scale, and each frame traces
+    :math:`b` of the film to within fewer than two pixels per aligned square of a dyadic
+    partition of the film. ``theta``, ``sigma_p`` and the gaze play no part. A film too
+    small to hold a whole tile also traces the pixel of its lowest rank after the window's
+    start, so a frame never has an empty wavefront. Edge rays are forced as for the other
+    laws. The frame's place in the cycle enters as an opaque value: a new frame compiles
+    nothing.
 """
 from __future__ import annotations
 
@@ -101,7 +117,11 @@ ACUITY_OFFSET_DEG = ACUITY_OMEGA0 / ACUITY_SLOPE
 #: Cell laws of the ``polar`` law's buffer (option ``polar_cells``).
 POLAR_CELLS = ("log", "acuity")
 
-SAMPLING_LAWS = ("kwon", "acuity", "polar")
+SAMPLING_LAWS = ("kwon", "acuity", "polar", "flat")
+
+#: Side of the ``flat`` law's ordered-dither tile, pixels (a power of two): its square,
+#: 4096, is the number of ranks, the finest step of the budget.
+FLAT_TILE = 64
 
 #: Parameter ranges; the README's table of extremes is generated from the same numbers.
 THETA_RANGE = (0.0, math.inf)      # open at 0
@@ -807,9 +827,123 @@ def polar_map(width: int, height: int, gaze, budget: float, theta: float,
     return smap, dr.select(smap, 1.0, 0.0)
 
 
+def flat_window(budget: float) -> int:
+    """The ranks a frame of ``sampling_law = "flat"`` traces, out of
+    :data:`FLAT_TILE` squared: the budget rounded up, so that the window's turns cover
+    every rank within ``ceil(1 / budget)`` frames.
+
+    Parameters
+    ----------
+    budget : float
+        The traced pixels' fraction of the film, in (0, 1].
+
+    Returns
+    -------
+    t : int
+        The window's length, in ranks, between 1 and :data:`FLAT_TILE` squared.
+
+    Raises
+    ------
+    ParameterError
+        When ``budget`` is out of range.
+    """
+    budget = check_range("ray_budget", budget, 0.0, 1.0, lo_open=True)
+    ranks = FLAT_TILE * FLAT_TILE
+    return min(ranks, max(1, math.ceil(budget * ranks - 1e-9)))
+
+
+def flat_rank(x: mi.UInt32, y: mi.UInt32) -> mi.UInt32:
+    """Each pixel's rank in the ordered-dither (Bayer) tile of :data:`FLAT_TILE` pixels:
+    the bits of ``x`` and ``x ^ y`` interleaved, the lowest first, so that the low bits of
+    the position decide the high bits of the rank.
+
+    Parameters
+    ----------
+    x, y : mi.UInt32
+        Pixel coordinates.
+
+    Returns
+    -------
+    rank : mi.UInt32
+        In ``[0, FLAT_TILE ** 2)``.
+    """
+    rank = dr.zeros(mi.UInt32, dr.width(x))
+    d = x ^ y
+    for i in range(FLAT_TILE.bit_length() - 1):
+        rank = (rank << 2) | (((d >> i) & 1) << 1) | ((x >> i) & 1)
+    return rank
+
+
+def flat_gap(width: int, height: int, budget: float) -> float:
+    """A distance (pixels) that no pixel of a ``flat`` map is farther than from its
+    nearest ray: every aligned square of side ``L`` whose :math:`4^{-i}` strata of ranks the
+    window holds two of has a traced pixel, and a pixel of a partial square at the film's
+    border has one in the next square.
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size.
+    budget : float
+        The traced pixels' fraction of the film.
+
+    Returns
+    -------
+    gap : float
+        The bound, in pixels.
+    """
+    ranks = FLAT_TILE * FLAT_TILE
+    t = flat_window(budget)
+    side = 1
+    while side < FLAT_TILE and t * side * side < 2 * ranks:
+        side *= 2
+    return min(2.0 * math.sqrt(2.0) * side, math.hypot(width, height))
+
+
+def flat_map(width: int, height: int, budget: float, frame: int,
+             edges: mi.Bool | None = None) -> tuple[mi.Bool, mi.Float]:
+    """``sampling_law = "flat"``: the pixels whose ordered-dither rank lies in this frame's
+    window of :func:`flat_window` ranks (module docstring), whatever the gaze.
+
+    Parameters
+    ----------
+    width, height : int
+        The film's size.
+    budget : float
+        The traced pixels' fraction of the film (``ray_budget``).
+    frame : int
+        The frame's place in the cycle (the planner's frame count); enters the kernel as an
+        opaque value.
+    edges : mi.Bool or None, optional
+        Rays forced on edges (None: none).
+
+    Returns
+    -------
+    sampling_map : mi.Bool
+        True where a ray is traced, one entry per pixel.
+    probability : mi.Float
+        1 where traced, 0 elsewhere: the map is deterministic.
+    """
+    ranks = FLAT_TILE * FLAT_TILE
+    t = flat_window(budget)
+    start = (int(frame) * t) % ranks
+    _, x, y = pixel_coords(width, height)
+    # Ranks from the window's start, modulo the tile's: integers, so no rank falls between
+    # two frames' windows.
+    turned = (flat_rank(x & (FLAT_TILE - 1), y & (FLAT_TILE - 1))
+              + dr.opaque(mi.UInt32, ranks - start)) & (ranks - 1)
+    smap = turned < dr.opaque(mi.UInt32, t)
+    if width < FLAT_TILE or height < FLAT_TILE:
+        # A partial tile may hold no rank of the window: trace its nearest after the start.
+        smap |= turned == dr.min(turned)
+    if edges is not None:
+        smap |= edges
+    return smap, dr.select(smap, 1.0, 0.0)
+
+
 def sampling_pass(gb, width: int, height: int, law: SamplingSettings,
                   gaze: tuple[float, float], seed, emitting: mi.Bool | None = None,
-                  sensor: mi.Sensor | None = None):
+                  sensor: mi.Sensor | None = None, frame: int = 0):
     """The sampling pass of a frame.
 
     Parameters
@@ -828,6 +962,8 @@ def sampling_pass(gb, width: int, height: int, law: SamplingSettings,
         The emission edges, forced like depth edges (None: none).
     sensor : mi.Sensor or None, optional
         The frame's sensor (needed by a law in degrees).
+    frame : int, optional
+        Frames since the history's reset: the ``flat`` law's turn (``map_seed >= 0`` pins it).
 
     Returns
     -------
@@ -844,7 +980,7 @@ def sampling_pass(gb, width: int, height: int, law: SamplingSettings,
         When a law in degrees has no ``sensor``.
     """
     prob = None
-    if law.in_degrees:
+    if law.in_degrees and law.law != "flat":
         if sensor is None:
             from ..validate import ParameterError
             raise ParameterError("sensor", None, "the frame's sensor for a sampling law in "
@@ -857,9 +993,11 @@ def sampling_pass(gb, width: int, height: int, law: SamplingSettings,
     if emitting is not None:
         edges = emitting if edges is None else edges | emitting
     if law.law == "polar":
-        smap, prob = polar_map(width, height, gaze, law.ray_budget, law.theta, edges,
-                               cell_offset(law, sensor))
-        return edges, smap, prob
+        return (edges, *polar_map(width, height, gaze, law.ray_budget, law.theta, edges,
+                                  cell_offset(law, sensor)))
+    if law.law == "flat":
+        return (edges, *flat_map(width, height, law.ray_budget,
+                                 law.map_seed if law.map_seed >= 0 else frame, edges))
     smap, prob = sampling_map(width, height, gaze=gaze, theta=law.theta, sigma_p=law.sigma_p,
                               seed=seed, edges=edges, probability=prob)
     return edges, smap, prob

@@ -843,7 +843,7 @@ class LiveRenderer:
         from ..scenes import apply_camera, sensor_dict
         o = self.integ.options
         if self._uniform is None:
-            frac = o["ray_budget"] if o["sampling_law"] in ("polar", "acuity") \
+            frac = o["ray_budget"] if o["sampling_law"] in ("polar", "acuity", "flat") \
                 else float(stats.get("ray_fraction") or 1.0)
             s = math.sqrt(min(max(frac, 1e-4), 1.0))
             w, h = max(1, round(self.width * s)), max(1, round(self.height * s))
