@@ -14,10 +14,14 @@ Then it writes, to ``--results`` (default ``docs/results/``):
 
 * ``vr.md``: every cell (mean ± standard deviation over the seeds) and, per condition and
   scene, the **speed-up at equal video JOD** of each foveated configuration against each
-  uniform family (uniform, + OIDN, + the same history, + the same history and OIDN; 1, 2 and 4
-  spp), and against all of them at once (``every uniform family``: their lower envelope,
-  at each JOD the least time of any family's own curve and of their joint Pareto front,
-  :func:`foveated_mi.study.equal_time.envelope_over_seeds`):
+  family that ran (uniform, + OIDN, + the same history, + the same history and OIDN, each at
+  the study's spp; dynamic resolution, ``uniform@0.5``; flat foveated rows, ``flat vr``),
+  and against all of them at once: their lower envelope, at each JOD the least time of any
+  family's own curve and of their joint Pareto front
+  (:func:`foveated_mi.study.equal_time.envelope_over_seeds`), named after the families that
+  ran (``every uniform family`` only when raw, + OIDN, + history, + history and OIDN, and
+  dynamic resolution all did: :func:`foveated_mi.study.equal_time.envelope_label`), beside
+  what sets it at the configuration's JOD (``envelope set by``):
   the time the family needs to reach the configuration's ``jod_video``, read along its
   best-so-far curve in log time (:func:`foveated_mi.study.equal_time.speedup`), over the
   configuration's time; ``>`` where the family never reaches it, ``<`` where its fastest
@@ -77,11 +81,10 @@ STUDY = os.path.join(HERE, "..", "configs", "studies", "vr.toml")
 RESULTS = os.path.join(HERE, "..", "docs", "results")
 #: Viewing condition -> its video JOD column.
 CONDITIONS = {"headset": "jod_video", "monitor": "jod_video_monitor"}
-#: The uniform families a foveated configuration is measured against.
+#: The uniform families at full resolution whose 1-spp rows the pictures show. The tables
+#: measure against every family that ran and their envelope
+#: (:func:`foveated_mi.study.equal_time.envelope_families`).
 FAMILIES = ("uniform", "uniform+oidn", "uniform+history", "uniform+history+oidn")
-#: Every uniform row of any family: their lower envelope in time and quality (the least time
-#: any family's curve, or their joint front, takes to reach a quality), read as one more family.
-ENVELOPE = "every uniform family"
 RING_DEG = 5.0
 
 
@@ -149,28 +152,35 @@ def label(row: dict) -> str:
 
 
 def speedups(rows: list[dict], column: str) -> list[dict]:
-    """Per scene, foveated configuration and uniform family: the speed-up at equal
-    ``column`` on the means and seed by seed (module docstring)."""
+    """Per scene, foveated configuration and family that ran: the speed-up at equal
+    ``column`` on the means and seed by seed (module docstring), then against their
+    envelope (``envelope``: true), named by
+    :func:`foveated_mi.study.equal_time.envelope_label`, with what sets it (``set_by``, and
+    ``set_by_seed`` seed by seed)."""
     from foveated_mi.study.aggregate import aggregate
-    from foveated_mi.study.equal_time import envelope_over_seeds, speedup_over_seeds
+    from foveated_mi.study.equal_time import (envelope_families, envelope_label,
+                                              envelope_over_seeds, speedup_over_seeds)
     out = []
     for scene in sorted({r["scene"] for r in rows}):
         cells = aggregate([r for r in rows if r["scene"] == scene])
-        families = [[c for c in cells if c["method"] == fam] for fam in FAMILIES]
-        families = [f for f in families if f]
+        families = envelope_families(cells)
+        if not families:
+            continue
+        envelope = envelope_label(families)
         for cell in (c for c in cells if c["method"] == "foveated"):
-            for fam in (*FAMILIES, ENVELOPE):
-                family = [c for c in cells if c["method"] == fam
-                          or (fam == ENVELOPE and c["method"] != "foveated")]
-                if family:
-                    # Every family: the lower envelope of their curves and joint front.
-                    s = envelope_over_seeds(cell, families, column) if fam == ENVELOPE \
-                        else speedup_over_seeds(cell, family, column)
-                    out.append({"scene": scene, "configuration": label(cell), "family": fam,
-                                "column": column, "ratio": s.ratio, "relation": s.relation,
-                                "per_seed": s.per_seed, "seed_mean": s.mean, "seed_sd": s.sd,
-                                "text": s.text(), "time_ms": cell["time_ms"],
-                                "quality": cell.get(column)})
+            for fam in (*families, envelope):
+                if fam == envelope:
+                    s = envelope_over_seeds(cell, list(families.values()), column,
+                                            names=list(families))
+                else:
+                    s = speedup_over_seeds(cell, families[fam], column)
+                out.append({"scene": scene, "configuration": label(cell), "family": fam,
+                            "envelope": fam == envelope, "column": column, "ratio": s.ratio,
+                            "relation": s.relation, "per_seed": s.per_seed,
+                            "seed_mean": s.mean, "seed_sd": s.sd, "text": s.text(),
+                            "time_ms": cell["time_ms"], "quality": cell.get(column),
+                            **({"set_by": s.family, "set_by_seed": s.per_seed_family}
+                               if fam == envelope else {})})
     return out
 
 
@@ -221,7 +231,7 @@ def flicker_table(rows: list[dict]) -> list[str]:
 
 def flicker_against_envelope(rows: list[dict], column: str) -> list[str]:
     """Each foveated cell's flicker against the uniform cell just above it on the envelope of
-    every uniform family: the cheapest uniform cell, of any family, whose ``column`` reaches
+    the uniform families: the cheapest uniform cell, of any family, whose ``column`` reaches
     the foveated cell's (means over seeds). Outside the fovea and ring by ring: ``≤`` where the
     foveated cell flickers no more, ``>`` where it flickers more, ``≈`` where the seeds do
     not settle it (:func:`foveated_mi.study.aggregate.margin`: the difference within its
@@ -264,16 +274,33 @@ def flicker_against_envelope(rows: list[dict], column: str) -> list[str]:
 
 
 def speedup_table(sps: list[dict]) -> list[str]:
-    fams = [f for f in (*FAMILIES, ENVELOPE) if any(s["family"] == f for s in sps)]
-    out = ["| scene | configuration | time ms | " + " | ".join(fams) + " |",
-           "|---|---|---|" + "---|" * len(fams)]
+    """One column per family that ran, then their envelope's and what sets it."""
+    from foveated_mi.study.equal_time import family_order
+    fams = sorted({s["family"] for s in sps if not s.get("envelope")}, key=family_order)
+    envs = list(dict.fromkeys(s["family"] for s in sps if s.get("envelope")))
+    out = ["| scene | configuration | time ms | " + " | ".join(fams + envs)
+           + (" | envelope set by" if envs else "") + " |",
+           "|---|---|---|" + "---|" * (len(fams) + len(envs) + bool(envs))]
     keys = list(dict.fromkeys((s["scene"], s["configuration"]) for s in sps))
     for scene, conf in keys:
         mine = {s["family"]: s for s in sps if (s["scene"], s["configuration"]) == (scene, conf)}
         first = next(iter(mine.values()))
+        env = next((s for s in mine.values() if s.get("envelope")), None)
+        sets = [] if not envs else [_set_by_text(env) if env else "-"]
         out.append(f"| {scene} | {conf} | {first['time_ms']:.0f} | "
-                   + " | ".join(_ratio_text(mine[f]) if f in mine else "-" for f in fams) + " |")
+                   + " | ".join([*(_ratio_text(mine[f]) if f in mine else "-"
+                                   for f in fams + envs), *sets]) + " |")
     return out
+
+
+def _set_by_text(s: dict) -> str:
+    """What sets the envelope at a configuration's quality: on the means, then seed by seed
+    in brackets where a seed's differs."""
+    seeds = s.get("set_by_seed") or []
+    text = s.get("set_by") or "-"
+    if any(x != s.get("set_by") for x in seeds):
+        text += " (" + "; ".join(x or "-" for x in seeds) + ")"
+    return text
 
 
 def eyes_table(rows: list[dict], first: str, worse: str, alone: str) -> list[str]:
@@ -554,7 +581,7 @@ def main(argv=None) -> int:
     column = conditions.get("headset")
     if column:
         lines += ["Each foveated cell's flicker against the uniform cell just above it on the "
-                  f"envelope of every uniform family (the cheapest that reaches its `{column}`; "
+                  f"envelope of the uniform rows (the cheapest that reaches its `{column}`; "
                   "`≤`: it flickers no more, `>`: more, `≈`: within the seeds' spread):", "",
                   *flicker_against_envelope(rows, column), ""]
     # Rows whose frames ran differently (replayed, traced): their ratios were refused above.

@@ -20,6 +20,17 @@ importance sampling by default (``pixel_filter="auto"`` -> ``importance``,
 ``mi.render``. On a box film both are the plain per-pixel mean, and ``mi.render`` runs.
 Without ``denoise`` the frame is ``mi.render``'s own (``auto`` -> ``splat``).
 
+**Dynamic resolution** (``scale < 1``). The frame is rendered on a film of
+``round(scale * W) x round(scale * H)`` pixels (the sensor's own film, resized for the frame
+and restored after it: the same camera, filter and field of view), every pixel of it at
+``spp``, denoised there on request, then upscaled to the film by :func:`upscale_bilinear`::
+
+    time_ms = render_ms (+ aov_ms + denoise_ms) + upscale_ms
+
+The upscale runs in NumPy because the frame is already a host array here (OIDN runs on host
+arrays too); a GPU engine does it in a shader for far less, which is why ``upscale_ms`` is
+reported on its own.
+
 ``spp`` is always passed to ``mi.render`` explicitly. ``mi.render(spp=N)`` leaves N as the
 sensor sampler's sample count, so both functions here restore the sampler's count afterwards:
 a caller relying on the sensor's own count is not silently changed.
@@ -34,9 +45,10 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .validate import ParameterError, check_choice, check_int
+from .validate import ParameterError, check_choice, check_int, check_range
 
-__all__ = ["render_uniform", "render_reference", "AOV_INTEGRATOR"]
+__all__ = ["render_uniform", "render_reference", "upscale_bilinear", "scaled_size",
+           "AOV_INTEGRATOR"]
 
 #: How a uniform frame honours the film's filter (see the module docstring).
 PIXEL_FILTERS = ("auto", "splat", "importance")
@@ -100,8 +112,10 @@ def _check_integrator(scene, integrator):
 
 def render_uniform(scene: "mi.Scene", *, spp: int, seed: int = 0, denoise: bool = False,
                    integrator: "mi.Integrator | None" = None, pixel_filter: str = "auto",
-                   sensor: "mi.Sensor | None" = None) -> tuple[np.ndarray, dict[str, Any]]:
-    """One uniform frame: every pixel traced with ``spp`` samples, denoised on request.
+                   sensor: "mi.Sensor | None" = None, scale: float = 1.0
+                   ) -> tuple[np.ndarray, dict[str, Any]]:
+    """One uniform frame: every pixel traced with ``spp`` samples, denoised on request; with
+    ``scale < 1``, every pixel of a smaller film, upscaled (dynamic resolution).
 
     Parameters
     ----------
@@ -121,6 +135,9 @@ def render_uniform(scene: "mi.Scene", *, spp: int, seed: int = 0, denoise: bool 
     sensor : mi.Sensor or None, optional
         The sensor to render (None: the scene's first; another one, e.g. one eye of a stereo
         rig, sees the same scene).
+    scale : float, optional
+        Render scale in (0, 1]: the frame is traced (and denoised) on a film of
+        :func:`scaled_size` pixels and upscaled bilinearly to the film (1: the film itself).
 
     Returns
     -------
@@ -130,6 +147,8 @@ def render_uniform(scene: "mi.Scene", *, spp: int, seed: int = 0, denoise: bool 
         ``{"time_ms", "render_ms", "spp", "denoised", "pixel_filter"}`` (+ ``aov_ms``,
         ``denoise_ms`` when denoised); ``pixel_filter`` is the estimator that ran (``splat`` on
         a box film, or for an integrator that is not a sampling integrator under ``auto``).
+        With ``scale < 1`` also ``scale``, ``size`` (the traced film's (width, height)) and
+        ``upscale_ms``, which ``time_ms`` includes.
 
     Raises
     ------
@@ -141,6 +160,7 @@ def render_uniform(scene: "mi.Scene", *, spp: int, seed: int = 0, denoise: bool 
     if not isinstance(denoise, bool):
         raise ParameterError("denoise", denoise, "true or false")
     pixel_filter = check_choice("pixel_filter", pixel_filter, PIXEL_FILTERS)
+    scale = check_range("scale", scale, 0.0, 1.0, lo_open=True)
     integ = _check_integrator(scene, integrator)
     if denoise:
         from .denoise import INSTALL_HINT, oidn_available
@@ -149,7 +169,128 @@ def render_uniform(scene: "mi.Scene", *, spp: int, seed: int = 0, denoise: bool 
     sensor = _sensor(scene, sensor)
     mode = _uniform_pixel_filter(sensor, integ, pixel_filter, denoise)
     with _KeepSampleCount(scene, sensor):
+        return _render_scaled(scene, integ, spp, seed, denoise, mode, sensor, scale)
+
+
+def scaled_size(size, scale: float) -> tuple[int, int]:
+    """The film a render scale traces: ``(round(scale * W), round(scale * H))``, at least one
+    pixel each way.
+
+    Parameters
+    ----------
+    size : tuple of int
+        The film's (width, height).
+    scale : float
+        The render scale, in (0, 1].
+
+    Returns
+    -------
+    size : tuple of int
+        The traced film's (width, height).
+    """
+    scale = check_range("scale", scale, 0.0, 1.0, lo_open=True)
+    return tuple(max(1, int(round(scale * int(n)))) for n in size)
+
+
+class _ResizedFilm:
+    """The sensor's film resized to ``size`` (its crop the whole film) and restored on exit:
+    the same camera and filter on fewer pixels. The perspective camera keeps its horizontal
+    field of view; the vertical one follows the rounded size's aspect (off by less than half
+    a traced pixel)."""
+
+    def __init__(self, sensor, size: tuple[int, int]):
+        self.params = mi.traverse(sensor)
+        self.size = size
+
+    def _set(self, size, crop, offset) -> None:
+        p = self.params
+        p["film.size"], p["film.crop_size"] = size, crop
+        p["film.crop_offset"] = offset
+        p.update()
+
+    def __enter__(self):
+        p = self.params
+        self.saved = (mi.ScalarVector2u(p["film.size"]), mi.ScalarVector2u(p["film.crop_size"]),
+                      mi.ScalarPoint2u(p["film.crop_offset"]))
+        self._set(mi.ScalarVector2u(self.size), mi.ScalarVector2u(self.size),
+                  mi.ScalarPoint2u(0, 0))
+        return self
+
+    def __exit__(self, *exc):
+        self._set(*self.saved)
+        return False
+
+
+def _render_scaled(scene, integ, spp, seed, denoise, mode, sensor, scale):
+    """A uniform frame at render scale ``scale`` (module docstring), as :func:`_render_uniform`
+    on the smaller film, then upscaled; the upscale counts in ``time_ms``. Scale 1 is
+    :func:`_render_uniform`'s frame itself."""
+    if scale == 1.0:
         return _render_uniform(scene, integ, spp, seed, denoise, mode, sensor)
+    film = sensor.film()
+    full = tuple(int(v) for v in film.size())
+    if tuple(int(v) for v in film.crop_size()) != full:
+        raise ParameterError("scale", scale, "1 for a film with a crop window (dynamic "
+                             "resolution scales the whole film)")
+    size = scaled_size(full, scale)
+    with _ResizedFilm(sensor, size):
+        low, stats = _render_uniform(scene, integ, spp, seed, denoise, mode, sensor)
+    t0 = time.perf_counter()
+    image = upscale_bilinear(low, full)
+    upscale_ms = (time.perf_counter() - t0) * 1e3
+    stats.update(scale=scale, size=size, upscale_ms=upscale_ms,
+                 time_ms=stats["time_ms"] + upscale_ms)
+    return image, stats
+
+
+def upscale_bilinear(image: np.ndarray, size) -> np.ndarray:
+    """Bilinear resize of an (h, w, C) image to ``size`` = (W, H), pixel centres aligned.
+
+    Output pixel ``x`` samples the input at ``u = (x + 0.5) * w / W - 0.5`` (the convention
+    of GPU texture filtering and ``skimage.transform.resize(order=1)``), clamped to the edge
+    pixels. Linear functions are reproduced exactly (to float32 rounding) wherever ``u``
+    needs no clamp, and a constant image stays that constant exactly.
+
+    Parameters
+    ----------
+    image : numpy.ndarray
+        (h, w, C) float image.
+    size : tuple of int
+        The output's (width, height), each >= 1.
+
+    Returns
+    -------
+    image : numpy.ndarray
+        (H, W, C) float32.
+    """
+    img = np.asarray(image, dtype=np.float32)
+    if img.ndim != 3 or min(img.shape) < 1:
+        raise ParameterError("image", f"an array of shape {img.shape}", "an (h, w, C) image")
+    if not (isinstance(size, (tuple, list)) and len(size) == 2):
+        raise ParameterError("size", size, "the output's (width, height)")
+    width, height = (check_int("size", n, 1) for n in size)
+
+    def taps(n_out: int, n_in: int):
+        u = np.clip((np.arange(n_out) + 0.5) * (n_in / n_out) - 0.5, 0.0, n_in - 1)
+        i0 = np.floor(u).astype(np.intp)
+        i1 = np.minimum(i0 + 1, n_in - 1)
+        return i0, i1, (u - i0).astype(np.float32)
+
+    y0, y1, fy = taps(height, img.shape[0])
+    x0, x1, fx = taps(width, img.shape[1])
+    # Separable, each pass gathering whole rows (contiguous): along x on the short image,
+    # transposed, then along y. a + (b - a) * f, in place, keeps a constant exact.
+    cols = np.ascontiguousarray(img.transpose(1, 0, 2))
+    a, d = cols[x0], cols[x1]
+    d -= a
+    d *= fx[:, None, None]
+    a += d
+    rows = np.ascontiguousarray(a.transpose(1, 0, 2))
+    a, d = rows[y0], rows[y1]
+    d -= a
+    d *= fy[:, None, None]
+    a += d
+    return a
 
 
 def _uniform_pixel_filter(sensor, integ, pixel_filter: str, denoise: bool) -> str:

@@ -75,6 +75,9 @@ def _add_view_parser(sub) -> None:
                    help="require a random token, printed with the address")
     v.add_argument("--gaze-csv", dest="gaze_csv", help="replay this t,x,y gaze CSV instead "
                    "of the mouse")
+    v.add_argument("--no-eye-tracking", dest="eye_tracking", action="store_false",
+                   help="fixed foveation: render at the lens centre whatever the gaze (which "
+                   "still moves the overlays), as a headset without an eye tracker does")
     v.add_argument("--record-dir", dest="record_dir", default=os.path.join("out", "live"),
                    help="where recorded walk-throughs go (default out/live)")
     v.add_argument("--jpeg-quality", type=int, dest="jpeg_quality", default=85,
@@ -360,6 +363,7 @@ def cmd_view(args: argparse.Namespace) -> int:
                     allow_remote=args.allow_remote, integrator=nested,
                     record_dir=args.record_dir, gaze_csv=args.gaze_csv,
                     jpeg_quality=args.jpeg_quality, max_fps=args.max_fps)
+    view.renderer.eye_tracking = args.eye_tracking      # before any page asks for a frame
     print(f"foveated-mi view: {args.scene} at {view.url}  (Ctrl-C stops)", flush=True)
     import signal
 

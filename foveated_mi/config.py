@@ -9,6 +9,8 @@ Layout (every key optional except ``scene``)::
     size = [256, 256]             # width, height (or one integer for a square)
     spp = 1
     seed = 0
+    eye_tracking = true           # false: fixed foveation, rendered at the lens centre (the
+                                  # camera's axis) whatever the [gaze] path does
     [scene_params]                # built-in scene parameters, e.g. size = 128 (voxel-city),
     size = 128                    # or an XML file's <default> parameters
     [integrator]                  # the nested integrator (default: path, max_depth 6)
@@ -80,7 +82,8 @@ FOVEATED_KEYS: dict[str, tuple[type, ...]] = {
     name: opt.toml_types() for name, opt in SCHEMA.items() if opt.kind != "point"}
 
 _TOP_KEYS = ("scene", "description", "frames", "fps", "size", "spp", "seed", "scene_params",
-             "integrator", "foveated", "camera", "gaze", "poses", "output", "stereo")
+             "integrator", "foveated", "camera", "gaze", "poses", "output", "stereo",
+             "eye_tracking")
 
 
 @dataclass(frozen=True)
@@ -113,6 +116,9 @@ class SequenceConfig:
     #: ``[stereo]``: ``{"headset", "eye_width", "ipd", "reuse", "first"}``, or None for one
     #: view
     stereo: dict | None = None
+    #: False: fixed foveation, every frame rendered at the lens centre (the gaze path is
+    #: where the eye looks, written to the stats)
+    eye_tracking: bool = True
 
     @property
     def width(self) -> int:
@@ -208,6 +214,7 @@ def parse_config(data: dict, *, base_dir: str = ".", source: str = "<config>",
     size = (ctx.integer("size[0]", size[0], 1, 16384), ctx.integer("size[1]", size[1], 1, 16384))
     spp = ctx.integer("spp", data.get("spp", 1), 1, 1 << 20)
     seed = ctx.integer("seed", data.get("seed", 0), 0, (1 << 32) - 1)
+    eye_tracking = ctx.boolean("eye_tracking", data.get("eye_tracking", True))
     description = ctx.string("description", data.get("description", ""))
 
     scene_params = dict(ctx.table("scene_params", data.get("scene_params", {})))
@@ -231,7 +238,8 @@ def parse_config(data: dict, *, base_dir: str = ".", source: str = "<config>",
     return SequenceConfig(scene=scene, frames=frames, fps=fps, size=size, spp=spp, seed=seed,
                           scene_params=scene_params, integrator=integrator, foveated=foveated,
                           camera=camera, gaze=gaze, output=output, description=description,
-                          source=source, poses=poses, stereo=_stereo(ctx, data.get("stereo")))
+                          source=source, poses=poses, stereo=_stereo(ctx, data.get("stereo")),
+                          eye_tracking=eye_tracking)
 
 
 def _stereo(ctx: TableContext, table: Any) -> dict | None:

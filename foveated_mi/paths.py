@@ -45,7 +45,7 @@ import numpy as np
 from .validate import ParameterError, check_choice, check_finite, check_range
 
 __all__ = ["INTERPOLATIONS", "CameraPath", "GazePath", "FixedGaze", "GazeKeyframes",
-           "Saccades", "GazeCSV", "BinocularGazeCSV"]
+           "Saccades", "GazeCSV", "BinocularGazeCSV", "off_centre_targets", "lens_centre"]
 
 INTERPOLATIONS = ("linear", "catmull_rom", "step")
 _CAMERA_KEYS = ("origin", "target", "up", "fov")
@@ -379,6 +379,79 @@ class Saccades(GazePath):
         s = (t - (t // self.period) * self.period - self.dwell) / self.duration
         w = _minimum_jerk(min(max(s, 0.0), 1.0))
         return (float(a[0] + w * (b[0] - a[0])), float(a[1] + w * (b[1] - a[1])))
+
+
+def off_centre_targets(eccentricity_deg: Any, count: Any, seed: Any, camera: dict,
+                       size: Sequence[int], *, name: str = "gaze") -> list[tuple[float, float]]:
+    """Saccade targets off the lens centre: ``count`` fixations at eccentricities drawn
+    uniformly in ``eccentricity_deg`` and directions uniform around the optical axis,
+    seeded, as normalised film positions of a pinhole ``camera`` (clamped inside the film).
+
+    A direction at eccentricity ``e`` and angle ``phi`` from the axis meets the image plane
+    ``tan(e)`` from the axis; the film spans ``2 tan(fov / 2)`` across (the camera's
+    horizontal field of view) and ``height / width`` of that down, with the axis at
+    ``0.5 - principal_point`` (an off-axis frustum's, as a headset eye has).
+
+    Parameters
+    ----------
+    eccentricity_deg : pair of float
+        ``[lo, hi]`` degrees from the lens centre, ``0 <= lo <= hi < 90``.
+    count : int
+        The number of fixations (>= 1).
+    seed : int
+        Seed of the draw (NumPy), in [0, 2^32).
+    camera : dict
+        The pinhole camera: ``fov`` (degrees along x) and optionally ``principal_point``.
+    size : pair of int
+        The film's ``(width, height)``.
+    name : str, optional
+        The path's name, for error messages (``{name}.off_centre_deg``, ...).
+
+    Returns
+    -------
+    targets : list of tuple of float
+        ``count`` film positions (x right, y down, origin top-left).
+    """
+    from .validate import check_int
+    allowed = "[lo, hi] degrees from the lens centre with 0 <= lo <= hi < 90"
+    try:
+        rng_deg = _check_vec(f"{name}.off_centre_deg", eccentricity_deg, 2)
+    except ParameterError:
+        raise ParameterError(f"{name}.off_centre_deg", eccentricity_deg, allowed) from None
+    if not 0.0 <= rng_deg[0] <= rng_deg[1] < 90.0:
+        raise ParameterError(f"{name}.off_centre_deg", eccentricity_deg, allowed)
+    count = check_int(f"{name}.count", count, 1, 100000)
+    seed = check_int(f"{name}.seed", seed, 0, 2**32 - 1)
+    tx = math.tan(math.radians(float(camera["fov"])) / 2.0) * 2.0      # film width, tangents
+    ty = tx * size[1] / size[0]                                        # square pixels
+    px, py = camera.get("principal_point", (0.0, 0.0))
+    rng = np.random.default_rng(seed)
+    ecc = np.radians(rng.uniform(rng_deg[0], rng_deg[1], count))
+    phi = rng.uniform(0.0, 2.0 * math.pi, count)
+    r = np.tan(ecc)
+    x = np.clip(0.5 - px + r * np.cos(phi) / tx, 0.0, 1.0)
+    y = np.clip(0.5 - py + r * np.sin(phi) / ty, 0.0, 1.0)
+    return [(float(a), float(b)) for a, b in zip(x, y)]
+
+
+def lens_centre(sensor) -> tuple[float, float]:
+    """Where a pinhole sensor's optical axis meets its film, as a normalised film position:
+    the gaze of fixed foveation (a headset without an eye tracker puts its density there).
+    The film's centre for a centred frustum; an off-axis one's axis
+    (:attr:`foveated_mi.stereo.Frustum.axis`), measured from the sensor's own rays.
+
+    Parameters
+    ----------
+    sensor : mi.Sensor
+        A ``perspective`` sensor.
+
+    Returns
+    -------
+    centre : tuple of float
+        ``(x, y)``, origin top-left.
+    """
+    from .stereo import frustum_of
+    return frustum_of(sensor).axis
 
 
 class GazeCSV(GazePath):

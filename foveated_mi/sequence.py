@@ -6,11 +6,14 @@ writes ``frame_NNNN.exr`` / ``.png`` atomically and appends one JSON line to
 ``stats.jsonl``. A camera cut in the config resets the history, so the frame after a cut is
 exactly a fresh first frame. A config with ``[poses]`` (a walk-through the live view
 recorded) gives every frame's camera, gaze and cut instead of paths. Each stats line holds
-the frame's gaze and, where the config moves the camera, its camera. At the end (or on Ctrl-C, with the frames done so far) it writes
+the frame's gaze (the rendered one; with ``eye_tracking = false``, fixed foveation, the lens
+centre, and the path's as ``eye_gaze``) and, where the config moves the camera, its camera.
+At the end (or on Ctrl-C, with the frames done so far) it writes
 ``sequence.mp4`` or ``sequence.gif``.
 """
 from __future__ import annotations
 
+import functools
 import json
 import os
 import time
@@ -19,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from .config import SequenceConfig
+from .paths import lens_centre
 
 
 def _video_path(out_dir: str, fmt: str) -> str | None:
@@ -60,7 +64,12 @@ def run_sequence(cfg: SequenceConfig, *, out_dir: str | None = None, compare_ful
     scene = load_scene(cfg.scene, width=cfg.width, height=cfg.height, spp=cfg.spp,
                        integrator=cfg.integrator, camera=cfg.camera_at(0), **cfg.scene_params)
     fr = FrameRenderer(scene, {**cfg.foveated, "timing": True}, spp=cfg.spp)
-    render = _render_frame if cfg.stereo is None else _eyes_renderer(cfg, scene, fr)
+    if cfg.stereo is not None:
+        render = _eyes_renderer(cfg, scene, fr)
+    elif cfg.eye_tracking:
+        render = _render_frame
+    else:       # fixed foveation: the lens centre, measured once
+        render = functools.partial(_render_frame, centre=lens_centre(scene.sensors()[0]))
     stats_path = os.path.join(out_dir, "stats.jsonl")
     tmp_stats = stats_path + ".partial"
     video, all_stats = [], []
@@ -102,9 +111,10 @@ def run_sequence(cfg: SequenceConfig, *, out_dir: str | None = None, compare_ful
 
 
 def _render_frame(cfg: SequenceConfig, i: int, scene, fr, out_dir: str, compare_full: bool,
-                  video: list) -> dict[str, Any]:
-    """Frame ``i``: camera, cut and gaze of the config, the render, its files (and its video
-    frame appended to ``video``). Returns its stats."""
+                  video: list, centre: tuple[float, float] | None = None) -> dict[str, Any]:
+    """Frame ``i``: camera, cut and gaze of the config (``centre``, the lens centre, for
+    fixed foveation), the render, its files (and its video frame appended to ``video``).
+    Returns its stats."""
     from .io import encode_srgb8
     from .scenes import apply_camera
     integ = fr.integrator
@@ -113,11 +123,15 @@ def _render_frame(cfg: SequenceConfig, i: int, scene, fr, out_dir: str, compare_
         apply_camera(scene, cam)
     if cfg.cut_before(i):
         integ.reset()
-    integ.gaze = cfg.gaze_at(i)
+    eye = cfg.gaze_at(i)
+    # Fixed foveation: the density stays at the lens centre whatever the eye does.
+    integ.gaze = eye if centre is None else centre
     t0 = time.perf_counter()
     res = fr.render_frame(seed=cfg.seed, compare_full=compare_full)
     stats = {"frame": i, "time_s": cfg.time(i), "gaze": list(integ.gaze),
              **{k: v for k, v in res.stats.items() if k not in ("frame", "gaze")}}
+    if not cfg.eye_tracking:
+        stats["eye_gaze"] = list(map(float, eye))
     if cam is not None:
         stats["camera"] = cam
     stats["wall_ms"] = (time.perf_counter() - t0) * 1e3
@@ -140,6 +154,21 @@ def _write_exr_only(res, name: str) -> None:
     write_exr(name + ".exr", layers)
 
 
+def _stereo_of(cfg: SequenceConfig, scene, fr):
+    """The config's two eyes (its headset's rig, else the scene camera's frustum at each
+    eye) over the frame renderer's integrator."""
+    from .stereo import Stereo, StereoRig, frustum_of
+    st = cfg.stereo
+    width = st["eye_width"] or cfg.width
+    if st["headset"] is not None:
+        from .headsets import headset
+        rig = headset(st["headset"]).rig(width, st["ipd"])
+    else:
+        rig = StereoRig(frustum_of(scene.sensors()[0]), ipd=st["ipd"], width=width)
+    return Stereo(scene, fr.integrator, rig, reuse=st.get("reuse", True),
+                  first=st.get("first", "left"))
+
+
 def _eyes_renderer(cfg: SequenceConfig, scene, fr):
     """``render(cfg, i, scene, fr, out_dir, compare_full, video)`` for ``[stereo]``: both
     eyes of the scene's camera (the head) with one integrator, each eye a view with its own
@@ -147,17 +176,10 @@ def _eyes_renderer(cfg: SequenceConfig, scene, fr):
     eyes as the layers ``left`` and ``right`` of ``frame_NNNN.exr`` and side by side in its
     PNG and the video; its stats hold each eye's."""
     from .paths import BinocularGazeCSV
-    from .stereo import EYES, Stereo, StereoRig, frustum_of
-    st = cfg.stereo
-    head = scene.sensors()[0]
-    width = st["eye_width"] or cfg.width
-    if st["headset"] is not None:
-        from .headsets import headset
-        rig = headset(st["headset"]).rig(width, st["ipd"])
-    else:
-        rig = StereoRig(frustum_of(head), ipd=st["ipd"], width=width)
-    stereo = Stereo(scene, fr.integrator, rig, reuse=st.get("reuse", True),
-                    first=st.get("first", "left"))
+    from .stereo import EYES
+    stereo = _stereo_of(cfg, scene, fr)
+    fixed = None if cfg.eye_tracking else tuple(lens_centre(stereo.sensors[eye])
+                                                 for eye in EYES)
 
     def render(cfg, i, scene, fr, out_dir, compare_full, video):
         from .io import encode_srgb8, write_png
@@ -170,6 +192,8 @@ def _eyes_renderer(cfg: SequenceConfig, scene, fr):
             stereo.cut()
         eye_gazes = cfg.gaze.eyes_at(cfg.time(i)) \
             if cfg.poses is None and isinstance(cfg.gaze, BinocularGazeCSV) else None
+        if fixed is not None:           # fixed foveation: each eye at its lens centre
+            eye_gazes = fixed
         t0 = time.perf_counter()
         frame = stereo.render(cfg.gaze_at(i), seed=cfg.seed, spp=cfg.spp, eye_gazes=eye_gazes)
         integ = fr.integrator

@@ -60,13 +60,16 @@ def test_a_tiny_vr_study_runs_end_to_end(bench, tmp_path):
     # every foveated configuration of the study file against each uniform family and their
     # envelope, per condition (without pyoidn, those that need OIDN are left out)
     from foveated_mi.config import read_toml
+    from foveated_mi.study.equal_time import envelope_label
     from foveated_mi.denoise import oidn_available
     configs = read_toml("study", bench.STUDY)[0]["foveated"]["configs"]
     if not oidn_available():
         configs = [c for c in configs if "oidn" not in (c.get("preset"), c.get("denoiser"))]
     assert len(sps) == len(report["conditions"]) * len(configs) * \
         ((4 if oidn_available() else 2) + 1)
-    assert all(s["family"] in (*bench.FAMILIES, bench.ENVELOPE) for s in sps)
+    assert all(s["family"] in bench.FAMILIES for s in sps if not s["envelope"])
+    assert {s["family"] for s in sps if s["envelope"]} == {
+        envelope_label(f for f in bench.FAMILIES if any(s["family"] == f for s in sps))}
     assert (res / "vr_eccentricity.png").stat().st_size > 0
     assert (res / "vr_side_by_side.mp4").stat().st_size > 0
     assert "Speed-up at equal" in (res / "vr.md").read_text()
@@ -234,7 +237,8 @@ def test_every_family_is_the_lower_envelope_of_each_family_s_curve(bench):
                  row("uniform", 1, seed, 7.0, 100.0),
                  row("uniform", 4, seed, 8.23, 414.0)]
     sps = {(s["configuration"], s["family"]): s for s in bench.speedups(rows, "jod_video")}
-    env = sps[("vr 4 spp", bench.ENVELOPE)]
+    envelope = "envelope of uniform and uniform+history"      # the families that ran
+    env = sps[("vr 4 spp", envelope)]
     own = sps[("vr 4 spp", "uniform+history")]
     # Its own curve: 266 ms * (440 / 266) ** (0.03 / 0.40), over 121 ms.
     want = 266.0 * (440.0 / 266.0) ** (0.03 / 0.40) / 121.0
@@ -244,8 +248,46 @@ def test_every_family_is_the_lower_envelope_of_each_family_s_curve(bench):
     # At 8.0 the front (100 ms, 7.0 to 266 ms, 8.21) is below the families' own curves
     # (uniform: 100 to 414 ms; uniform + history: its cheapest cell already does, 266 ms).
     front = 100.0 * (266.0 / 100.0) ** (1.0 / 1.21) / 50.0
-    assert sps[("vr 1 spp", bench.ENVELOPE)]["ratio"] == pytest.approx(front, rel=1e-9)
+    assert sps[("vr 1 spp", envelope)]["ratio"] == pytest.approx(front, rel=1e-9)
     assert front < min(sps[("vr 1 spp", f)]["ratio"] for f in ("uniform", "uniform+history"))
+    # what sets each point: a family's own curve, or the front between two families' cells
+    assert env["set_by"] == "uniform+history 2-4 spp"
+    assert sps[("vr 1 spp", envelope)]["set_by"] == \
+        "front of uniform 1 spp and uniform+history 2 spp"
+
+
+def test_the_tables_measure_against_every_family_that_ran_and_name_their_envelope(bench):
+    """Dynamic resolution and a flat foveated row are families beside the four uniform ones;
+    the envelope is "every uniform family" only with all five kinds, else the families
+    named; the table has a column per family, the envelope's and what sets it."""
+    def row(method, spp, jod, ms, options=None):
+        return {"scene": "city", "method": method, "spp": float(spp), "frame": 6.0,
+                "seed": 0.0, "time_ms": ms, "jod_video": jod,
+                "config": json.dumps({"options": options or {}})}
+    rows = [row("foveated", 1, 7.0, 20.0, {"preset": "vr"}),
+            row("foveated", 1, 6.0, 15.0, {"preset": "vr", "sampling_law": "flat"}),
+            row("uniform", 1, 5.0, 40.0), row("uniform+oidn", 1, 6.5, 60.0),
+            row("uniform+history", 1, 6.0, 50.0), row("uniform+history+oidn", 1, 7.5, 90.0),
+            row("uniform@0.5", 1, 4.0, 12.0), row("uniform+oidn@0.5", 1, 6.8, 25.0)]
+    sps = bench.speedups(rows, "jod_video")
+    fams = ["uniform", "uniform@0.5", "uniform+oidn", "uniform+oidn@0.5", "uniform+history",
+            "uniform+history+oidn", "flat vr"]
+    envelope = "every uniform family and flat vr"
+    assert [s["family"] for s in sps if s["configuration"] == "vr 1 spp"] == fams + [envelope]
+    env = next(s for s in sps if s["envelope"] and s["configuration"] == "vr 1 spp")
+    # 7.0 lies between OIDN at half scale (25 ms, 6.8) and history + OIDN (90 ms, 7.5)
+    assert env["set_by"] == "front of uniform+oidn@0.5 1 spp and uniform+history+oidn 1 spp"
+    assert env["ratio"] == pytest.approx(25.0 * 3.6 ** (0.2 / 0.7) / 20.0, rel=1e-12)
+    table = bench.speedup_table(sps)
+    assert table[0] == ("| scene | configuration | time ms | " + " | ".join(fams)
+                        + f" | {envelope} | envelope set by |")
+    assert table[2].endswith("| front of uniform+oidn@0.5 1 spp and uniform+history+oidn "
+                             "1 spp |")
+    # Without dynamic resolution the words "every uniform family" are gone.
+    rest = [r for r in rows if "@" not in r["method"]]
+    labels = {s["family"] for s in bench.speedups(rest, "jod_video") if s["envelope"]}
+    assert labels == {"envelope of uniform, uniform+oidn, uniform+history, "
+                      "uniform+history+oidn and flat vr"}
 
 
 def test_timing_passes_replace_the_times_and_say_so(bench, monkeypatch):

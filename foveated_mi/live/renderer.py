@@ -7,6 +7,8 @@ only change its *inputs*, under a lock, each change validated first:
 - the gaze: time-stamped samples from the page's mouse (:class:`GazeInput`), a saccade model
   or a gaze CSV (:mod:`foveated_mi.paths`), held by the gaze lock; with a latency setting a
   frame uses the gaze of that many milliseconds ago, as a slow eye tracker would deliver it;
+  without eye tracking (``foveated-mi view --no-eye-tracking``, fixed foveation) every frame
+  renders at the lens centre and the gaze moves the overlays only;
 - the camera: moves and turns accumulate into one pose (:class:`FlyCamera`); each frame
   renders the pose of its start, so moves are never queued. A jump (``home``, or more than
   :data:`CUT_DISTANCE` camera distances or :data:`CUT_ANGLE` degrees between two frames) is a
@@ -194,13 +196,15 @@ def _toml(value: Any) -> str:
 def sequence_toml(*, scene: str, frames: int, fps: float, size: tuple[int, int], spp: int,
                   seed: int, foveated: dict, poses_file: str, out_dir: str,
                   scene_params: dict | None = None, integrator: dict | None = None,
-                  description: str = "") -> str:
-    """A sequence config (:mod:`foveated_mi.config`) that renders the frames of a pose file."""
+                  description: str = "", eye_tracking: bool = True) -> str:
+    """A sequence config (:mod:`foveated_mi.config`) that renders the frames of a pose file
+    (``eye_tracking`` false: fixed foveation, as the live view rendered them)."""
     lines = ["# Recorded in the live view (foveated-mi view); render it with",
              "#   foveated-mi sequence THIS_FILE",
              f"scene = {_toml(scene)}", f"description = {_toml(description)}",
              f"frames = {frames}", f"fps = {_toml(round(float(fps), 3))}",
-             f"size = {_toml(list(size))}", f"spp = {spp}", f"seed = {seed}", ""]
+             f"size = {_toml(list(size))}", f"spp = {spp}", f"seed = {seed}",
+             *([] if eye_tracking else ["eye_tracking = false"]), ""]
     for name, table in (("scene_params", scene_params), ("integrator", integrator),
                         ("foveated", foveated)):
         if table:
@@ -225,7 +229,7 @@ class LiveRenderer:
                  spp: int = 1, options: dict | None = None, seed: int = 0,
                  jpeg_quality: int = 85, record_dir: str = os.path.join("out", "live"),
                  idle_frames: int = IDLE_FRAMES, gaze_csv: str | None = None,
-                 max_fps: float = MAX_FPS,
+                 max_fps: float = MAX_FPS, eye_tracking: bool = True,
                  clock: Callable[[], float] = time.perf_counter):
         import mitsuba as mi
         from ..kernels import film_size
@@ -252,6 +256,12 @@ class LiveRenderer:
         sensor = scene.sensors()[0]
         self.width, self.height = (int(v) for v in film_size(sensor))
         self.integ = make_integrator(scene, dict(self._given))
+        from ..paths import lens_centre
+        from ..validate import check_bool
+        #: False: fixed foveation, frames rendered at the lens centre (measured once: the
+        #: film never changes) while the page's gaze still drives the overlays
+        self.eye_tracking = check_bool("eye_tracking", eye_tracking)
+        self.lens_centre = lens_centre(sensor)
         self.variant = mi.variant()
         home = camera_of(scene)
         self.camera = FlyCamera(home, _look_distance(scene, sensor, home))
@@ -555,7 +565,8 @@ class LiveRenderer:
                              foveated=foveated, poses_file=stem + ".csv",
                              out_dir=os.path.join("out", stem),
                              scene_params=self.scene_params, integrator=integ,
-                             description=f"live view walk-through, {len(rows)} frames")
+                             description=f"live view walk-through, {len(rows)} frames",
+                             eye_tracking=self.eye_tracking)
         csv_path = os.path.join(self.record_dir, stem + ".csv")
         toml_path = os.path.join(self.record_dir, stem + ".toml")
         track.write(csv_path)
@@ -581,7 +592,8 @@ class LiveRenderer:
                 "latency_ms": self.latency_ms, "locked": self.locked, "source": self.source,
                 "recording": self.recording, "record_dir": os.path.abspath(self.record_dir),
                 "variant": self.variant, "fov": self.camera.fov,
-                "cut_distance": CUT_DISTANCE, "cut_angle": CUT_ANGLE}
+                "cut_distance": CUT_DISTANCE, "cut_angle": CUT_ANGLE,
+                "eye_tracking": self.eye_tracking}
 
     # -- the frame (render thread) --------------------------------------------------------
     def _pick_gaze(self, now: float) -> tuple[float, float, int, float | None]:
@@ -657,7 +669,7 @@ class LiveRenderer:
             apply_camera(self.scene, inputs["cam"])
         if inputs["cut"] or inputs["reset"]:
             integ.reset()
-        integ.gaze = inputs["gaze"]
+        integ.gaze = inputs["gaze"] if self.eye_tracking else self.lens_centre
         t0 = time.perf_counter()
         try:
             img = np.asarray(mi.render(self.scene, integrator=integ, spp=self.spp,

@@ -26,11 +26,13 @@ import statistics
 from dataclasses import dataclass, field
 from typing import Any
 
+from ..validate import ParameterError
 from .aggregate import Margin, aggregate, margin
 
 __all__ = ["Verdict", "equal_time_verdicts", "verdict_lines", "verdict_sentence", "speedup",
            "speedup_over_seeds", "envelope_over_seeds", "Speedup", "TARGETS", "comparable",
-           "trace_modes", "modes_warning"]
+           "trace_modes", "modes_warning", "family_of", "uniform_kind", "envelope_families",
+           "envelope_label", "family_order", "UNIFORM_KINDS"]
 
 #: (name, frame, column, needed margin, against): "uniform" is the baseline without history
 #: (frame 1: it does not change with the frame), "history" the uniform frame with the same
@@ -243,44 +245,58 @@ def speedup(cell: dict, family: list[dict], column: str) -> tuple[float, str]:
         cell); ``"<"`` (its fastest cell already does); ``"≠"`` where the times are not
         comparable.
     """
+    ratio, rel, _ = _speedup(cell, family, column)
+    return ratio, rel
+
+
+def _speedup(cell: dict, family: list[dict], column: str
+             ) -> tuple[float, str, tuple[dict, ...]]:
+    """:func:`speedup` with the family's cells that set the ratio: the two that bracket the
+    quality, the one it is read at, or none."""
     if not comparable([cell, *family]):
-        return math.nan, "≠"
+        return math.nan, "≠", ()
     q = cell.get(column, math.nan)
     frame = int(cell["frame"])
     pts = [r for r in family if int(r["frame"]) == frame] or \
           [r for r in family if int(r["frame"]) == 1]
-    pts = sorted(((r["time_ms"], r.get(column, math.nan)) for r in pts),
+    pts = sorted(((r["time_ms"], r.get(column, math.nan), r) for r in pts),
                  key=lambda p: p[0])
-    pts = [(t, y) for t, y in pts if t > 0 and math.isfinite(t) and math.isfinite(y)]
+    pts = [p for p in pts if p[0] > 0 and math.isfinite(p[0]) and math.isfinite(p[1])]
     t0 = cell.get("time_ms", math.nan)
     if not pts or not math.isfinite(q) or not (t0 > 0):
-        return math.nan, "="
+        return math.nan, "=", ()
     best, env = -math.inf, []
-    for t, y in pts:                      # best quality reachable within time t
+    for t, y, r in pts:                   # best quality reachable within time t
         if y > best:
             best = y
-            env.append((t, y))
+            env.append((t, y, r))
     if q <= env[0][1]:
-        return env[0][0] / t0, "<" if q < env[0][1] else "="
+        return env[0][0] / t0, "<" if q < env[0][1] else "=", (env[0][2],)
     if q > env[-1][1]:
-        return env[-1][0] / t0, ">"
-    for (ta, ya), (tb, yb) in zip(env, env[1:]):
+        return env[-1][0] / t0, ">", (env[-1][2],)
+    for (ta, ya, ra), (tb, yb, rb) in zip(env, env[1:]):
         if ya <= q <= yb:
             f = (q - ya) / (yb - ya)
-            return math.exp(math.log(ta) + f * (math.log(tb) - math.log(ta))) / t0, "="
-    return math.nan, "="
+            return (math.exp(math.log(ta) + f * (math.log(tb) - math.log(ta))) / t0, "=",
+                    (ra, rb))
+    return math.nan, "=", ()
 
 
 @dataclass
 class Speedup:
     """A cell's speed-up at equal quality against a family (:func:`speedup`): on the cells'
     means (``ratio``, ``relation``) and seed by seed (``per_seed``: ``(ratio, relation)``
-    pairs; ``mean`` and ``sd`` over the seeds whose ratio is finite)."""
+    pairs; ``mean`` and ``sd`` over the seeds whose ratio is finite). Against an envelope
+    (:func:`envelope_over_seeds`), ``family`` names what sets it at the cell's quality (a
+    family's curve between two of its cells, e.g. ``uniform+history 2-4 spp``, or the joint
+    front between two families' cells) and ``per_seed_family`` the same seed by seed."""
     ratio: float
     relation: str
     per_seed: list[tuple[float, str]]
     mean: float
     sd: float
+    family: str = ""
+    per_seed_family: list[str] = field(default_factory=list)
 
     @property
     def tie(self) -> bool:
@@ -335,24 +351,27 @@ def speedup_over_seeds(cell: dict, family: list[dict], column: str) -> Speedup:
                    statistics.stdev(xs) if len(xs) > 1 else math.nan)
 
 
-def _lowest(results: list[tuple[float, str]]) -> tuple[float, str]:
-    """The envelope's ``(ratio, relation)`` from each curve's: the least time at which any
-    curve reaches the quality (exact, or at most its cheapest cell's); where none does, at
-    least the slowest cell's of any; refused where any curve is."""
+def _lowest(results: list[tuple[float, str]]) -> tuple[float, str, int | None]:
+    """The envelope's ``(ratio, relation)`` from each curve's, and the index of the curve that
+    sets it: the least time at which any curve reaches the quality (exact, or at most its
+    cheapest cell's; the first such curve on a tie); where none does, at least the slowest
+    cell's of any; refused where any curve is."""
     if any(r == "≠" for _, r in results):
-        return math.nan, "≠"
-    reach = [(x, r) for x, r in results if r in ("=", "<") and math.isfinite(x)]
+        return math.nan, "≠", None
+    reach = [(x, r, i) for i, (x, r) in enumerate(results) if r in ("=", "<")
+             and math.isfinite(x)]
     if reach:
         return min(reach, key=lambda p: (p[0], p[1] == "<"))
-    never = [x for x, r in results if r == ">" and math.isfinite(x)]
-    return (max(never), ">") if never else (math.nan, "=")
+    never = [(x, r, i) for i, (x, r) in enumerate(results) if r == ">" and math.isfinite(x)]
+    return max(never, key=lambda p: p[0]) if never else (math.nan, "=", None)
 
 
-def envelope_over_seeds(cell: dict, families: list[list[dict]], column: str) -> Speedup:
-    """:func:`speedup_over_seeds` against the lower envelope of several uniform families: at
-    each quality the least time of any family's own curve and of their joint Pareto front
-    (each interpolated in log time between the cells that bracket it), on the means and seed
-    by seed. The front alone can bracket a quality between two families' cells dearer than
+def envelope_over_seeds(cell: dict, families: list[list[dict]], column: str,
+                        names: list[str] | None = None) -> Speedup:
+    """:func:`speedup_over_seeds` against the lower envelope of several families: at each
+    quality the least time of any family's own curve and of their joint Pareto front (each
+    interpolated in log time between the cells that bracket it), on the means and seed by
+    seed. The front alone can bracket a quality between two families' cells dearer than
     a family's own curve reaches it; the envelope is never above any family's.
 
     Parameters
@@ -363,19 +382,157 @@ def envelope_over_seeds(cell: dict, families: list[list[dict]], column: str) -> 
         Each family's aggregated cells.
     column : str
         The quality column.
+    names : list of str, optional
+        The families' names (default: :func:`family_of` their first cell).
 
     Returns
     -------
     speedup : Speedup
-        As :func:`speedup_over_seeds`.
+        As :func:`speedup_over_seeds`, with ``family`` and ``per_seed_family`` naming what
+        sets the envelope at the cell's quality: ``"<family> <a>-<b> spp"`` (its own curve
+        between two of its cells), ``"<family> <a> spp"`` (read at one cell: the cheapest
+        already reaches the quality, or none does), or ``"front of <family> <a> spp and
+        <family> <b> spp"`` (the joint front between two families' cells).
     """
+    if names is None:
+        names = [family_of(f[0]) if f else "" for f in families]
+    if len(names) != len(families):
+        raise ParameterError("names", names, f"one name per family ({len(families)})")
+    owner = {}
+    for name, fam in zip(names, families):
+        for c in fam:
+            for x in (c, *(c.get("rows") or ())):
+                owner[id(x)] = name
     curves = [*families, [c for f in families for c in f]]
-    parts = [speedup_over_seeds(cell, f, column) for f in curves]
-    ratio, rel = _lowest([(p.ratio, p.relation) for p in parts])
-    per_seed = [_lowest([p.per_seed[i] for p in parts]) for i in range(len(parts[0].per_seed))]
+    ratio, rel, i = _lowest([_speedup(cell, f, column)[:2] for f in curves])
+    family = _setter(_speedup(cell, curves[i], column)[2], owner) if i is not None else ""
+    per_seed, per_family = [], []
+    for r in cell.get("rows") or [cell]:
+        seed_curves = [[x for c in f for x in (c.get("rows") or [c])
+                        if x.get("seed") == r.get("seed")] for f in curves]
+        got = [_speedup(r, f, column) for f in seed_curves]
+        x, rx, j = _lowest([g[:2] for g in got])
+        per_seed.append((x, rx))
+        per_family.append(_setter(got[j][2], owner) if j is not None else "")
     xs = [x for x, _ in per_seed if math.isfinite(x)]
     return Speedup(ratio, rel, per_seed, sum(xs) / len(xs) if xs else math.nan,
-                   statistics.stdev(xs) if len(xs) > 1 else math.nan)
+                   statistics.stdev(xs) if len(xs) > 1 else math.nan, family, per_family)
+
+
+def _setter(bracket: tuple[dict, ...], owner: dict[int, str]) -> str:
+    """The name of what sets an envelope's point, from the cells that bracket it."""
+    if not bracket:
+        return ""
+    fams = [owner.get(id(c)) or family_of(c) or c["method"] for c in bracket]
+    spps = [f"{float(c['spp']):g}" for c in bracket]
+    if len(bracket) == 1 or (fams[0], spps[0]) == (fams[1], spps[1]):
+        return f"{fams[0]} {spps[0]} spp"
+    if fams[0] == fams[1]:
+        return f"{fams[0]} {spps[0]}-{spps[1]} spp"
+    return f"front of {fams[0]} {spps[0]} spp and {fams[1]} {spps[1]} spp"
+
+
+#: The kinds of uniform family an envelope needs to be called "every uniform family".
+UNIFORM_KINDS = ("uniform", "+ OIDN", "+ history", "+ history + denoiser",
+                 "dynamic resolution")
+
+
+def family_of(row: dict) -> str | None:
+    """The family a study row (or cell) belongs to on an envelope: its method for a uniform
+    one (``uniform``, ``uniform+oidn@0.5``, ``uniform+history+oidn``...), ``flat <preset>``
+    for a foveated row whose ``sampling_law`` is ``flat`` (the same rays spread evenly), None
+    for any other foveated row.
+
+    Parameters
+    ----------
+    row : dict
+        A study row or aggregated cell (``method``, ``config``).
+
+    Returns
+    -------
+    family : str or None
+        Its family's name.
+    """
+    m = row.get("method", "")
+    if m.startswith("uniform"):
+        return m
+    o = _options(row)
+    if m == "foveated" and o.get("sampling_law") == "flat":
+        return f"flat {o.get('preset', 'auto')}"
+    return None
+
+
+def uniform_kind(family: str) -> str | None:
+    """Which of :data:`UNIFORM_KINDS` a family is (None for a flat foveated one)."""
+    if not family.startswith("uniform"):
+        return None
+    if "@" in family:
+        return "dynamic resolution"
+    if family.startswith("uniform+history"):
+        return "+ history" if family == "uniform+history" else "+ history + denoiser"
+    return "+ OIDN" if family == "uniform+oidn" else "uniform"
+
+
+def family_order(name: str) -> tuple:
+    """Sort key of a family's name: raw, + OIDN, + history, + history + denoiser (each
+    followed by its dynamic-resolution families, the largest scale first), then the others
+    (flat foveated rows) by name."""
+    base, _, scale = name.partition("@")
+    kind = uniform_kind(base)
+    rank = UNIFORM_KINDS.index(kind) if kind is not None else len(UNIFORM_KINDS)
+    return (rank, -float(scale) if scale else -1.0, name)
+
+
+def envelope_families(cells: list[dict]) -> dict[str, list[dict]]:
+    """The families of a scene's cells that an envelope is built from (:func:`family_of`),
+    each with its cells, in the order of :func:`family_order`.
+
+    Parameters
+    ----------
+    cells : list of dict
+        Aggregated cells (or rows) of one scene.
+
+    Returns
+    -------
+    families : dict of str to list of dict
+        Name to cells, in that order; only the families that ran.
+    """
+    out: dict[str, list[dict]] = {}
+    for c in cells:
+        name = family_of(c)
+        if name is not None:
+            out.setdefault(name, []).append(c)
+    return {k: out[k] for k in sorted(out, key=family_order)}
+
+
+def envelope_label(names) -> str:
+    """The envelope's name from the families that ran: ``every uniform family`` only when
+    raw, + OIDN, + history, + history and a denoiser, and dynamic resolution all ran (and
+    ``and <the others>`` when flat foveated rows ran too); otherwise ``envelope of`` the
+    families, named.
+
+    Parameters
+    ----------
+    names : iterable of str
+        The families (:func:`envelope_families`' keys).
+
+    Returns
+    -------
+    label : str
+        The label.
+    """
+    names = sorted(dict.fromkeys(names), key=family_order)
+    if not names:
+        raise ParameterError("names", names, "at least one family")
+    kinds = {uniform_kind(n) for n in names}
+    if set(UNIFORM_KINDS) <= kinds:
+        others = [n for n in names if uniform_kind(n) is None]
+        return "every uniform family" + (f" and {_and(others)}" if others else "")
+    return f"envelope of {_and(names)}"
+
+
+def _and(names: list[str]) -> str:
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
 
 
 def _label(cell: dict) -> str:

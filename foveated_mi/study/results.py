@@ -28,7 +28,7 @@ from ..metrics import COMPARE_KEYS, FLICKER_KEYS
 
 __all__ = ["columns", "ResultsFile", "read_rows", "format_value", "parse_value",
            "NUMERIC_COLUMNS", "OPTIONAL_COLUMNS", "STEREO_KEYS",
-           "SEQUENCE_TIME_KEYS"]
+           "SEQUENCE_TIME_KEYS", "SCALE_KEYS"]
 
 _HEAD = ("task_id", "scene", "method", "seed", "theta", "sigma_p", "reconstruction", "spp",
          "frame",
@@ -73,8 +73,11 @@ STEREO_KEYS = ("psnr_left", "psnr_right", "psnr_fovea_left", "psnr_fovea_right",
                "psnr_periphery_left", "psnr_periphery_right", "jod_video_left",
                "jod_video_right", "jod_video_min", "time_left_ms", "time_right_ms")
 
+#: A dynamic-resolution row's render scale and the time its upscale took (in ``time_ms``).
+SCALE_KEYS = ("scale", "upscale_ms")
+
 #: Columns read back as numbers by :func:`read_rows` (besides any ``*_ms`` column).
-NUMERIC_COLUMNS = frozenset(("seed", "theta", "sigma_p", "spp", "frame", "rays",
+NUMERIC_COLUMNS = frozenset(("seed", "scale", "theta", "sigma_p", "spp", "frame", "rays",
                              "ray_fraction", "samples", "time_ms", *COMPARE_KEYS, "jod", "jod_video",
                              "jod_monitor", "jod_video_monitor", *FLICKER_KEYS, *STEREO_KEYS,
                              "history_hit_rate", "width", "height", "repeats"))
@@ -84,8 +87,9 @@ NUMERIC_COLUMNS = frozenset(("seed", "theta", "sigma_p", "spp", "frame", "rays",
 SEQUENCE_TIME_KEYS = ("time_mean_ms", "time_max_ms")
 
 #: Columns only some rows carry (a sequence row's flicker and frame times, a stereo row's
-#: eyes): a file gains them from the first row that brings them (:meth:`ResultsFile.append`).
-OPTIONAL_COLUMNS = frozenset((*FLICKER_KEYS, *STEREO_KEYS, *SEQUENCE_TIME_KEYS))
+#: eyes, a dynamic-resolution row's scale): a file gains them from the first row that brings
+#: them (:meth:`ResultsFile.append`).
+OPTIONAL_COLUMNS = frozenset((*FLICKER_KEYS, *STEREO_KEYS, *SEQUENCE_TIME_KEYS, *SCALE_KEYS))
 
 
 def format_value(v: Any) -> str:

@@ -49,7 +49,7 @@ def runs_oidn(task: dict) -> bool:
     """Whether a task's frames run OIDN: a ``+oidn`` family, or OIDN as its denoiser (given,
     else its preset's) or its disc's."""
     o = task.get("options") or {}
-    return task["method"].endswith("+oidn") or "oidn" in (
+    return task["method"].split("@")[0].endswith("+oidn") or "oidn" in (
         o.get("denoiser", o.get("preset")), o.get("foveal_disc_denoiser"))
 
 

@@ -87,8 +87,9 @@ def rendered_gazes(scene, task: dict) -> list:
     """The gazes a sequence's frames are rendered with: the eye tracker's, late by
     ``[viewer] gaze_latency_ms`` (``motion["rendered_gazes"]``) and jittered by a Gaussian of
     ``gaze_noise_deg`` degrees (converted at each gaze's pixels per degree, seeded by the
-    task's seed, kept on the film); the true gazes without a tracker. The metrics always
-    fixate the true gazes.
+    task's seed, kept on the film); the true gazes without a tracker; the lens centre
+    (:func:`foveated_mi.paths.lens_centre`) every frame for fixed foveation
+    (``eye_tracking`` false), which has no tracker. The metrics always fixate the true gazes.
 
     Parameters
     ----------
@@ -103,6 +104,9 @@ def rendered_gazes(scene, task: dict) -> list:
         One normalised film position per frame.
     """
     motion = task["motion"]
+    if not task.get("eye_tracking", True):
+        from ..paths import lens_centre
+        return [list(lens_centre(scene.sensors()[0]))] * len(motion["gazes"])
     gazes = motion.get("rendered_gazes", motion["gazes"])
     sigma = motion.get("gaze_noise_deg", 0.0)
     if sigma <= 0.0:
@@ -119,6 +123,31 @@ def rendered_gazes(scene, task: dict) -> list:
         dx, dy = rng.normal(0.0, sigma * ppd[key], 2)
         out.append([min(max(g[0] + dx / w, 0.0), 1.0), min(max(g[1] + dy / h, 0.0), 1.0)])
     return out
+
+
+def frame_seed(task: dict, k: int) -> int:
+    """The seed of frame ``k`` (from 0) of a uniform sequence: new samples every frame, as a
+    real renderer draws them, from the seeds the foveated integrator's history frames use
+    (the task's seed at frame 0, ``sample_tea_32(seed, k)`` after), so rows share their
+    random numbers frame by frame; the task's seed every frame with ``frozen_noise``.
+
+    Parameters
+    ----------
+    task : dict
+        A uniform sequence task (``seed``, ``frozen_noise``).
+    k : int
+        The frame, from 0.
+
+    Returns
+    -------
+    seed : int
+        In [0, 2^32).
+    """
+    seed = int(task["seed"])
+    if k == 0 or task.get("frozen_noise", False):
+        return seed
+    import mitsuba as mi
+    return int(mi.sample_tea_32(seed, k)[0])
 
 
 def _sequence_summary(task: dict, n: int, times: list, rays: list,

@@ -77,6 +77,9 @@ Layout (every key optional except ``scenes``)::
     [motion.gaze]               #   the gaze path (fixed, keyframes, saccades, csv; absent:
     type = "saccades"           #   each scene's gaze, still)
     targets = [[0.3, 0.5], [0.7, 0.4]]
+    # off_centre_deg = [20, 30] #   instead of targets: count (6) fixations drawn with seed
+    # count = 6                 #   (0) at these degrees from the lens centre, any direction
+    # seed = 3                  #   (clamped inside the film): where a tracker beats the lens
 
 With ``[motion]`` a row is one sequence (``frame`` = its frame count): ``time_ms`` is the
 median frame time after the first frame, the quality columns the mean over its frames, each
@@ -90,9 +93,11 @@ instability of its frames against their references
 ``metrics.fovea_deg`` and one column per ring of eccentricity from each frame's gaze ray,
 ``flicker_0_5``, ``flicker_5_10``, ``flicker_10_20``, ``flicker_20_35`` and
 ``flicker_35_180`` (degrees; nan where the film reaches no pixel, and without ``[viewer]``,
-which has no degrees). A uniform row without history renders every frame with its seed, so
-under a still camera its frames repeat and its flicker is 0 (a renderer drawing new samples
-each frame would flicker).
+which has no degrees). A uniform row without history draws new samples every frame, as a
+real renderer does: frame ``k`` uses the seed ``sample_tea_32(seed, k)`` (the row's seed at
+frame 0), the seeds the foveated integrator's history frames use. With ``[uniform]
+frozen_noise = true`` every frame uses the row's seed, so under a still camera its frames
+repeat and its flicker is 0.
 
     [foveated.defaults]         # options shared by the grid and the list
     atrous_iterations = 0
@@ -105,6 +110,8 @@ each frame would flicker).
     [[foveated.configs]]        # explicit configurations
     theta = 0.1
     reconstruction = "fast_sibson"
+    eye_tracking = false        # fixed foveation: rendered at the lens centre (the camera's
+                                # axis) whatever the eye does; the metrics fixate the eye
 
     [uniform]                   # baselines: every pixel traced at spp
     spp = [1, 4, 16]
@@ -114,6 +121,11 @@ each frame would flicker).
                                 #   foveated configurations' presets, else "auto")
     frames = [1, 16]            # history rows: frames recorded (default: the foveated
                                 #   configurations' frames, else [1])
+    frozen_noise = false        # true: rows without history render every frame of a
+                                #   sequence with the row's seed (the noise stands still)
+    scale = [1.0, 0.5]          # dynamic resolution: rows without history traced on a
+                                #   film of round(scale * size) pixels, upscaled
+                                #   bilinearly (method "uniform@0.5"; default [1.0])
 
 Uniform rows without history render one frame with ``mi.render`` (+ Intel OIDN when
 denoised); a frame does not depend on its number, so they are recorded at frame 1 only.
@@ -126,8 +138,9 @@ accumulate the same reprojection history; ``denoise = true`` keeps the preset's 
 
 Foveated keys are the options of the ``foveated`` integrator (checked by
 :func:`foveated_mi.options.validate_options`, so new options work without
-changes here) except ``gaze`` (per scene) and ``timing`` (always on), plus ``spp`` and
-``frames``. Every error is a :class:`~foveated_mi.validate.ParameterError` of one line naming
+changes here) except ``gaze`` (per scene) and ``timing`` (always on), plus ``spp``,
+``frames`` and ``eye_tracking`` (default true). Every error is a
+:class:`~foveated_mi.validate.ParameterError` of one line naming
 the file and the dotted key.
 """
 from __future__ import annotations
@@ -162,7 +175,7 @@ _TOP_KEYS = ("description", "seed", "seeds", "repeats", "warmup", "metric", "siz
 _SCENE_KEYS = ("scene", "label", "size", "gaze", "camera", "params", "integrator",
                "reference", "optional")
 _REFERENCE_KEYS = ("spp", "seed", "file", "layer")
-_EXTRA_KEYS = ("spp", "frames")          # foveated keys that are not integrator options
+_EXTRA_KEYS = ("spp", "frames", "eye_tracking")   # foveated keys, not integrator options
 _FORBIDDEN = {"gaze": "no gaze here: set it per scene (gaze = [x, y])",
               "timing": "no timing here: studies always time the stages"}
 
@@ -325,7 +338,8 @@ def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
     scenes = [_scene(ctx, f"scenes[{i}]", s, defaults, base_dir)
               for i, s in enumerate(scenes_in)]
     if "motion" in data:
-        scenes = _motion(ctx, data["motion"], scenes, base_dir, _tracker(ctx, data.get("viewer")))
+        scenes = _motion(ctx, data["motion"], scenes, base_dir, _tracker(ctx, data.get("viewer")),
+                         _gaze_view(ctx, data.get("viewer")))
     scenes, headset = _eyes(ctx, data.get("viewer"), scenes)
     _check_labels(ctx, scenes)
     metrics, perceptual = _metrics(ctx, data.get("metrics", {}))
@@ -534,12 +548,14 @@ def _delayed(path, gazes: list, fps: float, latency_ms: float) -> list:
 
 
 def _motion(ctx: TableContext, table: Any, scenes: list, base_dir: str,
-            tracker: tuple[float, float] = (0.0, 0.0)) -> list:
+            tracker: tuple[float, float] = (0.0, 0.0), view=None) -> list:
     """The scenes with their ``motion``: the ``[motion]`` paths sampled at each frame (plain
     values a worker can take; the camera path is completed by each scene's own camera). With
     an eye tracker's latency (:func:`_tracker`), ``rendered_gazes`` are the gazes the renderer
     is given (the metrics fixate ``gazes``); with its noise, ``gaze_noise_deg``. Neither key
-    is there without them, so the task ids of studies written before them stay the same."""
+    is there without them, so the task ids of studies written before them stay the same.
+    Saccades off the lens centre (:func:`_off_centre`) are drawn on each scene's ``view``
+    (:func:`_gaze_view`)."""
     from ..config import _camera, _gaze
     table = dict(ctx.table("motion", table))
     ctx.known("motion", table, ("frames", "fps", "camera", "gaze"))
@@ -550,10 +566,13 @@ def _motion(ctx: TableContext, table: Any, scenes: list, base_dir: str,
         fps = check_range("motion.fps", fps, 0.0, 1000.0, lo_open=True)
     except ParameterError as e:
         raise ctx.rename(e) from None
+    off_centre = _off_centre(ctx, table.get("gaze"), base_dir)
     gaze = _with_prefix(ctx, "motion", lambda c: _gaze(c, table["gaze"], base_dir)) \
-        if "gaze" in table else None
+        if "gaze" in table and off_centre is None else None
     out = []
     for scene in scenes:
+        if off_centre is not None and not scene.missing:     # drawn on this scene's view
+            gaze = off_centre(*view(scene))
         camera = None
         if "camera" in table and not scene.missing:
             # each scene's own camera fills the keys a keyframe leaves out
@@ -570,6 +589,52 @@ def _motion(ctx: TableContext, table: Any, scenes: list, base_dir: str,
         out.append(replace(scene, motion={**motion, **_eye_gazes(ctx, gaze, frames, fps,
                                                                    tracker)}))
     return out
+
+
+def _off_centre(ctx: TableContext, table: Any, base_dir: str):
+    """``[motion.gaze] off_centre_deg`` (with ``count``, default 6, and ``seed``, default 0)
+    on a saccade path: ``path(camera, size)``, the saccades between targets drawn off the
+    lens centre of that camera and film (:func:`foveated_mi.paths.off_centre_targets`); None
+    without it."""
+    from ..config import _gaze
+    from ..paths import off_centre_targets
+    if not isinstance(table, dict) or "off_centre_deg" not in table:
+        return None
+    table = dict(table)
+    if table.get("type") != "saccades":
+        raise ctx.error("motion.gaze.off_centre_deg", table["off_centre_deg"],
+                        "a [motion.gaze] with type = \"saccades\"")
+    if "targets" in table:
+        raise ctx.error("motion.gaze.targets", table["targets"], "no targets beside "
+                        "motion.gaze.off_centre_deg (the targets are drawn)")
+    drawn = (table.pop("off_centre_deg"), table.pop("count", 6), table.pop("seed", 0))
+
+    def path(camera: dict, size) -> Any:
+        targets = off_centre_targets(*drawn, camera, size, name="motion.gaze")
+        return _with_prefix(ctx, "motion", lambda c: _gaze(
+            c, {**table, "targets": [list(t) for t in targets]}, base_dir))
+    try:        # the values alone, checked once (every scene may be missing)
+        path({"fov": 90.0}, (1, 1))
+    except ParameterError as e:
+        raise e if getattr(e, "key", None) else ctx.rename(e) from None
+    return path
+
+
+def _gaze_view(ctx: TableContext, viewer: Any):
+    """``view(scene) -> (camera, size)``: the pinhole the head's gaze is on, whose axis is the
+    lens centre: the scene's camera and film, or under ``[viewer] headset`` the eye's
+    frustum and buffer (the head's, centred, with ``stereo``), as :func:`_eyes` sets them."""
+    hs = _headset(ctx, viewer)
+
+    def view(scene):
+        from ..scenes import scene_camera
+        camera = scene.camera or scene_camera(scene.source)
+        if hs is None:
+            return camera, scene.size
+        model, width = hs
+        head = isinstance(viewer, dict) and viewer.get("stereo") is True
+        return (model.head_camera if head else model.eye_camera)(camera, width)
+    return view
 
 
 def _eye_gazes(ctx: TableContext, gaze, frames: int, fps: float,
@@ -817,8 +882,11 @@ def _check_options(ctx: TableContext, key: str, options: dict, where: dict[str, 
     full.pop("timing", None)
     spp = ctx.integer(where.get("spp", f"{key}.spp"), options.get("spp", 1), 1, 1 << 16)
     frames = _frames(ctx, where.get("frames", f"{key}.frames"), options.get("frames", [1]))
+    tracked = ctx.boolean(where.get("eye_tracking", f"{key}.eye_tracking"),
+                          options.get("eye_tracking", True))
     # the options as given (for the config column) and the full validated set (for the id)
-    return {"options": full, "given": {k: opts[k] for k in opts}, "spp": spp, "frames": frames}
+    return {"options": full, "given": {k: opts[k] for k in opts}, "spp": spp, "frames": frames,
+            "eye_tracking": tracked}
 
 
 def _frames(ctx: TableContext, key: str, value: Any) -> list[int]:
@@ -877,7 +945,7 @@ def _foveated(ctx: TableContext, table: Any) -> list[dict]:
     # identical configurations (grid and list overlapping) run once
     seen, unique = set(), []
     for c in out:
-        key = json.dumps([c["options"], c["spp"]], sort_keys=True)
+        key = json.dumps([c["options"], c["spp"], c["eye_tracking"]], sort_keys=True)
         if key in seen:
             continue
         seen.add(key)
@@ -897,7 +965,10 @@ def _uniform(ctx: TableContext, table: Any, foveated: list[dict]) -> list[dict]:
     table = dict(ctx.table("uniform", table))
     if not table:
         return []
-    ctx.known("uniform", table, ("spp", "denoise", "history", "presets", "frames"))
+    ctx.known("uniform", table, ("spp", "denoise", "history", "presets", "frames",
+                                 "frozen_noise", "scale"))
+    frozen = ctx.boolean("uniform.frozen_noise", table.get("frozen_noise", False))
+    noise = {"frozen_noise": True} if frozen else {}    # (rows as they were without it)
     spp = table.get("spp", [1])
     spp = spp if isinstance(spp, list) else [spp]
     if not spp:
@@ -905,20 +976,47 @@ def _uniform(ctx: TableContext, table: Any, foveated: list[dict]) -> list[dict]:
     spps = [ctx.integer(f"uniform.spp[{i}]", s, 1, 1 << 16) for i, s in enumerate(spp)]
     dens = _bools(ctx, "uniform.denoise", table.get("denoise", [False]))
     hists = _bools(ctx, "uniform.history", table.get("history", [False]))
+    if frozen and False not in hists:     # history rows decorrelate their frames themselves
+        raise ctx.error("uniform.frozen_noise", True, "rows without history to apply to "
+                        "(uniform.history = [false, ...])")
     if True not in hists:
         for k in ("presets", "frames"):
             if k in table:
                 raise ctx.error(f"uniform.{k}", table[k], "no history rows to apply to "
                                 "(uniform.history = [false, true] adds them)")
     presets, frames = _uniform_history_of(ctx, table, foveated)
+    scales = _scales(ctx, table.get("scale", [1.0]))
+    if True in hists and scales != [1.0]:
+        raise ctx.error("uniform.scale", table["scale"], "1 with uniform.history = true "
+                        "(history rows at a render scale below 1 are not supported yet)")
     out = []
-    for s in dict.fromkeys(spps):
-        for d in dens:
-            if False in hists:
-                out.append({"spp": s, "denoise": d, "history": False})
-            if True in hists:
-                out += _uniform_history_rows(ctx, s, d, presets, frames)
+    for sc in scales:
+        for s in dict.fromkeys(spps):
+            for d in dens:
+                if sc != 1.0:        # dynamic resolution: the film traced at scale sc
+                    out.append({"spp": s, "denoise": d, "history": False, **noise,
+                                "scale": sc})
+                    continue
+                if False in hists:
+                    out.append({"spp": s, "denoise": d, "history": False, **noise})
+                if True in hists:
+                    out += _uniform_history_rows(ctx, s, d, presets, frames)
     return out
+
+
+def _scales(ctx: TableContext, value: Any) -> list[float]:
+    """``uniform.scale``: render scales in (0, 1] (dynamic resolution), each once."""
+    allowed = "a render scale > 0 and <= 1, or a non-empty list of them"
+    values = value if isinstance(value, list) else [value]
+    if not values:
+        raise ctx.error("uniform.scale", value, allowed)
+    out = []
+    for i, v in enumerate(values):
+        key = f"uniform.scale[{i}]" if isinstance(value, list) else "uniform.scale"
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 < v <= 1.0:
+            raise ctx.error(key, v, allowed)
+        out.append(float(v))
+    return list(dict.fromkeys(out))
 
 
 def _uniform_history_of(ctx: TableContext, table: dict, foveated: list[dict]

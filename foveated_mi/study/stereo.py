@@ -32,7 +32,7 @@ import numpy as np
 from ..stereo import EYES, EyeSensors, StereoRig, frustum_of
 from .results import STEREO_KEYS
 from .scoring import (UNIFORM_MODE, _camera_path, _flicker, _median, _mode, _quality,
-                      _sequence_summary, _viewing, rendered_gazes)
+                      _sequence_summary, _viewing, frame_seed, rendered_gazes)
 
 __all__ = ["STEREO_KEYS", "stereo_rig", "stereo_reference", "stereo_sequence_row"]
 
@@ -117,10 +117,17 @@ def _renderer(scene, task: dict, rig: StereoRig):
 
     def render_baseline(gaze, eye_gazes=None):
         eyes.follow()
-        runs = [render_uniform(scene, spp=spp, seed=seed + k, denoise=den, sensor=eyes[eye])
+        f = render_baseline.frame       # new samples every frame (scoring.frame_seed)
+        render_baseline.frame += 1
+        runs = [render_uniform(scene, spp=spp, seed=(frame_seed(task, f) + k) % 2**32,
+                               denoise=den, sensor=eyes[eye],
+                               scale=task["options"].get("scale", 1.0))
                 for k, eye in enumerate(EYES)]
         each = [r[1]["time_ms"] for r in runs]
-        return [r[0] for r in runs], sum(each), 1.0, each
+        from .tasks import _traced_fraction
+        return ([r[0] for r in runs], sum(each),
+                float(np.mean([_traced_fraction(*r) for r in runs])), each)
+    render_baseline.frame = 0
     return render_baseline, eyes, None
 
 
@@ -185,6 +192,9 @@ def _frames(scene, task: dict, refs: np.ndarray, render, eyes) -> tuple:
     # A binocular gaze path: each eye's own gazes, true and (late) rendered.
     true_eyes = motion.get("eye_gazes")
     rendered_eyes = motion.get("rendered_eye_gazes", true_eyes)
+    if not task.get("eye_tracking", True):      # fixed foveation: each eye at its lens centre
+        from ..paths import lens_centre
+        rendered_eyes = [[lens_centre(eyes[eye]) for eye in EYES]] * len(gazes)
     times, rays = [], []
     frames = {eye: {"shown": [], "quality": [], "eccs": [], "gazes": []} for eye in EYES}
     with _camera_path(scene) if cameras else contextlib.nullcontext() as move:

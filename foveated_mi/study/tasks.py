@@ -6,7 +6,8 @@ A worker keeps every scene it loaded in a module-level cache keyed by the scene'
 variant (:func:`get_scene`), so each worker process loads each scene once.
 
 Seeds: a task runs one configuration with one of the study's ``seeds``; every frame of it uses
-that seed (the foveated integrator decorrelates its own frames after the first), so results
+that seed (the foveated integrator decorrelates its own frames after the first, and a
+uniform sequence derives frame ``k``'s from it: :func:`.scoring.frame_seed`), so results
 do not depend on which worker runs a task or in which order, and configurations share their
 random numbers per seed (common random numbers: differences between rows of one seed are the
 configurations', not the noise's; :mod:`.aggregate` pairs them by seed).
@@ -39,8 +40,9 @@ from typing import Any
 
 import numpy as np
 
+from ..paths import lens_centre
 from .scoring import (UNIFORM_MODE, _camera_path, _flicker, _median, _mode, _quality,
-                      _sequence_summary, _viewing, rendered_gazes)
+                      _sequence_summary, _viewing, frame_seed, rendered_gazes)
 
 __all__ = ["expand_tasks", "reference_task", "reference_key", "run_task", "run_reference_task",
            "run_sequence_task", "task_frame", "get_scene", "scene_cache_info",
@@ -181,12 +183,18 @@ def expand_tasks(spec, variant: str, *, denoise_available: bool = True) -> list[
         for c in spec.foveated:
             config = {"method": "foveated", "options": c["given"], "spp": c["spp"],
                       "frames": c["frames"], "full_options": c["options"]}
+            tracked = c.get("eye_tracking", True)
+            # Fixed foveation is in the id and the config (its rows differ from the tracked
+            # ones); tracked rows keep the ids of studies written before it.
+            id_options = c["options"] if tracked else {**c["options"], "eye_tracking": False}
+            if not tracked:
+                config["eye_tracking"] = False
             for seed in seeds:
-                tid = task_id(ident, "foveated", c["options"], c["spp"], seed, variant, hashed)
+                tid = task_id(ident, "foveated", id_options, c["spp"], seed, variant, hashed)
                 tasks.append({**base, "kind": "foveated", "task_id": tid, "seed": seed,
                               "method": "foveated", "options": c["options"], "spp": c["spp"],
-                              "frames": c["frames"], "config": json.dumps(config,
-                                                                          sort_keys=True)})
+                              "frames": c["frames"], "eye_tracking": tracked,
+                              "config": json.dumps(config, sort_keys=True)})
         for u in spec.uniform:
             if u.get("history"):
                 if u["denoiser"] == "oidn" and not denoise_available:
@@ -205,19 +213,40 @@ def expand_tasks(spec, variant: str, *, denoise_available: bool = True) -> list[
                 continue
             if u["denoise"] and not denoise_available:
                 continue
-            method = "uniform+oidn" if u["denoise"] else "uniform"
-            config = {"method": method, "spp": u["spp"], "denoise": u["denoise"],
-                      "integrator": scene.integrator}
-            for seed in seeds:
-                tid = task_id(uident, method, {"denoise": u["denoise"]}, u["spp"], seed,
-                              variant, hashed)
-                tasks.append({**base, "kind": "uniform", "task_id": tid, "seed": seed,
-                              "method": method, "options": {"denoise": u["denoise"]},
-                              "spp": u["spp"], "frames": [1],
-                              "config": json.dumps(config, sort_keys=True)})
+            tasks += _uniform_tasks(base, u, scene, seeds, uident, hashed)
     for t in tasks:               # under [motion] a row is the whole sequence
         if t["motion"] is not None:
             t["frames"] = [len(t["motion"]["gazes"])]
+    return tasks
+
+
+def _uniform_tasks(base: dict, u: dict, scene, seeds, uident: dict, hashed: dict
+                   ) -> list[dict]:
+    """The tasks of one uniform configuration without history (:func:`expand_tasks`), one per
+    seed."""
+    method = "uniform+oidn" if u["denoise"] else "uniform"
+    opts = {"denoise": u["denoise"]}
+    config = {"method": method, "spp": u["spp"], "denoise": u["denoise"],
+              "integrator": scene.integrator}
+    if u.get("scale", 1.0) != 1.0:   # dynamic resolution (scale 1 keeps its ids)
+        method = f"{method}@{u['scale']:g}"
+        opts["scale"] = config["scale"] = u["scale"]
+        config["method"] = method
+    frozen = u.get("frozen_noise", False)
+    # New noise each frame changes a sequence's rows (a new id); a frozen sequence
+    # or a still view's single frame keeps the id it had before the option.
+    id_opts = dict(opts)
+    if frozen:
+        config["frozen_noise"] = True
+    elif scene.motion is not None:
+        id_opts["frozen_noise"] = False
+    tasks = []
+    for seed in seeds:
+        tid = task_id(uident, method, id_opts, u["spp"], seed, base["variant"], hashed)
+        tasks.append({**base, "kind": "uniform", "task_id": tid, "seed": seed,
+                      "method": method, "options": dict(opts),
+                      "spp": u["spp"], "frames": [1], "frozen_noise": frozen,
+                      "config": json.dumps(config, sort_keys=True)})
     return tasks
 
 
@@ -376,6 +405,9 @@ def _sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = False):
         row["samples"] = float(np.mean(render.samples))
     modes = getattr(render, "modes", None)      # the row's time: the frames after the first
     row["trace_mode"] = _mode(modes[1:] or modes) if modes else UNIFORM_MODE
+    if integ is None and task["options"].get("scale", 1.0) != 1.0:   # dynamic resolution
+        row.update(scale=task["options"]["scale"],
+                   upscale_ms=_median(render.upscale[1:] or render.upscale))
     if integ is not None:
         row.update(theta=task["options"]["theta"], sigma_p=task["options"]["sigma_p"],
                    reconstruction=task["options"]["reconstruction"],
@@ -423,11 +455,22 @@ def _sequence_renderer(scene, task: dict, gaze):
         return render_foveated, integ
     from ..baselines import render_uniform
     den = bool(task["options"]["denoise"])
+    scale = task["options"].get("scale", 1.0)
 
     def render_baseline(g):
-        image, stats = render_uniform(scene, spp=spp, seed=seed, denoise=den)
-        return image, stats["time_ms"], 1.0
+        k = len(render_baseline.upscale)    # the sequence's frame, from 0
+        image, stats = render_uniform(scene, spp=spp, seed=frame_seed(task, k), denoise=den,
+                                      scale=scale)
+        render_baseline.upscale.append(stats.get("upscale_ms"))
+        return image, stats["time_ms"], _traced_fraction(image, stats)
+    render_baseline.upscale = []        # each frame's upscale time (dynamic resolution)
     return render_baseline, None
+
+
+def _traced_fraction(image: np.ndarray, stats: dict) -> float:
+    """The share of the film's pixels a uniform frame traced: 1, or its scaled film's."""
+    w, h = stats.get("size", image.shape[1::-1])
+    return w * h / (image.shape[0] * image.shape[1])
 
 
 def _sequence_frames(scene, task: dict, refs: np.ndarray, render, rendered: list) -> tuple:
@@ -461,7 +504,9 @@ def _foveated_frames(scene, task: dict, record: list[int]):
     from ..integrators.foveated import FoveatedIntegrator
 
     opts = dict(task["options"])
-    integ = FoveatedIntegrator(nested=scene.integrator(), **opts, gaze=tuple(task["gaze"]),
+    # Fixed foveation renders at the lens centre; the metrics fixate the scene's gaze.
+    gaze = task["gaze"] if task.get("eye_tracking", True) else lens_centre(scene.sensors()[0])
+    integ = FoveatedIntegrator(nested=scene.integrator(), **opts, gaze=tuple(gaze),
                                timing=True)
     spp, seed, last = task["spp"], task["seed"], max(task["frames"])
     for _ in range(task["warmup"]):
@@ -510,7 +555,8 @@ def task_frame(task: dict, frame: int) -> np.ndarray:
         return first[frame][0]
     from ..baselines import render_uniform
     return render_uniform(scene, spp=task["spp"], seed=task["seed"],
-                          denoise=bool(task["options"]["denoise"]))[0]
+                          denoise=bool(task["options"]["denoise"]),
+                          scale=task["options"].get("scale", 1.0))[0]
 
 
 def run_task(task: dict, reference: np.ndarray) -> list[dict]:
@@ -556,21 +602,33 @@ def run_task(task: dict, reference: np.ndarray) -> list[dict]:
             row.update(_quality(ref_d, image, task, viewing))
             rows.append(row)
         return rows
+    return [_uniform_row(scene, task, common, ref_d, viewing)]
+
+
+def _uniform_row(scene, task: dict, common: dict, ref_d: np.ndarray, viewing: dict) -> dict:
+    """The row of a uniform task of a still view (:func:`run_task`): ``warmup`` untimed
+    frames, then ``repeats`` timed ones, the median time of each stage."""
     from ..baselines import render_uniform
+    from .results import stage_columns
     den = bool(task["options"]["denoise"])
+    scale = task["options"].get("scale", 1.0)
     for _ in range(task["warmup"]):
-        render_uniform(scene, spp=task["spp"], seed=task["seed"], denoise=den)
-    runs = [render_uniform(scene, spp=task["spp"], seed=task["seed"], denoise=den)
+        render_uniform(scene, spp=task["spp"], seed=task["seed"], denoise=den, scale=scale)
+    runs = [render_uniform(scene, spp=task["spp"], seed=task["seed"], denoise=den, scale=scale)
             for _ in range(task["repeats"])]
     image = runs[0][0]
-    pixels = w * h
-    row = dict(common, frame=1, rays=pixels, ray_fraction=1.0, samples=pixels * task["spp"],
+    fraction = _traced_fraction(image, runs[0][1])
+    pixels = common["width"] * common["height"] * fraction
+    row = dict(common, frame=1, rays=pixels, ray_fraction=fraction,
+               samples=pixels * task["spp"],
                time_ms=_median([s["time_ms"] for _, s in runs]), trace_mode=UNIFORM_MODE)
+    if scale != 1.0:
+        row.update(scale=scale, upscale_ms=_median([s["upscale_ms"] for _, s in runs]))
     if "trace_ms" in stage_columns():         # the whole uniform render is its trace stage
         row["trace_ms"] = _median([s["render_ms"] for _, s in runs])
     if den:
         row["aov_ms"] = _median([s["aov_ms"] for _, s in runs])
         row["denoise_ms"] = _median([s["denoise_ms"] for _, s in runs])
     row.update(_quality(ref_d, image, task, viewing))
-    return [row]
+    return row
 
