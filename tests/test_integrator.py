@@ -322,3 +322,26 @@ def test_toggling_history_drops_the_old_history():
 def test_gaze_bound_one_line():
     with pytest.raises(ParameterError, match=r"gaze = .* is invalid: expected two finite"):
         FoveatedIntegrator(gaze=(1e30, 0.5))
+
+
+def test_setting_the_gaze_validates_and_compiles_nothing_else(monkeypatch):
+    """The gaze is a frame's input: ``integ.gaze = ...`` checks it alone (no other option
+    validated, no pass's settings compiled) and renders what the same gaze given as an
+    option renders; a bad gaze is one line and changes nothing."""
+    import foveated_mi.integrators.foveated as module
+    scene = cornell()
+    a, b = FoveatedIntegrator(preset="vr"), FoveatedIntegrator(preset="vr", gaze=(0.3, 0.6))
+    calls = []
+    for name in ("validate_options", "frame_settings"):
+        real = getattr(module, name)
+        monkeypatch.setattr(module, name, lambda *x, real=real, name=name, **k:
+                            calls.append(name) or real(*x, **k))
+    a.gaze = (0.3, 0.6)
+    assert calls == [] and a.gaze == (0.3, 0.6) and a.options["gaze"] == (0.3, 0.6)
+    with pytest.raises(ParameterError) as e:
+        a.gaze = (float("nan"), 0.5)
+    assert str(e.value).startswith("gaze = ") and "\n" not in str(e.value)
+    assert a.gaze == (0.3, 0.6)
+    img_a = np.array(mi.render(scene, integrator=a, seed=3))
+    img_b = np.array(mi.render(scene, integrator=b, seed=3))
+    np.testing.assert_array_equal(img_a, img_b)

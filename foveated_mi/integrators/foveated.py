@@ -150,10 +150,13 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         raise AttributeError(name)
 
     def __setattr__(self, name, value):
-        if name in SCHEMA and "_options" in self.__dict__:
-            self.set_options(**{name: value})
-        else:
+        if name not in SCHEMA or "_options" not in self.__dict__:
             super().__setattr__(name, value)
+        elif name == "gaze":     # a frame's input, read by no pass's settings: nothing compiled
+            gaze = SCHEMA["gaze"].validate(value)
+            self._given, self._options = ({**d, "gaze": gaze} for d in (self._given, self._options))
+        else:
+            self.set_options(**{name: value})
 
     def to_string(self) -> str:
         opts = ", ".join(f"{k}={v!r}" for k, v in self._options.items())
