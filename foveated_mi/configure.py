@@ -204,6 +204,12 @@ FILM_OPTIONS = ("reconstruction", "jfa", "max_radius")
 #: check of :func:`~foveated_mi.options.validate_options` refuses elsewhere.
 FOVEAL_OPTIONS = ("foveal_upsampling", "foveal_space", "foveal_disc")
 
+#: Options of the foveal formation's full-resolution disc, which ``sampling_law = "flat"``
+#: does not have (:mod:`foveated_mi.kernels.flat`).
+DISC_OPTIONS = ("foveal_disc", "foveal_disc_spp", "foveal_disc_iterations",
+                "foveal_disc_iterations_moving", "foveal_disc_sigma_luminance",
+                "foveal_disc_denoiser")
+
 #: Options that only denoisers read (their registrations' ``reads``), beside the moving
 #: frame's colour test, which replaces ``sigma_luminance``.
 DENOISER_OPTIONS = ("atrous_iterations", "sigma_color", "sigma_normal", "sigma_position",
@@ -236,6 +242,11 @@ def _unread_by_law(o: Options) -> dict[str, tuple[str, str]]:
     elif law != "polar":
         unread["viewer_ppd"] = (f"sampling_law {law!r}", "polar_cells 'acuity' (sampling_law "
                                 "'polar', e.g. preset 'vr')")
+    if law == "flat" and o["formation"] == "foveal":
+        # An even buffer has no full-resolution disc.
+        for name in DISC_OPTIONS:
+            unread[name] = ("sampling_law 'flat', which has no disc",
+                            "sampling_law 'polar' (e.g. preset 'vr')")
     return unread
 
 
@@ -353,7 +364,8 @@ def foveal_settings(width: int, height: int, o: Options) -> FovealSettings:
     """
     offset = cell_offset(sampling_settings(o))
     lay = _buffer_space.layout(width, height, o["theta"], o["ray_budget"], offset,
-                               interleave_of(o))
+                               interleave_of(o),
+                               "flat" if o["sampling_law"] == "flat" else "polar")
     grid = lay.grid if o["foveal_space"] == "buffer" else foveal_grid(
         width, height, float(o["ray_budget"]), fovea_radius(width, height, o["theta"]),
         offset)

@@ -388,11 +388,16 @@ _SCHEMA: tuple[Option, ...] = (
            "the floor ``acuity_floor``; ``polar``: every pixel within ``theta`` of the gaze "
            "(a full-resolution disc), and the pixel under each cell of a log-polar buffer "
            "outside it whose cells are as large as the rest of ``ray_budget`` allows "
-           "(:mod:`foveated_mi.kernels.polar`); ``flat``: ``ray_budget`` of the pixels spread "
+           "(:mod:`foveated_mi.kernels.polar`); ``flat``: with ``formation = 'film'``, "
+           "``ray_budget`` of the pixels spread "
            "evenly over the film by an ordered-dither pattern that moves on each frame, so "
            "that a still view traces every pixel within ``ceil(1 / ray_budget)`` frames "
            "(``theta``, ``sigma_p`` and the gaze play no part: the same rays as a foveated "
-           "law, without the gaze; film formation only). See "
+           "law, without the gaze). Under ``formation = 'foveal'`` (``foveal_space = "
+           "'buffer'``) ``flat`` is a buffer of cells ``1 / sqrt(ray_budget)`` pixels "
+           "across tiling the film (:mod:`foveated_mi.kernels.flat`), with the polar "
+           "buffer's jitter, settling, history, denoiser and warp and no disc: dynamic "
+           "resolution with temporal accumulation. See "
            ":mod:`foveated_mi.frame.sampling`"),
     Option("ray_budget", 0.1, "float",
            "rays per frame as a fraction of the film's pixels (sampling_law = acuity, polar "
@@ -474,7 +479,8 @@ _SCHEMA: tuple[Option, ...] = (
            doc="The image formation after the trace (:mod:`foveated_mi.frame.formation`): "
            "``film`` resolves the history, reconstructs and post-processes on the film's "
            "pixels (§3.4-3.5); ``foveal`` denoises in the log-polar buffer of "
-           "``sampling_law = 'polar'`` and warps it once to the film "
+           "``sampling_law = 'polar'`` (or the even buffer of ``sampling_law = 'flat'``) "
+           "and warps it once to the film "
            "(:mod:`foveated_mi.frame.foveal`)"),
     _choice("foveal_upsampling", ("bilinear", "cubic", "joint"), "the warp of the foveal "
             "formation's buffer to the film: bilinear, cubic (Catmull-Rom), or joint (weighted "
@@ -924,10 +930,15 @@ def _check_combination(out: dict[str, Any]) -> None:
         raise ParameterError("foveal_contrast", out["foveal_contrast"],
                              "0 unless formation = 'foveal'")
     if out["formation"] == "foveal":
-        # Its cells are the pixels the polar law traces, and it keeps radiance throughout.
-        if out["sampling_law"] != "polar":
+        # Its cells are the pixels the polar law traces (the flat law's: an even grid of
+        # them, kept on the buffer's samples), and it keeps radiance throughout.
+        if out["sampling_law"] == "flat" and out["foveal_space"] != "buffer":
+            raise ParameterError("sampling_law", "flat", "'polar' with formation = 'foveal' "
+                                 "and foveal_space = 'film' ('flat' needs foveal_space = "
+                                 "'buffer')")
+        if out["sampling_law"] not in ("polar", "flat"):
             raise ParameterError("sampling_law", out["sampling_law"],
-                                 "'polar' with formation = 'foveal'")
+                                 "'polar' or 'flat' with formation = 'foveal'")
         if out["tonemap_samples"]:
             raise ParameterError("tonemap_samples", True, "False with formation = 'foveal'")
         if out["foveal_space"] == "buffer":

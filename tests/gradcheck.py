@@ -36,6 +36,7 @@ OPTION_SETS = [
     ("svgf_every_pixel", {"preset": "guided", "denoiser": "svgf", "sigma_p": 1.0}),
     ("vr", {"preset": "vr"}),
     ("vr_atrous", {"preset": "vr", "denoiser": "atrous"}),
+    ("vr_flat", {"preset": "vr", "sampling_law": "flat"}),
     ("flat", {"sampling_law": "flat", "ray_budget": 0.25}),
 ]
 

@@ -142,7 +142,8 @@ def test_frames_after_the_first_two_compile_nothing(preset, budget):
 
 def test_options_name_the_law():
     with pytest.raises(ParameterError, match="sampling_law"):
-        FoveatedIntegrator(preset="paper", sampling_law="flat", formation="foveal")
+        FoveatedIntegrator(preset="paper", sampling_law="flat", formation="foveal",
+                           foveal_space="film")
     with pytest.raises(ParameterError) as e:
         _sampling.flat_window(0.0)
     assert str(e.value).startswith("ray_budget = 0")

@@ -206,7 +206,7 @@ def test_a_still_view_accumulates_history_in_the_traced_pixels(space):
 
 @pytest.mark.parametrize("bad,match", [
     ({"formation": "foveal", "sampling_law": "kwon"},
-     r"sampling_law = 'kwon' is invalid: expected 'polar' with formation = 'foveal'"),
+     r"sampling_law = 'kwon' is invalid: expected 'polar' or 'flat' with formation = 'foveal'"),
     ({"preset": "vr", "tonemap_samples": True},
      r"tonemap_samples = True is invalid: expected False with formation = 'foveal'"),
     ({"preset": "vr", "ray_budget": 0.0}, r"ray_budget = 0\.0 is invalid"),

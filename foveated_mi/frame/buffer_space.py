@@ -12,7 +12,9 @@ moving too. Its *samples* are, in this order:
   :math:`r_0` (the others are off).
 
 These are the pixels the polar sampling law traces (cells inside the disc share its
-pixels). The plan casts the G-buffer at the samples only
+pixels). With ``sampling_law = "flat"`` the samples are the cells of an even grid at the
+budget's density (:mod:`foveated_mi.kernels.flat`) and there is no disc: the same passes
+without the gaze. The plan casts the G-buffer at the samples only
 (:func:`~foveated_mi.frame.gbuffer.gbuffer_at`), launches each of their pixels once and
 notes each sample's ray (:func:`sample_rays`), so that the traced values are developed
 straight onto the samples; the history lives on them, and it is reprojected sample to
@@ -59,8 +61,10 @@ import drjit as dr
 import mitsuba as mi
 
 from ..kernels.buffers import GBuffer
+from ..kernels.flat import FlatGrid, budget_pitch, flat_grid
 from ..kernels.grid import Grid
 from ..kernels.polar import PolarGrid, polar_grid_of
+from ..validate import check_choice
 from .reproject import CameraState, History, ReprojectionMap, nearest_claim, project_seen
 from .sampling import foveal_grid, fovea_radius
 
@@ -92,9 +96,10 @@ INTERLEAVE_ORDER = {
 
 @dataclass(frozen=True)
 class SampleLayout:
-    """The samples of a film and its options: the grid's cells, then the disc's patch."""
-    grid: PolarGrid
-    side: int                  #: pixels across the square patch that holds the disc
+    """The samples of a film and its options: the grid's cells, then the disc's patch
+    (none with ``sampling_law = "flat"``: an even grid, ``side`` 0)."""
+    grid: PolarGrid | FlatGrid
+    side: int                  #: pixels across the square patch that holds the disc (0: none)
     #: ``n``: each frame traces one cell in each ``n`` x ``n`` block of the grid
     #: (``foveal_interleave``); 1: every cell
     interleave: int = 1
@@ -120,8 +125,9 @@ class SampleLayout:
 
 
 def layout(width: int, height: int, theta: float, ray_budget: float,
-           offset: float = 0.0, interleave: int = 1) -> SampleLayout:
-    """The samples of a ``width`` x ``height`` film for a disc of radius ``theta``.
+           offset: float = 0.0, interleave: int = 1, law: str = "polar") -> SampleLayout:
+    """The samples of a ``width`` x ``height`` film for a disc of radius ``theta``, or with
+    ``law = "flat"`` an even grid of cells and no disc.
 
     Parameters
     ----------
@@ -141,12 +147,23 @@ def layout(width: int, height: int, theta: float, ray_budget: float,
         the budget's, and a frame traces one in each ``n`` x ``n`` block of them
         (:func:`interleaved`), spaced as the budget's cells, so that a frame's rays still
         number about ``ray_budget``.
+    law : str, optional
+        ``"polar"``: the polar grid and the disc; ``"flat"``: cells about
+        ``1 / sqrt(ray_budget)`` pixels across tiling the film
+        (:func:`~foveated_mi.kernels.flat.flat_grid`), whatever the gaze; ``theta`` and
+        ``offset`` are not read.
 
     Returns
     -------
     layout : SampleLayout
-        The grid's cells outside the disc, then a square patch wide enough to hold the disc.
+        The grid's cells outside the disc, then a square patch wide enough to hold the disc
+        (none with ``law = "flat"``).
     """
+    check_choice("law", law, ("polar", "flat"))
+    if law == "flat":
+        # One ray a cell of the budget's size; n x n finer cells take turns.
+        grid = flat_grid(width, height, budget_pitch(float(ray_budget)) / interleave)
+        return SampleLayout(grid, 0, int(interleave))
     r0 = fovea_radius(width, height, theta)
     grid = foveal_grid(width, height, float(ray_budget), r0, float(offset))
     if interleave > 1:
@@ -371,6 +388,12 @@ def sample_pixels(lay: SampleLayout, gaze: mi.Point2f, width: int, height: int
     """
     grid, nc = lay.grid, lay.cells
     idx = dr.arange(mi.UInt32, lay.size)
+    if not lay.side:
+        # No disc: every sample is a cell.
+        p = grid.film_position(idx, gaze)
+        px, py = mi.Int32(dr.floor(p.x)), mi.Int32(dr.floor(p.y))
+        on = (px >= 0) & (px < width) & (py >= 0) & (py < height)
+        return mi.UInt32(dr.select(on, py * width + px, 0)), on
     is_cell = idx < nc
     p = grid.film_position(dr.select(is_cell, idx, 0), gaze)
     kx, ky = _patch_xy(lay, mi.Int32(dr.select(is_cell, 0, idx - nc)), gaze)
@@ -429,7 +452,7 @@ def disc_rays(lay: SampleLayout, rays: mi.UInt32, traced: mi.Bool, n_rays: int) 
     Returns
     -------
     disc : mi.Bool
-        One flag per ray.
+        One flag per ray (all False without a disc).
     """
     disc = dr.zeros(mi.Bool, n_rays)
     dr.scatter(disc, True, rays, traced & (dr.arange(mi.UInt32, lay.size) >= lay.cells))

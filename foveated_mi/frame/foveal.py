@@ -3,8 +3,10 @@
 The passes after the trace cost what the rays cost. With ``sampling_law = "polar"`` the frame
 traces the pixel under each cell of the log-polar buffer
 (:func:`foveated_mi.frame.sampling.foveal_grid`, sized by ``ray_budget``) and every pixel
-of its full-resolution disc. Where the frame keeps its geometry and history is
-``foveal_space``:
+of its full-resolution disc. With ``sampling_law = "flat"`` (``buffer`` space only) the
+buffer is an even grid at the budget's density and there is no disc
+(:mod:`foveated_mi.kernels.flat`): dynamic resolution with temporal accumulation from the same
+passes. Where the frame keeps its geometry and history is ``foveal_space``:
 
 ``buffer`` (the ``vr`` preset)
     On the buffer's *samples*: its cells outside the disc, then the disc's pixels
@@ -50,6 +52,7 @@ from ..kernels.pixels import gather4, packet
 from ..kernels.taps import Surface, surface_energy
 from ..kernels.buffers import GBuffer, Resolved
 from ..kernels.grid import Grid, wrap_padding
+from ..kernels.flat import FlatGrid
 from ..kernels.polar import PolarGrid
 from ..postprocess import DENOISERS, DenoiseInput, Denoised
 from ..postprocess.registry import as_denoised
@@ -87,8 +90,9 @@ class FovealSettings:
     disc: str                  #: ``foveal_disc``
     #: the samples (cells outside the disc, then the disc's patch) of the film and budget
     layout: _buffer_space.SampleLayout
-    #: the buffer's grid (without the rings inside the disc in ``buffer`` space)
-    grid: PolarGrid
+    #: the buffer's grid (without the rings inside the disc in ``buffer`` space; an even
+    #: grid with ``sampling_law = "flat"``)
+    grid: PolarGrid | FlatGrid
     #: ``foveal_taa``: this frame's weight in what a cell shows (1: its denoised value)
     taa: float = 1.0
     #: ``foveal_contrast``: the cells' unsharp gain before the warp (0: none)
@@ -370,11 +374,17 @@ def _cubic(cells: mi.Float, grid: PolarGrid, x0: mi.Float, y0: mi.Float, fx: mi.
     for j in range(4):
         qy = dr.clip(mi.Int32(y0) + (j - 1), 0, grid.height - 1)
         for i in range(4):
-            q, _ = grid.neighbour(mi.Int32(x0) + (i - 1), qy)
+            q, _ = grid.neighbour(_tap_x(grid, mi.Int32(x0) + (i - 1)), qy)
             v = gather4(cells, q, mi.Bool(True))
             every &= v.w > 0.0
             acc += mi.Color3f(v.x, v.y, v.z) * dr.detach(wx[i] * wy[j])
     return dr.maximum(acc, 0.0), every
+
+
+def _tap_x(grid: Grid, qx: mi.Int32) -> mi.Int32:
+    """A warp tap's column: as is on a wrapped axis (the grid brings it back), clamped to the
+    edge on a clamped one (an even grid's, :mod:`foveated_mi.kernels.flat`), as its rows."""
+    return qx if grid.wrap_x else dr.clip(qx, 0, grid.width - 1)
 
 
 def _cell_packet(cells: mi.Color3f, valid: mi.Bool) -> mi.Float:
@@ -395,8 +405,9 @@ def warp(cells: mi.Color3f, valid: mi.Bool, grid: PolarGrid, gaze: mi.Point2f, w
     ----------
     cells, valid : mi.Color3f, mi.Bool
         The buffer's values, and the cells that hold one (one entry per cell of ``grid``).
-    grid, gaze : PolarGrid, mi.Point2f
-        The buffer's grid, and the gaze's film position (pixels).
+    grid, gaze : PolarGrid or FlatGrid, mi.Point2f
+        The buffer's grid, and the gaze's film position (pixels; an even grid ignores it,
+        and clamps both ways).
     width, height : int
         The film's size.
     guide : tuple of Surface, optional
@@ -443,7 +454,7 @@ def _bilinear(cells: mi.Float, grid: PolarGrid, x0: mi.Float, y0: mi.Float, fx: 
     for dy, wy in ((0, 1.0 - fy), (1, fy)):
         for dx, wx in ((0, 1.0 - fx), (1, fx)):
             qy = dr.clip(mi.Int32(y0) + dy, 0, grid.height - 1)
-            q, _ = grid.neighbour(mi.Int32(x0) + dx, qy)
+            q, _ = grid.neighbour(_tap_x(grid, mi.Int32(x0) + dx), qy)
             v = gather4(cells, q, mi.Bool(True))
             cq = mi.Color3f(v.x, v.y, v.z)      # 0 where the cell holds no value
             w = dr.detach(wx * wy * v.w)
@@ -629,10 +640,13 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
         radiance = stabilize(radiance, has, grid, previous, s.taa)
     shown = sharpen(radiance, has, grid, s.contrast) if s.contrast > 0.0 else radiance
     warped = warp(shown, has, grid, inp.gaze, width, height, kernel=s.upsampling)
-    # The disc shows its own samples, blended into the warp across the seam.
-    disc, held = _disc_values(resolved, inp, s, grad_pass)
-    own, mine, t = _disc_samples(disc, held, inp, s)
-    image = dr.select(own, dr.lerp(warped, mine, t), warped)
+    if lay.side:
+        # The disc shows its own samples, blended into the warp across the seam.
+        disc, held = _disc_values(resolved, inp, s, grad_pass)
+        own, mine, t = _disc_samples(disc, held, inp, s)
+        image = dr.select(own, dr.lerp(warped, mine, t), warped)
+    else:
+        image = warped      # an even grid (``sampling_law = "flat"``): no disc
     timer.mark("post", image)
     buffers = {"traced": shading.mask, "shading": resolved.shading,
                "shading_mask": resolved.mask, "history_count": resolved.count,
@@ -645,8 +659,9 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
         # What every sample showed: the cells after the denoiser, the disc's patch as shown.
         shown = mi.Color3f(dr.detach(resolved.shading))
         dr.scatter(shown, dr.detach(radiance), c, has)
-        dr.scatter(shown, dr.detach(disc), nc + dr.arange(mi.UInt32, lay.side * lay.side),
-                   held)
+        if lay.side:
+            dr.scatter(shown, dr.detach(disc), nc + dr.arange(mi.UInt32, lay.side * lay.side),
+                       held)
         history["shown"] = shown
     # What the cells' denoiser derived from their G-buffer alone, for the next frames while
     # it holds (a still view).

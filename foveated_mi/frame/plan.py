@@ -223,8 +223,7 @@ class Planner:
         the G-buffer at its samples only, the history reprojected sample to sample (and the
         other eye's samples, with a :attr:`partner`), the polar map and its launch."""
         ss, hs = settings.sampling, settings.history
-        lay = _buffer_space.layout(width, height, ss.theta, ss.ray_budget,
-                                   _sampling.cell_offset(ss, sensor), ss.interleave)
+        lay = self._layout(ss, sensor, width, height)
         gaze = _sampling.gaze_position(gaze_at, width, height)
         gaze_key = tuple(float(v) for v in gaze_at)
         partner = self._partner_history(lay, settings)
@@ -276,6 +275,13 @@ class Planner:
                          disc_rays=low, disc_spp=low_spp, cells_low=cells_low,
                          ray_shift=shift, kept=sm.kept if reused and self.keep_formation else None,
                          moving=self._camera_moved)
+
+    @staticmethod
+    def _layout(ss, sensor, width: int, height: int):
+        """The samples of the law's buffer: polar cells around a disc, or flat cells."""
+        return _buffer_space.layout(width, height, ss.theta, ss.ray_budget,
+                                    _sampling.cell_offset(ss, sensor), ss.interleave,
+                                    "flat" if ss.law == "flat" else "polar")
 
     def _settled(self, spp: int, still: bool, settings: PlanSettings,
                  turns: int) -> tuple[bool, bool]:
@@ -416,7 +422,9 @@ class Planner:
                                              ls.block_height)
         rays = _buffer_space.sample_rays(pixels, traced, ro.wavefront, ro.active,
                                          width * height)
-        disc = _buffer_space.disc_rays(lay, rays, traced, ro.lanes) if ls.disc_spp else None
+        # No disc (an even grid): every ray at the frame's rate.
+        disc = _buffer_space.disc_rays(lay, rays, traced, ro.lanes) \
+            if ls.disc_spp and lay.side else None
         return ro, smap, rays, disc
 
     def _partner_history(self, lay, settings: PlanSettings) -> History | None:
