@@ -512,8 +512,7 @@ _SCHEMA: tuple[Option, ...] = (
             "``denoised``, the same values through the frame's denoiser on the disc's square "
             "patch of pixels (a plain image, so a network gets what it was trained on), as the "
             "buffer's cells are (the ``vr`` preset's: with SVGF it smooths only where the "
-            "history's variance says a pixel is noisy, and it raised the fovea's PSNR by 2.0 dB "
-            "on voxel-city and 3.9 dB on a path-traced interior at 1 spp, "
+            "history's variance says a pixel is noisy, so it gains most on a noisy scene: "
             "``docs/results.md#the-disc-around-the-gaze-denoised``)"),
     Option("foveal_disc_iterations", -1, "int", "levels of the denoiser on the foveal "
            "disc's patch (-1: atrous_iterations, the buffer's)", lo=-1, hi=16,
@@ -528,10 +527,9 @@ _SCHEMA: tuple[Option, ...] = (
            "the disc's patch in a frame whose camera moved since the view's last, where its "
            "history is reprojected (-1: ``foveal_disc_iterations``, as a still frame; "
            "setting the camera's parameters, even to the same values, is a move). The motion "
-           "hides what fewer levels leave: the ``vr`` preset's 2 scored the video JOD of 4 "
-           "with the head turning and took the orbiting frame outside its trace from 0.16x "
-           "to 0.15x of a full render (``docs/results.md#the-discs-levels-where-the-camera-"
-           "moved``)"),
+           "hides what fewer levels leave: the ``vr`` preset's 2 scored as 4 did with the head "
+           "turning, in less time "
+           "(``docs/results.md#the-discs-levels-where-the-camera-moved``)"),
     Option("foveal_disc_sigma_luminance", 0.0, "float", "SVGF's colour sigma on the foveal "
            "disc's patch, in noise deviations (0: sigma_luminance, the buffer's)",
            lo=0.0, hi=1e9,
@@ -546,21 +544,19 @@ _SCHEMA: tuple[Option, ...] = (
            doc="With ``foveal_disc = 'denoised'``: the denoiser on the disc's square patch of "
            "full-resolution pixels, apart from the buffer's cells (``same``: ``denoiser``, "
            "as the cells). ``oidn`` (at ``oidn_quality``) gives the disc a network that "
-           "denoises a disc without history (a view's first frames) from its few samples: on a "
-           "still head at 8.4 pixels per degree it raised the fovea's PSNR by about 1 dB and "
-           "the video JOD by 0.05-0.10; with the head turning, side by side, ``fast`` added "
-           "20-23 ms a frame on a 2-core CPU, more than it bought "
-           "(``docs/results.md#the-disc-through-a-network``). A frame whose denoisers "
+           "denoises a disc without history (a view's first frames) from its few samples: it "
+           "helps a still head a little, and with the head turning it cost a CPU more time "
+           "than it bought (``docs/results.md#the-disc-through-a-network``). A frame whose "
+           "denoisers "
            "include one that runs on the host is formed without replay"),
     Option("foveal_disc_spp", 0, "int", "samples per pixel of the foveal disc's rays (0: "
            "the frame's spp, as the cells)", lo=0, hi=1 << 16,
            doc="With ``formation = 'foveal'`` and ``foveal_space = 'buffer'``: the disc's "
            "pixels trace this many samples, the cells the frame's spp (a value of the frame's "
-           "spp or more traces the frame's; the ``vr`` preset: 2). The disc holds about two "
-           "fifths of a ``vr`` frame's rays and a third of its trace time at 8.4 pixels per "
-           "degree, where half its samples cost 0.02-0.03 video JOD for a tenth to a fifth "
-           "of the frame (``docs/results.md#the-disc-at-a-sample-rate-of-its-own``); its "
-           "history counts the samples each pixel traced"),
+           "spp or more traces the frame's; the ``vr`` preset: 2). The disc holds a large "
+           "part of a ``vr`` frame's rays, and fewer samples there cost little video JOD for "
+           "the time they save (``docs/results.md#the-disc-at-a-sample-rate-of-its-own``); "
+           "its history counts the samples each pixel traced"),
     Option("foveal_interleave", 1, "int", "n: the foveal buffer holds n x n times the cells "
            "and a frame traces one in each n x n block of them, in turn (1: every cell)",
            lo=1, hi=4,
@@ -584,7 +580,7 @@ _SCHEMA: tuple[Option, ...] = (
            "G-buffer, the launch and the history stay at the cells' centres. It helps a "
            "still view a little at 0.5 and costs video JOD with the head turning; across "
            "whole cells, the first frame after a camera move that ends a long still view "
-           "trails a fresh frame by more than 0.5 dB "
+           "trails a fresh frame "
            "(``docs/results.md#each-cells-ray-through-a-moving-point-of-the-cell``). A "
            "small bright emitter inside a cell lights the whole cell in the frames whose "
            "point falls on it, until the history averages it in"),
