@@ -208,11 +208,18 @@ def test_bad_scales_are_one_line(scale, key):
     assert f": {key} = " in msg and "> 0 and <= 1" in msg and "\n" not in msg
 
 
-def test_history_at_a_scale_is_refused_in_one_line():
-    with pytest.raises(ParameterError) as e:
-        _study({"spp": [1], "history": [False, True], "scale": [0.5, 1]})
-    assert ": uniform.scale = " in str(e.value) and "not supported" in str(e.value)
-    assert "\n" not in str(e.value)
+def test_a_scale_applies_to_the_rows_without_history():
+    """Every family in one study: raw and + OIDN at each scale, history rows at full
+    resolution; a scale with history rows alone, or history without scale 1, is one line."""
+    spec = _study({"spp": [1], "history": [False, True], "scale": [0.5, 1]})
+    rows = [(u["history"], u.get("scale", 1.0)) for u in spec.uniform]
+    assert sorted(set(rows)) == [(False, 0.5), (False, 1.0), (True, 1.0)]
+    for table in ({"spp": [1], "history": [True], "scale": [0.5, 1]},
+                  {"spp": [1], "history": [False, True], "scale": [0.5]}):
+        with pytest.raises(ParameterError) as e:
+            _study(table)
+        assert ": uniform.scale = " in str(e.value) and "full resolution" in str(e.value)
+        assert "\n" not in str(e.value)
 
 
 # ---------------------------------------------------------------------------------------------

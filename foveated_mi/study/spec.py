@@ -125,7 +125,8 @@ repeat and its flicker is 0.
                                 #   sequence with the row's seed (the noise stands still)
     scale = [1.0, 0.5]          # dynamic resolution: rows without history traced on a
                                 #   film of round(scale * size) pixels, upscaled
-                                #   bilinearly (method "uniform@0.5"; default [1.0])
+                                #   bilinearly (method "uniform@0.5"; default [1.0]);
+                                #   history rows at scale 1 (the list must hold it)
 
 Uniform rows without history render one frame with ``mi.render`` (+ Intel OIDN when
 denoised); a frame does not depend on its number, so they are recorded at frame 1 only.
@@ -986,9 +987,13 @@ def _uniform(ctx: TableContext, table: Any, foveated: list[dict]) -> list[dict]:
                                 "(uniform.history = [false, true] adds them)")
     presets, frames = _uniform_history_of(ctx, table, foveated)
     scales = _scales(ctx, table.get("scale", [1.0]))
-    if True in hists and scales != [1.0]:
-        raise ctx.error("uniform.scale", table["scale"], "1 with uniform.history = true "
-                        "(history rows at a render scale below 1 are not supported yet)")
+    if scales != [1.0] and False not in hists:
+        raise ctx.error("uniform.scale", table["scale"], "1 with uniform.history = [true] "
+                        "(a render scale below 1 applies to the rows without history; "
+                        "history rows run at full resolution)")
+    if True in hists and 1.0 not in scales:
+        raise ctx.error("uniform.scale", table["scale"], "a list holding 1 with "
+                        "uniform.history = true (history rows run at full resolution)")
     out = []
     for sc in scales:
         for s in dict.fromkeys(spps):
