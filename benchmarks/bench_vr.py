@@ -25,7 +25,9 @@ Then it writes, to ``--results`` (default ``docs/results/``):
   the time the family needs to reach the configuration's ``jod_video``, read along its
   best-so-far curve in log time (:func:`foveated_mi.study.equal_time.speedup`), over the
   configuration's time; ``>`` where the family never reaches it, ``<`` where its fastest
-  cell already does. Per seed, then mean ± standard deviation over seeds;
+  cell already does. Per seed, then mean ± standard deviation over seeds; ``†`` marks a
+  ratio read from a baseline cell whose timing passes spread by more than 15 % of their
+  median (:attr:`foveated_mi.study.equal_time.Speedup.noisy`);
 * ``vr.json``: the same, machine-readable;
 * ``vr_eccentricity.png``: per configuration, PSNR (left) and temporal instability (right)
   against eccentricity in degrees (5-degree rings, all frames of seed 0 under the headset);
@@ -39,8 +41,9 @@ outside the fovea and per ring of eccentricity (0-5, 5-10, 10-20, 20-35, 35+ deg
 frame's gaze ray; lower is steadier).
 
 Without the perceptual extra (``pip install -e '.[perceptual]'``) there is no JOD: the tables
-fall back to fovea PSNR (one condition) and say so. Times are medians of each sequence's
-frames after the first, on this machine, comparable within one run only.
+fall back to fovea PSNR (one condition) and say so. Times are medians over the study's timing
+passes (``[motion] passes``, each scene and seed's rows in turn) of each pass's median frame
+after the first, on this machine, comparable within one run only.
 
     python benchmarks/bench_vr.py [--size 1152 648] [--frames 54] [--seeds 0 1 2]
                                   [--scenes voxel-city staircase] [--out out/vr]
@@ -178,10 +181,17 @@ def speedups(rows: list[dict], column: str) -> list[dict]:
                             "envelope": fam == envelope, "column": column, "ratio": s.ratio,
                             "relation": s.relation, "per_seed": s.per_seed,
                             "seed_mean": s.mean, "seed_sd": s.sd, "text": s.text(),
+                            "noisy": s.noisy, "time_spread": s.time_spread,
                             "time_ms": cell["time_ms"], "quality": cell.get(column),
                             **({"set_by": s.family, "set_by_seed": s.per_seed_family}
                                if fam == envelope else {})})
     return out
+
+
+def noisy_note(sps: list[dict]) -> list[str]:
+    """The footnote of the mark a noisy ratio carries, where one does."""
+    from foveated_mi.study.equal_time import NOISY_NOTE
+    return [NOISY_NOTE + ".", ""] if any(s.get("noisy") for s in sps) else []
 
 
 def _ratio_text(s: dict) -> str:
@@ -536,7 +546,9 @@ def main(argv=None) -> int:
              f"file says, "
              f"{camera}, a gaze latency of {viewer.get('gaze_latency_ms', 0.0):g} ms and "
              f"noise of {viewer.get('gaze_noise_deg', 0.0):g}°), "
-             f"time the median frame after the first{' (both eyes)' if stereo else ''}, "
+             f"time the median over {data['motion'].get('passes', 3)} round-robin timing "
+             f"passes of each pass's median frame after the first"
+             f"{' (both eyes)' if stereo else ''}, "
              f"quality against a {data['reference']['spp']}-spp reference per frame; "
              f"mean ± standard deviation over seeds {data['seeds']}. Quality: "
              + ", ".join(f"`{c}` ({k})" for k, c in conditions.items())
@@ -554,7 +566,7 @@ def main(argv=None) -> int:
         lines += [f"## {cond.capitalize()} (`{column}`)", "",
                   "Speed-up at equal " + column + " against each uniform family (mean over "
                   "seeds; ± the spread of the per-seed ratios; per seed in brackets):", "",
-                  *speedup_table(sps), ""]
+                  *speedup_table(sps), "", *noisy_note(sps)]
     eyes = ["jod_video", "jod_video_left", "jod_video_right", "psnr_left", "psnr_right",
             "psnr_fovea_left", "psnr_fovea_right", "psnr_periphery_left",
             "psnr_periphery_right", "time_left_ms", "time_right_ms"] if stereo else []

@@ -16,7 +16,10 @@ best frame-1 fovea PSNR is compared. With several seeds every number is a mean o
 and every margin carries its spread (:mod:`.aggregate`): a margin within its spread is a
 tie. Speed-up at equal quality (:func:`speedup`) reads the time a uniform family (one
 method over its spp) needs to reach a foveated cell's quality (JOD when the perceptual extra
-is installed, fovea PSNR otherwise).
+is installed, fovea PSNR otherwise). A ratio read from a baseline cell whose timing passes
+spread by more than :data:`NOISY_SPREAD` of their median (``time_spread``, a sequence row's:
+:func:`foveated_mi.study.tasks.run_sequence_group`) is flagged noisy (:attr:`Speedup.noisy`,
+marked :data:`NOISY_MARK`).
 """
 from __future__ import annotations
 
@@ -32,7 +35,16 @@ from .aggregate import Margin, aggregate, margin
 __all__ = ["Verdict", "equal_time_verdicts", "verdict_lines", "verdict_sentence", "speedup",
            "speedup_over_seeds", "envelope_over_seeds", "Speedup", "TARGETS", "comparable",
            "trace_modes", "modes_warning", "family_of", "uniform_kind", "envelope_families",
-           "envelope_label", "family_order", "UNIFORM_KINDS"]
+           "envelope_label", "family_order", "UNIFORM_KINDS", "NOISY_SPREAD", "NOISY_MARK",
+           "NOISY_NOTE", "time_spread", "speedup_spread"]
+
+#: The largest ``time_spread`` (range of a row's timing passes over their median) of a
+#: baseline cell that a ratio is read from before the ratio is flagged noisy.
+NOISY_SPREAD = 0.15
+#: The mark of a noisy ratio in text and tables, and what it means.
+NOISY_MARK = "†"
+NOISY_NOTE = (f"{NOISY_MARK}: a baseline cell it is read from has timing passes whose range "
+              f"exceeds {NOISY_SPREAD:.0%} of their median")
 
 #: (name, frame, column, needed margin, against): "uniform" is the baseline without history
 #: (frame 1: it does not change with the frame), "history" the uniform frame with the same
@@ -249,6 +261,43 @@ def speedup(cell: dict, family: list[dict], column: str) -> tuple[float, str]:
     return ratio, rel
 
 
+def time_spread(cells: list[dict]) -> float:
+    """The largest ``time_spread`` of ``cells`` and of their rows (aggregated cells' seeds).
+
+    Parameters
+    ----------
+    cells : list of dict
+        Study rows or aggregated cells.
+
+    Returns
+    -------
+    spread : float
+        The largest finite ``time_spread``; NaN where none has one (a still view's rows).
+    """
+    xs = [x.get("time_spread") for c in cells for x in (c, *(c.get("rows") or ()))]
+    xs = [float(x) for x in xs if isinstance(x, (int, float)) and not isinstance(x, bool)
+          and math.isfinite(x)]
+    return max(xs) if xs else math.nan
+
+
+def speedup_spread(cell: dict, family: list[dict], column: str) -> float:
+    """The timing spread of the baseline cells :func:`speedup` reads its ratio from (the two
+    that bracket ``cell``'s quality, or the one it is read at): :func:`time_spread`; the ratio
+    is noisy above :data:`NOISY_SPREAD`.
+
+    Parameters
+    ----------
+    cell, family, column
+        As for :func:`speedup`.
+
+    Returns
+    -------
+    spread : float
+        NaN where no baseline cell has timing passes, or the ratio has none.
+    """
+    return time_spread(list(_speedup(cell, family, column)[2]))
+
+
 def _speedup(cell: dict, family: list[dict], column: str
              ) -> tuple[float, str, tuple[dict, ...]]:
     """:func:`speedup` with the family's cells that set the ratio: the two that bracket the
@@ -286,7 +335,9 @@ def _speedup(cell: dict, family: list[dict], column: str
 class Speedup:
     """A cell's speed-up at equal quality against a family (:func:`speedup`): on the cells'
     means (``ratio``, ``relation``) and seed by seed (``per_seed``: ``(ratio, relation)``
-    pairs; ``mean`` and ``sd`` over the seeds whose ratio is finite). Against an envelope
+    pairs; ``mean`` and ``sd`` over the seeds whose ratio is finite; ``time_spread`` the
+    largest timing spread of the baseline cells it is read from, on the means or in any seed:
+    :func:`time_spread`). Against an envelope
     (:func:`envelope_over_seeds`), ``family`` names what sets it at the cell's quality (a
     family's curve between two of its cells, e.g. ``uniform+history 2-4 spp``, or the joint
     front between two families' cells) and ``per_seed_family`` the same seed by seed."""
@@ -297,6 +348,13 @@ class Speedup:
     sd: float
     family: str = ""
     per_seed_family: list[str] = field(default_factory=list)
+    time_spread: float = math.nan
+
+    @property
+    def noisy(self) -> bool:
+        """A baseline cell the ratio is read from has timing passes that spread by more
+        than :data:`NOISY_SPREAD` of their median."""
+        return math.isfinite(self.time_spread) and self.time_spread > NOISY_SPREAD
 
     @property
     def tie(self) -> bool:
@@ -319,7 +377,7 @@ class Speedup:
             return "-"
         rel = {"=": "", ">": "≥", "<": "≤"}[self.relation]
         spread = f" ± {self.sd:.2f}" if self.exact and math.isfinite(self.sd) else ""
-        return f"{rel}×{self.ratio:.2f}{spread}"
+        return f"{rel}×{self.ratio:.2f}{spread}" + (NOISY_MARK if self.noisy else "")
 
 
 def speedup_over_seeds(cell: dict, family: list[dict], column: str) -> Speedup:
@@ -340,15 +398,18 @@ def speedup_over_seeds(cell: dict, family: list[dict], column: str) -> Speedup:
     speedup : Speedup
         The ratio on the means, the per-seed ratios, their mean and spread.
     """
-    ratio, rel = speedup(cell, family, column)
-    per_seed = []
+    ratio, rel, read = _speedup(cell, family, column)
+    per_seed, read = [], list(read)
     for r in cell.get("rows") or [cell]:
         rows = [x for c in family for x in (c.get("rows") or [c])
                 if x.get("seed") == r.get("seed")]
-        per_seed.append(speedup(r, rows, column))
+        x, rx, b = _speedup(r, rows, column)
+        per_seed.append((x, rx))
+        read += b
     xs = [x for x, _ in per_seed if math.isfinite(x)]
     return Speedup(ratio, rel, per_seed, sum(xs) / len(xs) if xs else math.nan,
-                   statistics.stdev(xs) if len(xs) > 1 else math.nan)
+                   statistics.stdev(xs) if len(xs) > 1 else math.nan,
+                   time_spread=time_spread(read))
 
 
 def _lowest(results: list[tuple[float, str]]) -> tuple[float, str, int | None]:
@@ -405,7 +466,8 @@ def envelope_over_seeds(cell: dict, families: list[list[dict]], column: str,
                 owner[id(x)] = name
     curves = [*families, [c for f in families for c in f]]
     ratio, rel, i = _lowest([_speedup(cell, f, column)[:2] for f in curves])
-    family = _setter(_speedup(cell, curves[i], column)[2], owner) if i is not None else ""
+    read = list(_speedup(cell, curves[i], column)[2]) if i is not None else []
+    family = _setter(tuple(read), owner) if i is not None else ""
     per_seed, per_family = [], []
     for r in cell.get("rows") or [cell]:
         seed_curves = [[x for c in f for x in (c.get("rows") or [c])
@@ -414,9 +476,11 @@ def envelope_over_seeds(cell: dict, families: list[list[dict]], column: str,
         x, rx, j = _lowest([g[:2] for g in got])
         per_seed.append((x, rx))
         per_family.append(_setter(got[j][2], owner) if j is not None else "")
+        read += got[j][2] if j is not None else ()
     xs = [x for x, _ in per_seed if math.isfinite(x)]
     return Speedup(ratio, rel, per_seed, sum(xs) / len(xs) if xs else math.nan,
-                   statistics.stdev(xs) if len(xs) > 1 else math.nan, family, per_family)
+                   statistics.stdev(xs) if len(xs) > 1 else math.nan, family, per_family,
+                   time_spread(read))
 
 
 def _setter(bracket: tuple[dict, ...], owner: dict[int, str]) -> str:
@@ -602,11 +666,14 @@ def verdict_lines(v: Verdict) -> list[str]:
         parts = []
         for method, fam in v.families.items():
             ratio, rel = speedup(c[16], fam, col)
+            noisy = speedup_spread(c[16], fam, col) > NOISY_SPREAD
             if math.isfinite(ratio):
                 parts.append(f"{'≥' if rel == '>' else ('≤' if rel == '<' else '')}"
-                             f"×{ratio:.2f} against {method}")
+                             f"×{ratio:.2f}{NOISY_MARK * noisy} against {method}")
         if parts:
-            lines.append(f"  - speed-up at equal {what} (frame 16): " + ", ".join(parts))
+            lines.append(f"  - speed-up at equal {what} (frame 16): " + ", ".join(parts)
+                         + (f" ({NOISY_NOTE})" if any(NOISY_MARK in p for p in parts)
+                            else ""))
     return lines
 
 

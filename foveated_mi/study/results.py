@@ -14,7 +14,8 @@
   of a study in motion, :data:`foveated_mi.metrics.FLICKER_KEYS`): the file is rewritten once
   by the same union rule, the new columns at the end, earlier rows empty there.
 * Floats are written with ``repr`` (shortest exact round trip): ``nan`` and ``inf`` as such,
-  ``None`` as an empty cell. :func:`read_rows` reads them back with numbers as floats.
+  ``None`` as an empty cell, a list (:data:`LIST_COLUMNS`) as its numbers separated by
+  spaces. :func:`read_rows` reads them back with numbers as floats.
 """
 from __future__ import annotations
 
@@ -28,7 +29,7 @@ from ..metrics import COMPARE_KEYS, FLICKER_KEYS
 
 __all__ = ["columns", "ResultsFile", "read_rows", "format_value", "parse_value",
            "NUMERIC_COLUMNS", "OPTIONAL_COLUMNS", "STEREO_KEYS",
-           "SEQUENCE_TIME_KEYS", "SCALE_KEYS"]
+           "SEQUENCE_TIME_KEYS", "SCALE_KEYS", "LIST_COLUMNS"]
 
 _HEAD = ("task_id", "scene", "method", "seed", "theta", "sigma_p", "reconstruction", "spp",
          "frame",
@@ -80,11 +81,17 @@ SCALE_KEYS = ("scale", "upscale_ms")
 NUMERIC_COLUMNS = frozenset(("seed", "scale", "theta", "sigma_p", "spp", "frame", "rays",
                              "ray_fraction", "samples", "time_ms", *COMPARE_KEYS, "jod", "jod_video",
                              "jod_monitor", "jod_video_monitor", *FLICKER_KEYS, *STEREO_KEYS,
-                             "history_hit_rate", "width", "height", "repeats"))
+                             "history_hit_rate", "width", "height", "repeats",
+                             "time_ms_min", "time_ms_max", "time_spread"))
 
 
-#: A sequence row's frame times after the first besides their median (``time_ms``).
-SEQUENCE_TIME_KEYS = ("time_mean_ms", "time_max_ms")
+#: A sequence row's frame times after the first besides their median (``time_ms``), and
+#: the spread of its timing passes (:func:`foveated_mi.study.tasks.run_sequence_group`).
+SEQUENCE_TIME_KEYS = ("time_mean_ms", "time_max_ms", "time_ms_min", "time_ms_max",
+                      "time_spread", "time_ms_passes")
+
+#: Columns whose cells hold a list of numbers (written space-separated).
+LIST_COLUMNS = frozenset(("time_ms_passes",))
 
 #: Columns only some rows carry (a sequence row's flicker and frame times, a stereo row's
 #: eyes, a dynamic-resolution row's scale): a file gains them from the first row that brings
@@ -104,10 +111,13 @@ def format_value(v: Any) -> str:
     -------
     text : str
         ``""`` for None, ``true`` / ``false`` for a bool, ``repr`` of a float (shortest exact
-        round trip, ``nan`` and ``inf`` as such), else ``str(v)``.
+        round trip, ``nan`` and ``inf`` as such), a list or tuple as its items' cells
+        separated by spaces, else ``str(v)``.
     """
     if v is None:
         return ""
+    if isinstance(v, (list, tuple)):
+        return " ".join(format_value(x) for x in v)
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, float):
@@ -127,9 +137,12 @@ def parse_value(column: str, text: str) -> Any:
 
     Returns
     -------
-    value : float or str
-        A float (``nan`` for an empty cell) in a numeric column, else ``text``.
+    value : float, list of float or str
+        A float (``nan`` for an empty cell) in a numeric column, a list of floats in a
+        :data:`LIST_COLUMNS` one, else ``text``.
     """
+    if column in LIST_COLUMNS:
+        return [float(x) for x in text.split()]
     if column in NUMERIC_COLUMNS or column.endswith("_ms"):
         if text == "":
             return math.nan

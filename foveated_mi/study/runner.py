@@ -229,8 +229,8 @@ def _prepare_study(study, out, executor, scheduler, size, metric, variant):
 
 
 def _notes(spec: StudySpec) -> tuple[list[str], bool, bool]:
-    """Notes on what is skipped (missing optional scenes, OIDN, FovVideoVDP), whether OIDN
-    and the JOD column are available."""
+    """Notes on what is skipped (missing optional scenes, OIDN, FovVideoVDP) and on how
+    sequences are timed, whether OIDN and the JOD column are available."""
     from .. import perceptual
     from ..denoise import INSTALL_HINT, oidn_available
     notes = []
@@ -247,6 +247,11 @@ def _notes(spec: StudySpec) -> tuple[list[str], bool, bool]:
     if spec.perceptual.get("jod") and not with_jod:
         notes.append("note: no jod column: FovVideoVDP (pyfvvdp, torch) is not installed "
                      f"({perceptual.INSTALL_HINT})")
+    if any(s.motion is not None and not s.missing for s in spec.scenes):
+        notes.append(f"note: the sequences of each scene and seed run in one process: each "
+                     f"rendered and scored once, then timed in {spec.passes} round-robin "
+                     f"pass{'es' * (spec.passes != 1)} (row after row); a row's time_ms is the "
+                     "median over the passes, time_spread their range over it")
     return notes, have_oidn, with_jod
 
 
@@ -371,7 +376,9 @@ def timing_order(tasks: list[dict]) -> list[dict]:
     seed and late in the next: a steady drift cancels from the mean over an even number of
     seeds, and shows in the spread over an odd one, where configuration by configuration
     (each one's seeds together) it would move the ratios between configurations unseen.
-    What a task computes does not depend on when it runs (:mod:`.tasks`)."""
+    What a task computes does not depend on when it runs (:mod:`.tasks`). The ``[motion]``
+    tasks of one scene and seed run as one job, in this order, timed round-robin
+    (:func:`.tasks.run_sequence_group`)."""
     order = []
     for i, rows in seed_groups(tasks):
         order += rows if i % 2 == 0 else rows[::-1]
@@ -390,23 +397,41 @@ def seed_groups(tasks: list[dict]) -> list[tuple[int, list[dict]]]:
 
 
 def _run_tasks(pending, refs, ex, results, progress, result, say) -> None:
+    """The pending tasks on the executor: a still view's one job each; the ``[motion]``
+    tasks of a scene and seed one job together (a tuple of their ids as its key), so that
+    their sequences are timed round-robin in one process. Each task's rows are written
+    under its own id, as they come: a study resumes with the tasks it lacks."""
     from . import tasks as T
 
-    jobs = []
+    ready = []
     for t in timing_order(pending):
         if t["label"] not in refs:
             result.failed.append(f"task {t['task_id']} ({_describe(t)}) not run: its "
                                  "reference failed")
             continue
-        jobs.append((t["task_id"], T.run_task, (t, refs[t["label"]])))
+        ready.append(t)
+    jobs = [(t["task_id"], T.run_task, (t, refs[t["label"]])) for t in ready
+            if t.get("motion") is None]
+    for _, group in seed_groups([t for t in ready if t.get("motion") is not None]):
+        jobs.append((tuple(t["task_id"] for t in group), T.run_sequence_group,
+                     (group, refs[group[0]["label"]])))
     by_id = {t["task_id"]: t for t in pending}
-    for tid, rows, err in _progress(ex, jobs, "task", "tasks", progress):
-        if err is not None:
-            result.failed.append(f"task {tid} ({_describe(by_id[tid])}) failed: "
-                                 f"{_one_line(err)}")
-            continue
-        for row in rows:
-            results.append(row)
-            result.new_rows += 1
-        result.tasks_run += 1
+    unit, desc = ("group", "scene and seed groups") if any(isinstance(k, tuple)
+                                                            for k, _, _ in jobs) \
+        else ("task", "tasks")
+    for key, out, err in _progress(ex, jobs, unit, desc, progress):
+        ids = key if isinstance(key, tuple) else (key,)
+        if err is not None:                  # the job failed: each of its tasks did
+            out = {"rows": {}, "errors": dict.fromkeys(ids, _one_line(err))}
+        elif not isinstance(key, tuple):     # a still view's task: its rows
+            out = {"rows": {key: out}, "errors": {}}
+        for tid in ids:
+            if tid in out["errors"]:
+                result.failed.append(f"task {tid} ({_describe(by_id[tid])}) failed: "
+                                     f"{out['errors'][tid]}")
+                continue
+            for row in out["rows"][tid]:
+                results.append(row)
+                result.new_rows += 1
+            result.tasks_run += 1
 

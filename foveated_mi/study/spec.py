@@ -69,6 +69,7 @@ Layout (every key optional except ``scenes``)::
     [motion]                    # rows are sequences instead of frames of a still view
     frames = 45                 #   frames per sequence (>= 2), shown at fps
     fps = 90
+    passes = 3                  #   timing passes (>= 1) after the scored one, round-robin
     [motion.camera]             #   the camera path (the sequence format of configs/*.toml;
     interpolation = "linear"    #   absent: each scene's own camera, still); each scene's own
     [[motion.camera.keyframes]] #   camera (or the study's camera) fills the keys a keyframe
@@ -81,8 +82,15 @@ Layout (every key optional except ``scenes``)::
     # count = 6                 #   (0) at these degrees from the lens centre, any direction
     # seed = 3                  #   (clamped inside the film): where a tracker beats the lens
 
-With ``[motion]`` a row is one sequence (``frame`` = its frame count): ``time_ms`` is the
-median frame time after the first frame, the quality columns the mean over its frames, each
+With ``[motion]`` a row is one sequence (``frame`` = its frame count). The rows of a scene
+and seed run together, in one process: each row's sequence is rendered and scored once (which
+also compiles every kernel its frames need), then ``passes`` times more, unscored, row after
+row in turn (A, B, ..., A, B, ...), so that a slow moment of the machine falls on every row
+alike. ``time_ms`` is the median over those passes of each pass's median frame time after the
+first frame; ``time_ms_min`` and ``time_ms_max`` are the passes' extremes, ``time_spread``
+their range over ``time_ms`` and ``time_ms_passes`` each pass's time
+(:func:`foveated_mi.study.tasks.run_sequence_group`). The quality columns are the mean over
+its frames, each
 scored against a reference of that frame's camera (rendered once per scene, cached) with the
 fovea at that frame's gaze, and ``jod_video`` (with the perceptual extra) FovVideoVDP's score
 of the whole sequence as a video at ``fps``, fixating the gaze path. Its flicker columns
@@ -244,6 +252,7 @@ class StudySpec:
     seeds: tuple[int, ...] = (0,)
     repeats: int = 3
     warmup: int = 2
+    passes: int = 3                   # [motion] timing passes (round-robin)
     metric: str = "psnr_fovea"
     metrics: dict = field(default_factory=lambda: dict(DEFAULT_METRICS))
     perceptual: dict = field(default_factory=lambda: dict(DEFAULT_PERCEPTUAL))
@@ -341,6 +350,7 @@ def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
     if "motion" in data:
         scenes = _motion(ctx, data["motion"], scenes, base_dir, _tracker(ctx, data.get("viewer")),
                          _gaze_view(ctx, data.get("viewer")))
+    passes = _passes(ctx, data.get("motion"))
     scenes, headset = _eyes(ctx, data.get("viewer"), scenes)
     _check_labels(ctx, scenes)
     metrics, perceptual = _metrics(ctx, data.get("metrics", {}))
@@ -353,8 +363,8 @@ def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
                         "[[foveated.configs]] or [uniform])")
     return StudySpec(name=name, source=source, scenes=tuple(scenes), foveated=tuple(foveated),
                      uniform=tuple(uniform), seed=seeds[0], seeds=seeds, repeats=repeats,
-                     warmup=warmup, metric=metric, metrics=metrics, perceptual=perceptual,
-                     description=description, headset=headset)
+                     warmup=warmup, passes=passes, metric=metric, metrics=metrics,
+                     perceptual=perceptual, description=description, headset=headset)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -590,6 +600,14 @@ def _motion(ctx: TableContext, table: Any, scenes: list, base_dir: str,
         out.append(replace(scene, motion={**motion, **_eye_gazes(ctx, gaze, frames, fps,
                                                                    tracker)}))
     return out
+
+
+def _passes(ctx: TableContext, table: Any) -> int:
+    """``[motion] passes``: the timing passes of each sequence row after its scored one (a
+    table already checked by :func:`_motion`; 3 without it)."""
+    if not isinstance(table, dict):
+        return 3
+    return ctx.integer("motion.passes", table.get("passes", 3), 1, 1000)
 
 
 def _off_centre(ctx: TableContext, table: Any, base_dir: str):

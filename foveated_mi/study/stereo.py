@@ -15,8 +15,9 @@ true one for the metrics.
   noise is independent, as two cameras' would be; where the second eye reuses the first's
   samples (``[viewer] reuse``, the default), it is the same. A per-eye metric cannot see
   binocular rivalry.
-- The row's time is both eyes' frame time together (the median over frames after the first);
-  its rays are the eyes' mean fraction of one eye's film.
+- The row's time is both eyes' frame time together (the median over frames after the first,
+  then over the timing passes that follow the scored one: :func:`stereo_sequence_pass`); its
+  rays are the eyes' mean fraction of one eye's film.
 - Its quality columns are the eyes' mean; ``psnr_left`` / ``psnr_right`` (and their fovea
   and periphery, ``psnr_fovea_left``, ...) and, with the perceptual extra,
   ``jod_video_left`` / ``jod_video_right`` / ``jod_video_min`` are each eye's, as are
@@ -32,9 +33,10 @@ import numpy as np
 from ..stereo import EYES, EyeSensors, StereoRig, frustum_of
 from .results import STEREO_KEYS
 from .scoring import (UNIFORM_MODE, _camera_path, _flicker, _median, _mode, _quality,
-                      _sequence_summary, _viewing, frame_seed, rendered_gazes)
+                      _sequence_summary, _spread_ms, _viewing, frame_seed, rendered_gazes)
 
-__all__ = ["STEREO_KEYS", "stereo_rig", "stereo_reference", "stereo_sequence_row"]
+__all__ = ["STEREO_KEYS", "stereo_rig", "stereo_reference", "stereo_sequence_row",
+           "stereo_sequence_pass"]
 
 
 def stereo_rig(scene, stereo: dict) -> StereoRig:
@@ -188,13 +190,8 @@ def _frames(scene, task: dict, refs: np.ndarray, render, eyes) -> tuple:
     from ..render import to_display
     motion, m = task["motion"], task["metrics"]
     gazes, cameras = motion["gazes"], motion["cameras"]
-    rendered = rendered_gazes(scene, task)
-    # A binocular gaze path: each eye's own gazes, true and (late) rendered.
     true_eyes = motion.get("eye_gazes")
-    rendered_eyes = motion.get("rendered_eye_gazes", true_eyes)
-    if not task.get("eye_tracking", True):      # fixed foveation: each eye at its lens centre
-        from ..paths import lens_centre
-        rendered_eyes = [[lens_centre(eyes[eye]) for eye in EYES]] * len(gazes)
+    rendered, rendered_eyes = _rendered(scene, task, eyes)
     times, rays = [], []
     frames = {eye: {"shown": [], "quality": [], "eccs": [], "gazes": []} for eye in EYES}
     with _camera_path(scene) if cameras else contextlib.nullcontext() as move:
@@ -216,6 +213,57 @@ def _frames(scene, task: dict, refs: np.ndarray, render, eyes) -> tuple:
                 f["quality"].append(_quality(ref_d, images[e], dict(eye_task, jod=False),
                                              viewing))
     return times, rays, frames
+
+
+def _rendered(scene, task: dict, eyes) -> tuple[list, list | None]:
+    """The gazes the frames are rendered with: the head's (:func:`rendered_gazes`), and each
+    eye's own of a binocular gaze path (late as the tracker is), or each eye's lens centre
+    under fixed foveation (None: both eyes fixate where the head's gaze meets the scene)."""
+    motion = task["motion"]
+    rendered = rendered_gazes(scene, task)
+    rendered_eyes = motion.get("rendered_eye_gazes", motion.get("eye_gazes"))
+    if not task.get("eye_tracking", True):      # fixed foveation: each eye at its lens centre
+        from ..paths import lens_centre
+        rendered_eyes = [[lens_centre(eyes[eye]) for eye in EYES]] * len(motion["gazes"])
+    return rendered, rendered_eyes
+
+
+def stereo_sequence_pass(scene, task: dict) -> dict:
+    """One timing pass of a stereo sequence: both eyes of every frame rendered as
+    :func:`stereo_sequence_row` renders them, unscored.
+
+    Parameters
+    ----------
+    scene : mi.Scene
+        The task's scene.
+    task : dict
+        A sequence task whose ``motion`` has ``stereo``.
+
+    Returns
+    -------
+    times : dict
+        The pass's ``time_ms`` (both eyes, the median frame after the first),
+        ``time_mean_ms``, ``time_max_ms``, ``time_left_ms``, ``time_right_ms`` and
+        ``trace_mode``.
+    """
+    rig = stereo_rig(scene, task["motion"]["stereo"])
+    render, eyes, _ = _renderer(scene, task, rig)
+    rendered, rendered_eyes = _rendered(scene, task, eyes)
+    cameras = task["motion"]["cameras"]
+    times = []
+    with _camera_path(scene) if cameras else contextlib.nullcontext() as move:
+        for k in move(cameras) if cameras else range(len(rendered)):
+            eyes.follow()
+            _, time_ms, _, each = render(rendered[k],
+                                         rendered_eyes[k] if rendered_eyes else None)
+            times.append((time_ms, each))
+    both = [t for t, _ in times]
+    out = {"time_ms": _median(both[1:]), **_spread_ms(both[1:])}
+    for e, eye in enumerate(EYES):
+        out[f"time_{eye}_ms"] = _median([each[e] for _, each in times[1:]])
+    modes = getattr(render, "modes", None)
+    out["trace_mode"] = _mode(modes[2:] or modes) if modes else UNIFORM_MODE
+    return out
 
 
 def _stereo_jod(scene, task: dict, frames: dict, eyes) -> dict:

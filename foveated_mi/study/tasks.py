@@ -19,6 +19,11 @@ the median over the repeats of that stage at that frame (so stage medians need n
 the median total). Quality comes from the first repeat (every repeat renders the same images).
 A uniform task is timed the same way around :func:`foveated_mi.baselines.render_uniform`; a
 uniform task with history is a foveated task (the integrator at ``sigma_p = 1``).
+A ``[motion]`` task's row is one sequence, and the tasks of one scene and seed run together
+(:func:`run_sequence_group`): each sequence rendered and scored once, which also compiles every
+kernel its frames need (a saccade, a camera move, the second eye), then ``passes`` unscored
+timing passes, row after row in turn. Its time is the median over the passes of each pass's
+median frame time after the first; the scored pass's times are not used.
 Column ``trace_mode`` says how the timed frames ran (``replayed``, ``traced``, ``partly
 replayed``; ``mixed`` when they differ; :func:`foveated_mi.frame.outputs.trace_mode`): a
 frame timed stage by stage is traced, and so is a uniform render, so a study's rows are
@@ -42,10 +47,11 @@ import numpy as np
 
 from ..paths import lens_centre
 from .scoring import (UNIFORM_MODE, _camera_path, _flicker, _median, _mode, _quality,
-                      _sequence_summary, _viewing, frame_seed, rendered_gazes)
+                      _sequence_summary, _spread_ms, _viewing, frame_seed, rendered_gazes)
 
 __all__ = ["expand_tasks", "reference_task", "reference_key", "run_task", "run_reference_task",
-           "run_sequence_task", "task_frame", "get_scene", "scene_cache_info",
+           "run_sequence_task", "run_sequence_group", "task_frame", "get_scene",
+           "scene_cache_info",
            "clear_scene_cache", "task_id"]
 
 #: Test hook (not API): when set to a path that does not exist, the first task a process runs
@@ -175,6 +181,7 @@ def expand_tasks(spec, variant: str, *, denoise_available: bool = True) -> list[
         base = {"scene": scene.load_spec(), "label": scene.label, "gaze": list(scene.gaze),
                 "motion": scene.motion,
                 "variant": variant, "repeats": spec.repeats, "warmup": spec.warmup,
+                "passes": getattr(spec, "passes", 3),
                 "metrics": dict(spec.metrics), "perceptual": _perceptual(spec)}
         ident = scene.identity()
         # A uniform row renders each eye alone, however the foveated rows share them.
@@ -498,6 +505,106 @@ def _sequence_frames(scene, task: dict, refs: np.ndarray, render, rendered: list
     return times, rays, shown, quality, eccs
 
 
+def run_sequence_group(tasks: list[dict], reference: np.ndarray) -> dict:
+    """The ``[motion]`` tasks of one scene and seed, run together in this process.
+
+    Each task's sequence is rendered and scored once, in the order given (this pass also
+    compiles every kernel the sequence needs: its first frame, a saccade, a camera move, the
+    second eye; its times are not used). Then ``passes`` timing passes render every
+    sequence again in turn, unscored (the same seed, so the same frames): A, B, ..., then
+    A, B, ... again, so that a slow moment of the machine falls on every row alike rather
+    than on one.
+
+    Parameters
+    ----------
+    tasks : list of dict
+        Tasks of :func:`expand_tasks` of one scene and seed, each with ``motion`` (and
+        ``passes``, default 3).
+    reference : numpy.ndarray
+        The scene's linear reference (as for :func:`run_task`).
+
+    Returns
+    -------
+    result : dict
+        ``{"rows": {task_id: [row]}, "errors": {task_id: one line}}``: a task that fails
+        is left out of the timing passes and its error said in one line; the others go on.
+        A row's ``time_ms`` is the median over the passes of each pass's median frame time
+        after the first (``time_mean_ms``, ``time_max_ms`` and each eye's time likewise);
+        ``time_ms_min``, ``time_ms_max`` the passes' extremes, ``time_spread`` their range
+        over ``time_ms``, ``time_ms_passes`` each pass's, ``repeats`` the passes.
+    """
+    from .runner import _one_line
+    errors: dict[str, str] = {}
+
+    def fail(task, e):
+        errors[task["task_id"]] = _one_line(e)
+    rows = _round_robin(tasks, reference, fail)
+    return {"rows": {tid: [row] for tid, row in rows.items()}, "errors": errors}
+
+
+def _round_robin(tasks: list[dict], reference: np.ndarray, fail) -> dict[str, dict]:
+    """Each task's row (:func:`run_sequence_group`), by task id; ``fail(task, error)`` for a
+    task that raises (it is dropped)."""
+    from ..validate import check_int
+    passes = check_int("motion.passes", tasks[0].get("passes", 3) if tasks else 1, 1)
+    scored = {}
+    for t in tasks:                      # scored: every kernel of the whole path compiled
+        try:
+            _prepare_worker(t)
+            scene = get_scene(t["scene"], t["variant"])
+            scored[t["task_id"]] = (t, scene, _sequence_row(scene, t, reference))
+        except Exception as e:           # the task fails, the group goes on
+            fail(t, e)
+    timed: dict[str, list[dict]] = {tid: [] for tid in scored}
+    for _ in range(passes):              # timed: row after row, pass after pass
+        for tid, (t, scene, _) in list(scored.items()):
+            try:
+                timed[tid].append(_sequence_pass(scene, t))
+            except Exception as e:
+                fail(t, e)
+                del scored[tid]
+    return {tid: _timed_row(row, timed[tid]) for tid, (_, _, row) in scored.items()}
+
+
+def _sequence_pass(scene, task: dict) -> dict:
+    """One timing pass of a sequence: its frames rendered as its row renders them (camera
+    path, rendered gazes), unscored; the pass's ``time_ms`` (median frame time after the
+    first), ``time_mean_ms``, ``time_max_ms``, ``trace_mode`` (and ``upscale_ms`` at a render
+    scale, each eye's time for two eyes)."""
+    if task["motion"].get("stereo"):
+        from .stereo import stereo_sequence_pass
+        return stereo_sequence_pass(scene, task)
+    rendered = rendered_gazes(scene, task)
+    render, _ = _sequence_renderer(scene, task, rendered[0])
+    cameras = task["motion"]["cameras"]
+    times = []
+    with _camera_path(scene) if cameras else contextlib.nullcontext() as move:
+        for k in move(cameras) if cameras else range(len(rendered)):
+            times.append(render(rendered[k])[1])
+    out = {"time_ms": _median(times[1:]), **_spread_ms(times[1:])}
+    modes = getattr(render, "modes", None)
+    out["trace_mode"] = _mode(modes[1:] or modes) if modes else UNIFORM_MODE
+    if task["kind"] == "uniform" and task["options"].get("scale", 1.0) != 1.0:
+        out["upscale_ms"] = _median(render.upscale[1:] or render.upscale)
+    return out
+
+
+def _timed_row(row: dict, passes: list[dict]) -> dict:
+    """A scored sequence row with its times from the timing passes (:func:`_sequence_pass`):
+    each the median over the passes, ``trace_mode`` their common one, and the spread of the
+    passes' times."""
+    out = dict(row, repeats=len(passes))
+    for key in passes[0]:
+        out[key] = _mode(p[key] for p in passes) if key == "trace_mode" else \
+            _median([p.get(key) for p in passes])
+    xs = [float(p["time_ms"]) for p in passes if p.get("time_ms") is not None]
+    if xs:
+        mid = out["time_ms"]
+        out.update(time_ms_min=min(xs), time_ms_max=max(xs), time_ms_passes=xs,
+                   time_spread=(max(xs) - min(xs)) / mid if mid > 0 else float("nan"))
+    return out
+
+
 def _foveated_frames(scene, task: dict, record: list[int]):
     import drjit as dr
     import mitsuba as mi
@@ -575,9 +682,11 @@ def run_task(task: dict, reference: np.ndarray) -> list[dict]:
     _prepare_worker(task)
     from ..render import to_display
     from .results import stage_columns
+    if task.get("motion") is not None:         # a group of one, its errors raised
+        def fail(_task, e):
+            raise e
+        return [_round_robin([task], reference, fail)[task["task_id"]]]
     scene = get_scene(task["scene"], task["variant"])
-    if task.get("motion") is not None:
-        return [_sequence_row(scene, task, reference)]
     ref_d = to_display(reference, task["metrics"]["exposure"])
     w, h = task["scene"]["width"], task["scene"]["height"]
     record = sorted(task.get("frames_todo") or task["frames"])
