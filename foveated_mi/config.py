@@ -31,7 +31,7 @@ Layout (every key optional except ``scene``)::
                                   # binocular_csv (the same keys; a header names t, left_x,
                                   # left_y, right_x, right_y: each eye's gaze on its own film)
     [poses]                       # instead of [camera] and [gaze]: a pose per frame, as the
-    path = "walk.csv"             # live view records them (foveated_mi.live.poses); frames
+    path = "walk.csv"             # live view records them (foveated_mi.poses); frames
                                   # defaults to its row count (at most that)
     [stereo]                      # both eyes of the camera (the head), each with its own
     headset = "quest3"            # history: a headset's rig (foveated-mi headsets), else the
@@ -69,8 +69,8 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
-__all__ = ["SequenceConfig", "OutputConfig", "load_config", "parse_config", "VIDEO_FORMATS",
-           "FOVEATED_KEYS"]
+__all__ = ["SequenceConfig", "OutputConfig", "load_config", "parse_config", "camera_path",
+           "gaze_path", "VIDEO_FORMATS", "FOVEATED_KEYS"]
 
 VIDEO_FORMATS = ("mp4", "gif", "none")
 GAZE_TYPES = ("fixed", "keyframes", "saccades", "csv", "binocular_csv")
@@ -232,8 +232,8 @@ def parse_config(data: dict, *, base_dir: str = ".", source: str = "<config>",
             raise ctx.rename(e) from None
 
     foveated = _foveated(ctx, data.get("foveated", {}))
-    camera = _camera(ctx, data.get("camera"), scene)
-    gaze = _gaze(ctx, data.get("gaze", {"type": "fixed"}), base_dir)
+    camera = camera_path(ctx, data.get("camera"), scene)
+    gaze = gaze_path(ctx, data.get("gaze", {"type": "fixed"}), base_dir)
     output = _output(ctx, data.get("output", {}), default_output)
     return SequenceConfig(scene=scene, frames=frames, fps=fps, size=size, spp=spp, seed=seed,
                           scene_params=scene_params, integrator=integrator, foveated=foveated,
@@ -291,10 +291,28 @@ def _foveated(ctx: TableContext, table: Any) -> dict:
     return table
 
 
-def _camera(ctx: TableContext, table: Any, scene: str,
-            defaults: dict | None = None) -> CameraPath | None:
-    """The ``[camera]`` table as a path; the keys a keyframe leaves out come from
-    ``defaults`` (a camera dict), else from the scene's own camera."""
+def camera_path(ctx: TableContext, table: Any, scene: str,
+                defaults: dict | None = None) -> CameraPath | None:
+    """A ``[camera]`` table (of a sequence config or a study's ``[motion]``) as a path.
+
+    Parameters
+    ----------
+    ctx : TableContext
+        Where the table was read: its errors name the file and the key.
+    table : dict or None
+        The table: ``interpolation``, ``cut_threshold`` and either ``keyframes`` or one
+        pose's keys (``origin``, ``target``, ``up``, ``fov``, ``yaw``).
+    scene : str
+        A built-in scene's name or an XML path, whose camera fills the keys a keyframe
+        leaves out when ``defaults`` is None.
+    defaults : dict, optional
+        A camera dict filling those keys instead.
+
+    Returns
+    -------
+    path : CameraPath or None
+        None when ``table`` is None (the scene's own camera, static).
+    """
     if table is None:
         return None
     from .scenes import scene_camera
@@ -323,7 +341,7 @@ def _camera(ctx: TableContext, table: Any, scene: str,
 
 
 def _poses(ctx: TableContext, data: dict, base_dir: str):
-    """The ``[poses]`` table's pose file (:class:`foveated_mi.live.poses.PoseTrack`), or None;
+    """The ``[poses]`` table's pose file (:class:`foveated_mi.poses.PoseTrack`), or None;
     it replaces ``[camera]`` and ``[gaze]``."""
     if "poses" not in data:
         return None
@@ -338,11 +356,17 @@ def _poses(ctx: TableContext, data: dict, base_dir: str):
     if not os.path.isfile(full):
         raise ctx.error("poses.path", path, "an existing CSV file of per-frame poses "
                         "(relative to the config file)")
-    from .live.poses import PoseTrack
+    from .poses import PoseTrack
     return PoseTrack.read(full, name=path)   # errors name the file and line
 
 
-def _gaze(ctx: TableContext, table: Any, base_dir: str) -> GazePath:
+def gaze_path(ctx: TableContext, table: Any, base_dir: str) -> GazePath:
+    """A ``[gaze]`` table (of a sequence config or a study's ``[motion]``) as a gaze path.
+
+    ``table["type"]`` is one of :data:`GAZE_TYPES` (default ``fixed``), with that type's
+    keys (the module docs); a CSV's ``path`` is relative to ``base_dir``. Errors name
+    ``ctx``'s file and the key, or the CSV's file and line.
+    """
     table = dict(ctx.table("gaze", table))
     kind = ctx.string("gaze.type", table.pop("type", "fixed"), GAZE_TYPES)
     keys = {"fixed": ("x", "y"), "keyframes": ("keyframes", "interpolation"),

@@ -1,7 +1,8 @@
-"""The shape of the code that later work keeps: no import cycle, no function over 60 lines, an
-integrator that only orchestrates (under 300 lines), no pass in ``frame/`` that takes the
-options, and a short README: at most 300 lines, 20,000 bytes and 300 characters a line, each
-table cell within three lines of text (the figures live in docs/results.md).
+"""The shape of the code that later work keeps: no import cycle, no import of the live view
+from below it, no function over 60 lines, an integrator that only orchestrates (under 300
+lines), no pass in ``frame/`` that takes the options, and a short README: at most 300 lines,
+20,000 bytes and 300 characters a line, each table cell within three lines of text (the
+figures live in docs/results.md).
 
 Each rule is a plain function of source text, checked first on a small case that breaks it,
 so a rule that stopped seeing anything would fail here."""
@@ -120,6 +121,48 @@ def test_no_pass_takes_the_options():
     found = {str(p.relative_to(ROOT)): option_takers(p.read_text()) for p in files}
     assert {k: v for k, v in found.items() if v} == {}
 
+
+
+def imports_anywhere(name: str, text: str, is_pkg: bool) -> set[str]:
+    """Every module that module ``name`` imports, at any depth (a function's imports
+    included), as absolute names; ``from a import b`` gives both ``a`` and ``a.b``."""
+    pkg = name if is_pkg else name.rpartition(".")[0]
+    found = set()
+    for node in ast.walk(ast.parse(text)):
+        if isinstance(node, ast.ImportFrom):
+            base = pkg.split(".")[:len(pkg.split(".")) - max(node.level - 1, 0)]
+            mod = (".".join(base + ([node.module] if node.module else []))
+                   if node.level else node.module or "")
+            found |= {mod} | {f"{mod}.{a.name}" for a in node.names}
+        elif isinstance(node, ast.Import):
+            found |= {a.name for a in node.names}
+    return found
+
+
+def reaching_into_the_live_view(sources: dict[str, tuple[str, bool]]) -> list[str]:
+    """Modules outside ``foveated_mi.live`` and the command line that import the live view."""
+    def live(m):
+        return m == "foveated_mi.live" or m.startswith("foveated_mi.live.")
+    return sorted(n for n, (text, is_pkg) in sources.items()
+                  if not live(n) and n != "foveated_mi.cli"
+                  and any(live(m) for m in imports_anywhere(n, text, is_pkg)))
+
+
+def test_only_the_live_view_and_the_command_line_import_the_live_view():
+    """The live view is the top floor: the sequence config, the studies and the rest never
+    reach up into it (what both need, such as the pose files, lives below)."""
+    small = {"foveated_mi": ("from . import live\n", True),
+             "foveated_mi.config": ("def f():\n    from .live.poses import P\n", False),
+             "foveated_mi.study.spec": ("from ..live import poses\n", False),
+             "foveated_mi.paths": ("import foveated_mi.live.renderer\n", False),
+             "foveated_mi.cli": ("from .live.server import LiveView\n", False),
+             "foveated_mi.live.server": ("from . import protocol\n", False),
+             "foveated_mi.sequence": ("from .poses import PoseTrack\n", False)}
+    assert reaching_into_the_live_view(small) == [
+        "foveated_mi", "foveated_mi.config", "foveated_mi.paths", "foveated_mi.study.spec"]
+    sources = {name: (p.read_text(), p.name == "__init__.py")
+               for name, p in _modules(PACKAGE).items()}
+    assert reaching_into_the_live_view(sources) == []
 
 #: The README's limits: lines, bytes (UTF-8), characters a line, and the visible characters of
 #: a table cell (three lines of a column about 65 characters wide).

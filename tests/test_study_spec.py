@@ -545,11 +545,11 @@ def test_a_latency_of_one_frame_renders_the_previous_frame_s_gaze(tmp_path):
 
 
 def test_a_latency_between_frames_reads_the_path_that_much_earlier(tmp_path):
-    from foveated_mi.config import _gaze
+    from foveated_mi.config import gaze_path
     from foveated_mi.study.spec import TableContext
     _, m = _motion(tmp_path, "gaze_latency_ms = 50.0")
-    path = _gaze(TableContext("t"), {"type": "saccades", "targets": [[0.3, 0.4], [0.7, 0.6]],
-                                     "dwell": 0.03, "duration": 0.02}, ".")
+    path = gaze_path(TableContext("t"), {"type": "saccades", "targets": [[0.3, 0.4], [0.7, 0.6]],
+                                         "dwell": 0.03, "duration": 0.02}, ".")
     for k, g in enumerate(m["rendered_gazes"]):
         assert g == [float(v) for v in path.at(max(k / 90 - 0.05, 0.0))]
 

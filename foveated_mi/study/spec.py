@@ -567,9 +567,9 @@ def _motion(ctx: TableContext, table: Any, scenes: list, base_dir: str,
     is there without them, so the task ids of studies written before them stay the same.
     Saccades off the lens centre (:func:`_off_centre`) are drawn on each scene's ``view``
     (:func:`_gaze_view`)."""
-    from ..config import _camera, _gaze
+    from ..config import camera_path, gaze_path
     table = dict(ctx.table("motion", table))
-    ctx.known("motion", table, ("frames", "fps", "camera", "gaze"))
+    ctx.known("motion", table, ("frames", "fps", "camera", "gaze", "passes"))
     frames = ctx.integer("motion.frames", table.get("frames", 16), 2, 100000)
     fps = table.get("fps", 90.0)
     from ..validate import check_range
@@ -578,7 +578,7 @@ def _motion(ctx: TableContext, table: Any, scenes: list, base_dir: str,
     except ParameterError as e:
         raise ctx.rename(e) from None
     off_centre = _off_centre(ctx, table.get("gaze"), base_dir)
-    gaze = _with_prefix(ctx, "motion", lambda c: _gaze(c, table["gaze"], base_dir)) \
+    gaze = _with_prefix(ctx, "motion", lambda c: gaze_path(c, table["gaze"], base_dir)) \
         if "gaze" in table and off_centre is None else None
     out = []
     for scene in scenes:
@@ -587,8 +587,8 @@ def _motion(ctx: TableContext, table: Any, scenes: list, base_dir: str,
         camera = None
         if "camera" in table and not scene.missing:
             # each scene's own camera fills the keys a keyframe leaves out
-            path = _with_prefix(ctx, "motion", lambda c: _camera(c, table["camera"], scene.source,
-                                                                  scene.camera))
+            path = _with_prefix(ctx, "motion", lambda c: camera_path(
+                c, table["camera"], scene.source, scene.camera))
             camera = [path.at(k / fps) for k in range(frames)]
         gazes = [list(map(float, gaze.at(k / fps))) for k in range(frames)] if gaze else \
             [list(scene.gaze)] * frames
@@ -615,7 +615,7 @@ def _off_centre(ctx: TableContext, table: Any, base_dir: str):
     on a saccade path: ``path(camera, size)``, the saccades between targets drawn off the
     lens centre of that camera and film (:func:`foveated_mi.paths.off_centre_targets`); None
     without it."""
-    from ..config import _gaze
+    from ..config import gaze_path
     from ..paths import off_centre_targets
     if not isinstance(table, dict) or "off_centre_deg" not in table:
         return None
@@ -630,7 +630,7 @@ def _off_centre(ctx: TableContext, table: Any, base_dir: str):
 
     def path(camera: dict, size) -> Any:
         targets = off_centre_targets(*drawn, camera, size, name="motion.gaze")
-        return _with_prefix(ctx, "motion", lambda c: _gaze(
+        return _with_prefix(ctx, "motion", lambda c: gaze_path(
             c, {**table, "targets": [list(t) for t in targets]}, base_dir))
     try:        # the values alone, checked once (every scene may be missing)
         path({"fov": 90.0}, (1, 1))
