@@ -1,7 +1,7 @@
 """Pool the per-seed speed-ups of several runs of one VR study.
 
     python benchmarks/pool_vr.py docs/results/vr_10ppd_samples \
-        docs/results/vr_10ppd_samples_seeds345 [--family "every uniform family"] \
+        docs/results/vr_10ppd_samples_seeds345 [--family "uniform+history"] \
         [--condition headset] [--threshold 2.5]
 
 Each folder holds the ``vr.json`` that ``bench_vr.py --results`` wrote. Within a run, each
@@ -24,7 +24,9 @@ import os
 import statistics
 import sys
 
-ENVELOPE = "every uniform family"
+#: What ``--family`` names by default: each run's envelope of the families it ran (older runs
+#: wrote it as "every uniform family", without the ``envelope`` flag).
+ENVELOPE = "the envelope"
 SIGN = {"=": "", ">": "≥", "<": "≤"}
 
 
@@ -56,6 +58,12 @@ def check_same_study(runs: list[dict], folders: list[str]) -> None:
                                  f"{of(runs[0])}: expected runs of one study, timed alike")
 
 
+def _of_family(s: dict, family: str) -> bool:
+    if family == ENVELOPE:
+        return bool(s.get("envelope")) or s["family"] == "every uniform family"
+    return s["family"] == family
+
+
 def pooled(runs: list[dict], condition: str, family: str) -> list[dict]:
     """Per scene and configuration held by every run: each run's per-seed ``(ratio,
     relation)`` pairs, and their pool (``mean``, ``sd``, ``lowest``, ``relation``)."""
@@ -66,7 +74,7 @@ def pooled(runs: list[dict], condition: str, family: str) -> list[dict]:
             raise ValueError(f"condition {condition!r} is not in every run: expected one of "
                              + ", ".join(sorted(run["conditions"])))
         keyed.append({(s["scene"], s["configuration"]): s for s in table["speedups"]
-                      if s["family"] == family})
+                      if _of_family(s, family)})
     out = []
     for key in (k for k in keyed[0] if all(k in kd for kd in keyed[1:])):
         per_run = [[(float(x), r) for x, r in kd[key]["per_seed"]] for kd in keyed]
@@ -121,7 +129,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("results", nargs="+", help="bench_vr.py --results folders, one per run")
     ap.add_argument("--family", default=ENVELOPE,
-                    help=f"the uniform family (default: {ENVELOPE!r})")
+                    help=f"the uniform family (default: {ENVELOPE!r}, of the families each run "
+                    "ran)")
     ap.add_argument("--condition", default="headset", help="viewing condition (headset)")
     ap.add_argument("--threshold", type=float, default=None,
                     help="also say whether the pooled ratio is over this, by its spread")

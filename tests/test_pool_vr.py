@@ -87,4 +87,22 @@ def test_configurations_not_in_every_run_are_left_out(bench, tmp_path, capsys):
     b = _run(tmp_path / "b", [[2.9, "="]])
     assert bench.main([a, b]) == 2
     assert capsys.readouterr().out.strip() == (
-        "pool_vr: no configuration against 'every uniform family' is in every run")
+        "pool_vr: no configuration against 'the envelope' is in every run")
+
+
+def test_by_default_each_run_s_envelope_is_pooled_whatever_its_families(bench, tmp_path):
+    """A run writes its envelope under the families it ran ("envelope of ..."), flagged; an
+    older run wrote "every uniform family". The default pools either, never a family's own."""
+    a = _run(tmp_path / "a", [[2.7, "="], [2.5, "="]])
+    b = tmp_path / "b"
+    b.mkdir()
+    (b / "vr.json").write_text(json.dumps({
+        "size": [1152, 648], "frames": 36, "seeds": [3, 4], "date": "2026-12-06",
+        "conditions": {"headset": {"speedups": [
+            {"scene": "voxel-city", "configuration": "vr 2 spp", "envelope": True,
+             "family": "envelope of uniform+history", "per_seed": [[2.9, "="], [3.1, "="]]},
+            {"scene": "voxel-city", "configuration": "vr 2 spp", "family": "uniform+history",
+             "per_seed": [[9.0, "="], [9.0, "="]]}]}}}))
+    pool, = bench.pooled([bench.load_run(a), bench.load_run(str(b))], "headset", bench.ENVELOPE)
+    assert pool["seeds"] == 4 and pool["lowest"] == 2.5
+    assert math.isclose(pool["mean"], statistics.fmean([2.7, 2.5, 2.9, 3.1]), rel_tol=1e-12)
