@@ -702,6 +702,16 @@ _SCHEMA: tuple[Option, ...] = (
            "of its history either way. See :mod:`foveated_mi.frame.reproject`"),
     Option("clamp", 1e4, "float", "largest accepted sample component; larger samples are "
            "scaled down", lo=0.0, hi=3e38, lo_open=True),
+    Option("frame_ms", 0.0, "float", "hold this frame time in milliseconds: the foveal "
+           "formation chooses each frame's ray budget and spp (0: off)", lo=0.0, hi=1e6,
+           doc="Hold this frame time (ms; 0, the default: off): before each frame of the "
+           "foveal formation the integrator chooses its ``ray_budget``, ``spp``, "
+           "``foveal_disc_spp`` and ``foveal_still_spp`` from a ladder of measured "
+           "configurations, by a cost model fitted to its own last frames, and times the frame "
+           "(forcing it); ``stats['frame_budget']`` gives the budget, the prediction, the "
+           "measured time and the choice (:mod:`foveated_mi.budget`)"),
+    Option("fps", 0.0, "float", "hold this frame rate: frame_ms = 1000 / fps (0: off)",
+           lo=0.0, hi=1e6),
     Option("timing", False, "bool", "synchronise at stage boundaries and report wall time per "
            "stage", cli=False),
     Option("freeze", True, "bool", "replay the recorded kernels of the trace and of the "
@@ -893,8 +903,42 @@ def validate_options(options: dict[str, Any], gradients: bool = False) -> dict[s
             # A colour test or cap given is the one every frame reads, not the preset's
             # moving one.
             out[moving] = 0.0
+    out["frame_ms"] = _check_frame_budget(out["frame_ms"], out["fps"])
+    if out["frame_ms"] > 0 and (out["formation"], out["foveal_space"]) != ("foveal", "buffer"):
+        raise ParameterError("frame_ms", out["frame_ms"], "0 unless formation = 'foveal' and "
+                             "foveal_space = 'buffer' (the vr preset chooses its rays to hold it)")
     _check_combination(out)
     return out
+
+
+def _check_frame_budget(frame_ms: float, fps: float) -> float:
+    """The frame time to hold from ``frame_ms`` and ``fps`` (validated, 0 each: off).
+
+    Parameters
+    ----------
+    frame_ms : float
+        Milliseconds a frame (0: off).
+    fps : float
+        Frames a second (0: off); ``frame_ms = 1000 / fps``.
+
+    Returns
+    -------
+    frame_ms : float
+        The budget in ms (0: off).
+
+    Raises
+    ------
+    ParameterError
+        Where both are given and disagree by more than a frame time written to three
+        significant figures can (0.5 %).
+    """
+    if fps <= 0:
+        return frame_ms
+    ms = 1000.0 / fps
+    if frame_ms > 0 and abs(frame_ms - ms) > 5e-3 * ms:
+        raise ParameterError("fps", fps, f"1000 / frame_ms ({1000.0 / frame_ms:.4g}), or 0 "
+                             "with frame_ms given")
+    return ms
 
 
 #: Options of the foveal buffer's own samples, and the value that leaves them off.

@@ -48,6 +48,7 @@ TRANSPOSE_ONLY = [
     ("vr_joint", {"preset": "vr", "foveal_space": "film", "foveal_upsampling": "joint"}),
     ("vr_film", {"preset": "vr", "foveal_space": "film"}),
     ("vr_disc", {"preset": "vr", "foveal_disc": "denoised"}),
+    ("vr_frame_ms", {"preset": "vr", "frame_ms": 40.0}),      # at the rung the budget chose
     ("vr_film_disc", {"preset": "vr", "foveal_space": "film", "foveal_disc": "denoised"}),
 ]
 

@@ -50,9 +50,8 @@ from typing import Any
 
 import mitsuba as mi
 
-from ..frame import gradient as _gradient
-from ..frame import pipeline as _pipeline
-from ..frame import trace as _trace
+from ..budget import FrameBudget
+from ..frame import gradient as _gradient, pipeline as _pipeline, trace as _trace
 from ..frame.adjoint import NestedAdjoint
 from ..configure import denoisers_used, formation_settings, frame_settings, viewer_options
 from ..frame.formation import FrozenFormation, replayable
@@ -62,7 +61,7 @@ from ..frame.sampling import sensor_ppd
 from ..frame.scene_state import scene_state
 from ..frame.settings import FrameSettings
 from ..frame.shading import is_ad_integrator
-from ..frame.view import Views
+from ..frame.view import Hidden, Views
 from ..options import (SCHEMA, from_properties, gradient_refusal, parameter_table,
                        pixel_filter_warning, validate_options, warn_ignored)
 from ..timing import StageTimer
@@ -93,6 +92,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         # 'auto' preset then resolves to one whose gradient is exact.
         self._gradients = is_ad_integrator(self.nested)
         self._options = validate_options(self._given, self._gradients)
+        self._budget = Hidden(FrameBudget())   # frame_ms: the rungs, a controller per view
         self._settings = self._compile(self._options)   # each pass's, read once
         self._pixel_filter_warned: str | None = None
         self._ignored_warned: set[str] = set()
@@ -110,10 +110,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         ``i``-th sensor, with its own gaze, history and last frame."""
         return self._views
 
-    @property
-    def _primal(self) -> _gradient.PrimalFrame | None:
-        """The last primal frame of the view rendered last."""
-        return self._view.primal
+    _primal = property(lambda self: self._view.primal)   # the last frame of the view rendered last
 
     # -- options --------------------------------------------------------------------------
     @property
@@ -167,6 +164,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         """Forget the history of every view (each one's next frame starts fresh, as frame 0)."""
         for view in self._views:
             view.reset()
+        self._budget.value.reset()       # a cut: the frame budget's cost model too
 
     @property
     def frame(self) -> int:
@@ -192,36 +190,38 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
             # mi.render(scene, params) with parameters that need gradients: 'auto' becomes
             # the exact preset before this primal frame, which the gradient pass reuses.
             self._prepare_gradients()
-        o, timer = self._view_options(view, sensor), StageTimer(self._options["timing"])
+        c = self._budget.value.choose(view.index, state, film_size(sensor))   # frame_ms's rung
+        o, timer = self._view_options(view, sensor, c=c), StageTimer(self._options["timing"])
         # The graph is kept when mi.render will differentiate the frame.
         record = state.differentiated and gradient_refusal(o) is None
-        frame = self._frame(scene, sensor, seed, spp, state, o, record, timer)
+        frame = self._frame(scene, sensor, seed, c.spp if c else spp, state, o, record, timer)
         stats = {k: (list(v) if k == "gaze" else v) for k, v in o.items() if k != "timing"}
         stats["gaze_tracked"] = list(self._tracked_gaze(view))
+        stats.update({"frame_budget": c.stats} if c else {})
         # Plan, trace, form, commit (foveated_mi.frame.pipeline).
-        return _pipeline.primal_frame(view, self._passes(), frame, self._settings, timer, stats)
+        image = _pipeline.primal_frame(view, self._passes(), frame,
+                                       c.settings if c else self._settings, timer, stats)
+        return self._budget.value.measured(c, image, lambda: view.stats) if c else image
 
     def _tracked_gaze(self, view) -> tuple[float, float]:
         """``view``'s gaze as given: its own, else the ``gaze`` option."""
         return self._options["gaze"] if view.gaze is None else view.gaze
 
-    def _view_options(self, view, sensor: mi.Sensor, commit: bool = True) -> dict[str, Any]:
-        """The options as ``view`` reads them: its own gaze where it has one, held within
-        ``gaze_hold_deg`` of the gaze it rendered last (:meth:`~.View.held_gaze`; degrees
-        at the film's centre; ``commit``: a frame that is rendered, not only planned)."""
-        o, gaze = self._options, self._tracked_gaze(view)
+    def _view_options(self, view, sensor: mi.Sensor, commit: bool = True, c=None) -> dict:
+        """The options (``c``: the budget's rung's) with ``view``'s gaze, held within
+        ``gaze_hold_deg`` of its last (``commit``: a frame rendered, not only planned)."""
+        o, gaze = (c.options if c else self._options), self._tracked_gaze(view)
         if o["gaze_hold_deg"] > 0:
             gaze = view.held_gaze(gaze, o["gaze_hold_deg"] * sensor_ppd(sensor),
                                   *film_size(sensor), commit=commit)
         return o if gaze == o["gaze"] else {**o, "gaze": gaze}
 
-    @staticmethod
-    def _compile(o: dict[str, Any]) -> FrameSettings:
-        """Each pass's settings, read once per change of the options."""
+    def _compile(self, o: dict[str, Any]) -> FrameSettings:
+        """Each pass's settings, read once per change of the options (so are the budget's)."""
+        self._budget.value.configure(o["frame_ms"], self._given, self._gradients)
         return frame_settings(o)
 
-    def _passes(self) -> _pipeline.Passes:
-        return _pipeline.Passes(self.nested, self._frozen_trace, self._frozen)
+    _passes = lambda self: _pipeline.Passes(self.nested, self._frozen_trace, self._frozen)  # noqa
 
     def _frame(self, scene, sensor, seed, spp, state, o: dict[str, Any], record: bool,
                timer: StageTimer) -> _pipeline.Frame:
@@ -280,10 +280,11 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         p = view.primal
         if p is not None and p.scene_id == id(scene) and p.plan.sensor is sensor:
             return p
-        frame = self._frame(scene, sensor, seed, spp, scene_state(scene, sensor),
-                            self._view_options(view, sensor, commit=False), False,
-                            StageTimer(False))
-        return _pipeline.uncommitted_frame(view, self._passes(), frame, self._settings)
+        c = self._budget.value.current(view.index)
+        frame = self._frame(scene, sensor, seed, c.spp if c else spp, scene_state(scene, sensor),
+                            self._view_options(view, sensor, False, c), False, StageTimer(False))
+        return _pipeline.uncommitted_frame(view, self._passes(), frame,
+                                           c.settings if c else self._settings)
 
     # -- results: the view rendered last (``views[i]`` holds each view's) --------------------
     buffers = property(lambda self: self._view.buffers, doc="The last frame's named buffers "
