@@ -61,6 +61,10 @@ def _add_view_parser(sub) -> None:
     v.add_argument("--ray-budget", type=float, dest="ray_budget",
                    help="rays per frame as a fraction of the film (polar and acuity laws)")
     v.add_argument("--denoiser", help="the post-processing filter")
+    v.add_argument("--fps", type=float, help="frame-rate target (72, 90, 120, ...): the vr "
+                   "preset chooses each frame's rays and spp to hold 1000 / fps ms")
+    v.add_argument("--frame-ms", type=float, dest="frame_ms",
+                   help="frame-time target in ms (instead of --fps)")
     v.add_argument("--size", type=int, nargs=2, metavar=("W", "H"), default=[480, 270],
                    help="film size (default 480 270)")
     v.add_argument("--spp", type=int, default=1, help="samples per pixel (default 1)")
@@ -332,8 +336,8 @@ def cmd_view(args: argparse.Namespace) -> int:
     from .options import validate_options
     from .validate import check_int, check_range
 
-    options = {k: getattr(args, k) for k in ("preset", "ray_budget", "denoiser")
-               if getattr(args, k) is not None}
+    options = {k: getattr(args, k) for k in ("preset", "ray_budget", "denoiser", "fps",
+                                             "frame_ms") if getattr(args, k) is not None}
     validate_options(options)
     check_int("--spp", args.spp, 1, SPP_MAX)
     check_int("--size W", args.size[0], 1, 16384)

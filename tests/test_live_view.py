@@ -261,6 +261,26 @@ def test_a_preset_change_takes_effect_and_a_bad_value_is_refused(page, capsys):
     wait_for(lambda: meta(page)["preset_resolved"] == "vr", 90, "the vr preset back")
 
 
+def test_the_page_sets_a_frame_rate_target_and_shows_the_budget_held(page):
+    from selenium.webdriver.support.ui import Select
+    Select(page.find_element("id", "fps")).select_by_value("90")
+    m = wait_for(lambda: (m := meta(page))["frame_budget"] and m, 90, "the 90 Hz budget")
+    assert m["frame_budget"]["budget_ms"] == 1000.0 / 90
+    assert js(page, "window.live.state.frame_ms") == 1000.0 / 90
+    # The line and the frame it describes, read in one script (the page sets both in one
+    # task): the target, the render time against the budget, the rung chosen, the rate held.
+    b, text = js(page, "[window.live.meta.frame_budget, "
+                       "document.getElementById('budget').textContent]")
+    assert text == (f"90 Hz target: {b['measured_ms']:.1f} of {b['budget_ms']:.1f} ms (rung "
+                    f"{b['rung']}: {b['spp']} spp, {100 * b['ray_budget']:.0f} % rays) · held "
+                    f"{b['held']}/{b['window_frames']} frames of the last second")
+    assert 1 <= b["window_frames"] and 0 <= b["held"] <= b["window_frames"]
+    Select(page.find_element("id", "fps")).select_by_value("0")
+    wait_for(lambda: meta(page)["frame_budget"] is None, 90, "the target off")
+    assert page.find_element("id", "budget").text == ""
+    assert js(page, "window.live.state.frame_ms") == 0.0
+
+
 def test_split_view_shows_uniform_rendering_with_the_same_rays(page):
     from selenium.webdriver.support.ui import Select
     Select(page.find_element("id", "split")).select_by_value("uniform")
@@ -585,6 +605,75 @@ def test_latency_renders_the_gaze_of_that_many_ms_ago(live):
     finally:
         r.clock = time.perf_counter
         r.set_view(latency_ms=0.0)
+
+
+def test_a_frame_rate_target_puts_its_budget_in_each_frame_and_changes_live(live):
+    """Both clocks are the test's: the renderer's (the last second's window) and the frame
+    budget's (a frame's render time, read once as it starts and once as it ends)."""
+    from foveated_mi.live.renderer import LiveRenderer
+    assert live.renderer.wait_stopped(WAIT_S)
+    r = LiveRenderer(live.renderer.scene, options={"preset": "vr", "fps": 90})
+    now, t, step = [100.0], [0.0], [10.5e-3]
+    r.clock = lambda: now[0]
+
+    def render_clock():
+        t[0] += step[0]
+        return t[0]
+    r.integ._budget.value.clock = render_clock
+
+    def frame(dt=0.1):
+        now[0] += dt
+        m = r.render_frame().meta
+        return m, m["frame_budget"]
+
+    for _ in range(3):
+        m, b = frame()
+    # 1000 / 90 and its reciprocal: each a correctly rounded division.
+    assert b["budget_ms"] == 1000.0 / 90 and math.isclose(b["fps"], 90.0, rel_tol=4e-16)
+    # A difference of two clock readings below 1 s: exact to an ulp of the later one.
+    assert abs(b["measured_ms"] - 10.5) <= 1e3 * math.ulp(t[0])
+    # 10.5 ms of 11.1 holds the cheapest rung: the next one is predicted dearer than 90 % of
+    # the budget (its samples double, cost model section of foveated_mi.budget).
+    assert (b["rung"], b["spp"], b["ray_budget"], b["ladder"]) == (0, 2, 0.1, "still")
+    assert (b["held"], b["window_frames"]) == (3, 3) and b["predicted_ms"] is not None
+    # Live: the next frame holds 120 Hz; 10.5 ms misses it, and only the new target's frames count.
+    r.change_settings({"fps": 120})
+    m, b = frame()
+    assert m["rebuild"]["changed"] == {"fps": 120} and b["budget_ms"] == 1000.0 / 120
+    assert (b["held"], b["window_frames"]) == (0, 1)
+    step[0] = 5e-3
+    m, b = frame()
+    assert (b["held"], b["window_frames"]) == (1, 2)
+    m, b = frame(1.5)                     # the earlier frames are out of the last second
+    assert (b["held"], b["window_frames"]) == (1, 1)
+    # A frame_ms turns the fps given off (and the other way round); 0 turns the target off.
+    r.change_settings({"frame_ms": 20.0})
+    assert frame()[1]["budget_ms"] == 20.0 and r._given["fps"] == 0.0
+    assert r.check_settings({"fps": 90})[0]["frame_ms"] == 0.0
+    # Bad values: the option's own line; a preset without the foveal buffer refuses a target.
+    with pytest.raises(ParameterError, match=r"^fps = -1.0 is invalid: expected a finite "):
+        r.check_settings({"fps": -1.0})
+    with pytest.raises(ParameterError, match=r"^frame_ms = 20.0 is invalid: expected 0 unless "
+                       r"formation = 'foveal'"):
+        r.check_settings({"preset": "guided"})
+    assert protocol.parse('{"type": "settings", "fps": "72"}')[1] == {"fps": 72.0}
+    with pytest.raises(ParameterError, match=r"^fps = 'fast' is invalid: expected a finite"):
+        protocol.parse('{"type": "settings", "fps": "fast"}')
+    r.change_settings({"fps": 0})
+    assert frame()[1] is None and r.state()["frame_ms"] == 0.0
+
+
+def test_a_bad_frame_rate_target_is_one_line_and_exit_2(capsys):
+    # --port 70000: were a target not refused, the command would stop at the port, not serve.
+    for args, line in (
+            (["--fps", "-5"], "fps = -5.0 is invalid: expected a finite number >= 0 and <= 1e+06"),
+            (["--preset", "guided", "--fps", "90"], "frame_ms = 11.11111111111111 is invalid: "
+             "expected 0 unless formation = 'foveal' and foveal_space = 'buffer'"),
+            (["--fps", "90", "--frame-ms", "20"], "fps = 90.0 is invalid: expected 1000 / "
+             "frame_ms (50)")):
+        assert main(["view", "cornell-box", "--port", "70000", *args]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and err.startswith("foveated-mi: error: " + line), err
 
 
 def test_gaze_replay_sources_and_a_bad_csv(live, tmp_path):

@@ -12,7 +12,8 @@ page sends is ever run as code: :func:`parse` returns plain values or raises a o
 ``move``                  ``forward``, ``right``, ``up`` (in camera distances, each in
                           [-1, 1]), ``yaw``, ``pitch`` (degrees, each in [-90, 90]); any subset
 ``home``                  back to the scene's camera (a jump: the history is dropped)
-``settings``              any of ``preset``, ``ray_budget``, ``spp``, ``denoiser``
+``settings``              any of ``preset``, ``ray_budget``, ``spp``, ``denoiser``, ``fps``
+                          (the frame-rate target, 0: off)
 ``view``                  any of ``overlays`` (a list of :data:`OVERLAYS`), ``split`` (one of
                           :data:`SPLITS`), ``latency_ms`` (in [0, 1000])
 ``gaze_source``           ``source`` (one of :data:`SOURCES`); with ``csv``: ``csv`` (the file's
@@ -39,7 +40,7 @@ SPLITS = ("off", "uniform", "still")
 #: Where the gaze comes from.
 SOURCES = ("mouse", "saccades", "csv")
 #: Controls that rebuild the renderer.
-SETTINGS = ("preset", "ray_budget", "spp", "denoiser")
+SETTINGS = ("preset", "ray_budget", "spp", "denoiser", "fps")
 MAX_CSV_BYTES = 1 << 20
 MAX_MESSAGE_BYTES = MAX_CSV_BYTES + 4096
 LATENCY_MAX_MS = 1000.0
@@ -105,16 +106,20 @@ def _settings(msg: dict) -> dict:
     for k in ("preset", "denoiser"):
         if k in out and not isinstance(out[k], str):
             raise ParameterError(k, out[k], "a string")
-    if "ray_budget" in out:   # a number, as `--ray-budget` reads it (float)
-        v = out["ray_budget"]
+    # Numbers, as `--ray-budget` and `--fps` read them (float); the ranges are the options'.
+    for k, allowed in (("ray_budget", "a finite number > 0 and <= 1"),
+                       ("fps", "a finite number >= 0 and <= 1e+06")):
+        if k not in out:
+            continue
+        v = out[k]
         if isinstance(v, str):
             try:
                 v = float(v)
             except ValueError:
-                raise ParameterError("ray_budget", v, "a finite number > 0 and <= 1") from None
+                raise ParameterError(k, v, allowed) from None
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise ParameterError("ray_budget", v, "a finite number > 0 and <= 1")
-        out["ray_budget"] = float(v)
+            raise ParameterError(k, v, allowed)
+        out[k] = float(v)
     if "spp" in out:
         v = out["spp"]
         if isinstance(v, str):

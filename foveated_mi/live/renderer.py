@@ -13,10 +13,16 @@ only change its *inputs*, under a lock, each change validated first:
   renders the pose of its start, so moves are never queued. A jump (``home``, or more than
   :data:`CUT_DISTANCE` camera distances or :data:`CUT_ANGLE` degrees between two frames) is a
   cut: the history is dropped before the frame;
-- the settings (preset, ray budget, spp, denoiser), checked as the command line checks them
-  and applied between two frames; the frame after a change reports how long the change and
-  its first frame (new kernels) took;
+- the settings (preset, ray budget, spp, denoiser, the frame-rate target), checked as the
+  command line checks them and applied between two frames; the frame after a change reports
+  how long the change and its first frame (new kernels) took;
 - what is shown: overlays, the split view, recording.
+
+With a frame-rate target (``fps``, or ``frame_ms``: the ``vr`` preset's frame budget,
+:mod:`foveated_mi.budget`) each frame's numbers carry the budget, the configuration the
+integrator chose for it and its render time, and how many of the frames of the last second
+(on :attr:`LiveRenderer.clock`) held the budget. That is the integrator's render time only,
+not the loop's pacing (``max_fps``).
 
 Each frame becomes a :class:`LiveFrame` (JPEG and its numbers) handed to ``publish``; the
 server sends a page the newest one when the page has room for it, so frames the page could
@@ -39,6 +45,7 @@ thread, the frame and what the page is told.
 """
 from __future__ import annotations
 
+import collections
 import contextlib
 import logging
 import math
@@ -66,6 +73,8 @@ __all__ = ["LiveRenderer", "LiveFrame", "GazeInput", "FlyCamera", "CUT_DISTANCE"
 
 #: Frames without any input after which the loop rests until the next input.
 IDLE_FRAMES = 120
+#: Seconds of frames over which the page is told how many held the frame budget.
+HELD_WINDOW_S = 1.0
 #: Frames per second the loop renders at most (a display's refresh; 0: no cap): faster
 #: frames would be dropped unseen and take the CPU from the page.
 MAX_FPS = 60.0
@@ -165,6 +174,8 @@ class LiveRenderer:
         self._blocked_version = -1
         self._fps_ema: float | None = None
         self._last_end: float | None = None
+        #: (end, within the budget) of the frame-budget frames of the last HELD_WINDOW_S
+        self._held: collections.deque = collections.deque()
 
     # -- what the jobs hold, as the renderer's attributes -----------------------------------
     clock = property(lambda self: self.mailbox.clock,
@@ -306,8 +317,9 @@ class LiveRenderer:
         self.mailbox.set_source(source, gaze_source(source, csv, name))
 
     def check_settings(self, changes: dict) -> tuple[dict, int]:
-        """``(options, spp)`` after ``changes`` (preset, ray_budget, spp, denoiser), checked
-        as the command line checks them; raises the command line's one-line error."""
+        """``(options, spp)`` after ``changes`` (preset, ray_budget, spp, denoiser, fps or
+        frame_ms), checked as the command line checks them; raises the command line's
+        one-line error. A new target (``fps`` or ``frame_ms``) turns the other one off."""
         from ..options import validate_options
         from ..validate import check_int
         given = dict(self._given)
@@ -317,6 +329,9 @@ class LiveRenderer:
                 spp = check_int("--spp", v, 1, SPP_MAX)
             else:
                 given[k] = v
+        for k, other in (("fps", "frame_ms"), ("frame_ms", "fps")):
+            if k in changes and other not in changes and given.get(other):
+                given[other] = 0.0        # off: the integrator keeps an option not given
         if self.recorder.on:
             k = next(iter(changes))
             raise ParameterError(k, changes[k], "no change while recording (stop the "
@@ -365,7 +380,8 @@ class LiveRenderer:
                 "height": self.height, "spp": spp, "spp_max": SPP_MAX,
                 "preset": given.get("preset", "auto"), "preset_resolved": o["preset"],
                 "ray_budget": o["ray_budget"], "denoiser": o["denoiser"],
-                "presets": list(PRESET_NAMES), "denoisers": SCHEMA["denoiser"].names(),
+                "frame_ms": o["frame_ms"], "presets": list(PRESET_NAMES),
+                "denoisers": SCHEMA["denoiser"].names(),
                 "overlays": list(self.overlays), "split": self.split,
                 "latency_ms": self.latency_ms, "locked": self.locked, "source": self.source,
                 "recording": self.recording, "record_dir": os.path.abspath(self.record_dir),
@@ -412,6 +428,7 @@ class LiveRenderer:
         self.integ.reset()
         for job in (self.uniform, self.still, self.overlay):
             job.reset()
+        self._held.clear()                # a new target: its frames only
         return {"changed": pending["changes"], "apply_ms": (time.perf_counter() - t0) * 1e3}
 
     def _render(self, inputs: dict, rebuild: dict | None):
@@ -487,10 +504,31 @@ class LiveRenderer:
             "ray_budget": o["ray_budget"], "spp": self.spp, "fov": cam["fov"],
             "fovea": _fovea(self.width, self.height, o), "frame_ms": frame_ms, **times,
             "render_fps": self._fps_ema, "dropped": self.dropped,
+            "frame_budget": self._frame_budget(stats, end),
             "overlays": list(inputs["overlays"]), "split": inputs["split"],
             "split_info": split_info, "resting_after": self.idle_frames,
             "recording": len(rec) if inputs["recording"] and rec is not None else None,
         }
+
+    def _frame_budget(self, stats: dict, end: float) -> dict | None:
+        """The frame budget's numbers for the page (None without a target): the budget, the
+        target rate, the prediction, the render time measured and the configuration chosen
+        (:mod:`foveated_mi.budget`), and of the frames that ended within
+        :data:`HELD_WINDOW_S` of this one, how many took at most the budget (``held``)."""
+        fb = stats.get("frame_budget")
+        if fb is None:
+            self._held.clear()
+            return None
+        measured, budget = _num(fb.get("measured_ms")), float(fb["budget_ms"])
+        self._held.append((end, measured is not None and measured <= budget))
+        while self._held and end - self._held[0][0] > HELD_WINDOW_S:
+            self._held.popleft()
+        return {"budget_ms": budget, "fps": 1e3 / budget,
+                "predicted_ms": _num(fb.get("predicted_ms")), "measured_ms": measured,
+                "ladder": fb["ladder"], "rung": int(fb["rung"]),
+                "configuration": fb["configuration"], "spp": int(fb["spp"]),
+                "ray_budget": float(fb["ray_budget"]),
+                "held": sum(ok for _, ok in self._held), "window_frames": len(self._held)}
 
     def _commit(self, inputs: dict, meta: dict, frame_ms: float) -> None:
         """After the frame: its pose recorded, the rest counter, what the next frame

@@ -114,6 +114,17 @@
     $("split").value = s.split;
     $("lock").checked = s.locked;
     if (document.activeElement !== $("source")) $("source").value = s.source;
+    // The target as a rate (a --frame-ms or --fps of the command line may be none of the
+    // select's: it joins them).
+    const hz = s.frame_ms > 0 ? String(Number((1000 / s.frame_ms).toFixed(2))) : "0";
+    const fps = $("fps");
+    if (![...fps.options].some((o) => o.value === hz)) {
+      const o = document.createElement("option");
+      o.value = hz;
+      o.textContent = `${hz} Hz`;
+      fps.appendChild(o);
+    }
+    if (document.activeElement !== fps) fps.value = hz;
     $("record").textContent = s.recording ? "Stop recording" : "Record";
     $("record").classList.toggle("on", s.recording);
   }
@@ -171,8 +182,16 @@
       ` · history ${m.history_frame}${m.cut ? " (cut)" : ""}` +
       ` · hit ${fmt(100 * (m.history_hit_rate || 0), 0)} % · dropped ${m.dropped}` +
       ` · gaze latency ${fmt(latMed, 0)} ms` + (m.recording !== null ? ` · REC ${m.recording}` : "");
+    const b = m.frame_budget;
+    // The budget the integrator chose this frame, its render time, and how many of the last
+    // second's frames held it.
+    $("budget").textContent = b ?
+      `${Number(b.fps.toFixed(1))} Hz target: ${fmt(b.measured_ms, 1)} of ` +
+      `${fmt(b.budget_ms, 1)} ms (rung ${b.rung}: ${b.spp} spp, ` +
+      `${fmt(100 * b.ray_budget, 0)} % rays) · held ${b.held}/${b.window_frames} frames ` +
+      `of the last second` : "";
     $("label-left").textContent =
-      `foveated: ${m.preset_resolved}, ${m.spp} spp, ${fmt(m.frame_ms, 1)} ms` +
+      `foveated: ${m.preset_resolved}, ${b ? b.spp : m.spp} spp, ${fmt(m.frame_ms, 1)} ms` +
       (m.locked ? " · gaze locked" : "") + (m.latency_ms ? ` · +${m.latency_ms} ms latency` : "");
     const s = m.split_info;
     let right = "";
@@ -398,6 +417,11 @@
   }
   $("ov-rings").addEventListener("change", () => { if (live.meta) drawOverlay(live.meta); });
   $("split").addEventListener("change", () => send({type: "view", split: $("split").value}));
+  $("fps").addEventListener("change", () => {
+    $("error").textContent = "";
+    $("rebuild").textContent = "rebuilding…";
+    send({type: "settings", fps: Number($("fps").value)});
+  });
   $("latency").addEventListener("change", () => {
     $("error").textContent = "";
     send({type: "view", latency_ms: number($("latency").value)});
