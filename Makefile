@@ -37,11 +37,11 @@ test-slow: $(STAMP)       # only the checks marked slow
 test-perceptual: $(PSTAMP)
 	$(RUN) FOVEATED_REQUIRE_PERCEPTUAL=1 $(PY) -m pytest -q $(XDIST) --durations=15 -m perceptual
 
-bench: $(STAMP)
-	$(RUN) $(PY) benchmarks/bench_reorder.py
-	$(RUN) $(PY) benchmarks/bench_reconstruct.py
-	$(RUN) $(PY) benchmarks/bench_quality.py
-	$(RUN) $(PY) benchmarks/bench_temporal.py
+bench: $(STAMP)    # the default set of the suite (python -m benchmarks --list lists it all)
+	$(RUN) $(PY) -m benchmarks bench_reorder
+	$(RUN) $(PY) -m benchmarks bench_reconstruct
+	$(RUN) $(PY) -m benchmarks bench_quality
+	$(RUN) $(PY) -m benchmarks bench_temporal
 
 notebooks: $(STAMP)    # executes notebooks/*.ipynb in place (small size; FULL=1 for paper sizes)
 	$(RUN) $(PY) scripts/run_notebooks.py $(if $(FULL),--full,)

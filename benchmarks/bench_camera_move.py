@@ -18,12 +18,10 @@ from __future__ import annotations
 
 import argparse
 import functools
-import os
 import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import foveated_mi  # noqa: E402
 import mitsuba as mi  # noqa: E402

@@ -24,7 +24,7 @@ stages (``timing=True``: each stage's outputs evaluated and synchronised at its 
 frames then take a little longer; ``stages_ms`` in the JSON, medians per eye and stage).
 Medians over the frames after ``--warmup``; the ratios are of medians: two eyes against one
 (the target is at most 1.5, the goal 1.3) and against uniform stereo (twice ``full``). This
-is frame cost only; at equal per-eye video JOD, run ``bench_vr.py --stereo`` against
+is frame cost only; at equal per-eye video JOD, run ``foveated-mi study report --stereo`` against
 ``--one-eye``.
 """
 from __future__ import annotations

@@ -13,12 +13,9 @@ periphery); ``--scene`` takes a built-in name or an XML path instead.
 from __future__ import annotations
 
 import argparse
-import os
-import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
 import foveated_mi  # noqa: E402,F401
 import mitsuba as mi  # noqa: E402

@@ -1,4 +1,5 @@
-"""Helpers shared by the benchmark scripts (not part of the package API)."""
+"""Helpers shared by the benchmarks (not part of the package API); ``python -m benchmarks``
+runs them (:mod:`benchmarks.__main__`)."""
 from __future__ import annotations
 
 import json
@@ -48,9 +49,43 @@ def machine() -> dict:
     return info
 
 
+def cpu_model() -> str:
+    """The CPU's model name (``/proc/cpuinfo``; else what :mod:`platform` says)."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.lower().startswith("model name"):
+                    return line.partition(":")[2].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def commit() -> str | None:
+    """The checkout's commit (``git rev-parse HEAD``), or None outside a git checkout."""
+    import subprocess
+    try:
+        r = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
+                           cwd=os.path.dirname(os.path.abspath(__file__)), timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return r.stdout.strip() or None if r.returncode == 0 else None
+
+
+def run_info() -> dict:
+    """What every result carries: the machine, its CPU, the commit, the date and the variant."""
+    return {"platform": platform.platform(), "cpu_model": cpu_model(),
+            "cpu_count": os.cpu_count(), "commit": commit(),
+            "date": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "variant": mi.variant(),
+            "mitsuba": mi.__version__, "drjit": dr.__version__}
+
+
 def write_json(path: str | None, payload: dict) -> None:
+    """``payload`` as JSON at ``path`` (nothing without one), with :func:`run_info` under
+    ``run``: the one output format of the benchmarks."""
     if not path:
         return
+    payload = {**payload, "run": run_info()}
     from foveated_mi.io import atomic_write
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     with atomic_write(path, "w") as f:

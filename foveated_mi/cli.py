@@ -1,5 +1,8 @@
 """``foveated-mi``: render a foveated frame or a sequence, run a study, or view live (command line).
 
+``foveated-mi study FILE.toml`` runs a study; ``foveated-mi study report|pool|compare|inspect``
+analyses one (:data:`STUDY_VERBS`).
+
 Bad input prints one line (``foveated-mi: error: <name> = <value> is invalid: expected ...``)
 and exits with status 2; no traceback, no half-written output.
 """
@@ -13,6 +16,12 @@ import warnings
 from typing import Any, Sequence
 
 EXIT_USAGE = 2
+
+#: ``foveated-mi study VERB ...``: the analysis of a study, by the module that does it. A first
+#: argument that is one of these selects it; any other is a study file to run.
+STUDY_VERBS = {"report": "report", "pool": "pool", "compare": "compare", "inspect": None}
+#: ``foveated-mi study inspect WHAT ...``: one row of a study looked at closely.
+INSPECT_VERBS = {"where": "inspect_where", "look": "inspect_look", "reads": "inspect_reads"}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -147,7 +156,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-progress", action="store_true", dest="no_progress")
 
     st = sub.add_parser("study", help="run a speed-accuracy study from a TOML file "
-                        "(see configs/studies/)")
+                        "(see configs/studies/); foveated-mi study report|pool|compare|inspect "
+                        "... analyses one (each with --help)")
     st.add_argument("study", help="study file (TOML)")
     st.add_argument("--out", help="output folder (default out/studies/<study name>)")
     st.add_argument("--executor", default="local", help="local | dask")
@@ -389,7 +399,25 @@ def _one_line_warning(message, category, filename, lineno, line=None) -> str:
     return f"foveated-mi: warning: {message}\n"
 
 
+def study_verb(argv: list[str]) -> int:
+    """``foveated-mi study VERB ...`` (:data:`STUDY_VERBS`): the verb's module's ``main``."""
+    import importlib
+    from .validate import ParameterError
+    verb, rest = argv[0], argv[1:]
+    name, prog = STUDY_VERBS[verb], f"foveated-mi study {verb}"
+    if name is None:        # inspect WHAT
+        if not rest or rest[0] not in INSPECT_VERBS:
+            raise ParameterError("study inspect", rest[0] if rest else None,
+                                 "one of " + ", ".join(INSPECT_VERBS))
+        name, prog, rest = INSPECT_VERBS[rest[0]], f"{prog} {rest[0]}", rest[1:]
+    module = importlib.import_module(f".study.{name}", __package__)
+    return module.main(rest, prog=prog)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if len(argv) >= 2 and argv[0] == "study" and argv[1] in STUDY_VERBS:
+        return _guarded(lambda: study_verb(argv[1:]))
     args = build_parser().parse_args(argv)
     shown, warnings.formatwarning = warnings.formatwarning, _one_line_warning
     try:
@@ -399,26 +427,35 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _run(args) -> int:
+    return _guarded(lambda: _dispatch(args))
+
+
+def _dispatch(args) -> int:
+    if args.command == "render":
+        return cmd_render(args)
+    if args.command == "study":
+        return cmd_study(args)
+    if args.command == "view":
+        return cmd_view(args)
+    if args.command == "headsets":
+        from .headsets import headset_table
+        from .validate import check_int
+        width = None if args.eye_width is None else check_int("--eye-width",
+                                                              args.eye_width, 8, 16384)
+        sys.stdout.write(headset_table(width))
+        return 0
+    if args.command == "demo":
+        from .demo import run_demo
+        return run_demo(args.out, size=tuple(args.size) if args.size else None,
+                        progress=not args.no_progress)
+    return cmd_sequence(args)
+
+
+def _guarded(fn) -> int:
+    """``fn()``, bad input as one line and exit status 2."""
     from .validate import ParameterError
     try:
-        if args.command == "render":
-            return cmd_render(args)
-        if args.command == "study":
-            return cmd_study(args)
-        if args.command == "view":
-            return cmd_view(args)
-        if args.command == "headsets":
-            from .headsets import headset_table
-            from .validate import check_int
-            width = None if args.eye_width is None else check_int("--eye-width",
-                                                                  args.eye_width, 8, 16384)
-            sys.stdout.write(headset_table(width))
-            return 0
-        if args.command == "demo":
-            from .demo import run_demo
-            return run_demo(args.out, size=tuple(args.size) if args.size else None,
-                            progress=not args.no_progress)
-        return cmd_sequence(args)
+        return fn()
     except ParameterError as e:
         sys.stderr.write(f"foveated-mi: error: {e}\n")
         return EXIT_USAGE

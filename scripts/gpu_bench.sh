@@ -220,8 +220,8 @@ fi
 # needs most of a run's deadline. Without torch in the wheelhouse it scores fovea PSNR only.
 if [[ " ${GPU_BENCH_ONLY:-} " == *" vr "* ]]; then
   if missing=$(have_modules "${STUDY_MODULES[@]}"); then
-    step vr 420 "VR study (configs/studies/vr.toml), voxel-city, seed 0" "$VPY" $B/bench_vr.py \
-      --variant "$VARIANT" --seeds 0 --scenes voxel-city --out "$OUT/vr" \
+    step vr 420 "VR study (configs/studies/vr.toml), voxel-city, seed 0" "$VPY" -m foveated_mi.cli \
+      study report configs/studies/vr.toml --variant "$VARIANT" --seeds 0 --scenes voxel-city --out "$OUT/vr" \
       --results "$OUT/vr/results" --no-progress
   else
     skip vr "the study's quality metrics need $missing (not in the wheelhouse)"

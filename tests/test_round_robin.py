@@ -12,7 +12,7 @@ from foveated_mi.study import read_rows, run_study
 from foveated_mi.study import tasks as T
 from foveated_mi.validate import ParameterError
 
-BENCH_MODULE = "bench_vr"  # the conftest's ``bench`` fixture imports it
+BENCH_MODULE = "foveated_mi.study.report"  # the conftest's ``bench`` fixture imports it
 
 #: A head moving and a saccade (frame 2 of 4), two rows (``vr`` and uniform 1 spp).
 STUDY = """
@@ -237,7 +237,7 @@ def test_one_noisy_seed_flags_the_ratio():
 
 
 def test_bench_vr_marks_a_noisy_ratio_and_says_why(bench):
-    """bench_vr prints the mark the package sets, and its footnote once."""
+    """The report prints the mark the package sets, and its footnote once."""
     from foveated_mi.study.equal_time import NOISY_MARK, NOISY_NOTE
     rows = [dict(_cell("foveated", 1, 10.0, 5.0, 0.0), config='{"options": {"preset": "vr"}}'),
             _cell("uniform", 2, 40.0, 4.0, 0.2), _cell("uniform", 4, 80.0, 6.0, 0.2)]

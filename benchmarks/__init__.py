@@ -1,0 +1,2 @@
+"""The benchmarks of foveated_mi, one suite: ``python -m benchmarks --list`` (see
+:mod:`benchmarks.__main__`)."""

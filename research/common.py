@@ -1,0 +1,128 @@
+"""Helpers shared by the probes: a copy of the benchmarks' helpers as the probes used them."""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import statistics
+import time
+
+import drjit as dr
+import mitsuba as mi
+
+
+def timed(fn, *args, **kw):
+    dr.sync_thread()
+    t0 = time.perf_counter()
+    out = fn(*args, **kw)
+    dr.eval(out)
+    dr.sync_thread()
+    return out, (time.perf_counter() - t0) * 1e3
+
+
+def pm(r: dict, col: str, fmt: str = ".2f") -> str:
+    """A study cell's ``col`` as "mean ± standard deviation" ("-" where it is missing)."""
+    import math
+    v = r.get(col)
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "-"
+    sd = r.get(f"{col}_sd", math.nan)
+    return format(v, fmt) + (f" ± {format(sd, fmt)}" if not math.isnan(sd) else "")
+
+
+def median(xs):
+    return statistics.median(xs) if xs else float("nan")
+
+
+def machine() -> dict:
+    info = {"variant": mi.variant(), "python": platform.python_version(),
+            "mitsuba": mi.__version__, "drjit": dr.__version__,
+            "cpu_count": os.cpu_count(), "machine": platform.machine()}
+    if mi.variant().startswith("cuda"):
+        try:
+            import subprocess
+            info["gpu"] = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"],
+                                         capture_output=True, text=True).stdout.strip()
+        except OSError:
+            pass
+    return info
+
+
+def write_json(path: str | None, payload: dict) -> None:
+    if not path:
+        return
+    from foveated_mi.io import atomic_write
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    with atomic_write(path, "w") as f:
+        json.dump(payload, f, indent=2)
+
+
+def md_table(header, rows) -> str:
+    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    out += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return "\n".join(out)
+
+
+def preset_edges(scene, preset="paper", **options):
+    """The edge rays the ``foveated`` integrator would force on ``scene``'s first sensor
+    under ``preset`` (its edge detector and threshold; ``options`` override), or None when
+    the threshold is 0."""
+    from foveated_mi.frame.gbuffer import render_gbuffer
+    from foveated_mi.kernels import film_size
+    from foveated_mi.options import validate_options
+    from foveated_mi.frame.sampling import depth_edges
+    o = validate_options({"preset": preset, **options})
+    if o["edge_threshold"] <= 0:
+        return None
+    sensor = scene.sensors()[0]
+    W, H = film_size(sensor)
+    gb = render_gbuffer(scene, sensor)
+    return depth_edges(gb.depth, gb.hit, W, H, o["edge_threshold"], detector=o["edge_detector"])
+
+
+def calibrate_theta(width, height, target, *, sigma_p, gaze=(0.5, 0.5), edges=None, seed=0):
+    """θ whose sampling map (edge rays ``edges`` included, e.g. from :func:`preset_edges`)
+    traces about ``target`` of the pixels. Raises ValueError when the edge rays alone
+    exceed the target."""
+    from foveated_mi.frame.sampling import sampling_map
+    if edges is not None:
+        forced = dr.count(edges)[0] / (width * height)
+        if forced > target:
+            raise ValueError(f"target = {target!r} is invalid: expected at least the edge-ray "
+                             f"fraction {forced:.4f}")
+    lo, hi = 1e-4, 10.0
+    for _ in range(30):
+        mid = (lo * hi) ** 0.5
+        smap, _ = sampling_map(width, height, gaze=gaze, theta=mid, sigma_p=sigma_p, seed=seed,
+                               edges=edges)
+        frac = dr.count(smap)[0] / (width * height)
+        lo, hi = (mid, hi) if frac < target else (lo, mid)
+    return (lo * hi) ** 0.5
+
+
+def scene_with_reference(name, width, height, *, max_depth, ref_spp, seed=12345):
+    """Built-in or XML scene with a path tracer, and its converged reference (linear, NumPy).
+
+    The reference is rendered with an explicit spp; callers must pass ``spp`` explicitly too,
+    since ``mi.render(spp=N)`` leaves N as the sensor's sample count."""
+    import numpy as np
+    from foveated_mi.scenes import load_scene
+    scene = load_scene(name, width=width, height=height, spp=1,
+                       integrator={"type": "path", "max_depth": max_depth})
+    ref = np.array(mi.render(scene, integrator=scene.integrator(), spp=ref_spp, seed=seed))
+    return scene, ref
+
+
+def parse_sets(items: list[str]) -> dict:
+    """``["reorder='tiles'", "ray_budget=0.2"]`` -> the options they set."""
+    import ast
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ValueError(f"--set {item!r}: expected OPTION=VALUE")
+        try:
+            out[key] = ast.literal_eval(value)
+        except (ValueError, SyntaxError):
+            out[key] = value          # a bare word: a string option's value
+    return out
