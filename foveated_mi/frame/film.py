@@ -143,7 +143,7 @@ def form_film(shading: ShadingBuffer, inp: FormationInput, s: FilmSettings,
     return Formed(post.image, buffers, history)
 
 
-def film_stats(buffers: dict[str, Any]) -> dict[str, Any]:
+def film_stats(buffers: dict[str, dr.ArrayBase]) -> dict[str, Any]:
     """Pixels that took their value from the history only, and pixels without a value.
 
     Parameters

@@ -709,7 +709,7 @@ def foveal_grids(width: int, height: int, s: FovealSettings) -> dict[str, Grid]:
     return {name: samples for name in SAMPLE_BUFFERS}
 
 
-def foveal_stats(buffers: dict[str, Any]) -> dict[str, Any]:
+def foveal_stats(buffers: dict[str, dr.ArrayBase]) -> dict[str, Any]:
     """Film pixels, or buffer samples, that took their value from the history only, and
     those without a value (a sample off the film is none).
 

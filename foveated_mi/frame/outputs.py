@@ -23,21 +23,26 @@ from .reorder import Reordered
 
 class FrameOutputs:
     """A frame's buffers (``buffers``: name -> flat array), the grid each lives on, and its
-    stats."""
+    stats. ``carried``: values that its caller knows of the frame and the frame does not (the
+    integrator's options), which the stats carry as they are, over any of the same name: set
+    by the caller after the frame, so that the frame never receives them."""
 
-    def __init__(self, buffers: dict[str, Any], grids: dict[str, Grid],
-                 stats_raw: dict[str, Any]):
+    def __init__(self, buffers: dict[str, dr.ArrayBase | tuple | Reordered | None],
+                 grids: dict[str, Grid],
+                 stats_raw: dict[str, int | float | bool | str | dict | dr.ArrayBase]):
         self.buffers = buffers
         self.grids = grids
+        self.carried: dict[str, object] = {}
         self._stats_raw = stats_raw
         self._stats: dict[str, Any] | None = None
+        self._stats_carried: dict | None = None
 
     @property
     def stats(self) -> dict[str, Any]:
         """Stats as plain Python values (reading them synchronises)."""
-        if self._stats is None:
+        if self._stats is None or self._stats_carried is not self.carried:
             s = {}
-            for k, v in self._stats_raw.items():
+            for k, v in {**self._stats_raw, **self.carried}.items():
                 if isinstance(v, mi.Bool) and dr.width(v) > 1:
                     v = dr.count(v)          # a mask the frame left uncounted
                 if isinstance(v, (mi.UInt32, mi.Int32, mi.Float, mi.Bool)) or dr.is_array_v(v):
@@ -54,7 +59,7 @@ class FrameOutputs:
                 # buffer's samples on the film) that found their history.
                 s["history_hit_rate"] = s["history_hits"] / max(s.get("reprojected",
                                                                       s["pixels"]), 1)
-            self._stats = s
+            self._stats, self._stats_carried = s, self.carried
         return dict(self._stats)
 
     def export(self, name: str):
@@ -138,8 +143,8 @@ def _disc_stats(plan: FramePlan) -> dict[str, Any]:
 
 
 def frame_outputs(plan: FramePlan, samples, formed: Formed, fs: FormationSettings,
-                  timer: StageTimer, index: int, replayed: tuple[bool, bool] = (False, False),
-                  record: dict[str, Any] | None = None) -> FrameOutputs:
+                  timer: StageTimer, index: int,
+                  replayed: tuple[bool, bool] = (False, False)) -> FrameOutputs:
     """The buffers and stats of primal frame number ``index`` (module docstring).
 
     Parameters
@@ -154,8 +159,6 @@ def frame_outputs(plan: FramePlan, samples, formed: Formed, fs: FormationSetting
         The frame's number since the view's last reset.
     replayed : tuple of bool, optional
         Whether the trace and the formation were replayed (:func:`trace_mode`).
-    record : dict or None, optional
-        Values the stats carry as they are (the integrator's options).
 
     Returns
     -------
@@ -193,6 +196,6 @@ def frame_outputs(plan: FramePlan, samples, formed: Formed, fs: FormationSetting
         "timings_ms": timer.finish(), "gbuffer_reused": plan.gbuffer_reused,
         "trace_replayed": bool(replayed[0]), "formation_replayed": bool(replayed[1]),
         "trace_mode": trace_mode(*replayed),
-        "variant": mi.variant(), **(record or {}),
+        "variant": mi.variant(),
     }
     return FrameOutputs(buffers, grids, stats)

@@ -127,7 +127,7 @@ def trace_pass(passes: Passes, frame: Frame, plan: FramePlan, settings: FrameSet
 
 
 def primal_frame(view: View, passes: Passes, frame: Frame, settings: FrameSettings,
-                 timer: StageTimer, stats: dict[str, Any]) -> mi.TensorXf:
+                 timer: StageTimer) -> mi.TensorXf:
     """The primal frame of ``view``: plan, trace, form, commit (module docstring).
 
     Parameters
@@ -142,8 +142,6 @@ def primal_frame(view: View, passes: Passes, frame: Frame, settings: FrameSettin
         The frame's settings.
     timer : StageTimer
         The frame's stage timer.
-    stats : dict
-        Values the frame's stats carry as they are (the integrator's options).
 
     Returns
     -------
@@ -161,14 +159,14 @@ def primal_frame(view: View, passes: Passes, frame: Frame, settings: FrameSettin
         plan, shaded.shading, frame.formation, timer, frozen, frame.record)
     # The history, buffers and stats of this frame, and the frame a gradient pass reuses.
     commit_pass(view, frame, plan, shaded, formed, settings, timer, recorded,
-                (trace_replayed, formation_replayed), stats)
+                (trace_replayed, formation_replayed))
     flat = dr.ravel(formed.image) if formed.flat is None else formed.flat
     return mi.TensorXf(flat, shape=(plan.height, plan.width, 3))
 
 
 def commit_pass(view: View, frame: Frame, plan: FramePlan, shaded: _trace.Shaded, formed,
                 settings: FrameSettings, timer: StageTimer, recorded,
-                replayed: tuple[bool, bool], stats: dict[str, Any]) -> None:
+                replayed: tuple[bool, bool]) -> None:
     """The frame's history becomes the view's (none without ``history``), its buffers and
     stats are kept, and the frame is kept for a gradient pass.
 
@@ -192,12 +190,10 @@ def commit_pass(view: View, frame: Frame, plan: FramePlan, shaded: _trace.Shaded
         The formation's derivative graph ``(x, image)``, where kept.
     replayed : tuple of bool
         Whether the trace and the formation were replayed.
-    stats : dict
-        Values the frame's stats carry as they are.
     """
     view.planner.commit(plan, formed.history if settings.plan.history.keep else None)
     view.outputs = frame_outputs(plan, shaded, formed, frame.formation, timer, view.frame - 1,
-                                 replayed, stats)
+                                 replayed)
     view.primal = _gradient.PrimalFrame(plan, shaded.shading, id(frame.scene), frame.formation,
                                         recorded)
 

@@ -435,7 +435,7 @@ class Planner:
             return None
         return other.history if other.history.layout == lay else None
 
-    def commit(self, plan: FramePlan, history: dict[str, Any] | None) -> None:
+    def commit(self, plan: FramePlan, history: dict[str, mi.Color3f | mi.Float] | None) -> None:
         """After a primal frame: its history becomes the next frame's, and the frame is counted.
 
         Parameters
@@ -447,17 +447,8 @@ class Planner:
             the foveal buffer's samples); None without history (the previous one is kept).
         """
         if history is not None:
-            gb = plan.gbuffer
-            in_buffer = plan.space.kind == "buffer"
-            self.history = History(**history, depth=gb.depth,
-                                   camera=_reproject.camera_state(plan.sensor),
-                                   width=plan.width, height=plan.height,
-                                   layout=plan.space.layout,
-                                   position=gb.position if in_buffer else None,
-                                   normal=gb.normal if in_buffer else None,
-                                   gaze=plan.gaze if in_buffer else None,
-                                   pixels=plan.space.pixels if in_buffer else None,
-                                   direction=gb.direction if in_buffer else None)
+            # What the space's reprojection reads of it (:meth:`.space.SampleSpace.history`).
+            self.history = plan.space.history(history, plan.gbuffer, plan.sensor, plan.gaze)
         self.index += 1
 
     def _check_reset(self, scene: mi.Scene, state: SceneState, width: int, height: int) -> None:

@@ -13,6 +13,7 @@ which formation or law ran:
   :meth:`~SampleSpace.from_pixels`: the film's traced pixels, and a gradient summed onto them
   from the samples or a tangent read back at the samples (the gradient pass's seam);
 - :meth:`~SampleSpace.still_map`, :meth:`~SampleSpace.reprojection_map`: the history's map;
+- :meth:`~SampleSpace.history`: the history a frame leaves on the space;
 - :attr:`~SampleSpace.layout`: what the history records of the space's layout.
 
 A space's device arrays (:meth:`~SampleSpace.arrays`) are a frozen recording's inputs and its
@@ -145,6 +146,28 @@ class SampleSpace:
         """
         raise NotImplementedError
 
+    def history(self, kept: dict[str, mi.Color3f | mi.Float], gb: GBuffer, sensor: mi.Sensor,
+                gaze: mi.Point2f | None) -> History:
+        """The history a frame leaves on this space, for the next frame to reproject.
+
+        Parameters
+        ----------
+        kept : dict
+            The formation's history (``mean``, ``count``, ``moment2``), one value per sample.
+        gb : GBuffer
+            The frame's G-buffer at the samples.
+        sensor : mi.Sensor
+            The frame's sensor (its camera goes with the history).
+        gaze : mi.Point2f or None
+            The frame's gaze, in film pixels.
+
+        Returns
+        -------
+        history : History
+            What the space's reprojection reads of it next frame.
+        """
+        raise NotImplementedError
+
     def arrays(self) -> dict | None:
         """Its device arrays (a recording's inputs; None: it has none)."""
         raise NotImplementedError
@@ -188,6 +211,12 @@ class FilmSpace(SampleSpace):
         return _reproject.reprojection_map(gb.position, gb.hit, history, self.width,
                                            self.height, tolerance=tolerance,
                                            direction=gb.direction, mode=mode, reach=reach)
+
+    def history(self, kept: dict[str, mi.Color3f | mi.Float], gb: GBuffer, sensor: mi.Sensor,
+                gaze: mi.Point2f | None) -> History:
+        """The values and depth at the pixels (a depth test reads them)."""
+        return History(**kept, depth=gb.depth, camera=_reproject.camera_state(sensor),
+                       width=self.width, height=self.height, layout=None)
 
     def arrays(self) -> None:
         return None
@@ -240,6 +269,15 @@ class BufferSpace(SampleSpace):
         """:func:`~.buffer_space.reprojection_map`: a plane test; ``reach`` is unused."""
         return _buffer_space.reprojection_map(gb, self.on, history, self.layout, self.width,
                                               self.height, tolerance=tolerance, mode=mode)
+
+    def history(self, kept: dict[str, mi.Color3f | mi.Float], gb: GBuffer, sensor: mi.Sensor,
+                gaze: mi.Point2f | None) -> History:
+        """With the samples' layout, pixels, hit points, normals and view directions, and the
+        gaze (a plane test reads them, and the other eye's samples)."""
+        return History(**kept, depth=gb.depth, camera=_reproject.camera_state(sensor),
+                       width=self.width, height=self.height, layout=self.layout,
+                       position=gb.position, normal=gb.normal, gaze=gaze, pixels=self.pixels,
+                       direction=gb.direction)
 
     def arrays(self) -> dict:
         return {"pixels": self.pixels, "on": self.on, "rays": self.rays}

@@ -195,12 +195,12 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         # The graph is kept when mi.render will differentiate the frame.
         record = state.differentiated and gradient_refusal(o) is None
         frame = self._frame(scene, sensor, seed, c.spp if c else spp, state, o, record, timer)
-        stats = {k: (list(v) if k == "gaze" else v) for k, v in o.items() if k != "timing"}
-        stats["gaze_tracked"] = list(self._tracked_gaze(view))
-        stats.update({"frame_budget": c.stats} if c else {})
-        # Plan, trace, form, commit (foveated_mi.frame.pipeline).
+        # Plan, trace, form, commit (foveated_mi.frame.pipeline); the stats carry the options.
         image = _pipeline.primal_frame(view, self._passes(), frame,
-                                       c.settings if c else self._settings, timer, stats)
+                                       c.settings if c else self._settings, timer)
+        stats = {k: (list(v) if k == "gaze" else v) for k, v in o.items() if k != "timing"}
+        view.outputs.carried = {**stats, "gaze_tracked": list(self._tracked_gaze(view)),
+                                **({"frame_budget": c.stats} if c else {})}
         return self._budget.value.measured(c, image, lambda: view.stats) if c else image
 
     def _tracked_gaze(self, view) -> tuple[float, float]:
