@@ -418,3 +418,9 @@ def render_reference(scene: "mi.Scene", *, spp: int, seed: int = 0,
             done += n
             k += 1
     return (acc / spp).astype(np.float32)
+
+
+def traced_fraction(image: np.ndarray, stats: dict) -> float:
+    """The share of the film's pixels a uniform frame traced: 1, or its scaled film's."""
+    w, h = stats.get("size", image.shape[1::-1])
+    return w * h / (image.shape[0] * image.shape[1])

@@ -24,7 +24,7 @@ from .frame.settings import (DenoiseSettings, DomainSettings, FrameSettings, His
                              SamplingSettings, TraceSettings)
 from .frame.space import SPACES
 from .postprocess import DENOISERS
-from .options import DEFAULTS, SCHEMA, still_rate
+from .options import DEFAULTS, SCHEMA, IgnoredOptionWarning, still_rate
 from .validate import check_choice
 
 Options = dict[str, Any]
@@ -320,6 +320,33 @@ def ignored_options(given: Options, o: Options) -> dict[str, str]:
             out[name] = (f"{name} = {shown} has no effect under preset {o['preset']!r} "
                          f"({why}); it is read by {reader}")
     return out
+
+
+def warn_ignored(given: dict[str, Any], options: dict[str, Any],
+                 warned: set[str] = frozenset()) -> set[str]:
+    """Warn (:class:`IgnoredOptionWarning`, one line each) of the options given that nothing
+    reads under the others (:func:`ignored_options`), but those in
+    ``warned``.
+
+    Parameters
+    ----------
+    given : dict
+        The options the user set.
+    options : dict
+        The validated options.
+    warned : set of str, optional
+        The warnings already given (the last call's result): not repeated.
+
+    Returns
+    -------
+    warnings : set of str
+        Every warning that holds now, for the next call.
+    """
+    import warnings
+    now = set(ignored_options(given, options).values())
+    for text in sorted(now - set(warned)):
+        warnings.warn(text, IgnoredOptionWarning, stacklevel=4)   # the integrator's caller
+    return now
 
 
 # -- the built-in formations' readers ----------------------------------------------------------

@@ -191,34 +191,6 @@ class IgnoredOptionWarning(UserWarning):
     reconstruction or denoiser does not read (:func:`foveated_mi.configure.ignored_options`)."""
 
 
-def warn_ignored(given: dict[str, Any], options: dict[str, Any],
-                 warned: set[str] = frozenset()) -> set[str]:
-    """Warn (:class:`IgnoredOptionWarning`, one line each) of the options given that nothing
-    reads under the others (:func:`foveated_mi.configure.ignored_options`), but those in
-    ``warned``.
-
-    Parameters
-    ----------
-    given : dict
-        The options the user set.
-    options : dict
-        The validated options.
-    warned : set of str, optional
-        The warnings already given (the last call's result): not repeated.
-
-    Returns
-    -------
-    warnings : set of str
-        Every warning that holds now, for the next call.
-    """
-    import warnings
-    from .configure import ignored_options
-    now = set(ignored_options(given, options).values())
-    for text in sorted(now - set(warned)):
-        warnings.warn(text, IgnoredOptionWarning, stacklevel=4)   # the integrator's caller
-    return now
-
-
 def pixel_filter_warning(given: dict[str, Any], options: dict[str, Any]) -> str | None:
     """The one-line warning for an explicit ``pixel_filter = "splat"`` with a denoiser that needs
     independent per-pixel noise.
@@ -1091,7 +1063,6 @@ def check_differentiable(options: dict[str, Any]) -> None:
     error = refusal(options)
     if error is not None:
         raise error
-
 
 
 # -- docs -----------------------------------------------------------------------------------

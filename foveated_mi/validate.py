@@ -333,3 +333,10 @@ class TableContext:
         elif not isinstance(value, str):
             raise self.error(key, value, "a string")
         return value
+
+
+def one_line(e: BaseException) -> str:
+    """An exception in one line: its type and its text with every run of white space one space
+    (a worker's or a task's failure, as a study reports it)."""
+    text = " ".join(str(e).split())
+    return f"{type(e).__name__}: {text}" if text else type(e).__name__

@@ -53,7 +53,8 @@ import mitsuba as mi
 from ..budget import FrameBudget
 from ..frame import gradient as _gradient, pipeline as _pipeline, trace as _trace
 from ..frame.adjoint import NestedAdjoint
-from ..configure import denoisers_used, formation_settings, frame_settings, viewer_options
+from ..configure import (denoisers_used, formation_settings, frame_settings, viewer_options,
+                         warn_ignored)
 from ..frame.formation import FrozenFormation, replayable
 from ..frame.gbuffer import film_size
 from ..frame.reproject import History
@@ -63,7 +64,7 @@ from ..frame.settings import FrameSettings
 from ..frame.shading import is_ad_integrator
 from ..frame.view import Hidden, Views
 from ..options import (SCHEMA, from_properties, gradient_refusal, parameter_table,
-                       pixel_filter_warning, validate_options, warn_ignored)
+                       pixel_filter_warning, validate_options)
 from ..timing import StageTimer
 from ..validate import ParameterError
 
@@ -132,8 +133,7 @@ class FoveatedIntegrator(mi.SamplingIntegrator):
         self._warn_pixel_filter()
 
     def _warn_pixel_filter(self) -> None:
-        """Warn once for an explicit splat with a denoiser that needs independent noise, or an
-        option nothing reads; again only when an option change makes it anew (not per frame)."""
+        """Warn once of a splat that a denoiser needs independent, or an option none reads."""
         msg = pixel_filter_warning(self._given, self._options)
         if msg is not None and msg != self._pixel_filter_warned:
             warnings.warn(msg, UserWarning, stacklevel=3)

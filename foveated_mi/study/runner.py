@@ -18,7 +18,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..validate import ParameterError, check_int
+from ..validate import ParameterError, check_int, one_line
 from .spec import QUALITY_COLUMNS, StudySpec, load_study
 
 __all__ = ["run_study", "StudyResult", "load_reference_file"]
@@ -113,11 +113,6 @@ def load_reference_file(ref: dict, scene) -> np.ndarray:
     if not np.isfinite(arr).all():
         raise ParameterError(name, ref["file"], "finite pixel values")
     return arr
-
-
-def _one_line(e: BaseException) -> str:
-    text = " ".join(str(e).split())
-    return f"{type(e).__name__}: {text}" if text else type(e).__name__
 
 
 def _describe(task: dict) -> str:
@@ -338,7 +333,7 @@ def _references(spec, scenes, pending, file_refs, out_dir, variant, ex, progress
         os.makedirs(ref_dir, exist_ok=True)
     for label, out, err in _progress(ex, jobs, "ref", "references", progress):
         if err is not None:
-            result.failed.append(f"reference of {label} failed: {_one_line(err)}")
+            result.failed.append(f"reference of {label} failed: {one_line(err)}")
             continue
         arr = out["image"]
         with atomic_write(paths[label], "wb") as f:
@@ -422,7 +417,7 @@ def _run_tasks(pending, refs, ex, results, progress, result, say) -> None:
     for key, out, err in _progress(ex, jobs, unit, desc, progress):
         ids = key if isinstance(key, tuple) else (key,)
         if err is not None:                  # the job failed: each of its tasks did
-            out = {"rows": {}, "errors": dict.fromkeys(ids, _one_line(err))}
+            out = {"rows": {}, "errors": dict.fromkeys(ids, one_line(err))}
         elif not isinstance(key, tuple):     # a still view's task: its rows
             out = {"rows": {key: out}, "errors": {}}
         for tid in ids:

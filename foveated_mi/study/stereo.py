@@ -126,9 +126,9 @@ def _renderer(scene, task: dict, rig: StereoRig):
                                scale=task["options"].get("scale", 1.0))
                 for k, eye in enumerate(EYES)]
         each = [r[1]["time_ms"] for r in runs]
-        from .tasks import _traced_fraction
+        from ..baselines import traced_fraction
         return ([r[0] for r in runs], sum(each),
-                float(np.mean([_traced_fraction(*r) for r in runs])), each)
+                float(np.mean([traced_fraction(*r) for r in runs])), each)
     render_baseline.frame = 0
     return render_baseline, eyes, None
 

@@ -460,7 +460,7 @@ def _sequence_renderer(scene, task: dict, gaze):
         render_foveated.modes = []          # each frame's trace_mode
         render_foveated.samples = []        # and samples traced (a still view's settle)
         return render_foveated, integ
-    from ..baselines import render_uniform
+    from ..baselines import render_uniform, traced_fraction
     den = bool(task["options"]["denoise"])
     scale = task["options"].get("scale", 1.0)
 
@@ -469,15 +469,9 @@ def _sequence_renderer(scene, task: dict, gaze):
         image, stats = render_uniform(scene, spp=spp, seed=frame_seed(task, k), denoise=den,
                                       scale=scale)
         render_baseline.upscale.append(stats.get("upscale_ms"))
-        return image, stats["time_ms"], _traced_fraction(image, stats)
+        return image, stats["time_ms"], traced_fraction(image, stats)
     render_baseline.upscale = []        # each frame's upscale time (dynamic resolution)
     return render_baseline, None
-
-
-def _traced_fraction(image: np.ndarray, stats: dict) -> float:
-    """The share of the film's pixels a uniform frame traced: 1, or its scaled film's."""
-    w, h = stats.get("size", image.shape[1::-1])
-    return w * h / (image.shape[0] * image.shape[1])
 
 
 def _sequence_frames(scene, task: dict, refs: np.ndarray, render, rendered: list) -> tuple:
@@ -533,11 +527,11 @@ def run_sequence_group(tasks: list[dict], reference: np.ndarray) -> dict:
         ``time_ms_min``, ``time_ms_max`` the passes' extremes, ``time_spread`` their range
         over ``time_ms``, ``time_ms_passes`` each pass's, ``repeats`` the passes.
     """
-    from .runner import _one_line
+    from ..validate import one_line
     errors: dict[str, str] = {}
 
     def fail(task, e):
-        errors[task["task_id"]] = _one_line(e)
+        errors[task["task_id"]] = one_line(e)
     rows = _round_robin(tasks, reference, fail)
     return {"rows": {tid: [row] for tid, row in rows.items()}, "errors": errors}
 
@@ -717,7 +711,7 @@ def run_task(task: dict, reference: np.ndarray) -> list[dict]:
 def _uniform_row(scene, task: dict, common: dict, ref_d: np.ndarray, viewing: dict) -> dict:
     """The row of a uniform task of a still view (:func:`run_task`): ``warmup`` untimed
     frames, then ``repeats`` timed ones, the median time of each stage."""
-    from ..baselines import render_uniform
+    from ..baselines import render_uniform, traced_fraction
     from .results import stage_columns
     den = bool(task["options"]["denoise"])
     scale = task["options"].get("scale", 1.0)
@@ -726,7 +720,7 @@ def _uniform_row(scene, task: dict, common: dict, ref_d: np.ndarray, viewing: di
     runs = [render_uniform(scene, spp=task["spp"], seed=task["seed"], denoise=den, scale=scale)
             for _ in range(task["repeats"])]
     image = runs[0][0]
-    fraction = _traced_fraction(image, runs[0][1])
+    fraction = traced_fraction(image, runs[0][1])
     pixels = common["width"] * common["height"] * fraction
     row = dict(common, frame=1, rays=pixels, ray_fraction=fraction,
                samples=pixels * task["spp"],
