@@ -62,7 +62,8 @@ from .validate import check_int, check_range
 #: Frames the cost model is fitted over.
 WINDOW = 16
 #: A rung's first frames after the options are set: its kernels compile and its passes are
-#: recorded (``freeze``), so their time is not a frame's; they neither fit nor step down.
+#: recorded (``freeze``), so their time is not a frame's; they neither fit nor step down. A
+#: view's very first frame is the model's stand-in until the first warmed frame replaces it.
 WARMUP = 2
 
 
@@ -235,16 +236,22 @@ class Controller:
         The cost model's window.
     warmup : int, optional
         Each rung's first frames, left out (:data:`WARMUP`).
+    estimator : callable, optional
+        ``estimator(obs, rung) -> (samples, cells)``: what a rung would trace where the frame
+        of ``obs`` was traced (:func:`estimate`, the ``vr`` preset's; another ladder, such as
+        uniform rendering's render scales, brings its own).
     """
 
     def __init__(self, budget_ms: float, ladders: dict[str, tuple[Rung, ...]] | None = None,
                  margin: float = 0.1, patience: int = 3, window: int = WINDOW,
-                 warmup: int = WARMUP):
+                 warmup: int = WARMUP,
+                 estimator: Callable[[Observation, Any], tuple[float, float]] = estimate):
         self.budget_ms = check_range("frame_ms", budget_ms, 0.0, 1e6, lo_open=True)
         self.ladders = dict(LADDERS if ladders is None else ladders)
         self.margin = check_range("margin", margin, 0.0, 1.0, hi_open=True)
         self.patience = check_int("patience", patience, 1, 1000)
         self.warmup = check_int("warmup", warmup, 0, 1000)
+        self.estimate = estimator
         self._seen: dict[Rung, int] = {}        # frames rendered at each rung
         self.model = CostModel(window)
         self.index = {name: 0 for name in self.ladders}
@@ -256,6 +263,7 @@ class Controller:
     def _reset_state(self) -> None:
         self._last: Observation | None = None
         self._last_ms: float | None = None
+        self._provisional = False                     # the model holds a warm-up frame only
         self._up = 0
         self._reached: dict[str, int] = {}            # ladder -> frame its rung was reached
         self._barred: dict[str, tuple[int, int]] = {}  # ladder -> (rung, until frame)
@@ -270,7 +278,7 @@ class Controller:
         """The model's time for rung ``index`` of ``ladder`` (None before a frame)."""
         if self._last is None:
             return None
-        return self.model.predict(*estimate(self._last, self.ladders[ladder][index]))
+        return self.model.predict(*self.estimate(self._last, self.ladders[ladder][index]))
 
     def choose(self, moving: bool) -> tuple[str, int, float | None]:
         """The next frame's ladder, rung and predicted time (ms; None before a frame).
@@ -317,8 +325,12 @@ class Controller:
     def observe(self, ms: float, obs: Observation) -> None:
         """The frame just rendered: its measured time (ms) and what it traced."""
         seen = self._seen[obs.rung] = self._seen.get(obs.rung, 0) + 1
-        if seen <= self.warmup and self._last is not None:
+        warm = seen <= self.warmup
+        if warm and self._last is not None:
             return                        # compiling and recording: not a frame's time
+        if self._provisional:             # the first frame compiled: a stand-in until now
+            self.model.reset()
+        self._provisional = warm
         self.model.add(obs.samples, obs.cells, ms)
         self._last, self._last_ms = obs, float(ms)
         cheapest = self.predict(self.ladder, 0)

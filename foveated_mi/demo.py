@@ -25,10 +25,24 @@ and the film-space preset (``oidn``, or ``guided`` without ``pyoidn``) run again
 uniform baselines (with that preset's history and denoiser), and the demo reports the
 speed-up at equal JOD (full-frame PSNR without the perceptual extra, the fovea's PSNR beside
 it) at frame 16 against uniform rendering with the same history and denoiser, seed by seed.
-It writes what that sentence compares as a picture, ``headset/side_by_side.png``: the
-converged reference, the ``vr`` frame and the baseline's cheapest frame at frame 16 (the
-first seed), side by side, the fovea ringed around the gaze
-(:mod:`foveated_mi.study.pictures`).
+
+Last, the headset **at one frame budget** (:func:`budget_from`): the median frame time of
+uniform 1 spp + the same history + denoiser at frame 16, measured in this run's headset table
+(a headset asks for the best image in a fixed time, and this is the cheapest frame of the
+baseline above, timed on this machine in this run). ``vr`` with ``frame_ms`` at that budget
+(the integrator picks each frame's rays and spp) and uniform rendering at the same budget by
+dynamic resolution (:mod:`foveated_mi.uniform_budget`: raw, and + OIDN at the render scale when
+``pyoidn`` is installed; the better of the two by video JOD, else by mean ring PSNR, is
+compared) each render :data:`BUDGET_FRAMES` frames of a still view (the first seed); the
+figures are over the second half, once each side's kernels compiled and its controller had
+half the frames to climb its ladder: the time held (median),
+video JOD (FovVideoVDP at 90 frames a second, when the perceptual extra is installed) and
+display PSNR ring by ring of eccentricity (:data:`foveated_mi.metrics.FLICKER_RINGS_DEG`).
+Its sentence says what the budget bought. ``headset/side_by_side.png`` shows the reference,
+the ``vr`` frame and the uniform frame at the budget's last frame, at the film's own pixels,
+labelled in a band above them, the fovea ringed around the gaze
+(:mod:`foveated_mi.study.pictures`); ``headset/at_budget.json`` holds both sides' per-frame
+stats (budget, prediction, measured time, what was chosen).
 
 Times are on this machine; they are comparable within the run only.
 """
@@ -36,9 +50,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import time
 from typing import Sequence
+
+import numpy as np
+
+from .validate import ParameterError
 
 #: The demo study (see :func:`foveated_mi.study.parse_study`).
 STUDY = {
@@ -66,6 +85,12 @@ HEADSET = {
     "foveated": {"defaults": {"frames": [1, 16]},
                  "configs": [{"preset": "vr", "spp": 1}, {"preset": "vr", "spp": 4}]},
 }   # + the film-space preset at 1 spp (film_preset)
+
+#: Frames each side renders at the headset's frame budget (a still view); its figures are over
+#: the second half.
+BUDGET_FRAMES = 16
+#: The rate the frames at the budget are shown at, as a headset's (FovVideoVDP's video JOD).
+BUDGET_FPS = 90.0
 
 
 def run_demo(out: str = os.path.join("out", "demo"), *, size: tuple[int, int] | None = None,
@@ -169,48 +194,219 @@ def _run_headset(out: str, size, preset: str, progress: bool):
     print(f"(mean ± {SPREAD} over {len(spec.seeds)} seeds)")
     print()
     print(headset_sentence(cells, column))
-    picture = _headset_picture(res, cells, column)
-    if picture is not None:
-        path, names = picture
-        print(f"Side by side ({' | '.join(names)}; frame 16, seed {res.spec.seeds[0]}, the "
-              f"ring {spec.metrics['fovea_deg']:g}° around the gaze): {path}")
-    return res, picture and picture[0]
+    budget = budget_from(res.rows)
+    if budget is None:
+        print("\nAt one frame budget: no uniform 1 spp + history row at frame 16 ran, so no "
+              "budget was measured.")
+        return res, None
+    return res, _at_budget(res, *budget, jod=jod)
 
 
-def _headset_picture(res, cells: list[dict], column: str):
-    """What :func:`headset_sentence` compares, as a picture under the study's folder:
-    ``(path, panel names)``, None where the sentence compares nothing. The reference, the
-    chosen ``vr`` cell and the cheapest cell of the baseline family at frame 16, rendered
-    again for the first seed (:func:`foveated_mi.study.tasks.task_frame`), side by side."""
+def budget_from(rows: list[dict]) -> tuple[float, str] | None:
+    """The headset's frame budget: the median time of uniform 1 spp + history + a denoiser at
+    frame 16 over the seeds (the family :func:`headset_choice` compares against).
+
+    Parameters
+    ----------
+    rows : list of dict
+        The headset study's rows.
+
+    Returns
+    -------
+    budget : tuple or None
+        ``(ms, the family's method)``; None where no such row ran.
+    """
+    fams = sorted({r["method"] for r in rows if r["method"].startswith("uniform+history+")})
+    if not fams:
+        return None
+    times = [float(r["time_ms"]) for r in rows if r["method"] == fams[0]
+             and float(r["spp"]) == 1 and int(r["frame"]) == 16
+             and r.get("time_ms") == r.get("time_ms")]
+    return (float(np.median(times)), fams[0]) if times else None
+
+
+def _at_budget(res, budget_ms: float, family: str, jod: bool) -> str:
+    """The headset at one frame budget (module docstring): its table, sentence, picture and
+    stats; returns the picture's path."""
     import mitsuba as mi
+    from . import viewer
+    from .io import atomic_write
     from .render import to_display
     from .study.pictures import cached_reference, ring_radius, write_side_by_side
-    from .study.tasks import expand_tasks, get_scene, task_frame
-    choice = headset_choice(cells, column)
-    if choice is None:
-        return None
-    vr, _, family = choice
-    base = min((f for f in family if int(f["frame"]) == int(vr["frame"])),
-               key=lambda f: f["time_ms"], default=None)
-    if base is None:
-        return None
+    from .study.tasks import get_scene
     spec, variant, seed = res.spec, mi.variant(), res.spec.seeds[0]
-    tasks = {t["task_id"]: t for t in expand_tasks(spec, variant)}
+    s0 = spec.scenes[0]
+    scene = get_scene(s0.load_spec(), variant)
+    sensor, gaze, exposure = scene.sensors()[0], tuple(s0.gaze), spec.metrics["exposure"]
+    ecc = viewer.eccentricity_map(sensor, gaze)
+    reference = to_display(cached_reference(spec, res.out_dir, variant), exposure)
+    held = slice(BUDGET_FRAMES // 2, BUDGET_FRAMES)
 
-    def frame_of(cell):
-        row = next(r for r in cell.get("rows") or [cell] if r.get("seed") == seed)
-        return to_display(task_frame(tasks[row["task_id"]], int(cell["frame"])),
-                          spec.metrics["exposure"])
+    sides = _sides_at_budget(scene, budget_ms, gaze, seed)
+    figures = {name: _side_figures(frames[held], stats[held], reference, ecc, exposure, gaze,
+                                   sensor, spec.perceptual["display"] if jod else None)
+               for name, (frames, stats) in sides.items()}
+    vr_name, *uniform = sides
+    best = max(uniform, key=lambda n: figures[n]["jod"] if jod else
+               _mean_psnr(figures[n]["rings"]))
+    what = f"uniform 1 spp + history + {family.split('+')[2].upper()}"
+    print(f"\nAt one frame budget: {budget_ms:.0f} ms ({what}'s median frame time at frame "
+          f"16 above), {BUDGET_FRAMES} frames of a still view each (seed {seed}), figures over "
+          f"frames {held.start + 1}-{BUDGET_FRAMES}:")
+    rings = list(figures[vr_name]["rings"])
+    _print_sides(figures, rings, jod)
+    print()
+    print(budget_sentence(budget_ms, vr_name, best, figures, seed))
+    labels = ["reference (256 spp)", f"vr at {figures[vr_name]['held_ms']:.0f} ms",
+              f"{best.split(',')[0]} at {figures[best]['held_ms']:.0f} ms"]
+    path = write_side_by_side(os.path.join(res.out_dir, "side_by_side.png"),
+                              [reference, figures[vr_name]["last"], figures[best]["last"]],
+                              gaze, ring_radius(sensor, spec.metrics["fovea_deg"], gaze),
+                              labels=labels)
+    print(f"Side by side at one budget ({' | '.join(labels)}; frame {BUDGET_FRAMES}, seed "
+          f"{seed}, the ring {spec.metrics['fovea_deg']:g}° around the gaze): {path}")
+    record = {"budget_ms": budget_ms, "budget_source": f"{family} 1 spp, frame 16, median",
+              "frames": BUDGET_FRAMES, "seed": seed, "labels": labels, "compared": best,
+              "sides": {n: {"stats": st, **{k: v for k, v in figures[n].items() if k != "last"}}
+                        for n, (_, st) in sides.items()}}
+    with atomic_write(os.path.join(res.out_dir, "at_budget.json"), "w") as fh:
+        json.dump(record, fh, indent=1, default=_plain)
+    return path
 
-    reference = to_display(cached_reference(spec, res.out_dir, variant),
-                           spec.metrics["exposure"])
-    panels = [reference, frame_of(vr), frame_of(base)]
-    scene = spec.scenes[0]
-    sensor = get_scene(scene.load_spec(), variant).sensors()[0]
-    path = write_side_by_side(os.path.join(res.out_dir, "side_by_side.png"), panels,
-                              scene.gaze, ring_radius(sensor, spec.metrics["fovea_deg"],
-                                                      scene.gaze))
-    return path, ["reference", _name(vr), _name(base)]
+
+def _sides_at_budget(scene, budget_ms: float, gaze, seed: int) -> dict:
+    """``{side: (frames, per-frame budget stats)}``: vr holding ``budget_ms`` (``frame_ms``),
+    and uniform (+ OIDN where installed) holding it by dynamic resolution."""
+    import mitsuba as mi
+    from .denoise import oidn_available
+    from .integrators.foveated import FoveatedIntegrator
+    from .uniform_budget import render_uniform_budget
+    integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr", frame_ms=budget_ms,
+                               gaze=gaze)
+    frames, stats = [], []
+    for _ in range(BUDGET_FRAMES):
+        img = mi.render(scene, integrator=integ, seed=seed)
+        frames.append(np.array(img, dtype=np.float32)[..., :3])
+        stats.append(dict(integ.stats["frame_budget"]))
+    sides = {"vr (frame_ms)": (frames, stats)}
+    for denoise in ((False, True) if oidn_available() else (False,)):
+        name = "uniform" + (" + OIDN" if denoise else "") + ", dynamic resolution"
+        sides[name] = render_uniform_budget(scene, frame_ms=budget_ms, frames=BUDGET_FRAMES,
+                                            seed=seed, denoise=denoise)
+    return sides
+
+
+def _side_figures(frames, stats, reference, ecc, exposure: float, gaze, sensor,
+                  display: str | None) -> dict:
+    """One side's figures over the frames held: its median time, its last choice, its PSNR
+    ring by ring, its last frame shown, and (``display``: the perceptual extra) video JOD."""
+    from . import viewer
+    from .render import to_display
+    shown = np.stack([to_display(f, exposure) for f in frames])
+    out = {"held_ms": float(np.median([s["measured_ms"] for s in stats])),
+           "chose": stats[-1]["configuration"], "rings": ring_psnr(reference, shown, ecc),
+           "last": shown[-1]}
+    if display is not None:
+        from .perceptual import jod_video
+        out["jod"] = jod_video(np.broadcast_to(reference, shown.shape), shown, fixations=gaze,
+                               fps=BUDGET_FPS, ppd=None,
+                               fov_horizontal=viewer.horizontal_fov(sensor), display=display)
+    return out
+
+
+def _print_sides(figures: dict, rings: list, jod: bool) -> None:
+    """The table of the sides at one budget: time held, choice, JOD, PSNR by ring."""
+    print(f"{'side':38s} {'held ms':>7s} {'chose (last frame)':34s}" + (f" {'JOD':>5s}" if jod
+          else "") + "".join(f" {r:>8s}" for r in rings))
+    for name, f in figures.items():
+        print(f"{name:38s} {f['held_ms']:7.0f} {f['chose']:34s}"
+              + (f" {f['jod']:5.2f}" if jod else "")
+              + "".join(f" {v:8.2f}" for v in f["rings"].values()))
+    print("(PSNR in dB by ring of eccentricity)")
+
+
+def _plain(value):
+    """JSON for what :func:`json.dump` does not know (NumPy scalars and tuples' kin)."""
+    return value.item() if hasattr(value, "item") else list(value)
+
+
+def ring_psnr(reference: np.ndarray, frames: np.ndarray, eccentricity: np.ndarray,
+              rings=None) -> dict[str, float]:
+    """Display PSNR of ``frames`` against ``reference`` ring by ring of eccentricity, the
+    squared errors pooled over the frames.
+
+    Parameters
+    ----------
+    reference : numpy.ndarray
+        Display values (H, W, 3) in [0, 1].
+    frames : numpy.ndarray
+        Display values (F, H, W, 3).
+    eccentricity : numpy.ndarray
+        (H, W) degrees from the gaze (:func:`foveated_mi.viewer.eccentricity_map`).
+    rings : sequence of float or None, optional
+        Ring edges in degrees (None: :data:`foveated_mi.metrics.FLICKER_RINGS_DEG`).
+
+    Returns
+    -------
+    psnr : dict
+        ``{"lo-hi°": dB}`` per ring with a pixel, in order (the last ring's edge beyond the
+        film written ``lo°+``).
+    """
+    from .metrics import FLICKER_RINGS_DEG, _check_rings
+    edges = _check_rings(FLICKER_RINGS_DEG if rings is None else rings)
+    ref = np.asarray(reference, dtype=np.float64)
+    test = np.asarray(frames, dtype=np.float64)
+    if test.ndim != 4 or test.shape[1:] != ref.shape or eccentricity.shape != ref.shape[:2]:
+        raise ParameterError("frames", test.shape, f"(F, {', '.join(map(str, ref.shape))}) "
+                             "frames of the reference's shape, and an eccentricity map of its "
+                             "(H, W)")
+    se = ((test - ref) ** 2).mean(axis=(0, 3))            # per pixel, over frames and colour
+    out = {}
+    top = float(eccentricity.max())
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        m = (eccentricity >= lo) & (eccentricity < hi)
+        if m.any():
+            mse = float(se[m].mean())
+            out[f"{lo:g}-{hi:g}°" if hi <= top else f"{lo:g}°+"] = \
+                10.0 * math.log10(1.0 / mse) if mse > 0 else math.inf
+    return out
+
+
+def _mean_psnr(rings: dict[str, float]) -> float:
+    return float(np.mean(list(rings.values())))
+
+
+def budget_sentence(budget_ms: float, vr: str, uniform: str, figures: dict, seed: int) -> str:
+    """One sentence: what ``vr`` bought over ``uniform`` at one frame budget.
+
+    Parameters
+    ----------
+    budget_ms : float
+        The budget.
+    vr, uniform : str
+        The two sides' names in ``figures``.
+    figures : dict
+        Per side: ``held_ms``, ``chose``, ``rings`` (:func:`ring_psnr`) and, where the
+        perceptual extra ran, ``jod`` (video JOD).
+    seed : int
+        The seed both rendered with.
+
+    Returns
+    -------
+    sentence : str
+        Video JOD where both sides have it, then PSNR ring by ring (never the fovea alone).
+    """
+    a, b = figures[vr], figures[uniform]
+    rings = ", ".join(f"{r} {a['rings'][r] - b['rings'][r]:+.1f} dB" for r in a["rings"]
+                      if r in b["rings"])
+    if "jod" in a and "jod" in b:
+        bought = (f"{a['jod'] - b['jod']:+.2f} video JOD ({a['jod']:.2f} against "
+                  f"{b['jod']:.2f}) and, ring by ring of eccentricity, PSNR {rings}")
+    else:
+        bought = f"PSNR ring by ring of eccentricity {rings}"
+    return (f"At one frame budget of {budget_ms:.0f} ms, vr held {a['held_ms']:.0f} ms "
+            f"({a['chose']}) and {uniform} held {b['held_ms']:.0f} ms ({b['chose']}): vr "
+            f"bought {bought} (seed {seed}).")
 
 
 def _name(r: dict) -> str:

@@ -81,7 +81,8 @@ def test_demo_runs_end_to_end_and_resumes(tmp_path, capsys):
     from foveated_mi import perceptual
     whole = "over the whole frame" if perceptual.available() else "for full-frame PSNR "
     assert whole in head[0] and "(fovea PSNR " in head[0]
-    # the picture of what the sentence compares: reference | vr | baseline at 32x18 each
+    # vr and uniform at one budget: its sentence, its stats and its labelled picture
+    _check_at_budget(out, text)
     _check_side_by_side(out, text)
     hrows = (out / "headset" / "results.csv").read_text().splitlines()
     assert len(hrows) == 1 + 3 * (3 * 2 + 4 - (0 if _oidn() else 2) + 2 * 2 * 2)
@@ -96,18 +97,60 @@ def _oidn():
     return oidn_available()
 
 
+def _check_at_budget(out, text):
+    """Both sides ran at one budget, the uniform 1 spp + history + denoiser frame-16 rows'
+    median time; the sentence names it and judges beyond the fovea."""
+    import csv
+    from foveated_mi import perceptual
+    from foveated_mi.demo import BUDGET_FRAMES
+    rows = list(csv.DictReader((out / "headset" / "results.csv").open()))
+    fam = sorted({r["method"] for r in rows if r["method"].startswith("uniform+history+")})[0]
+    budget = float(np.median([float(r["time_ms"]) for r in rows if r["method"] == fam
+                              and float(r["spp"]) == 1 and float(r["frame"]) == 16]))
+    rec = json.loads((out / "headset" / "at_budget.json").read_text())
+    assert rec["budget_ms"] == pytest.approx(budget, rel=1e-12)
+    sides = rec["sides"]
+    assert "vr (frame_ms)" in sides and rec["compared"] in sides and len(sides) >= 2
+    for name, side in sides.items():
+        assert len(side["stats"]) == BUDGET_FRAMES, name
+        assert all(s["budget_ms"] == rec["budget_ms"] and s["measured_ms"] > 0
+                   for s in side["stats"]), name
+    assert all("ray_budget" in s for s in sides["vr (frame_ms)"]["stats"])
+    assert all(0 < s["scale"] <= 1 for s in sides[rec["compared"]]["stats"])
+    [line] = [s for s in text.splitlines() if s.startswith("At one frame budget of ")]
+    assert line.startswith(f"At one frame budget of {budget:.0f} ms, vr held ")
+    assert f" and {rec['compared']} held " in line
+    # what the budget bought: video JOD where the extra runs, and the rings, never the fovea
+    # alone (the film spans 100 degrees: every ring out to 35 degrees and beyond has pixels)
+    assert ("video JOD" in line) == perceptual.available()
+    rings = ["0-5°", "5-10°", "10-20°", "20-35°", "35°+"]
+    assert all(f"{r} " in line for r in rings), line
+    assert list(sides["vr (frame_ms)"]["rings"]) == rings
+
+
 def _check_side_by_side(out, text):
-    """The demo's picture: three 32x18 panels, its path printed; the first panel is the
-    cached reference in display values with the gaze ringed, the others rendered frames."""
+    """The demo's picture: a label band over three 32x18 panels, its path printed; the first
+    panel is the cached reference in display values with the gaze ringed, the others
+    rendered frames, each labelled (the band is the labels' text, drawn on every panel)."""
     import imageio.v3 as iio
     from foveated_mi.render import to_display
-    from foveated_mi.study.pictures import RING_COLOUR, mark_gaze
+    from foveated_mi.study.pictures import LABEL_HEIGHT, RING_COLOUR, label_band, mark_gaze
     png = out / "headset" / "side_by_side.png"
-    [line] = [s for s in text.splitlines() if s.startswith("Side by side (reference | ")]
-    assert line.endswith(str(png)) and "| foveated (vr) " in line and "| uniform+history+" in line
+    [line] = [s for s in text.splitlines() if s.startswith("Side by side at one budget (")]
+    assert line.endswith(str(png))
+    labels = line.split("(", 1)[1].split("; frame ")[0].split(" | ")
+    assert labels[0] == "reference (256 spp)" and labels[1].startswith("vr at ")
+    assert labels[2].startswith("uniform") and labels[2].endswith(" ms")
+    rec = json.loads((out / "headset" / "at_budget.json").read_text())
+    assert rec["labels"] == labels
     assert f"picture: {png}" in text
     img = iio.imread(png)
-    assert img.shape == (18, 3 * 32, 3) and img.dtype == np.uint8
+    assert img.shape == (LABEL_HEIGHT + 18, 3 * 32, 3) and img.dtype == np.uint8
+    band, img = img[:LABEL_HEIGHT], img[LABEL_HEIGHT:]
+    assert np.array_equal(band, label_band(labels, 32))
+    for k in range(3):                   # text drawn over every panel, and not the same text
+        assert band[:, 32 * k:32 * (k + 1)].any()
+    assert not np.array_equal(band[:, 32:64], band[:, 64:96])
     [ref] = [np.load(p) for p in (out / "headset" / "references").glob("*.npy")]
     # 100 degrees over 32 px: 0.3 px per degree, so the 5-degree ring takes its 3-px minimum
     want = (np.clip(mark_gaze(to_display(ref), (0.5, 0.5), 3), 0, 1) * 255 + 0.5).astype(np.uint8)
@@ -322,3 +365,35 @@ def test_the_headset_sentence_without_jod_judges_the_whole_frame():
     # against 40 ms, the same on every seed; a fovea far below the baseline's changes nothing
     text = headset_sentence(aggregate(_psnr_rows(vr_psnr=31.0, vr_fovea=20.0)), "psnr")
     assert "needs ×3.54 ± 0.00 that time for the same full-frame PSNR (foveation paid;" in text
+
+
+def test_ring_psnr_pools_each_ring_s_errors_over_the_frames():
+    from foveated_mi.demo import ring_psnr
+    ecc = np.tile(np.arange(8, dtype=np.float64) * 6.0, (4, 1))     # 0, 6, ..., 42 degrees
+    ref = np.full((4, 8, 3), 0.5)
+    err = np.where(ecc < 5, 0.1, np.where(ecc < 20, 0.01, 0.001))[..., None]
+    frames = np.stack([ref + err, ref - err])
+    out = ring_psnr(ref, frames, ecc)
+    assert list(out) == ["0-5°", "5-10°", "10-20°", "20-35°", "35°+"]
+    # PSNR = 10 log10(1 / e^2) for a constant error e, to float64 rounding
+    np.testing.assert_allclose(list(out.values()), [20.0, 40.0, 40.0, 60.0, 60.0], rtol=1e-12)
+    with pytest.raises(Exception) as e:
+        ring_psnr(ref, frames[0], ecc)
+    assert "frames" in str(e.value) and "\n" not in str(e.value)
+
+
+def test_the_budget_sentence_reads_jod_and_every_ring_never_the_fovea_alone():
+    from foveated_mi.demo import budget_sentence
+    rings = {"0-5°": 30.0, "5-10°": 28.0, "35°+": 25.0}
+    fig = {"vr": {"held_ms": 50.0, "chose": "2 spp at 20% of the rays", "rings": rings},
+           "u": {"held_ms": 52.0, "chose": "1 spp at render scale 0.71",
+                 "rings": {k: v - 2.0 + (k == "35°+") * 3.0 for k, v in rings.items()}}}
+    text = budget_sentence(55.0, "vr", "u", fig, 0)
+    assert text.startswith("At one frame budget of 55 ms, vr held 50 ms (2 spp at 20% of the "
+                           "rays) and u held 52 ms (1 spp at render scale 0.71)")
+    assert "PSNR ring by ring of eccentricity 0-5° +2.0 dB, 5-10° +2.0 dB, 35°+ -1.0 dB" \
+        in text
+    assert "JOD" not in text
+    fig["vr"]["jod"], fig["u"]["jod"] = 8.1, 7.6
+    assert "+0.50 video JOD (8.10 against 7.60) and, ring by ring of eccentricity, PSNR 0-5° " \
+        "+2.0 dB" in budget_sentence(55.0, "vr", "u", fig, 0)

@@ -1,9 +1,10 @@
 """Pictures of a study's frames: frames side by side, the gaze ringed at the fovea's radius
-(``foveated-mi demo`` and ``benchmarks/bench_vr.py``).
+(``foveated-mi demo`` and ``foveated-mi study report``).
 
 Panels are display-referred (H, W, 3) images in [0, 1] (:func:`foveated_mi.render.to_display`),
 laid left to right at their own size; the ring is drawn on each at the gaze, in a red that
-the scenes' display values rarely hold.
+the scenes' display values rarely hold. Labels, when given, are written in a band above the
+panels (:func:`label_band`), so no pixel of a panel is covered.
 """
 from __future__ import annotations
 
@@ -15,10 +16,12 @@ import numpy as np
 from ..validate import ParameterError, check_point2, check_range
 
 __all__ = ["mark_gaze", "side_by_side", "ring_radius", "cached_reference",
-           "write_side_by_side", "RING_COLOUR"]
+           "write_side_by_side", "label_band", "RING_COLOUR", "LABEL_HEIGHT"]
 
 #: The gaze ring's colour (display values).
 RING_COLOUR = (1.0, 0.2, 0.1)
+#: Height in pixels of the band that holds the panels' labels.
+LABEL_HEIGHT = 14
 
 
 def mark_gaze(img: np.ndarray, gaze, radius: float) -> np.ndarray:
@@ -127,7 +130,39 @@ def cached_reference(spec, out: str, variant: str, scene: int = 0) -> np.ndarray
                                 f"{s.label}-{reference_key(s, variant)}.npy"))
 
 
-def write_side_by_side(path: str, panels: Sequence[np.ndarray], gaze, radius: float) -> str:
+def label_band(labels: Sequence[str], width: int) -> np.ndarray:
+    """A black band of :data:`LABEL_HEIGHT` pixels with ``labels[k]`` written in white over
+    columns ``k * width`` to ``(k + 1) * width`` (Pillow's default font), each clipped to its
+    own columns.
+
+    Parameters
+    ----------
+    labels : sequence of str
+        One label per panel.
+    width : int
+        A panel's width in pixels (>= 1).
+
+    Returns
+    -------
+    band : numpy.ndarray
+        uint8 (LABEL_HEIGHT, len(labels) * width, 3).
+    """
+    from PIL import Image, ImageDraw, ImageFont
+    from ..validate import check_int
+    width = check_int("width", width, 1)
+    if isinstance(labels, str) or not all(isinstance(t, str) for t in labels) or not labels:
+        raise ParameterError("labels", labels, "one or more strings, one per panel")
+    font = ImageFont.load_default(size=LABEL_HEIGHT - 3)
+    band = np.zeros((LABEL_HEIGHT, len(labels) * width, 3), np.uint8)
+    for k, text in enumerate(labels):
+        tile = Image.new("RGB", (width, LABEL_HEIGHT))     # drawn on its own: clipped to it
+        ImageDraw.Draw(tile).text((2, 1), text, fill=(255, 255, 255), font=font)
+        band[:, k * width:(k + 1) * width] = np.asarray(tile)
+    return band
+
+
+def write_side_by_side(path: str, panels: Sequence[np.ndarray], gaze, radius: float,
+                       labels: Sequence[str] | None = None) -> str:
     """:func:`side_by_side` written to ``path`` as a PNG, atomically.
 
     Parameters
@@ -136,6 +171,8 @@ def write_side_by_side(path: str, panels: Sequence[np.ndarray], gaze, radius: fl
         The PNG's path.
     panels, gaze, radius
         As for :func:`side_by_side`.
+    labels : sequence of str or None, optional
+        One per panel, written in a band above them (:func:`label_band`); None: no band.
 
     Returns
     -------
@@ -145,6 +182,10 @@ def write_side_by_side(path: str, panels: Sequence[np.ndarray], gaze, radius: fl
     import imageio.v3 as iio
     from ..io import atomic_write
     strip = side_by_side(panels, gaze, radius)
+    if labels is not None:
+        if len(labels) != len(panels):
+            raise ParameterError("labels", labels, f"{len(panels)} labels, one per panel")
+        strip = np.concatenate([label_band(labels, strip.shape[1] // len(panels)), strip])
     with atomic_write(path) as tmp:
         iio.imwrite(tmp, strip, extension=".png")
     return path
