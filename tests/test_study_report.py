@@ -314,3 +314,14 @@ def test_timing_passes_replace_the_times_and_say_so(bench, monkeypatch):
             assert seen["keep"]({"method": "uniform+history", "options": {}})
         else:
             assert seen["keep"] is None
+
+
+def test_a_fixed_foveation_row_is_a_configuration_of_its_own():
+    """Rows that differ only in ``eye_tracking`` are two configurations in every table (the
+    config column holds it beside the options)."""
+    from foveated_mi.study.report import label
+    opts = {"preset": "vr", "ray_budget": 0.2}
+    tracked = {"method": "foveated", "spp": 2.0, "config": json.dumps({"options": opts})}
+    fixed = {**tracked, "config": json.dumps({"options": opts, "eye_tracking": False})}
+    assert label(tracked) == "vr 2 spp, ray_budget 0.2"
+    assert label(fixed) == "vr 2 spp, ray_budget 0.2, fixed foveation"

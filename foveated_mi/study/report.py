@@ -147,10 +147,13 @@ def _scene_name(s: dict) -> str:
 
 def label(row: dict) -> str:
     if row["method"] == "foveated":
-        opts = json.loads(row["config"]).get("options", {})
-        # The options set besides the preset tell two rows of one preset apart.
+        config = json.loads(row["config"])
+        opts = config.get("options", {})
+        # The options set besides the preset tell two rows of one preset apart, and so does
+        # a row rendered at the lens centre whatever the eye does.
         rest = "".join(f", {k} {v}" for k, v in sorted(opts.items()) if k != "preset")
-        return f"{opts.get('preset', 'auto')} {row['spp']:.0f} spp{rest}"
+        fixed = ", fixed foveation" if config.get("eye_tracking") is False else ""
+        return f"{opts.get('preset', 'auto')} {row['spp']:.0f} spp{rest}{fixed}"
     return f"{row['method']} {row['spp']:.0f} spp"
 
 
