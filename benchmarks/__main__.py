@@ -2,9 +2,11 @@
 
 ``python -m benchmarks --list`` lists the suite; ``python -m benchmarks NAME --help`` gives a
 benchmark's flags. Every benchmark is a module of this folder with ``main(argv)``, listed in
-:data:`SUITE`; each writes its results (``--out`` or ``--json``) through
-:func:`common.write_json`, which adds the machine, its CPU model, the commit, the date and the
-variant under ``run``. ``make bench`` runs the default set (:data:`DEFAULT`).
+:data:`SUITE`; each builds its command line with :func:`common.parser` (``--variant`` and
+``--out``, shared), sets its variant with :func:`common.setup`, and writes its results
+(``--out``) through :func:`common.write_json`, which adds the machine, its CPU model, the
+commit, the date and the variant under ``run``. ``make bench`` runs the default set
+(:data:`DEFAULT`).
 """
 from __future__ import annotations
 

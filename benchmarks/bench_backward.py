@@ -8,7 +8,7 @@ parameter, path length 4, 4 spp; foveated with θ = 0.1, σp = 0.8 and the diffe
 ``mi.render(scene, params)`` and ``dr.backward`` of the image mean, timed with a sync at the end.
 The primal frame alone is timed the same way, so ``backward ms`` = step − primal is what the
 gradient pass costs. Peak memory is the process's high-water mark minus its size after loading
-the scene.
+the scene. The rows go to ``--out`` under ``rows``, each child running the parent's variant.
 
     python benchmarks/bench_backward.py --sizes 256 1024 --out out/bench_backward.json
 """
@@ -22,6 +22,8 @@ import statistics
 import subprocess
 import sys
 import time
+
+from common import parser, setup, write_json
 
 CONFIGS = {
     "foveated(prb)": {"nested": "prb", "foveated": True},
@@ -87,13 +89,13 @@ def child(name: str, size: int, spp: int, repeats: int) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, out=os.path.join("out", "bench_backward.json"))
     ap.add_argument("--sizes", type=int, nargs="+", default=[256, 1024])
     ap.add_argument("--spp", type=int, default=4)
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--out", default=os.path.join("out", "bench_backward.json"))
     ap.add_argument("--child", nargs=2, metavar=("CONFIG", "SIZE"), help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
+    variant = setup(a)          # each child runs the parent's variant
     if a.child:
         print(json.dumps(child(a.child[0], int(a.child[1]), a.spp, a.repeats)))
         return 0
@@ -101,7 +103,8 @@ def main(argv=None) -> int:
     for size in a.sizes:
         for name in CONFIGS:
             p = subprocess.run([sys.executable, os.path.abspath(__file__), "--child", name,
-                                str(size), "--spp", str(a.spp), "--repeats", str(a.repeats)],
+                                str(size), "--spp", str(a.spp), "--repeats", str(a.repeats),
+                                "--variant", variant],
                                capture_output=True, text=True)
             if p.returncode != 0:
                 err = (p.stderr.strip().splitlines() or ["?"])[-1]
@@ -119,9 +122,7 @@ def main(argv=None) -> int:
         print(f"| {r['size']}² | {r['config']} | {r['ray_fraction']:.0%} | {r['primal_ms']:.0f} "
               f"| {r['step_ms']:.0f} | {r['backward_ms']:.0f} | {r['peak_mib']:.0f} "
               f"| {', '.join(f'{v:.4f}' for v in r['grad'])} |")
-    os.makedirs(os.path.dirname(a.out) or ".", exist_ok=True)
-    with open(a.out, "w") as f:
-        json.dump(rows, f, indent=2)
+    write_json(a.out, rows)
     return 1 if any("error" in r for r in rows) else 0
 
 

@@ -16,17 +16,16 @@ display values (:func:`foveated_mi.render.to_display`) and on linear values clip
 """
 from __future__ import annotations
 
-import argparse
 import functools
 import sys
 
 import numpy as np
 
 
-import foveated_mi  # noqa: E402
+import foveated_mi  # noqa: E402,F401  (a variant and the integrator on import)
 import mitsuba as mi  # noqa: E402
 
-from common import machine, md_table, parse_sets, write_json  # noqa: E402
+from common import machine, md_table, parse_sets, parser, setup, write_json  # noqa: E402
 
 #: The camera moves after the still frames: ``closer`` (the default: several pixels land in
 #: one previous pixel), ``away`` (the box shrinks and the sky around it appears) and ``turn``.
@@ -99,7 +98,7 @@ def camera_move(preset: str, still: int, seed: int, size: int = 64, ref_spp: int
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = parser(__doc__)
     p.add_argument("--presets", nargs="+", default=["guided", "oidn"])
     p.add_argument("--history", nargs="+", type=int, default=[1, 4, 32])
     p.add_argument("--seeds", nargs="+", type=int, default=[5])
@@ -110,10 +109,8 @@ def main(argv=None) -> int:
     p.add_argument("--set", action="append", default=[], metavar="OPTION=VALUE",
                    help="an option of the foveated integrator for every row, over the "
                    "preset's (a Python literal, e.g. --set foveal_jitter=0.5); repeatable")
-    p.add_argument("--variant")
-    p.add_argument("--out", help="JSON results")
     a = p.parse_args(argv)
-    foveated_mi.set_variant(a.variant)
+    setup(a)
     extra = {"reprojection": a.reprojection} if a.reprojection else {}
     extra.update(parse_sets(a.set))
     rows = [camera_move(pr, n, s, a.size, a.ref_spp, move=mv, **extra)

@@ -25,14 +25,13 @@ against a full render at the same spp. Times are medians of 3 repeats after a wa
 ``FoveatedIntegrator(timing=True)`` (stage boundaries synchronised) and
 ``baselines.render_uniform``; on a CPU they are comparable only within one run.
 
-    python benchmarks/bench_equal_time.py [--size 640 360] [--out out/equal_time]
+    python benchmarks/bench_equal_time.py [--size 640 360] [--study-out out/equal_time]
 
 The study resumes: a second run only re-renders what ``out/equal_time/results.csv`` lacks
-(delete it to re-measure).
+(delete it to re-measure). ``--out FILE`` also writes the study's rows as JSON.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
@@ -43,6 +42,7 @@ import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
+from common import parser, setup, write_json  # noqa: E402
 from common import pm as _pm  # noqa: E402
 
 STUDY = os.path.join(HERE, "..", "configs", "studies", "equal_time.toml")
@@ -85,15 +85,16 @@ def rows_table(rows: list[dict]) -> list[str]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, out_help="write the study's rows to this JSON file")
     ap.add_argument("--size", type=int, nargs=2, default=None, metavar=("W", "H"),
                     help="film size (default: the study's 640 360)")
-    ap.add_argument("--out", default=os.path.join("out", "equal_time"))
+    ap.add_argument("--study-out", default=os.path.join("out", "equal_time"), metavar="DIR",
+                    help="the study's folder: its results.csv, references and plots")
     ap.add_argument("--results", default=RESULTS, help="where the tables and plots go")
     ap.add_argument("--no-progress", action="store_true")
     a = ap.parse_args(argv)
 
-    import foveated_mi  # noqa: F401
+    variant = setup(a)
     import mitsuba as mi
     from foveated_mi.demo import film_preset
     from foveated_mi.study import run_study
@@ -101,12 +102,12 @@ def main(argv=None) -> int:
     from foveated_mi.study.pareto import plot_pareto
 
     t0 = time.perf_counter()
-    res = run_study(STUDY, out=a.out, size=tuple(a.size) if a.size else None,
-                    progress=not a.no_progress)
+    res = run_study(STUDY, out=a.study_out, size=tuple(a.size) if a.size else None,
+                    variant=variant, progress=not a.no_progress)
     rows = res.rows
     os.makedirs(a.results, exist_ok=True)
     for metric, name in (("psnr_fovea", "fovea"), ("psnr", "full")):
-        d = os.path.join(a.out, f"pareto_{name}")
+        d = os.path.join(a.study_out, f"pareto_{name}")
         os.makedirs(d, exist_ok=True)
         png, svg = plot_pareto(rows, metric, d, title=f"Equal time: {metric} against time per frame")
         shutil.copy(png, os.path.join(a.results, f"equal_time_pareto_{name}.png"))
@@ -136,6 +137,7 @@ def main(argv=None) -> int:
     with open(os.path.join(a.results, "equal_time.md"), "w") as f:
         f.write("\n".join(lines))
     print("\n".join(lines[:lines.index("## Every row")]))
+    write_json(a.out, {"rows": rows, "failed": res.failed, "warnings": res.warnings})
     print(f"written {os.path.join(a.results, 'equal_time.md')} in {time.perf_counter() - t0:.0f} s")
     return 1 if res.failed else 0
 

@@ -14,16 +14,15 @@ buffer), at frame 1 and frame N, and the gains.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 
 import numpy as np
 
 
-import foveated_mi  # noqa: E402
+import foveated_mi  # noqa: E402,F401  (a variant and the integrator on import)
 import mitsuba as mi  # noqa: E402
 
-from common import machine, md_table, write_json  # noqa: E402
+from common import machine, md_table, parser, setup, write_json  # noqa: E402
 
 FILTERS = ("box", "gaussian", "tent", "mitchell", "lanczos")
 
@@ -64,17 +63,15 @@ def history_gain(rfilter: str, seed: int, size: int, frames: int) -> dict:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = parser(__doc__)
     p.add_argument("--filters", nargs="+", default=["box", "gaussian"], choices=FILTERS)
     p.add_argument("--seeds", nargs="+", type=int, default=[5, 6, 7])
     p.add_argument("--size", type=int, default=64)
     p.add_argument("--frames", type=int, default=32)
-    p.add_argument("--variant")
-    p.add_argument("--out", help="JSON results")
     a = p.parse_args(argv)
     if a.size < 8 or a.frames < 2:
         p.error(f"--size must be >= 8 (got {a.size}) and --frames >= 2 (got {a.frames})")
-    foveated_mi.set_variant(a.variant)
+    setup(a)
     rows = [history_gain(f, s, a.size, a.frames) for f in a.filters for s in a.seeds]
     print(md_table(["film filter", "seed", "linear frame 1", f"linear frame {a.frames}", "gain",
                     "display frame 1", f"display frame {a.frames}", "gain"],

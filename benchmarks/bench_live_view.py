@@ -15,15 +15,13 @@ page's own socket:
   protocol, for a machine without a browser: the same rates and latency, without drawing.
 
     python benchmarks/bench_live_view.py                      # voxel-city 480x270, vr, 1 spp
-    python benchmarks/bench_live_view.py --client python --seconds 5 --json out/live.json
+    python benchmarks/bench_live_view.py --client python --seconds 5 --out out/live.json
 
 Targets: at least 15 frames per second with the split view off, and a gaze latency of at most
 two frame times (the frame being rendered when the gaze moves, then the frame with it).
 """
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import os
 import re
@@ -37,6 +35,8 @@ import time
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, "tests"))   # the browser helper the tests use
+
+from common import parser, setup, write_json  # noqa: E402
 
 TARGET_FPS = 15.0
 TARGET_LATENCY_FRAMES = 2.0
@@ -187,7 +187,8 @@ def fmt(v, f=".1f"):
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = parser(__doc__, out_help="write the figures to this JSON file")
+    p.add_argument("--json", dest="out", help="the same as --out")
     p.add_argument("--scene", default="voxel-city")
     p.add_argument("--size", type=int, nargs=2, default=[480, 270])
     p.add_argument("--preset", default="vr")
@@ -199,9 +200,8 @@ def main(argv=None) -> int:
                    "selenium's pointer actions through chromedriver")
     p.add_argument("--max-fps", type=float, default=60.0, dest="max_fps",
                    help="the server's frame cap (its default 60; 0: none)")
-    p.add_argument("--variant")
-    p.add_argument("--json", help="write the figures here")
     args = p.parse_args(argv)
+    args.variant = setup(args)        # the server renders with the same variant
 
     load_before = os.getloadavg()[0]
     proc, url = start_server(args)
@@ -219,9 +219,7 @@ def main(argv=None) -> int:
     m = re.search(r"stopped after (\d+) frames", tail)
     results["frames_rendered"] = int(m.group(1)) if m else None
     results["load_average_1min"] = [load_before, os.getloadavg()[0]]
-    import foveated_mi  # noqa: F401  (picks the variant the server picked by default)
-    import mitsuba as mi
-    results["variant"] = args.variant or mi.variant()
+    results["variant"] = args.variant
 
     print(f"live view, {args.scene} {args.size[0]}x{args.size[1]}, preset {args.preset}, "
           f"{args.spp} spp, {results['variant']}, {os.cpu_count()} cores, frame cap "
@@ -251,10 +249,7 @@ def main(argv=None) -> int:
                   f"{TARGET_FPS:g} {'met' if ok_fps else 'missed'}; median gaze latency "
                   f"{fmt(r['latency_frames_median'], '.2f')} frame times: target <= "
                   f"{TARGET_LATENCY_FRAMES:g} {'met' if ok_lat else 'missed'}")
-    if args.json:
-        os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
-        with open(args.json, "w") as f:
-            json.dump(results, f, indent=2, default=lambda v: None)
+    write_json(args.out, results, default=lambda v: None)
     return 0
 
 

@@ -54,7 +54,6 @@ not replayed, their passes' tracing in Python).
 """
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import sys
@@ -64,9 +63,9 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-import foveated_mi
-from common import (calibrate_theta, machine, md_table, median, parse_sets, preset_edges,
-                    write_json)
+import foveated_mi  # noqa: F401  (a variant and the integrator on import)
+from common import (calibrate_theta, machine, md_table, median, parse_sets, parser, preset_edges,
+                    setup, write_json)
 
 SHARED = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "scenes")
 STAIRCASE = os.path.join(SHARED, "staircase", "scene.xml")
@@ -298,7 +297,7 @@ def run_case(name: str, spec: dict, *, scale: float, frames: int, warmup: int,
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = parser(__doc__)
     p.add_argument("--cases", nargs="+", default=list(DEFAULT_CASES), choices=list(CASES),
                    help="default: " + " ".join(DEFAULT_CASES))
     p.add_argument("--scale", type=float, default=1.0, help="film size multiplier (default 1)")
@@ -314,8 +313,6 @@ def main(argv=None):
     p.add_argument("--kernels", action="store_true",
                    help="also list one timed frame's kernels stage by stage (ms, width, "
                         "operations)")
-    p.add_argument("--variant")
-    p.add_argument("--out", help="JSON results")
     a = p.parse_args(argv)
     try:
         overrides = parse_sets(a.set)
@@ -324,7 +321,7 @@ def main(argv=None):
     if not (a.scale > 0 and a.frames >= 1 and a.warmup >= 0):
         p.error(f"--scale must be > 0 (got {a.scale}), --frames >= 1 (got {a.frames}), "
                 f"--warmup >= 0 (got {a.warmup})")
-    foveated_mi.set_variant(a.variant)
+    setup(a)
     rows, results = [], []
     for name in a.cases:
         spec = CASES[name]

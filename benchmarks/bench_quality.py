@@ -12,19 +12,18 @@ SSIM ≈ 0.8 at about 5 % rays.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-import foveated_mi
-from common import machine, md_table, scene_with_reference, timed, write_json
+import foveated_mi  # noqa: F401  (a variant and the integrator on import)
+from common import machine, md_table, parser, scene_with_reference, setup, timed, write_json
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = parser(__doc__)
     p.add_argument("--scene", default="voxel-city")
     p.add_argument("--size", type=int, nargs=2, default=(1024, 1024))
     p.add_argument("--thetas", type=float, nargs="+", default=(0.04, 0.1, 0.2))
@@ -34,10 +33,8 @@ def main(argv=None):
     p.add_argument("--max-radius", type=int, default=32)
     p.add_argument("--methods", nargs="+",
                    default=("voronoi", "sibson", "fast_sibson", "discrete_sibson"))
-    p.add_argument("--variant")
-    p.add_argument("--out")
     a = p.parse_args(argv)
-    foveated_mi.set_variant(a.variant)
+    setup(a)
     from foveated_mi import reconstruct as rec
     from foveated_mi.frame.gbuffer import render_gbuffer
     from foveated_mi.metrics import psnr, ssim

@@ -17,8 +17,6 @@ turns in every repetition so that load from other processes affects them alike.
 """
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import os
 import platform
@@ -29,7 +27,7 @@ import time
 import numpy as np
 
 
-import foveated_mi  # noqa: E402
+from common import parser as bench_parser, setup, write_json  # noqa: E402
 
 FRACTIONS = (0.01, 0.02, 0.05, 0.10, 0.20, 0.50)
 SIGMA_P = 0.8
@@ -84,11 +82,9 @@ def time_round_robin(fns: dict, inputs, repeats: int) -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = bench_parser(__doc__, out_help="write all results to this JSON file")
     parser.add_argument("--size", type=int, default=1024, help="film width = height (default 1024)")
     parser.add_argument("--repeats", type=int, default=5, help="timed calls per case (default 5)")
-    parser.add_argument("--out", default=None, help="write all results to this JSON file")
-    parser.add_argument("--variant", default=None, help="Mitsuba variant (default: foveated_mi's choice)")
     parser.add_argument("--max-radius", type=int, default=32, help="max_radius of the interpolation")
     parser.add_argument("--jfa-variant", default="jfa+1", help="JFA step sequence (default jfa+1)")
     parser.add_argument("--fractions", default=",".join(str(f) for f in FRACTIONS),
@@ -105,7 +101,7 @@ def main(argv=None) -> int:
     if not all(0 < f <= 1 for f in fractions):
         parser.error(f"--fractions = {args.fractions!r}: expected comma-separated numbers in (0, 1]")
 
-    variant = foveated_mi.set_variant(args.variant)
+    variant = setup(args)
     import drjit as dr
     import mitsuba as mi
     from foveated_mi.reconstruct import RECONSTRUCTIONS, Guide, jump_flood, reconstruct
@@ -167,13 +163,10 @@ def main(argv=None) -> int:
                      f"{paper['sibson_over_jfa'] <= 3.0} ({paper['sibson_over_jfa']:.2f} x)")
     table = "\n".join(lines)
     print(table)
-    if args.out:
-        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-        with open(args.out, "w") as f:
-            json.dump({"size": size, "variant": variant, "repeats": args.repeats,
-                       "max_radius": args.max_radius, "jfa_variant": args.jfa_variant,
-                       "machine": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
-                       "rows": rows, "markdown": table}, f, indent=2)
+    write_json(args.out, {"size": size, "variant": variant, "repeats": args.repeats,
+                          "max_radius": args.max_radius, "jfa_variant": args.jfa_variant,
+                          "machine": platform.processor() or platform.machine(),
+                          "cpu_count": os.cpu_count(), "rows": rows, "markdown": table})
     return 0
 
 

@@ -17,20 +17,19 @@ compiled from the second timed frame on (Dr.Jit kernel history; target 0).
 """
 from __future__ import annotations
 
-import argparse
 import sys
 
 import drjit as dr
 import mitsuba as mi
 
-import foveated_mi
-from common import calibrate_theta, machine, md_table, median, preset_edges, timed, write_json
+from common import (calibrate_theta, machine, md_table, median, parser, preset_edges, setup, timed,
+                    write_json)
 
 MODES = ("none", "rows", "rows_blocks", "compact", "tiles")
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = parser(__doc__)
     p.add_argument("--scene", default="voxel-city")
     p.add_argument("--size", type=int, nargs=2, default=(1024, 1024))
     p.add_argument("--fraction", type=float, default=0.10, help="target ray fraction")
@@ -39,10 +38,8 @@ def main(argv=None):
     p.add_argument("--max-depth", type=int, default=3)
     p.add_argument("--frames", type=int, default=5)
     p.add_argument("--warmup", type=int, default=2)
-    p.add_argument("--variant")
-    p.add_argument("--out", help="JSON results")
     a = p.parse_args(argv)
-    foveated_mi.set_variant(a.variant)
+    setup(a)
     from foveated_mi.integrators.foveated import FoveatedIntegrator
     from foveated_mi.scenes import load_scene
 

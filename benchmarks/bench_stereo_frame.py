@@ -29,15 +29,14 @@ is frame cost only; at equal per-eye video JOD, run ``foveated-mi study report -
 """
 from __future__ import annotations
 
-import argparse
 import sys
 
 import mitsuba as mi
 import numpy as np
 
-import foveated_mi
+import foveated_mi  # noqa: F401  (a variant and the integrator on import)
 from bench_overhead import _forced, _orbit
-from common import machine, md_table, median, write_json
+from common import machine, md_table, median, parser, setup, write_json
 
 CASES = ("full", "vr one eye", "vr stereo", "vr stereo, no reuse")
 
@@ -128,7 +127,7 @@ def run(scene_name: str, headset_name: str, eye_width: int, *, spp: int, max_dep
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = parser(__doc__)
     p.add_argument("--scene", default="voxel-city")
     p.add_argument("--headset", default="quest3", help="a headset (foveated-mi headsets)")
     p.add_argument("--eye-width", type=int, default=640, dest="eye_width",
@@ -142,8 +141,6 @@ def main(argv=None):
     p.add_argument("--warmup", type=int, default=3)
     p.add_argument("--stages", action="store_true",
                    help="also time each eye's stages (module docstring)")
-    p.add_argument("--variant")
-    p.add_argument("--out", help="JSON results")
     a = p.parse_args(argv)
     bad = [f"{n} {v} (allowed: {ok})" for n, v, good, ok in (
         ("--eye-width", a.eye_width, a.eye_width == 0 or a.eye_width >= 16, "0 or >= 16"),
@@ -154,7 +151,7 @@ def main(argv=None):
         ("--warmup", a.warmup, a.warmup >= 0, ">= 0")) if not good]
     if bad:
         p.error("; ".join(bad))
-    foveated_mi.set_variant(a.variant)
+    setup(a)
     r = run(a.scene, a.headset, a.eye_width, spp=a.spp, max_depth=a.max_depth,
             ray_budget=a.ray_budget, orbit=a.orbit, frames=a.frames, warmup=a.warmup,
             stages=a.stages)

@@ -5,14 +5,15 @@ for each configuration, the display-referred PSNR (clip, gamma 2.2) against a re
 the last frame's (mean over seeds), the largest fall from a frame to any of the next 4
 (mean and worst over seeds), the traced fraction, and the first seed's sequence.
 
-    python benchmarks/bench_still_view.py --size 64 --seeds 5 6 7 8 9 10 11 12
+    python benchmarks/bench_still_view.py --size 64 --seeds 5 6 7 8 9 10 11 12 [--out FILE]
 
 The default scene is Mitsuba's Cornell box (Gaussian film filter, the light in the
-periphery); ``--scene`` takes a built-in name or an XML path instead.
+periphery); ``--scene`` takes a built-in name or an XML path instead. ``--out`` writes the
+table's rows as JSON (every seed's sequence of PSNRs too).
 """
 from __future__ import annotations
 
-import argparse
+import sys
 
 import numpy as np
 
@@ -23,6 +24,8 @@ import mitsuba as mi  # noqa: E402
 from foveated_mi.denoise import oidn_available  # noqa: E402
 from foveated_mi.integrators.foveated import FoveatedIntegrator  # noqa: E402
 from foveated_mi.scenes import load_scene  # noqa: E402
+
+from common import parser, setup, write_json  # noqa: E402
 
 CONFIGS = {
     "oidn": dict(preset="oidn"),
@@ -44,8 +47,8 @@ def largest_drop(ps: list[float]) -> float:
     return max(ps[i] - min(ps[i + 1:i + 1 + WINDOW]) for i in range(len(ps) - 1))
 
 
-def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv=None) -> int:
+    ap = parser(__doc__, out_help="write the table's rows to this JSON file")
     ap.add_argument("--scene", default=None, help="built-in name or XML path (default: "
                     "Mitsuba's Cornell box)")
     ap.add_argument("--size", default="64", help="W or WxH")
@@ -56,6 +59,7 @@ def main(argv=None) -> None:
     ap.add_argument("--ref-spp", type=int, default=512)
     ap.add_argument("--configs", nargs="+", default=list(CONFIGS), choices=list(CONFIGS))
     a = ap.parse_args(argv)
+    setup(a)
     w, h = (int(v) for v in (a.size.lower().split("x") * 2)[:2])
     if a.scene is None:
         d = mi.cornell_box()
@@ -69,11 +73,12 @@ def main(argv=None) -> None:
     print("| configuration | last frame (dB) | largest 4-frame drop, mean / worst (dB) | "
           "traced | first seed's sequence |")
     print("|---|---|---|---|---|")
+    rows = []
     for name in a.configs:
         cfg = CONFIGS[name]
         if cfg["preset"] == "oidn" and not oidn_available():
             continue
-        last, drops, seq, traced = [], [], None, []
+        last, drops, seqs, traced = [], [], [], []
         for seed in a.seeds:
             integ = FoveatedIntegrator(nested=scene.integrator(), theta=a.theta,
                                        sigma_p=a.sigma_p, **cfg)
@@ -84,10 +89,16 @@ def main(argv=None) -> None:
                 traced.append(integ.stats["ray_fraction"])
             last.append(ps[-1])
             drops.append(largest_drop(ps))
-            seq = seq or " ".join(f"{p:.1f}" for p in ps)
+            seqs.append(ps)
+        rows.append({"config": name, "last_db": float(np.mean(last)),
+                     "drop_db": float(np.mean(drops)), "worst_drop_db": max(drops),
+                     "traced": float(np.mean(traced)), "seeds": a.seeds, "psnr_db": seqs})
         print(f"| {name} | {np.mean(last):.2f} | {np.mean(drops):.2f} / {max(drops):.2f} | "
-              f"{np.mean(traced):.3f} | {seq} |", flush=True)
+              f"{np.mean(traced):.3f} | {' '.join(f'{p:.1f}' for p in seqs[0])} |", flush=True)
+    write_json(a.out, {"size": [w, h], "frames": a.frames, "theta": a.theta,
+                       "sigma_p": a.sigma_p, "ref_spp": a.ref_spp, "scene": a.scene, "rows": rows})
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

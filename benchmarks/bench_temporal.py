@@ -8,17 +8,17 @@ and 64 frames.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 
 import mitsuba as mi
 
-import foveated_mi
-from common import machine, md_table, median, scene_with_reference, timed, write_json
+import foveated_mi  # noqa: F401  (a variant and the integrator on import)
+from common import (machine, md_table, median, parser, scene_with_reference, setup, timed,
+                    write_json)
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = parser(__doc__)
     p.add_argument("--scene", default="voxel-city")
     p.add_argument("--size", type=int, nargs=2, default=(1024, 1024))
     p.add_argument("--theta", type=float, default=0.1)
@@ -26,10 +26,8 @@ def main(argv=None):
     p.add_argument("--frames", type=int, default=64)
     p.add_argument("--ref-spp", type=int, default=64)
     p.add_argument("--max-depth", type=int, default=3)
-    p.add_argument("--variant")
-    p.add_argument("--out")
     a = p.parse_args(argv)
-    foveated_mi.set_variant(a.variant)
+    setup(a)
     import numpy as np
     from foveated_mi.integrators.foveated import FoveatedIntegrator
     from foveated_mi.metrics import psnr, ssim

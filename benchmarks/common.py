@@ -2,10 +2,12 @@
 runs them (:mod:`benchmarks.__main__`)."""
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import platform
 import statistics
+import sys
 import time
 
 import drjit as dr
@@ -80,16 +82,62 @@ def run_info() -> dict:
             "mitsuba": mi.__version__, "drjit": dr.__version__}
 
 
-def write_json(path: str | None, payload: dict) -> None:
+def parser(doc: str, *, out: str | None = None,
+           out_help: str = "write the results to this JSON file") -> argparse.ArgumentParser:
+    """The command line every benchmark starts from: ``--variant`` and ``--out``.
+
+    Parameters
+    ----------
+    doc : str
+        The benchmark's docstring; its first line describes the command.
+    out : str or None, optional
+        The default of ``--out`` (None: write nothing unless asked).
+    out_help : str, optional
+        What ``--out`` names.
+
+    Returns
+    -------
+    parser : argparse.ArgumentParser
+        A parser to add the benchmark's own flags to.
+    """
+    p = argparse.ArgumentParser(description=doc.strip().splitlines()[0])
+    p.add_argument("--variant", help="Mitsuba variant (default: $FOVEATED_MI_VARIANT, else "
+                   "cuda_ad_rgb where CUDA works, else llvm_ad_rgb)")
+    p.add_argument("--out", default=out,
+                   help=out_help + (" (default %(default)s)" if out is not None else ""))
+    return p
+
+
+def setup(args: argparse.Namespace) -> str:
+    """Set the variant that ``args.variant`` names (None: the package's choice) and register
+    the ``foveated`` integrator for it; an unavailable variant exits with one line.
+
+    Returns
+    -------
+    variant : str
+        The variant set.
+    """
+    import foveated_mi
+    from foveated_mi.validate import ParameterError
+    try:
+        return foveated_mi.set_variant(args.variant)
+    except ParameterError as e:
+        sys.stderr.write(f"error: {e}\n")
+        raise SystemExit(2) from None
+
+
+def write_json(path: str | None, payload: dict | list, *, default=None) -> None:
     """``payload`` as JSON at ``path`` (nothing without one), with :func:`run_info` under
-    ``run``: the one output format of the benchmarks."""
+    ``run``: the one output format of the benchmarks. A list of rows is written as
+    ``{"rows": [...]}``; ``default`` is :func:`json.dump`'s, for values JSON lacks."""
     if not path:
         return
-    payload = {**payload, "run": run_info()}
+    rows = {"rows": payload} if isinstance(payload, list) else payload
+    payload = {**rows, "run": run_info()}
     from foveated_mi.io import atomic_write
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     with atomic_write(path, "w") as f:
-        json.dump(payload, f, indent=2)
+        json.dump(payload, f, indent=2, default=default)
 
 
 def md_table(header, rows) -> str:

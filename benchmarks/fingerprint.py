@@ -13,7 +13,6 @@ the JIT kernels launched per frame. Run it on two trees and compare:
 """
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import sys
@@ -27,6 +26,8 @@ import mitsuba as mi
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.scenes import apply_camera, camera_of, load_scene
 from foveated_mi.postprocess import DENOISERS
+
+from common import parser, setup, write_json
 
 #: name -> (options, scene, frames, moving camera)
 CONFIGS = {
@@ -124,16 +125,14 @@ def _same(ref, new) -> bool:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", help="write the fingerprints to this JSON file")
+    ap = parser(__doc__, out_help="write the fingerprints to this JSON file")
     ap.add_argument("--compare", help="compare against this JSON file; exit 1 on a difference")
     args = ap.parse_args(argv)
+    setup(args)
     result = {name: fingerprint(name) for name in CONFIGS}
     for nested in ("prb", "path"):
         result[f"gradient-{nested}"] = gradient_fingerprint(nested)
-    if args.out:
-        with open(args.out, "w") as f:
-            json.dump(result, f, indent=1)
+    write_json(args.out, result)
     if args.compare:
         with open(args.compare) as f:
             ref = json.load(f)

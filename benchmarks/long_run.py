@@ -8,7 +8,6 @@ fails. ``tests/test_long_run.py`` (marked ``slow``) runs it.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import sys
@@ -16,7 +15,7 @@ import sys
 import drjit as dr
 import mitsuba as mi
 
-import foveated_mi
+from common import parser, setup, write_json
 
 
 def rss_mib() -> float:
@@ -37,15 +36,13 @@ def finite(v) -> bool:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = parser(__doc__)
     p.add_argument("--frames", type=int, default=500)
     p.add_argument("--size", type=int, nargs=2, default=(64, 64))
     p.add_argument("--warmup", type=int, default=3)
     p.add_argument("--probe", type=int, default=50, help="frame of the first memory probe")
-    p.add_argument("--variant")
-    p.add_argument("--out")
     a = p.parse_args(argv)
-    foveated_mi.set_variant(a.variant)
+    setup(a)
     from foveated_mi.integrators.foveated import FoveatedIntegrator
     from foveated_mi.paths import Saccades
     from foveated_mi.scenes import load_scene
@@ -79,10 +76,7 @@ def main(argv=None) -> int:
     print(json.dumps(result, indent=2))
     ok = abs(growth) <= 0.05 and compiled == 0 and not bad
     print("long run:", "all checks met" if ok else "CHECK FAILED")
-    if a.out:
-        from foveated_mi.io import atomic_write
-        with atomic_write(a.out, "w") as f:
-            json.dump(result, f, indent=2)
+    write_json(a.out, result)
     return 0 if ok else 1
 
 

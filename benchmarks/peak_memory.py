@@ -1,13 +1,12 @@
 """Peak memory of one 2048x2048 frame (film sizes up to 2048^2 within 24 GB).
 
-    python benchmarks/peak_memory.py --size 2048 2048
+    python benchmarks/peak_memory.py --size 2048 2048 [--out FILE]
 
 Prints the process's peak resident memory (ru_maxrss) after a foveated frame of voxel-city,
 with every reconstruction stage on (discrete_sibson, the heaviest, with --reconstruction).
 """
 from __future__ import annotations
 
-import argparse
 import json
 import resource
 import sys
@@ -16,16 +15,15 @@ import time
 import mitsuba as mi
 import numpy as np
 
-import foveated_mi
+from common import parser, setup, write_json
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = parser(__doc__)
     p.add_argument("--size", type=int, nargs=2, default=(2048, 2048))
     p.add_argument("--reconstruction", default="sibson")
-    p.add_argument("--variant")
     a = p.parse_args(argv)
-    foveated_mi.set_variant(a.variant)
+    setup(a)
     from foveated_mi.integrators.foveated import FoveatedIntegrator
     from foveated_mi.scenes import load_scene
     W, H = a.size
@@ -41,6 +39,7 @@ def main(argv=None) -> int:
            "peak_rss_gib": peak, "finite": bool(np.isfinite(img).all()),
            "ray_fraction": integ.stats["ray_fraction"], "variant": mi.variant()}
     print(json.dumps(out, indent=2))
+    write_json(a.out, out)
     return 0 if out["finite"] and peak < 24 else 1
 
 

@@ -15,7 +15,6 @@ first test that needs it. The report prints the totals and the files that compil
 """
 from __future__ import annotations
 
-import argparse
 import collections
 import hashlib
 import json
@@ -70,6 +69,41 @@ def pytest_runtest_teardown(item, nextitem):
 
 # -- the report ----------------------------------------------------------------------------------
 
+def tally(path: str) -> dict:
+    """The kernels a run recorded by the plugin compiled, in all and per test file.
+
+    Parameters
+    ----------
+    path : str
+        The plugin's JSON lines.
+
+    Returns
+    -------
+    tally : dict
+        ``kernels``, ``compile_s``, ``literal_variants`` (kernels that differ from an earlier
+        one only in literals), ``literal_variants_s`` and ``programs`` (distinct ones), and the
+        same four per test file under ``files``, the costliest first.
+    """
+    seen: set[str] = set()
+    per_file = collections.defaultdict(lambda: [0, 0.0, 0, 0.0])
+    with open(path) as f:
+        for line in f:
+            row = json.loads(line)
+            acc = per_file[row["test"].split("::")[0]]
+            for shape, ms in row["compiled"]:
+                acc[0] += 1
+                acc[1] += ms / 1e3
+                if shape in seen:          # the same program as an earlier kernel
+                    acc[2] += 1
+                    acc[3] += ms / 1e3
+                seen.add(shape)
+    keys = ("kernels", "compile_s", "literal_variants", "literal_variants_s")
+    files = {name: dict(zip(keys, v)) for name, v in
+             sorted(per_file.items(), key=lambda kv: -kv[1][1])}
+    return {**{k: sum(v[i] for v in per_file.values()) for i, k in enumerate(keys)},
+            "programs": len(seen), "files": files}
+
+
 def report(path: str, top: int = 12) -> str:
     """The totals of a run recorded by the plugin, and the files that compile most.
 
@@ -85,31 +119,21 @@ def report(path: str, top: int = 12) -> str:
     text : str
         A Markdown table with a summary line above it.
     """
-    seen: set[str] = set()
-    per_file = collections.defaultdict(lambda: [0, 0.0, 0, 0.0])
-    with open(path) as f:
-        for line in f:
-            row = json.loads(line)
-            acc = per_file[row["test"].split("::")[0]]
-            for shape, ms in row["compiled"]:
-                acc[0] += 1
-                acc[1] += ms / 1e3
-                if shape in seen:          # the same program as an earlier kernel
-                    acc[2] += 1
-                    acc[3] += ms / 1e3
-                seen.add(shape)
-    n, t, nv, tv = (sum(v[i] for v in per_file.values()) for i in range(4))
-    lines = [f"{n} kernels compiled in {t:.1f} s; {nv} of them ({tv:.1f} s) differ from an "
-             f"earlier one only in literals; {len(seen)} distinct programs "
-             f"({t - tv:.1f} s).", "",
+    t = tally(path)
+    lines = [f"{t['kernels']} kernels compiled in {t['compile_s']:.1f} s; "
+             f"{t['literal_variants']} of them ({t['literal_variants_s']:.1f} s) differ from an "
+             f"earlier one only in literals; {t['programs']} distinct programs "
+             f"({t['compile_s'] - t['literal_variants_s']:.1f} s).", "",
              "| file | kernels | compile s | literal variants | their s |", "|---|---|---|---|---|"]
-    for name, (k, s, kv, sv) in sorted(per_file.items(), key=lambda kv: -kv[1][1])[:top]:
-        lines.append(f"| {name} | {k} | {s:.1f} | {kv} | {sv:.1f} |")
+    for name, f in list(t["files"].items())[:top]:
+        lines.append(f"| {name} | {f['kernels']} | {f['compile_s']:.1f} | "
+                     f"{f['literal_variants']} | {f['literal_variants_s']:.1f} |")
     return "\n".join(lines)
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    from common import parser, write_json   # here: the plugin itself stays light
+    ap = parser(__doc__, out_help="write the totals, per test file too, to this JSON file")
     ap.add_argument("path", nargs="?", default=OUT, help="the plugin's output")
     ap.add_argument("--top", type=int, default=12, help="files listed (default 12)")
     args = ap.parse_args(argv)
@@ -118,6 +142,7 @@ def main(argv=None) -> int:
               f"(run pytest with -p suite_compile first)", file=sys.stderr)
         return 2
     print(report(args.path, args.top))
+    write_json(args.out, tally(args.path))
     return 0
 
 

@@ -85,7 +85,7 @@ def summarise(out: str, variant: str) -> str:
     backward = []
     for path in sorted(glob.glob(os.path.join(out, "backward_*.json"))):
         d = _json(path)
-        backward += d if isinstance(d, list) else []
+        backward += d if isinstance(d, list) else (d or {}).get("rows", [])  # older: a list
     tests_log = _read(os.path.join(out, "logs", "tests.log")).splitlines()
     tests_last = next((l for l in reversed(tests_log) if l.strip() and not l.startswith("not collected")), "")
     not_collected = next((l for l in tests_log if l.startswith("not collected")), "")
