@@ -18,7 +18,7 @@ from .frame import buffer_space as _buffer_space
 from .frame.film import FilmSettings, jfa_bound
 from .frame.formation import FORMATIONS, FormationSettings, OptionValues
 from .frame.foveal import FovealSettings
-from .frame.sampling import cell_offset, foveal_grid, fovea_radius, sensor_ppd
+from .frame.cells import cell_offset, foveal_grid, fovea_radius, sensor_ppd
 from .frame.settings import (DenoiseSettings, DomainSettings, FrameSettings, HistorySettings,
                              LaunchSettings, PlanSettings, ReconstructionSettings,
                              SamplingSettings, TraceSettings)
@@ -477,7 +477,7 @@ def disc_denoise_settings(o: Options, moving: bool = False) -> DenoiseSettings:
 def viewer_options(o: Options, sensor) -> Options:
     """The options a frame's formation reads through ``sensor``: with ``polar_cells =
     "acuity"`` and ``viewer_ppd = 0``, ``viewer_ppd`` is the sensor's pixels per degree at the
-    film's centre (:func:`~foveated_mi.frame.sampling.sensor_ppd`, the value the plan's
+    film's centre (:func:`~foveated_mi.frame.cells.sensor_ppd`, the value the plan's
     sampling map uses), so that the formation's cells are the map's.
 
     Parameters

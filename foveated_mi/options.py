@@ -378,7 +378,7 @@ _SCHEMA: tuple[Option, ...] = (
            doc="With ``sampling_law = 'polar'`` the cells outside the disc grow with the "
            "distance from it, so only cells far below a pixel near the disc reach the whole "
            "film; the buffer stops at cells of a quarter pixel at the disc's edge "
-           "(:data:`foveated_mi.frame.sampling.MIN_PITCH`), which trace about 0.85 of the "
+           "(:data:`foveated_mi.frame.cells.MIN_PITCH`), which trace about 0.85 of the "
            "film with ``vr``'s disc, and a budget above that gets them with a warning that "
            "says what the frame traces."),
     Option("acuity_floor", 0.01, "float", "smallest probability of the acuity law "

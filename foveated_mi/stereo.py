@@ -22,12 +22,12 @@ below). A cut resets both histories (:meth:`Stereo.cut`).
 samples, as the ``vr`` preset's). The first eye renders its frame as it would alone. The
 second reprojects the first eye's samples of that frame into its own, by its history's rules
 (the plane test, exclusive reads), reads them only where a shadow ray says the first eye saw
-the very point (:func:`foveated_mi.frame.buffer_space.partner_map`), and traces the rest:
+the very point (:func:`foveated_mi.frame.eye_reuse.partner_map`), and traces the rest:
 what the first eye did not see (the crescents, :func:`crescent`), the sky, and surfaces whose
 BSDF has a glossy or delta lobe, whose radiance differs between the eyes. With
 ``reuse="periphery"`` it traces its own disc too; otherwise a disc pixel reuses the first
 eye's value only of a point landing within an eighth of a pixel of its centre
-(:data:`foveated_mi.frame.buffer_space.DISC_REACH`), where it stands for that pixel, and
+(:data:`foveated_mi.frame.eye_reuse.DISC_REACH`), where it stands for that pixel, and
 traces the rest (measured: ``docs/results.md#two-eyes-in-a-headset``).
 Where a sample is reused, both eyes show the same estimate: their noise there is shared, not
 independent, which a per-eye metric cannot tell from independent noise (neither sees

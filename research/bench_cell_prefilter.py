@@ -65,7 +65,7 @@ def measure(name: str, width: int, height: int, spp: int, budget: float,
     """Both warps of one scene against its reference (module docstring)."""
     import mitsuba as mi
     from foveated_mi.frame.foveal import SEAM, warp
-    from foveated_mi.frame.sampling import fovea_radius, foveal_grid
+    from foveated_mi.frame.cells import fovea_radius, foveal_grid
     from foveated_mi.options import PRESETS
     from foveated_mi.render import to_display
     from foveated_mi.scenes import apply_camera, camera_of, load_scene

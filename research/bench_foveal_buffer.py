@@ -32,7 +32,7 @@ import foveated_mi  # noqa: F401  (sets a variant)
 from common import machine, md_table, median, timed, write_json
 
 from foveated_mi import viewer
-from foveated_mi.frame.sampling import ACUITY_OMEGA0, ACUITY_SLOPE
+from foveated_mi.frame.cells import ACUITY_OMEGA0, ACUITY_SLOPE
 from foveated_mi.kernels.grid import Grid
 from foveated_mi.frame.foveal import warp
 from foveated_mi.kernels.polar import polar_grid

@@ -72,7 +72,7 @@ def measure(args) -> list[dict]:
     from bench_cell_prefilter import cells_both_ways
     from foveated_mi.configure import sampling_settings
     from foveated_mi.frame.foveal import SEAM, warp
-    from foveated_mi.frame.sampling import cell_offset, fovea_radius, foveal_grid
+    from foveated_mi.frame.cells import cell_offset, fovea_radius, foveal_grid
     from foveated_mi.integrators.foveated import FoveatedIntegrator
     from foveated_mi.options import PRESETS, validate_options
     from foveated_mi.render import to_display

@@ -24,7 +24,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 def held_frames(path: str, hold_deg: float) -> tuple[int, int] | None:
     """``(frames, frames the hold renders otherwise)`` of a study file, or None without a
     sequence."""
-    from foveated_mi.frame.sampling import sensor_ppd
+    from foveated_mi.frame.cells import sensor_ppd
     from foveated_mi.frame.view import View
     from foveated_mi.study.spec import load_study
     from foveated_mi.study.tasks import _prepare_worker, expand_tasks, get_scene, rendered_gazes

@@ -11,7 +11,7 @@ import pytest
 from kernel_counts import compiled_by
 
 from foveated_mi.frame import buffer_space
-from foveated_mi.frame.sampling import foveal_grid, fovea_radius, gaze_position
+from foveated_mi.frame.cells import foveal_grid, fovea_radius, gaze_position
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.metrics import psnr
 from foveated_mi.options import validate_options
@@ -132,12 +132,12 @@ def test_a_still_view_projects_nothing_and_a_gaze_move_does(monkeypatch):
 
 
 def test_a_still_view_builds_its_launch_once_and_a_gaze_or_layout_change_again(monkeypatch):
-    from foveated_mi.frame import plan as _plan
+    from foveated_mi.frame import buffer_plan
     scene = _scene()
     integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
     calls = []
-    real = _plan._reorder.launch_of_pixels
-    monkeypatch.setattr(_plan._reorder, "launch_of_pixels",
+    real = buffer_plan._reorder.launch_of_pixels
+    monkeypatch.setattr(buffer_plan._reorder, "launch_of_pixels",
                         lambda *a, **k: calls.append(a[4]) or real(*a, **k))
     images = [np.array(mi.render(scene, integrator=integ, seed=k)) for k in range(3)]
     assert calls == ["tiles"]
@@ -147,7 +147,7 @@ def test_a_still_view_builds_its_launch_once_and_a_gaze_or_layout_change_again(m
     mi.render(scene, integrator=integ, seed=4)
     assert calls == ["tiles", "tiles", "compact"]
     # The reused launch traces what a fresh one does: the same frames, bit for bit.
-    monkeypatch.setattr(_plan._reorder, "launch_of_pixels", real)
+    monkeypatch.setattr(buffer_plan._reorder, "launch_of_pixels", real)
     fresh = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
     for k, image in enumerate(images):
         fresh.views[0].planner._samples_cache = None
@@ -163,13 +163,13 @@ def test_a_moving_camera_under_a_still_gaze_keeps_its_samples_launch(monkeypatch
     """The samples' pixels, and so the launch, depend on the gaze alone: a camera that moves
     under a still gaze casts a new G-buffer at them but builds no launch, and traces the
     frames that a launch built afresh every frame traces, bit for bit."""
-    from foveated_mi.frame import plan as _plan
+    from foveated_mi.frame import buffer_plan
     scene = _scene()
     params = mi.traverse(scene)
     integ = FoveatedIntegrator(nested=scene.integrator(), preset="vr")
     calls = []
-    real = _plan._reorder.launch_of_pixels
-    monkeypatch.setattr(_plan._reorder, "launch_of_pixels",
+    real = buffer_plan._reorder.launch_of_pixels
+    monkeypatch.setattr(buffer_plan._reorder, "launch_of_pixels",
                         lambda *a, **k: calls.append(1) or real(*a, **k))
 
     def frames(integrator, drop: bool, gazes):

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from foveated_mi.cli import main
-from foveated_mi.frame import plan as _plan
+from foveated_mi.frame import buffer_plan
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.options import PRESET_NAMES
 from foveated_mi.validate import ParameterError
@@ -247,8 +247,8 @@ def test_every_preset_rejects_values_past_the_ends_in_one_line(preset, name, val
 def test_a_launch_of_no_rays_gives_a_finite_frame(preset, reorder, monkeypatch):
     """Every sample borrowed, settled or off the film: the launch is one idle lane and the
     frame shows what it holds (black, with no history), in every launch layout."""
-    monkeypatch.setattr(_plan.Planner, "_traced_of",
-                        staticmethod(lambda sm, *a: dr.zeros(mi.Bool, dr.width(sm.on))))
+    monkeypatch.setattr(buffer_plan, "_traced_of",
+                        lambda sm, *a: dr.zeros(mi.Bool, dr.width(sm.on)))
     integ = FoveatedIntegrator(preset=preset, reorder=reorder)
     img = _frames(integ, 24, 20)
     assert integ.stats["rays"] == 0 and np.all(img == 0)

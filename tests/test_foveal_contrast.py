@@ -127,7 +127,7 @@ def test_a_vr_frame_with_both_renders_and_differs_only_in_the_periphery():
     # The disc's own pixels (traced at full resolution) are shown as they are either way.
     yy, xx = np.mgrid[0:64, 0:96]
     r = np.hypot(xx + 0.5 - 48, yy + 0.5 - 32)
-    from foveated_mi.frame.sampling import fovea_radius
+    from foveated_mi.frame.cells import fovea_radius
     r0 = fovea_radius(96, 64, validate_options({"preset": "vr"})["theta"])
     assert diff[r < r0 - 2.5].max() == 0.0
     assert diff[r > r0 + 2.5].max() > 0.01

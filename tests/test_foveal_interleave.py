@@ -15,7 +15,7 @@ from gradcheck import forward_and_reverse
 
 from foveated_mi.frame import buffer_space
 from foveated_mi.frame.foveal import fill_cells
-from foveated_mi.frame.sampling import gaze_position
+from foveated_mi.frame.cells import gaze_position
 from foveated_mi.kernels.buffers import Resolved
 from foveated_mi.options import validate_options
 from foveated_mi.validate import ParameterError

@@ -11,7 +11,7 @@ import pytest
 from still_cells import periphery_mse, still_frames
 
 from foveated_mi.frame import buffer_space
-from foveated_mi.frame.sampling import gaze_position
+from foveated_mi.frame.cells import gaze_position
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.options import validate_options
 from foveated_mi.scenes import load_scene

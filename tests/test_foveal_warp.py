@@ -11,7 +11,7 @@ import pytest
 import tolerances
 
 from foveated_mi.frame.foveal import warp
-from foveated_mi.frame.sampling import fovea_radius, foveal_grid
+from foveated_mi.frame.cells import fovea_radius, foveal_grid
 
 W, H = 96, 64
 

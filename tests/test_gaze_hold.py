@@ -3,7 +3,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from foveated_mi.frame.sampling import sensor_ppd
+from foveated_mi.frame.cells import sensor_ppd
 from foveated_mi.frame.view import View
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.scenes import load_scene

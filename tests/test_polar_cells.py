@@ -13,8 +13,8 @@ from kernel_counts import compiled_by
 
 from foveated_mi.configure import sampling_settings
 from foveated_mi.frame import buffer_space
-from foveated_mi.frame.sampling import (_traced_pixels, cell_offset, fovea_radius, foveal_grid,
-                                        sensor_ppd)
+from foveated_mi.frame.cells import (_traced_pixels, cell_offset, fovea_radius, foveal_grid,
+                                     sensor_ppd)
 from foveated_mi.integrators.foveated import FoveatedIntegrator
 from foveated_mi.kernels.polar import polar_grid_of
 from foveated_mi.options import validate_options

@@ -141,15 +141,15 @@ def test_a_reused_sample_holds_what_tracing_it_gives(first, monkeypatch):
     face traces that face's albedo, wherever its ray falls in the pixel. A borrowed sample
     whose pixel, and the first eye's sample's pixel, each see one face holds exactly what
     tracing it gives: the plane test never lends it another face's value."""
-    from foveated_mi.frame import buffer_space
+    from foveated_mi.frame import eye_reuse
     lent = {}
-    borrow = buffer_space.borrow
+    borrow = eye_reuse.borrow
 
     def spy(own, history, other, partner):
         lent.update(index=np.array(other.index, dtype=np.int64),
                     pixels=np.array(partner.pixels, dtype=np.int64))
         return borrow(own, history, other, partner)
-    monkeypatch.setattr(buffer_space, "borrow", spy)
+    monkeypatch.setattr(eye_reuse, "borrow", spy)
     stereo = _rendered(_scene(), first)
     second = "right" if first == "left" else "left"
     took, pixels, values, on = _borrowed(stereo, second)
@@ -313,7 +313,7 @@ def test_borrow_reads_each_sample_from_one_history_in_one_kernel():
     second moment; elsewhere its own history's where its own map hits; and all of the reads
     are one kernel: evaluating one evaluates the rest (a timed frame forces them one at a
     time, and each alone would run both maps' gathers again)."""
-    from foveated_mi.frame.buffer_space import borrow
+    from foveated_mi.frame.eye_reuse import borrow
     from foveated_mi.frame.reproject import CameraState, History, ReprojectionMap
     n = 6
     camera = CameraState(mi.Matrix4f(1.0), mi.Point3f(0.0))
@@ -413,16 +413,16 @@ def test_a_claimed_cell_s_ray_meets_the_first_eye_s_point(monkeypatch):
     pixel's centre lies up to 0.7 pixel, several thousandths, away), and no shadow ray is
     needed. Nearly all of the claimed cells on a surface meet their point; the cards hide
     the rest."""
-    from foveated_mi.frame import buffer_space
+    from foveated_mi.frame import eye_reuse
     seen = {}
-    same_point = buffer_space.same_point
+    same_point = eye_reuse.same_point
 
     def spy(gb, partner, claimed):
         same = same_point(gb, partner, claimed)
         seen.update(same=np.array(same, dtype=bool),
                     took=np.array(claimed[0] & gb.hit, dtype=bool))
         return same
-    monkeypatch.setattr(buffer_space, "same_point", spy)
+    monkeypatch.setattr(eye_reuse, "same_point", spy)
     _rendered(_scene())
     took, same = seen["took"], seen["same"]
     assert took.sum() > 100

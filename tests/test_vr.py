@@ -68,8 +68,8 @@ def test_a_budget_beyond_the_finest_cells_gets_them_and_one_warning():
     traces, and the frame traces that."""
     import re
     import warnings
-    from foveated_mi.frame import buffer_space, sampling
-    sampling.foveal_grid.cache_clear()          # it warns once per film, budget and disc
+    from foveated_mi.frame import buffer_space, cells
+    cells.foveal_grid.cache_clear()          # it warns once per film, budget and disc
     scene = _scene((64, 48), spp=1)
     with pytest.warns(UserWarning, match=r"ray_budget = 1\.0 is above the 0\.\d+ of the film") \
             as caught:
@@ -79,7 +79,7 @@ def test_a_budget_beyond_the_finest_cells_gets_them_and_one_warning():
     assert len(said) == 1, said
     reach = float(re.search(r"traces ([0-9.]+) of it", said[0]).group(1))
     lay = buffer_space.layout(64, 48, integ.options["theta"], 1.0)
-    assert lay.grid.pitch == sampling.MIN_PITCH
+    assert lay.grid.pitch == cells.MIN_PITCH
     # Sized on the host in float64, placed on the device in float32 (as the budget's test).
     assert 0.5 < reach < 1.0
     assert integ.stats["ray_fraction"] == pytest.approx(reach, rel=0.02)
@@ -124,7 +124,7 @@ def test_the_fovea_shows_its_own_traced_pixels():
     shading = integ.buffer("shading")
     yy, xx = np.mgrid[0:48, 0:64]
     from foveated_mi.frame.foveal import SEAM
-    from foveated_mi.frame.sampling import foveal_grid, fovea_radius
+    from foveated_mi.frame.cells import foveal_grid, fovea_radius
     grid = foveal_grid(64, 48, integ.options["ray_budget"],
                        fovea_radius(64, 48, integ.options["theta"]))
     assert grid.fovea == fovea_radius(64, 48, integ.options["theta"])
@@ -568,7 +568,7 @@ def test_the_preset_denoises_its_disc_where_the_frame_is_noisy():
         for seed in range(3):
             image = np.array(mi.render(scene, integrator=integ, spp=1, seed=seed))
             if fovea is None:
-                from foveated_mi.frame.sampling import fovea_radius
+                from foveated_mi.frame.cells import fovea_radius
                 r0 = fovea_radius(64, 48, integ.options["theta"])
                 fovea = np.hypot(xx + 0.5 - 32, yy + 0.5 - 24) <= r0 - 2
             errors[disc].append(np.mean((image[fovea] - reference[fovea]) ** 2))

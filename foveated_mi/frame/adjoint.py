@@ -87,7 +87,7 @@ from typing import Any, Callable
 import drjit as dr
 import mitsuba as mi
 
-from .plan import FramePlan
+from .frame_plan import FramePlan
 from . import shading as _shading
 from .shading import integrator_kind
 from .pixel_filter import FilterSampler, SplatFootprint

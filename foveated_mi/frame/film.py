@@ -14,6 +14,7 @@ from typing import Any
 import drjit as dr
 
 from ..timing import StageTimer
+from . import cells as _cells
 from . import reproject as _reproject
 from . import sampling as _sampling
 from .formation import FormationInput, Formed, register_formation
@@ -67,9 +68,9 @@ def jfa_bound(width: int, height: int, law: SamplingSettings,
     elif law.law == "polar":
         # The widest cell, at the rings' reach: its pixel is at most a cell diagonal from
         # any pixel it covers.
-        grid = _sampling.foveal_grid(width, height, law.ray_budget,
-                                     _sampling.fovea_radius(width, height, law.theta),
-                                     _sampling.cell_offset(law))
+        grid = _cells.foveal_grid(width, height, law.ray_budget,
+                                  _cells.fovea_radius(width, height, law.theta),
+                                  _cells.cell_offset(law))
         gap = 2.0 * float(grid.cell_size(grid.reach))
     elif law.law == "flat":
         gap = _sampling.flat_gap(width, height, law.ray_budget)

@@ -2,7 +2,7 @@
 
 The passes after the trace cost what the rays cost. With ``sampling_law = "polar"`` the frame
 traces the pixel under each cell of the log-polar buffer
-(:func:`foveated_mi.frame.sampling.foveal_grid`, sized by ``ray_budget``) and every pixel
+(:func:`foveated_mi.frame.cells.foveal_grid`, sized by ``ray_budget``) and every pixel
 of its full-resolution disc. With ``sampling_law = "flat"`` (``buffer`` space only) the
 buffer is an even grid at the budget's density and there is no disc
 (:mod:`foveated_mi.kernels.flat`): dynamic resolution with temporal accumulation from the same
@@ -58,13 +58,13 @@ from ..postprocess import DENOISERS, DenoiseInput, Denoised
 from ..postprocess.registry import as_denoised
 from ..timing import StageTimer
 from . import buffer_space as _buffer_space
+from .cells import snapped_pixels
 from . import domain
 from . import reproject as _reproject
 from .film import film_stats
 from .formation import FormationInput, Formed, register_formation
 from .post import denoise_in_domain, runs
 from .settings import DenoiseSettings, DomainSettings
-from .sampling import snapped_pixels
 from .shading import ShadingBuffer
 
 #: Pixels over which the fovea's own values blend into the warped buffer at the disc's edge.
@@ -510,8 +510,14 @@ def form_foveal(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
         As :func:`~.film.form_film`'s, ``s`` a :class:`FovealSettings`. Returns the
         :class:`~.formation.Formed`: the image on the film, the buffers and the history."""
     s = moving_settings(s, inp.moving)
-    if inp.space.kind == "buffer":
-        return _form_in_buffer(shading, inp, s, timer, grad_pass)
+    return SPACE_FORMS[inp.space.kind](shading, inp, s, timer, grad_pass)
+
+
+def _form_on_film(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
+                  timer: StageTimer, grad_pass: bool) -> Formed:
+    """``foveal_space = "film"``: the history resolve on the traced pixels, each cell from
+    the pixel under its centre, denoising in the buffer, one warp, the albedo multiplied back
+    per pixel; the disc shows its own pixels."""
     width, height = inp.width, inp.height
     grid, d = s.grid, s.domain
     # History resolve (Fig. 4): this frame's samples blended with the reprojected history.
@@ -607,7 +613,7 @@ def _disc_samples(values: mi.Color3f, held: mi.Bool, inp: FormationInput, s: Fov
     return own, dr.gather(mi.Color3f, values, k - lay.cells, own), t
 
 
-def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
+def _form_on_samples(shading: ShadingBuffer, inp: FormationInput, s: FovealSettings,
                      timer: StageTimer, grad_pass: bool) -> Formed:
     """``foveal_space = "buffer"``: the history resolve on the buffer's samples, denoising
     in the buffer, the albedo multiplied back on its cells, one warp; the disc shows its own
@@ -667,6 +673,13 @@ def _form_in_buffer(shading: ShadingBuffer, inp: FormationInput, s: FovealSettin
     # it holds (a still view).
     return Formed(image, buffers, history,
                   kept=None if out.kept is None else {"cells": out.kept})
+
+
+#: Sample space (``inp.space.kind``) -> the formation on it.
+SPACE_FORMS = {
+    "film": _form_on_film,          # the film's pixels
+    "buffer": _form_on_samples,     # the foveal buffer's samples (:mod:`.buffer_space`)
+}
 
 
 def _buffer_cells(resolved: Resolved, gb: GBuffer, s: FovealSettings, targets: mi.Bool

@@ -21,7 +21,7 @@ from ..timing import StageTimer
 from ..validate import ParameterError
 from . import adjoint as _adjoint
 from .formation import Formed, FormationInput, FormationSettings, FrozenFormation, form
-from .plan import FramePlan
+from .frame_plan import FramePlan
 from .settings import TraceSettings
 from .shading import ShadingBuffer
 

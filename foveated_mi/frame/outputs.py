@@ -17,7 +17,7 @@ from ..kernels.grid import Grid
 from ..timing import StageTimer
 from ..validate import ParameterError
 from .formation import FormationSettings, Formed
-from .plan import FramePlan
+from .frame_plan import FramePlan
 from .reorder import Reordered
 
 

@@ -31,7 +31,7 @@ from . import gradient as _gradient
 from . import trace as _trace
 from .formation import FormationSettings, FrozenFormation
 from .outputs import frame_outputs
-from .plan import FramePlan
+from .frame_plan import FramePlan
 from .scene_state import SceneState
 from .settings import FrameSettings
 from .view import View

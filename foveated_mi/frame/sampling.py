@@ -36,8 +36,8 @@ the pixel under the gaze (clamped to the film), so a frame never has an empty wa
     The density follows the minimum angle of resolution, which grows linearly with
     eccentricity: :math:`\omega(e) = \omega_0 + m e` (Guenter et al. 2012, "Foveated 3D
     Graphics", §3: :math:`\omega_0 = 1/48°`, :math:`m` between 0.022 and 0.034 °/°; here
-    :data:`ACUITY_SLOPE` = 0.022, the low end, which keeps the most periphery). Rays per
-    unit solid angle fall as :math:`\omega^{-2}`:
+    :data:`~.cells.ACUITY_SLOPE` = 0.022, the low end, which keeps the most periphery).
+    Rays per unit solid angle fall as :math:`\omega^{-2}`:
 
     .. math::  P(e) = \operatorname{clip}\big(k\,(\omega_0 / \omega(e))^2,\; P_{\min},\; 1\big),
 
@@ -47,29 +47,29 @@ the pixel under the gaze (clamped to the film), so a frame never has an empty wa
     nothing.
 ``polar`` (the ``vr`` preset; the pixels the ``foveal`` formation forms its image from)
     No draw: for a given gaze the map is the same every frame, :math:`P` = 1 where traced and
-    0 elsewhere (:func:`polar_map`). It traces every pixel of a full-resolution disc of radius
-    ``theta`` around the gaze (in units of half the film diagonal, as in ``kwon``;
-    ``theta_deg`` plays no part: :func:`fovea_radius`) and, outside it, the pixel under the
-    centre of each cell of a log-polar buffer (:mod:`foveated_mi.kernels.polar`), whose
-    cells grow linearly with the distance to the gaze. :func:`foveal_grid` sizes the cells
-    (bisection on their size at the disc's edge) so that the traced pixels number
-    ``ray_budget`` of the film with the gaze at its centre; a disc that alone needs more
-    than the budget is traced whole, with the coarsest cells around it, and a warning says
-    so. Edge rays are forced as for the other laws. The grid does not depend on the gaze,
-    which enters as an opaque value, so a moving gaze compiles nothing.
+    0 elsewhere (:func:`~.cells.polar_map`). It traces every pixel of a full-resolution disc
+    of radius ``theta`` around the gaze (in units of half the film diagonal, as in ``kwon``;
+    ``theta_deg`` plays no part: :func:`~.cells.fovea_radius`) and, outside it, the pixel
+    under the centre of each cell of a log-polar buffer (:mod:`foveated_mi.kernels.polar`),
+    whose cells grow linearly with the distance to the gaze. :func:`~.cells.foveal_grid`
+    sizes the cells (bisection on their size at the disc's edge) so that the traced pixels
+    number ``ray_budget`` of the film with the gaze at its centre; a disc that alone needs
+    more than the budget is traced whole, with the coarsest cells around it, and a warning
+    says so. Edge rays are forced as for the other laws. The grid does not depend on the
+    gaze, which enters as an opaque value, so a moving gaze compiles nothing.
 
-    **Cells** (option ``polar_cells``, :func:`cell_offset`): ``log`` (the default, and
-    ``vr``), square cells whose size is proportional to the distance to the gaze (offset
+    **Cells** (option ``polar_cells``, :func:`~.cells.cell_offset`): ``log`` (the default,
+    and ``vr``), square cells whose size is proportional to the distance to the gaze (offset
     :math:`c = 0`); ``acuity``, Koskela et al. 2019's offset :math:`c = \omega_0 / m`
-    degrees (:data:`ACUITY_OFFSET_DEG`, about 0.95°) in pixels, so that a cell's radial size
-    :math:`s(r) \propto r + c` follows the minimum angle of resolution
+    degrees (:data:`~.cells.ACUITY_OFFSET_DEG`, about 0.95°) in pixels, so that a cell's
+    radial size :math:`s(r) \propto r + c` follows the minimum angle of resolution
     :math:`\omega(e) = \omega_0 + m e = m\,(e + \omega_0 / m)` of the ``acuity`` law.
     Degrees become pixels by the viewer's pixels per degree at the film's centre: the
-    option ``viewer_ppd``, or, at 0, the sensor's own (:func:`sensor_ppd`, measured once per
-    projection; the gaze plays no part, so the grid stays the same as the gaze moves). With
-    :math:`c` fixed, the bisection sizes the cells at the disc's edge to the budget as for
-    ``log``. Every pass that builds the grid (this map, the foveal buffer's samples, its
-    formation) gets the same :math:`c`.
+    option ``viewer_ppd``, or, at 0, the sensor's own (:func:`~.cells.sensor_ppd`, measured
+    once per projection; the gaze plays no part, so the grid stays the same as the gaze
+    moves). With :math:`c` fixed, the bisection sizes the cells at the disc's edge to the
+    budget as for ``log``. Every pass that builds the grid (this map, the foveal buffer's
+    samples, its formation) gets the same :math:`c`.
 ``flat`` (the same rays spread evenly: dynamic resolution with temporal accumulation)
     No draw and no gaze: :math:`P` = 1 where traced and 0 elsewhere (:func:`flat_map`).
     Each pixel has a rank :math:`j` in an ordered-dither (Bayer) matrix of
@@ -90,32 +90,19 @@ the pixel under the gaze (clamped to the film), so a frame never has an empty wa
 from __future__ import annotations
 
 import math
-import warnings
 
 import drjit as dr
 import mitsuba as mi
 
-import functools
-
 import numpy as np
 
 from ..kernels import pixel_coords
-from ..kernels.polar import PolarGrid, centres_at_film_centre, polar_grid_of
 from ..validate import check_range
+from .cells import ACUITY_OMEGA0, ACUITY_SLOPE, cell_offset, polar_map
 from .settings import SamplingSettings
 
-#: Minimum angle of resolution at the fovea, degrees (Guenter et al. 2012, §3).
-ACUITY_OMEGA0 = 1.0 / 48.0
-#: Its growth per degree of eccentricity (Guenter et al. 2012 fit 0.022-0.034; the low end).
-ACUITY_SLOPE = 0.022
 #: Fixed-point steps that solve for the acuity law's scale (each one sum over the film).
 ACUITY_STEPS = 8
-#: :math:`\omega_0 / m`, degrees: :math:`\omega(e) = m\,(e + \omega_0/m)`, the offset of
-#: ``polar_cells = "acuity"`` (Koskela et al. 2019) before it is converted to pixels.
-ACUITY_OFFSET_DEG = ACUITY_OMEGA0 / ACUITY_SLOPE
-
-#: Cell laws of the ``polar`` law's buffer (option ``polar_cells``).
-POLAR_CELLS = ("log", "acuity")
 
 SAMPLING_LAWS = ("kwon", "acuity", "polar", "flat")
 
@@ -550,281 +537,6 @@ def probability_in_degrees(directions: mi.Vector3f, sensor: mi.Sensor, law: Samp
     if law.law == "acuity":
         return acuity_probability(ecc, law.ray_budget, law.acuity_floor)
     return kwon_in_degrees(ecc, law.theta_deg, law.sigma_p)
-
-
-def _traced_pixels(grid: PolarGrid | None, width: int, height: int,
-                   fovea: float | None = None) -> int:
-    """Pixels :func:`polar_map` traces with the gaze at the film's centre (host, float64);
-    without a grid, the disc's alone."""
-    traced = np.zeros(width * height, bool)
-    if grid is not None:
-        x, y = (np.floor(c).astype(np.int64) for c in centres_at_film_centre(grid))
-        on = (x >= 0) & (x < width) & (y >= 0) & (y < height)
-        traced[y[on] * width + x[on]] = True
-        fovea = grid.fovea
-    py, px = np.mgrid[0:height, 0:width]
-    traced |= ((px + 0.5 - width / 2) ** 2 + (py + 0.5 - height / 2) ** 2
-               <= fovea ** 2).ravel()
-    return int(traced.sum())
-
-
-#: The smallest disc the ``polar`` law lays out, in pixels: it holds a pixel centre wherever
-#: the gaze lies on the film (the nearest is at most half a pixel's diagonal, 0.707, away),
-#: so a frame always traces a ray. The cells grow as their distance over the disc's radius:
-#: a disc of no size would make every cell infinite.
-MIN_FOVEA = 0.75
-
-
-def fovea_radius(width: int, height: int, theta: float) -> float:
-    """The full-resolution disc of ``sampling_law = "polar"``, in pixels: ``theta`` of half
-    the diagonal, at least :data:`MIN_FOVEA` and at most the diagonal (a disc that wide
-    covers the film from any gaze on it, :func:`gaze_position`).
-
-    Parameters
-    ----------
-    width, height : int
-        The film's size.
-    theta : float
-        θ, in units of half the film's diagonal (as Eq. 1's θ).
-
-    Returns
-    -------
-    radius : float
-        The disc's radius, in pixels.
-    """
-    diagonal = math.hypot(width, height)
-    return min(max(float(theta) * 0.5 * diagonal, MIN_FOVEA), diagonal)
-
-
-#: The finest cells at the disc's edge, in pixels: a quarter of a pixel, some four cells a
-#: film pixel over the whole buffer. Finer cells add rays only where cells already share
-#: pixels, and their number grows without bound as the budget nears the whole film (a
-#: budget of 1 at 1152x648 asked for 89 million).
-MIN_PITCH = 0.25
-
-
-@functools.lru_cache(maxsize=16)
-def foveal_grid(width: int, height: int, budget: float, fovea: float,
-                offset: float = 0.0) -> PolarGrid:
-    """The polar buffer of a ``width`` x ``height`` film with a full-resolution disc and
-    cells outside it as large as the rest of the budget allows.
-
-    The pixels :func:`polar_map` traces number ``budget`` of the film with the gaze at its
-    centre (host, once per film, budget, disc and offset). A disc that alone needs more than
-    the budget is traced whole, with the coarsest cells outside it, and a warning says so once.
-    A budget above what cells of :data:`MIN_PITCH` at the disc's edge reach gets those
-    cells, and a warning says what they trace.
-
-    Parameters
-    ----------
-    width, height : int
-        The film's size.
-    budget : float
-        The traced pixels' fraction of the film.
-    fovea : float
-        The disc's radius (pixels, traced whole).
-    offset : float, optional
-        The cells' offset :math:`c` in pixels (:func:`cell_offset`; 0: log-polar), held fixed
-        while the bisection sizes the cells at the disc's edge.
-
-    Returns
-    -------
-    grid : PolarGrid
-        The buffer's grid (cached).
-    """
-    offset = check_range("cell offset", offset, 0.0, None)
-
-    def grid(pitch: float) -> PolarGrid:
-        return polar_grid_of(width, height, fovea, pitch, offset=offset)
-
-    n = width * height
-    target = budget * n
-    lo, hi = 0.05, math.hypot(width, height)      # the cells' size at the disc's edge
-    disc = _traced_pixels(None, width, height, fovea)
-    if disc > target:
-        warnings.warn(f"ray_budget = {budget!r} is below the {disc / n:.4g} of the film that "
-                      f"the full-resolution disc (theta) traces: the frame traces the disc "
-                      f"and the coarsest cells around it", UserWarning, stacklevel=2)
-        return grid(hi)
-    reach = _traced_pixels(grid(MIN_PITCH), width, height)
-    if reach < target:
-        warnings.warn(f"ray_budget = {budget!r} is above the {reach / n:.4g} of the film that "
-                      f"the foveal buffer's finest cells reach ({MIN_PITCH} pixel at the "
-                      f"disc's edge): the frame traces {reach / n:.4g} of it", UserWarning,
-                      stacklevel=2)
-        return grid(MIN_PITCH)
-    for _ in range(40):       # larger cells, fewer traced pixels: bisection
-        mid = (lo * hi) ** 0.5
-        if _traced_pixels(grid(mid), width, height) > target:
-            lo = mid
-        else:
-            hi = mid
-    return grid(hi)
-
-
-def cell_offset(law: SamplingSettings, sensor: mi.Sensor | None = None) -> float:
-    """The offset :math:`c` of the ``polar`` law's cells, in pixels (module docstring).
-
-    Parameters
-    ----------
-    law : SamplingSettings
-        The sampling law (its ``polar_cells`` and ``viewer_ppd``).
-    sensor : mi.Sensor or None, optional
-        The frame's sensor, whose pixels per degree at the film's centre convert
-        :data:`ACUITY_OFFSET_DEG` to pixels when ``viewer_ppd`` is 0.
-
-    Returns
-    -------
-    offset : float
-        0 for ``log`` cells; :data:`ACUITY_OFFSET_DEG` times the pixels per degree for
-        ``acuity`` cells.
-
-    Raises
-    ------
-    ParameterError
-        For ``acuity`` cells with ``viewer_ppd = 0`` and no sensor to measure it on.
-    """
-    from ..validate import check_choice
-    if check_choice("polar_cells", law.polar_cells, POLAR_CELLS) == "log":
-        return 0.0
-    ppd = check_range("viewer_ppd", law.viewer_ppd, 0.0, None)
-    if ppd == 0.0:
-        if sensor is None:
-            from ..validate import ParameterError
-            raise ParameterError("viewer_ppd", law.viewer_ppd, "> 0, or the frame's sensor to "
-                                 "measure it on (polar_cells = 'acuity')")
-        ppd = sensor_ppd(sensor)
-    return ACUITY_OFFSET_DEG * ppd
-
-
-#: Projection key -> (handles on its variables, pixels per degree): :func:`sensor_ppd`'s.
-_PPD_CACHE: dict = {}
-
-
-def sensor_ppd(sensor: mi.Sensor) -> float:
-    """The sensor's pixels per degree at its film's centre
-    (:func:`foveated_mi.viewer.pixels_per_degree`), measured once per projection.
-
-    The projection is the sensor, its film's size and crop, and every parameter of the
-    sensor but its pose: a moving camera or gaze reads nothing from the device, a new field of
-    view (``params.update()``) is measured anew.
-
-    Parameters
-    ----------
-    sensor : mi.Sensor
-        The sensor.
-
-    Returns
-    -------
-    ppd : float
-        Pixels per degree along the film's x axis at its centre.
-    """
-    from ..viewer import pixels_per_degree
-    from .scene_state import _own, _token
-    params = mi.traverse(sensor)
-    film = sensor.film()
-    keys = [k for k in params.keys() if not k.endswith("to_world")]
-    key = (id(sensor), tuple(film.size()), tuple(film.crop_size()), tuple(film.crop_offset()),
-           tuple((k, _token(params[k])) for k in keys))
-    hit = _PPD_CACHE.get(key)
-    if hit is None:
-        with dr.suspend_grad():
-            ppd = pixels_per_degree(sensor, (0.5, 0.5))
-        if len(_PPD_CACHE) >= 16:
-            _PPD_CACHE.pop(next(iter(_PPD_CACHE)))
-        # The handles keep the variables the key names alive: no other can take their index.
-        hit = _PPD_CACHE[key] = (tuple(_own(params[k]) for k in keys), ppd)
-    return hit[1]
-
-
-def gaze_position(gaze, width: int, height: int) -> mi.Point2f:
-    """The gaze's film position in pixels, opaque: a new gaze reuses every kernel. A gaze off
-    the film is held at the film's nearest point: the polar buffer's rings reach the film's
-    diagonal from a point on it, and from no farther.
-
-    Parameters
-    ----------
-    gaze : tuple of float
-        The gaze, a normalised film position.
-    width, height : int
-        The film's size.
-
-    Returns
-    -------
-    position : mi.Point2f
-        The gaze's film position, in pixels.
-    """
-    x, y = (min(max(float(g), 0.0), 1.0) for g in gaze[:2])
-    return mi.Point2f(dr.opaque(mi.Float, x * width), dr.opaque(mi.Float, y * height))
-
-
-def snapped_pixels(grid: PolarGrid, gaze: mi.Point2f, width: int, height: int
-                   ) -> tuple[mi.UInt32, mi.Bool]:
-    """The film pixel under each cell's centre, and whether it lies on the film.
-
-    Parameters
-    ----------
-    grid : PolarGrid
-        The log-polar buffer.
-    gaze : mi.Point2f
-        The gaze's film position, in pixels.
-    width, height : int
-        The film's size.
-
-    Returns
-    -------
-    pixels : mi.UInt32
-        Each cell's pixel (flat index), 0 where off the film.
-    on : mi.Bool
-        Whether the pixel lies on the film.
-    """
-    idx, _, _ = grid.cells()
-    p = grid.film_position(idx, gaze)
-    qx, qy = mi.Int32(dr.floor(p.x)), mi.Int32(dr.floor(p.y))
-    on = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
-    return mi.UInt32(dr.select(on, qy * width + qx, 0)), on
-
-
-def polar_map(width: int, height: int, gaze, budget: float, theta: float,
-              edges: mi.Bool | None = None, offset: float = 0.0) -> tuple[mi.Bool, mi.Float]:
-    """``sampling_law = "polar"``: every pixel of the full-resolution disc of radius θ
-    around the gaze, and the pixel under each cell of the log-polar buffer outside it
-    (:func:`foveal_grid`: the rest of ``budget``), so that each cell has a traced pixel.
-
-    Parameters
-    ----------
-    width, height : int
-        The film's size.
-    gaze : tuple of float
-        The gaze, a normalised film position.
-    budget : float
-        The traced pixels' fraction of the film (``ray_budget``).
-    theta : float
-        The disc's radius, in units of half the film's diagonal.
-    edges : mi.Bool or None, optional
-        Rays forced on edges (None: none).
-    offset : float, optional
-        The cells' offset in pixels (:func:`cell_offset`; 0: log-polar).
-
-    Returns
-    -------
-    sampling_map : mi.Bool
-        True where a ray is traced, one entry per pixel.
-    probability : mi.Float
-        1 where traced, 0 elsewhere: the map is deterministic.
-    """
-    grid = foveal_grid(width, height, float(budget), fovea_radius(width, height, theta),
-                       float(offset))
-    g = gaze_position(gaze, width, height)
-    q, on = snapped_pixels(grid, g, width, height)
-    smap = dr.zeros(mi.Bool, width * height)
-    dr.scatter(smap, mi.Bool(True), q, on)
-    _, x, y = pixel_coords(width, height)
-    d2 = dr.square(mi.Float(x) + 0.5 - g.x) + dr.square(mi.Float(y) + 0.5 - g.y)
-    smap |= d2 <= grid.fovea * grid.fovea
-    if edges is not None:
-        smap |= edges
-    return smap, dr.select(smap, 1.0, 0.0)
 
 
 def flat_window(budget: float) -> int:

@@ -259,7 +259,7 @@ def _ray_of_lane(rays: int, spp: int, disc: mi.Bool | None, disc_spp: int
 def shifts_of(shift: mi.Vector2f | None, spp: int, disc: mi.Bool | None = None,
               disc_spp: int = 0) -> mi.Vector2f | None:
     """Each lane's shift of its film position (:func:`lanes_of`'s layout) from one per ray
-    (:attr:`~foveated_mi.frame.plan.FramePlan.ray_shift`); None for None."""
+    (:attr:`~foveated_mi.frame.frame_plan.FramePlan.ray_shift`); None for None."""
     if shift is None:
         return None
     ray_id, _ = _ray_of_lane(dr.width(shift), spp, disc, disc_spp)

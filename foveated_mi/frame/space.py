@@ -4,8 +4,9 @@ A frame's shading buffer, G-buffer, reprojection map and history live either on 
 pixels (:class:`FilmSpace`) or on the foveal buffer's samples (:class:`BufferSpace`: the
 log-polar cells and the disc's pixels, :mod:`.buffer_space`). A formation declares which
 space it forms from (:func:`~.formation.register_formation`'s ``space``); the plan makes that
-space and every pass after it asks the space (the interface :class:`SampleSpace`), never
-which formation or law ran:
+space by the space's own route (:data:`.plan.PLAN_ROUTES`: :mod:`.film_plan`,
+:mod:`.buffer_plan`) and every pass after it asks the space (the interface
+:class:`SampleSpace`), never which formation or law ran:
 
 - :meth:`~SampleSpace.develop_at`: where the trace pass develops the rays' estimates
   (:func:`~.shading.develop`);

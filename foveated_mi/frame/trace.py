@@ -51,7 +51,7 @@ import mitsuba as mi
 
 from .domain import tonemap_samples
 from .formation import RECORDINGS, _fields, _no_collection
-from .plan import FramePlan
+from .frame_plan import FramePlan
 from .sampling import opaque_seed
 from .settings import TraceSettings
 from .shading import (ShadingBuffer, TracedSamples, develop, lanes_of, shifts_of,

@@ -58,7 +58,7 @@ from ..configure import (denoisers_used, formation_settings, frame_settings, vie
 from ..frame.formation import FrozenFormation, replayable
 from ..frame.gbuffer import film_size
 from ..frame.reproject import History
-from ..frame.sampling import sensor_ppd
+from ..frame.cells import sensor_ppd
 from ..frame.scene_state import scene_state
 from ..frame.settings import FrameSettings
 from ..frame.shading import is_ad_integrator

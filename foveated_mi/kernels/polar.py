@@ -21,8 +21,8 @@ and angle coordinate :math:`v = \theta\,w / 2\pi` with :math:`w = 2\pi (r_0 + c)
     :math:`\alpha > 1`);
   - with :math:`c = \omega_0 / m` degrees in pixels, the cell size follows the minimum angle
     of resolution :math:`\omega(e) = \omega_0 + m e`, which is the visual-polar buffer of
-    Koskela et al. 2019 (:data:`foveated_mi.frame.sampling.ACUITY_OMEGA0`, ``ACUITY_SLOPE``;
-    the option ``polar_cells = "acuity"``, :func:`foveated_mi.frame.sampling.cell_offset`).
+    Koskela et al. 2019 (:data:`foveated_mi.frame.cells.ACUITY_OMEGA0`, ``ACUITY_SLOPE``;
+    the option ``polar_cells = "acuity"``, :func:`foveated_mi.frame.cells.cell_offset`).
 
 :func:`polar_grid` sizes :math:`r_0` so that the cells inside the film number a budget (a
 fraction of its pixels) when the gaze is at the film's centre; the grid's size does not depend

@@ -112,13 +112,12 @@ class Overlays:
         import drjit as dr
         import mitsuba as mi
         from ..configure import sampling_settings, viewer_options
-        from ..frame import sampling
+        from ..frame import cells
         w, h = self.width, self.height
         fovea = float(o["theta"]) * 0.5 * math.hypot(w, h)    # the disc of the polar law
         # The frame's cells (polar_cells), measured on the sensor the frames are rendered by.
         law = sampling_settings(viewer_options(o, self.scene.sensors()[0]))
-        grid = sampling.foveal_grid(w, h, float(o["ray_budget"]), fovea,
-                                    sampling.cell_offset(law))
+        grid = cells.foveal_grid(w, h, float(o["ray_budget"]), fovea, cells.cell_offset(law))
         if self._cells is None:
             idx = dr.arange(mi.UInt32, w * h)
             self._cells = mi.Point2f(mi.Float(idx % w) + 0.5, mi.Float(idx // w) + 0.5)

@@ -92,7 +92,7 @@ def sequence(task, refs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _disc(task, ref: np.ndarray, theta: float) -> np.ndarray:
     """(F, H, W, 1): each frame's disc around its gaze, out to the seam, at ``theta``."""
     from foveated_mi.frame.foveal import SEAM
-    from foveated_mi.frame.sampling import fovea_radius
+    from foveated_mi.frame.cells import fovea_radius
     h, w = ref.shape[1:3]
     return _disc_masks(task["motion"]["gazes"], w, h, fovea_radius(w, h, theta) + SEAM)
 
@@ -126,7 +126,7 @@ def cells_both_ways(reference: np.ndarray, grid, gaze, width: int, height: int):
     skips it), though pixels of the film may lie in it."""
     import drjit as dr
     import mitsuba as mi
-    from foveated_mi.frame.sampling import snapped_pixels
+    from foveated_mi.frame.cells import snapped_pixels
     from foveated_mi.kernels.grid import Grid
     flat = mi.Color3f(*[mi.Float(np.ascontiguousarray(reference[..., c]).ravel())
                         for c in range(3)])
@@ -150,7 +150,7 @@ def ceiling(task, refs: np.ndarray, budget: float, per_frame: bool = False) -> d
     import mitsuba as mi
     from foveated_mi.frame import buffer_space
     from foveated_mi.frame.foveal import SEAM, warp
-    from foveated_mi.frame.sampling import fovea_radius
+    from foveated_mi.frame.cells import fovea_radius
     from foveated_mi.render import to_display
     from foveated_mi.study.tasks import get_scene
     scene = get_scene(task["scene"], task["variant"])
@@ -304,7 +304,7 @@ def cell_widths(grid, ecc_row: np.ndarray, width: int, r0: float) -> dict:
 def _blur_table(args, task, refs: np.ndarray, budgets) -> dict:
     """Prints and returns :func:`blurred_flicker` and :func:`cell_widths` (``--blur``)."""
     from foveated_mi.frame import buffer_space
-    from foveated_mi.frame.sampling import fovea_radius
+    from foveated_mi.frame.cells import fovea_radius
     from foveated_mi.metrics import flicker_ring_columns
     from foveated_mi.render import to_display
     from foveated_mi.study.scoring import _viewing

@@ -13,7 +13,7 @@ BENCH_MODULE = "bench_cell_prefilter"  # the conftest's ``bench`` fixture import
 
 
 def _grid(w, h):
-    from foveated_mi.frame.sampling import fovea_radius, foveal_grid
+    from foveated_mi.frame.cells import fovea_radius, foveal_grid
     return foveal_grid(w, h, 0.1, fovea_radius(w, h, 0.15))
 
 
