@@ -1,7 +1,9 @@
 """``foveated-mi sequence``: render a camera/gaze sequence with temporal reuse.
 
-Per frame the runner moves the camera (:func:`foveated_mi.scenes.apply_camera`, in place, so
-no kernel is recompiled), sets the gaze, renders with the history of the previous frames,
+Each frame's inputs (:func:`frame_input`) go through the frame driver
+(:class:`foveated_mi.frames.FrameDriver`): it moves the camera when it changed
+(:func:`foveated_mi.scenes.apply_camera`, in place, so no kernel is recompiled), sets the
+gaze, renders with the history of the previous frames; the runner then
 writes ``frame_NNNN.exr`` / ``.png`` atomically and appends one JSON line to
 ``stats.jsonl``. A camera cut in the config resets the history, so the frame after a cut is
 exactly a fresh first frame. A config with ``[poses]`` (a walk-through the live view
@@ -13,16 +15,13 @@ At the end (or on Ctrl-C, with the frames done so far) it writes
 """
 from __future__ import annotations
 
-import functools
 import json
 import os
-import time
 from typing import Any
 
 import numpy as np
 
 from .config import SequenceConfig
-from .paths import lens_centre
 
 
 def _video_path(out_dir: str, fmt: str) -> str | None:
@@ -51,7 +50,8 @@ def write_video(path: str, frames: list[np.ndarray], fps: float) -> None:
 def run_sequence(cfg: SequenceConfig, *, out_dir: str | None = None, compare_full: bool = False,
                  progress: bool = True) -> list[dict[str, Any]]:
     """Render ``cfg`` and return the per-frame stats. Ctrl-C keeps what is written. With
-    ``[stereo]`` each frame is both eyes (:func:`_render_eyes`)."""
+    ``[stereo]`` each frame is both eyes (:func:`_eyes_view`)."""
+    from .frames import run_frames
     from .render import FrameRenderer
     from .scenes import load_scene
 
@@ -64,12 +64,7 @@ def run_sequence(cfg: SequenceConfig, *, out_dir: str | None = None, compare_ful
     scene = load_scene(cfg.scene, width=cfg.width, height=cfg.height, spp=cfg.spp,
                        integrator=cfg.integrator, camera=cfg.camera_at(0), **cfg.scene_params)
     fr = FrameRenderer(scene, {**cfg.foveated, "timing": True}, spp=cfg.spp)
-    if cfg.stereo is not None:
-        render = _eyes_renderer(cfg, scene, fr)
-    elif cfg.eye_tracking:
-        render = _render_frame
-    else:       # fixed foveation: the lens centre, measured once
-        render = functools.partial(_render_frame, centre=lens_centre(scene.sensors()[0]))
+    driver, emit = _driver(cfg, scene, fr, compare_full)
     stats_path = os.path.join(out_dir, "stats.jsonl")
     tmp_stats = stats_path + ".partial"
     video, all_stats = [], []
@@ -80,8 +75,9 @@ def run_sequence(cfg: SequenceConfig, *, out_dir: str | None = None, compare_ful
     interrupted = failed = False
     try:
         with open(tmp_stats, "w") as log:
-            for i in range(cfg.frames):
-                stats = render(cfg, i, scene, fr, out_dir, compare_full, video)
+            inputs = (frame_input(cfg, i) for i in range(cfg.frames))
+            for frame in run_frames(driver, inputs, restore=False):
+                stats = emit(cfg, frame, fr, out_dir, video)
                 log.write(json.dumps(stats) + "\n")
                 log.flush()
                 all_stats.append(stats)
@@ -110,31 +106,46 @@ def run_sequence(cfg: SequenceConfig, *, out_dir: str | None = None, compare_ful
     return all_stats
 
 
-def _render_frame(cfg: SequenceConfig, i: int, scene, fr, out_dir: str, compare_full: bool,
-                  video: list, centre: tuple[float, float] | None = None) -> dict[str, Any]:
-    """Frame ``i``: camera, cut and gaze of the config (``centre``, the lens centre, for
-    fixed foveation), the render, its files (and its video frame appended to ``video``).
-    Returns its stats."""
+def _driver(cfg: SequenceConfig, scene, fr, compare_full: bool):
+    """``(driver, emit)``: the frame driver of the config's view (one eye, or both with
+    ``[stereo]``) and the function that writes a frame and returns its stats."""
+    from .frames import FrameDriver, RendererView
+    if cfg.stereo is not None:
+        view, emit = _eyes_view(cfg, scene, fr)
+    else:
+        view, emit = RendererView(fr, compare_full=compare_full), _frame_out
+    # Fixed foveation: the driver renders at the lens centre, measured once. Every frame
+    # after the first moves the camera, as the sequences measured so far did.
+    driver = FrameDriver(scene, view, eye_tracking=cfg.eye_tracking, camera=cfg.camera_at(0),
+                         reapply=True)
+    return driver, emit
+
+
+def frame_input(cfg: SequenceConfig, i: int):
+    """Frame ``i``'s inputs (:class:`foveated_mi.frames.FrameInput`): the config's camera,
+    cut and gaze (each eye's of a binocular gaze path), its seed and spp."""
+    from .frames import FrameInput
+    from .paths import BinocularGazeCSV
+    eye_gazes = cfg.gaze.eyes_at(cfg.time(i)) \
+        if cfg.stereo is not None and cfg.poses is None \
+        and isinstance(cfg.gaze, BinocularGazeCSV) else None
+    return FrameInput(i, camera=cfg.camera_at(i), cut=cfg.cut_before(i), gaze=cfg.gaze_at(i),
+                      eye_gazes=eye_gazes, seed=cfg.seed, spp=cfg.spp)
+
+
+def _frame_out(cfg: SequenceConfig, frame, fr, out_dir: str, video: list) -> dict[str, Any]:
+    """Frame ``frame``'s files (and its video frame appended to ``video``); returns its
+    stats: the gaze rendered (the lens centre under fixed foveation, the eye's then as
+    ``eye_gaze``)."""
     from .io import encode_srgb8
-    from .scenes import apply_camera
-    integ = fr.integrator
-    cam = cfg.camera_at(i)
-    if cam is not None and i > 0:
-        apply_camera(scene, cam)
-    if cfg.cut_before(i):
-        integ.reset()
-    eye = cfg.gaze_at(i)
-    # Fixed foveation: the density stays at the lens centre whatever the eye does.
-    integ.gaze = eye if centre is None else centre
-    t0 = time.perf_counter()
-    res = fr.render_frame(seed=cfg.seed, compare_full=compare_full)
-    stats = {"frame": i, "time_s": cfg.time(i), "gaze": list(integ.gaze),
+    res, i = frame.result, frame.input.index
+    stats = {"frame": i, "time_s": cfg.time(i), "gaze": list(fr.integrator.gaze),
              **{k: v for k, v in res.stats.items() if k not in ("frame", "gaze")}}
     if not cfg.eye_tracking:
-        stats["eye_gaze"] = list(map(float, eye))
-    if cam is not None:
-        stats["camera"] = cam
-    stats["wall_ms"] = (time.perf_counter() - t0) * 1e3
+        stats["eye_gaze"] = list(map(float, frame.input.gaze))
+    if frame.input.camera is not None:
+        stats["camera"] = frame.input.camera
+    stats["wall_ms"] = frame.time_ms
     name = os.path.join(out_dir, f"frame_{i:04d}")
     if cfg.output.exr:
         res.write(name + ".exr") if cfg.output.png else _write_exr_only(res, name)
@@ -169,55 +180,41 @@ def _stereo_of(cfg: SequenceConfig, scene, fr):
                   first=st.get("first", "left"))
 
 
-def _eyes_renderer(cfg: SequenceConfig, scene, fr):
-    """``render(cfg, i, scene, fr, out_dir, compare_full, video)`` for ``[stereo]``: both
-    eyes of the scene's camera (the head) with one integrator, each eye a view with its own
-    history (:class:`foveated_mi.stereo.Stereo`); a cut resets both. Each frame writes the
-    eyes as the layers ``left`` and ``right`` of ``frame_NNNN.exr`` and side by side in its
-    PNG and the video; its stats hold each eye's."""
-    from .paths import BinocularGazeCSV
-    from .stereo import EYES
-    stereo = _stereo_of(cfg, scene, fr)
-    fixed = None if cfg.eye_tracking else tuple(lens_centre(stereo.sensors[eye])
-                                                 for eye in EYES)
+def _eyes_view(cfg: SequenceConfig, scene, fr):
+    """``(view, emit)`` for ``[stereo]``: both eyes of the scene's camera (the head) with
+    one integrator, each eye a view with its own history (:class:`foveated_mi.stereo.Stereo`,
+    through :class:`foveated_mi.frames.StereoView`; a cut resets both), and the function
+    that writes a frame: the eyes as the layers ``left`` and ``right`` of
+    ``frame_NNNN.exr`` and side by side in its PNG and the video; its stats hold each eye's."""
+    from .frames import StereoView
+    return StereoView(_stereo_of(cfg, scene, fr)), _eyes_out
 
-    def render(cfg, i, scene, fr, out_dir, compare_full, video):
-        from .io import encode_srgb8, write_png
-        from .scenes import apply_camera
-        from .stereo import write_stereo
-        cam = cfg.camera_at(i)
-        if cam is not None and i > 0:
-            apply_camera(scene, cam)
-        if cfg.cut_before(i):
-            stereo.cut()
-        eye_gazes = cfg.gaze.eyes_at(cfg.time(i)) \
-            if cfg.poses is None and isinstance(cfg.gaze, BinocularGazeCSV) else None
-        if fixed is not None:           # fixed foveation: each eye at its lens centre
-            eye_gazes = fixed
-        t0 = time.perf_counter()
-        frame = stereo.render(cfg.gaze_at(i), seed=cfg.seed, spp=cfg.spp, eye_gazes=eye_gazes)
-        integ = fr.integrator
-        eyes = {eye: stereo.views[eye].stats for eye in EYES}
-        stats = {"frame": i, "time_s": cfg.time(i), "gazes": [list(g) for g in frame.gazes],
-                 "timings_ms": {"total": sum(e["timings_ms"]["total"] for e in eyes.values())},
-                 **{eye: {"rays": e["rays"], "ray_fraction": e["ray_fraction"],
-                          "history_hit_rate": e.get("history_hit_rate"),
-                          "timings_ms": e["timings_ms"]} for eye, e in eyes.items()}}
-        if frame.fixation is not None:
-            stats.update(fixation=list(map(float, frame.fixation)), hit=bool(frame.hit))
-        if cam is not None:
-            stats["camera"] = cam
-        stats["wall_ms"] = (time.perf_counter() - t0) * 1e3
-        name = os.path.join(out_dir, f"frame_{i:04d}")
-        both = np.concatenate([np.asarray(frame.left), np.asarray(frame.right)], axis=1)
-        if cfg.output.exr:
-            png = write_stereo(name + ".exr", frame, exposure=integ.exposure,
-                               tonemap=integ.tonemap)
-            if not cfg.output.png:
-                os.remove(png)
-        elif cfg.output.png:
-            write_png(name + ".png", both, exposure=integ.exposure, tonemap=integ.tonemap)
-        if cfg.output.video != "none":
-            video.append(encode_srgb8(both, exposure=integ.exposure, tonemap=integ.tonemap))
-        return stats
-    return render
+
+def _eyes_out(cfg: SequenceConfig, frame, fr, out_dir: str, video: list) -> dict[str, Any]:
+    """A two-eye frame's files and stats (:func:`_eyes_view`)."""
+    from .io import encode_srgb8, write_png
+    from .stereo import write_stereo
+    i, eyes, integ = frame.input.index, frame.stats, fr.integrator
+    both_eyes = frame.result
+    stats = {"frame": i, "time_s": cfg.time(i), "gazes": [list(g) for g in both_eyes.gazes],
+             "timings_ms": {"total": sum(e["timings_ms"]["total"] for e in eyes.values())},
+             **{eye: {"rays": e["rays"], "ray_fraction": e["ray_fraction"],
+                      "history_hit_rate": e.get("history_hit_rate"),
+                      "timings_ms": e["timings_ms"]} for eye, e in eyes.items()}}
+    if both_eyes.fixation is not None:
+        stats.update(fixation=list(map(float, both_eyes.fixation)), hit=bool(both_eyes.hit))
+    if frame.input.camera is not None:
+        stats["camera"] = frame.input.camera
+    stats["wall_ms"] = frame.time_ms
+    name = os.path.join(out_dir, f"frame_{i:04d}")
+    both = np.concatenate(frame.image, axis=1)
+    if cfg.output.exr:
+        png = write_stereo(name + ".exr", both_eyes, exposure=integ.exposure,
+                           tonemap=integ.tonemap)
+        if not cfg.output.png:
+            os.remove(png)
+    elif cfg.output.png:
+        write_png(name + ".png", both, exposure=integ.exposure, tonemap=integ.tonemap)
+    if cfg.output.video != "none":
+        video.append(encode_srgb8(both, exposure=integ.exposure, tonemap=integ.tonemap))
+    return stats

@@ -26,13 +26,11 @@ true one for the metrics.
 """
 from __future__ import annotations
 
-import contextlib
-
 import numpy as np
 
 from ..stereo import EYES, EyeSensors, StereoRig, frustum_of
 from .results import STEREO_KEYS
-from .scoring import (UNIFORM_MODE, _camera_path, _flicker, _median, _mode, _quality,
+from .scoring import (UNIFORM_MODE, _flicker, _median, _mode, _quality,
                       _sequence_summary, _spread_ms, _viewing, frame_seed, rendered_gazes)
 
 __all__ = ["STEREO_KEYS", "stereo_rig", "stereo_reference", "stereo_sequence_row",
@@ -91,46 +89,54 @@ def stereo_reference(scene, task: dict, frames) -> np.ndarray:
 
 def _renderer(scene, task: dict, rig: StereoRig):
     """``(render, eyes, integrator)``: ``render(gaze, eye_gazes=None)`` renders both eyes at
-    the head's current pose, fixating the head's ``gaze`` (or each at its own of
-    ``eye_gazes``), and returns ``(images, time_ms, ray_fraction, each eye's time_ms)``;
-    ``eyes`` the :class:`EyeSensors` the frames use; ``integrator`` None for a uniform row."""
+    the head's current pose (their view's, :mod:`foveated_mi.frames`), fixating the head's
+    ``gaze`` (or each at its own of ``eye_gazes``), and returns ``(images, time_ms,
+    ray_fraction, each eye's time_ms)``; ``eyes`` the :class:`EyeSensors` the frames use;
+    ``integrator`` None for a uniform row."""
+    from ..frames import StereoView, UniformEyesView
     spp, seed = task["spp"], task["seed"]
     if task["kind"] == "foveated":
         from ..integrators.foveated import FoveatedIntegrator
         from ..stereo import Stereo
         integ = FoveatedIntegrator(nested=scene.integrator(), **task["options"], timing=True)
         how = task["motion"]["stereo"]
-        stereo = Stereo(scene, integ, rig, reuse=how.get("reuse", True),
-                        first=how.get("first", "left"))
+        view = StereoView(Stereo(scene, integ, rig, reuse=how.get("reuse", True),
+                                 first=how.get("first", "left")))
 
         def render_foveated(gaze, eye_gazes=None):
-            frame = stereo.render(tuple(gaze), seed=seed, spp=spp, eye_gazes=eye_gazes)
-            images = [np.array(frame.left, dtype=np.float32),
-                      np.array(frame.right, dtype=np.float32)]
-            stats = [stereo.views[eye].stats for eye in EYES]
+            images, by_eye, _ = view.render(gaze, eye_gazes, seed, spp)
+            stats = [by_eye[eye] for eye in EYES]
             render_foveated.modes.extend(s["trace_mode"] for s in stats)
             each = [s["timings_ms"]["total"] for s in stats]
             return images, sum(each), float(np.mean([s["ray_fraction"] for s in stats])), each
         render_foveated.modes = []      # each eye's trace_mode, frame by frame
-        return render_foveated, stereo.eyes, integ
-    from ..baselines import render_uniform
-    eyes = EyeSensors(scene, rig)
-    den = bool(task["options"]["denoise"])
+        return render_foveated, view.stereo.eyes, integ
+    from ..baselines import traced_fraction
+    view = UniformEyesView(EyeSensors(scene, rig), denoise=bool(task["options"]["denoise"]),
+                           scale=task["options"].get("scale", 1.0))
 
     def render_baseline(gaze, eye_gazes=None):
-        eyes.follow()
         f = render_baseline.frame       # new samples every frame (scoring.frame_seed)
         render_baseline.frame += 1
-        runs = [render_uniform(scene, spp=spp, seed=(frame_seed(task, f) + k) % 2**32,
-                               denoise=den, sensor=eyes[eye],
-                               scale=task["options"].get("scale", 1.0))
-                for k, eye in enumerate(EYES)]
-        each = [r[1]["time_ms"] for r in runs]
-        from ..baselines import traced_fraction
-        return ([r[0] for r in runs], sum(each),
-                float(np.mean([traced_fraction(*r) for r in runs])), each)
+        images, by_eye, _ = view.render(gaze, eye_gazes, frame_seed(task, f), spp)
+        each = [by_eye[eye]["time_ms"] for eye in EYES]
+        return (images, sum(each),
+                float(np.mean([traced_fraction(images[k], by_eye[eye])
+                               for k, eye in enumerate(EYES)])), each)
     render_baseline.frame = 0
-    return render_baseline, eyes, None
+    return render_baseline, view.eyes, None
+
+
+def _path_frames(scene, task: dict, render, eyes):
+    """Both eyes' frames of a sequence through the frame driver (:mod:`foveated_mi.frames`):
+    the head at each frame's camera (put back afterwards), ``render`` (:func:`_renderer`)
+    at the rendered gazes (:func:`_rendered`); each frame's ``result`` what it returned."""
+    from ..frames import FrameDriver, FunctionView, path_inputs, run_frames
+    rendered, rendered_eyes = _rendered(scene, task, eyes)
+    driver = FrameDriver(scene, FunctionView(render, scene, eyes=eyes),
+                         eye_tracking=task.get("eye_tracking", True), reapply=True)
+    return run_frames(driver, path_inputs(rendered, task["motion"]["cameras"],
+                                          eye_gazes=rendered_eyes))
 
 
 def stereo_sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = False):
@@ -189,29 +195,26 @@ def _frames(scene, task: dict, refs: np.ndarray, render, eyes) -> tuple:
     (reference, image) display pairs, ``quality``, ``eccs`` and true ``gazes``."""
     from ..render import to_display
     motion, m = task["motion"], task["metrics"]
-    gazes, cameras = motion["gazes"], motion["cameras"]
+    gazes = motion["gazes"]
     true_eyes = motion.get("eye_gazes")
-    rendered, rendered_eyes = _rendered(scene, task, eyes)
     times, rays = [], []
     frames = {eye: {"shown": [], "quality": [], "eccs": [], "gazes": []} for eye in EYES}
-    with _camera_path(scene) if cameras else contextlib.nullcontext() as move:
-        for k in move(cameras) if cameras else range(len(gazes)):
-            eyes.follow()
-            truth = true_eyes[k] if true_eyes else eyes.gazes(tuple(gazes[k]))[0]
-            images, time_ms, ray_fraction, each = render(
-                rendered[k], rendered_eyes[k] if rendered_eyes else None)
-            times.append((time_ms, each))
-            rays.append(ray_fraction)
-            for e, eye in enumerate(EYES):
-                eye_task = dict(task, gaze=list(truth[e]))
-                viewing = _viewing(scene, eye_task, eyes[eye])
-                ref_d = to_display(refs[k][e], m["exposure"])
-                f = frames[eye]
-                f["eccs"].append(viewing["eccentricity"])
-                f["gazes"].append(list(truth[e]))
-                f["shown"].append((ref_d, to_display(images[e], m["exposure"])))
-                f["quality"].append(_quality(ref_d, images[e], dict(eye_task, jod=False),
-                                             viewing))
+    for frame in _path_frames(scene, task, render, eyes):
+        k = frame.input.index
+        truth = true_eyes[k] if true_eyes else eyes.gazes(tuple(gazes[k]))[0]
+        images, time_ms, ray_fraction, each = frame.result
+        times.append((time_ms, each))
+        rays.append(ray_fraction)
+        for e, eye in enumerate(EYES):
+            eye_task = dict(task, gaze=list(truth[e]))
+            viewing = _viewing(scene, eye_task, eyes[eye])
+            ref_d = to_display(refs[k][e], m["exposure"])
+            f = frames[eye]
+            f["eccs"].append(viewing["eccentricity"])
+            f["gazes"].append(list(truth[e]))
+            f["shown"].append((ref_d, to_display(images[e], m["exposure"])))
+            f["quality"].append(_quality(ref_d, images[e], dict(eye_task, jod=False),
+                                         viewing))
     return times, rays, frames
 
 
@@ -248,15 +251,7 @@ def stereo_sequence_pass(scene, task: dict) -> dict:
     """
     rig = stereo_rig(scene, task["motion"]["stereo"])
     render, eyes, _ = _renderer(scene, task, rig)
-    rendered, rendered_eyes = _rendered(scene, task, eyes)
-    cameras = task["motion"]["cameras"]
-    times = []
-    with _camera_path(scene) if cameras else contextlib.nullcontext() as move:
-        for k in move(cameras) if cameras else range(len(rendered)):
-            eyes.follow()
-            _, time_ms, _, each = render(rendered[k],
-                                         rendered_eyes[k] if rendered_eyes else None)
-            times.append((time_ms, each))
+    times = [frame.result[1::2] for frame in _path_frames(scene, task, render, eyes)]
     both = [t for t, _ in times]
     out = {"time_ms": _median(both[1:]), **_spread_ms(both[1:])}
     for e, eye in enumerate(EYES):

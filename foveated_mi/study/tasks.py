@@ -439,39 +439,48 @@ def _sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = False):
 
 def _sequence_renderer(scene, task: dict, gaze):
     """``(render, integrator)`` for the frames of a sequence: ``render(gaze)`` renders one
-    frame and returns ``(image, time_ms, ray_fraction)``; ``integrator`` is the foveated
+    frame (its view's, :mod:`foveated_mi.frames`) and returns ``(image, time_ms,
+    ray_fraction)``, the time the integrator's own; ``integrator`` is the foveated
     integrator the frames share (its history runs through the sequence), None for a uniform
     row."""
-    import mitsuba as mi
+    from ..frames import FoveatedView, UniformView
     spp, seed = task["spp"], task["seed"]
     if task["kind"] == "foveated":
         from ..integrators.foveated import FoveatedIntegrator
         integ = FoveatedIntegrator(nested=scene.integrator(), **task["options"],
                                    gaze=tuple(gaze), timing=True)
+        view = FoveatedView(scene, integ)
 
         def render_foveated(g):
-            integ.gaze = tuple(g)
-            image = np.array(mi.render(scene, integrator=integ, spp=spp, seed=seed),
-                             dtype=np.float32)
-            stats = integ.stats
+            image, stats, _ = view.render(g, None, seed, spp)
             render_foveated.modes.append(stats["trace_mode"])
             render_foveated.samples.append(stats["lanes_active"])
             return image, stats["timings_ms"]["total"], stats["ray_fraction"]
         render_foveated.modes = []          # each frame's trace_mode
         render_foveated.samples = []        # and samples traced (a still view's settle)
         return render_foveated, integ
-    from ..baselines import render_uniform, traced_fraction
-    den = bool(task["options"]["denoise"])
-    scale = task["options"].get("scale", 1.0)
+    from ..baselines import traced_fraction
+    view = UniformView(scene, denoise=bool(task["options"]["denoise"]),
+                       scale=task["options"].get("scale", 1.0))
 
     def render_baseline(g):
         k = len(render_baseline.upscale)    # the sequence's frame, from 0
-        image, stats = render_uniform(scene, spp=spp, seed=frame_seed(task, k), denoise=den,
-                                      scale=scale)
+        image, stats, _ = view.render(g, None, frame_seed(task, k), spp)
         render_baseline.upscale.append(stats.get("upscale_ms"))
         return image, stats["time_ms"], traced_fraction(image, stats)
     render_baseline.upscale = []        # each frame's upscale time (dynamic resolution)
     return render_baseline, None
+
+
+def _path_frames(scene, task: dict, render, gazes: list):
+    """The frames of a sequence through the frame driver (:mod:`foveated_mi.frames`): frame
+    ``k`` at the motion's camera (put back afterwards: the scene is cached for later tasks),
+    rendered by ``render`` (:func:`_sequence_renderer`) at ``gazes[k]`` (the lens centre
+    under fixed foveation); each frame's ``result`` is what ``render`` returned."""
+    from ..frames import FrameDriver, FunctionView, path_inputs, run_frames
+    driver = FrameDriver(scene, FunctionView(render, scene),
+                         eye_tracking=task.get("eye_tracking", True), reapply=True)
+    return run_frames(driver, path_inputs(gazes, task["motion"]["cameras"]))
 
 
 def _sequence_frames(scene, task: dict, refs: np.ndarray, render, rendered: list) -> tuple:
@@ -482,20 +491,19 @@ def _sequence_frames(scene, task: dict, refs: np.ndarray, render, rendered: list
     degrees (:func:`_viewing`; None without degrees)."""
     from ..render import to_display
     motion, m = task["motion"], task["metrics"]
-    gazes, cameras = motion["gazes"], motion["cameras"]
+    gazes = motion["gazes"]
     times, shown, quality, rays, eccs = [], [], [], [], []
-    # A still camera (a gaze path only) is never moved, whatever the sensor.
-    with _camera_path(scene) if cameras else contextlib.nullcontext() as move:
-        for k in move(cameras) if cameras else range(len(gazes)):
-            frame_task = dict(task, gaze=gazes[k])
-            viewing = _viewing(scene, frame_task)
-            eccs.append(viewing["eccentricity"])
-            image, time_ms, ray_fraction = render(rendered[k])
-            times.append(time_ms)
-            rays.append(ray_fraction)
-            ref_d = to_display(refs[k], m["exposure"])
-            shown.append((ref_d, to_display(image, m["exposure"])))
-            quality.append(_quality(ref_d, image, dict(frame_task, jod=False), viewing))
+    for frame in _path_frames(scene, task, render, rendered):
+        k = frame.input.index
+        image, time_ms, ray_fraction = frame.result
+        frame_task = dict(task, gaze=gazes[k])
+        viewing = _viewing(scene, frame_task)
+        eccs.append(viewing["eccentricity"])
+        times.append(time_ms)
+        rays.append(ray_fraction)
+        ref_d = to_display(refs[k], m["exposure"])
+        shown.append((ref_d, to_display(image, m["exposure"])))
+        quality.append(_quality(ref_d, image, dict(frame_task, jod=False), viewing))
     return times, rays, shown, quality, eccs
 
 
@@ -570,11 +578,7 @@ def _sequence_pass(scene, task: dict) -> dict:
         return stereo_sequence_pass(scene, task)
     rendered = rendered_gazes(scene, task)
     render, _ = _sequence_renderer(scene, task, rendered[0])
-    cameras = task["motion"]["cameras"]
-    times = []
-    with _camera_path(scene) if cameras else contextlib.nullcontext() as move:
-        for k in move(cameras) if cameras else range(len(rendered)):
-            times.append(render(rendered[k])[1])
+    times = [frame.result[1] for frame in _path_frames(scene, task, render, rendered)]
     out = {"time_ms": _median(times[1:]), **_spread_ms(times[1:])}
     modes = getattr(render, "modes", None)
     out["trace_mode"] = _mode(modes[1:] or modes) if modes else UNIFORM_MODE
