@@ -114,6 +114,16 @@ class FrameDriver:
         self.camera, self.home, self.reapply, self.frames = camera, None, reapply, 0
         self.fixed = None if eye_tracking else view.lens_centre()
 
+    @property
+    def eye_tracking(self) -> bool:
+        """False: fixed foveation (each frame at the view's lens centre)."""
+        return self.fixed is None
+
+    @eye_tracking.setter
+    def eye_tracking(self, on: bool) -> None:
+        from .validate import check_bool
+        self.fixed = None if check_bool("eye_tracking", on) else self.view.lens_centre()
+
     def move(self, camera: dict | None) -> bool:
         """Move the scene's camera to ``camera`` if it is another (or, with ``reapply``,
         after the first frame); whether it moved."""

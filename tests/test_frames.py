@@ -124,3 +124,27 @@ def test_a_real_frame_through_the_driver_equals_mi_render():
     assert isinstance(frame.image, np.ndarray) and frame.image.dtype == np.float32
     np.testing.assert_array_equal(frame.image, expected)
     assert tuple(integ.gaze) == pytest.approx((0.3, 0.4))
+
+
+def test_the_live_view_renders_through_the_driver(tmp_path):
+    """The live view's frame is the driver's step with the mailbox's inputs; switching eye
+    tracking off on a running view moves the next frame to the lens centre."""
+    from foveated_mi.live.renderer import LiveRenderer
+    from foveated_mi.scenes import load_scene
+    r = LiveRenderer(load_scene("cornell-box", width=24, height=16),
+                     options={"preset": "guided"}, record_dir=str(tmp_path))
+    seen, step = [], r.driver.step
+
+    def spy(frame):
+        seen.append(frame)
+        return step(frame)
+    r.driver.step = spy
+    r.set_gaze(0.2, 0.3)
+    meta = r.render_frame().meta
+    assert len(seen) == 1 and seen[0].gaze == (0.2, 0.3) and seen[0].index == 0
+    assert seen[0].camera is not None and seen[0].spp == r.spp and seen[0].seed == r.seed
+    assert r.integ.gaze == (0.2, 0.3) and meta["frame"] == 0
+    r.eye_tracking = False
+    r.render_frame()
+    assert len(seen) == 2 and seen[1].gaze == (0.2, 0.3)     # the eye's, kept for the page
+    assert r.integ.gaze == r.lens_centre and r.driver.eye_tracking is False

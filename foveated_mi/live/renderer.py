@@ -57,6 +57,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..frames import FoveatedView, FrameDriver, FrameInput
 from ..poses import Pose, PoseTrack  # noqa: F401  (importable from here, as before)
 from ..validate import ParameterError
 from . import display
@@ -143,6 +144,9 @@ class LiveRenderer:
         #: film never changes) while the page's gaze still drives the overlays
         self.eye_tracking = check_bool("eye_tracking", eye_tracking)
         self.lens_centre = lens_centre(sensor)
+        # Frames go through the one frame driver (camera, cut, gaze or lens centre, timing).
+        self.driver = FrameDriver(scene, FoveatedView(scene, self.integ),
+                                  eye_tracking=self.eye_tracking)
         self.variant = mi.variant()
         home = camera_of(scene)
         camera = FlyCamera(home, look_distance(scene, sensor, home))
@@ -433,26 +437,21 @@ class LiveRenderer:
 
     def _render(self, inputs: dict, rebuild: dict | None):
         """The foveated frame at the inputs' camera and gaze: image, stats, time (ms)."""
-        import mitsuba as mi
-        from ..scenes import apply_camera
-        integ = self.integ
-        if inputs["cam"] != self.mailbox.prev_cam:
-            apply_camera(self.scene, inputs["cam"])
-        if inputs["cut"] or inputs["reset"]:
-            integ.reset()
-        integ.gaze = inputs["gaze"] if self.eye_tracking else self.lens_centre
-        t0 = time.perf_counter()
+        self.driver.view.integrator = self.integ     # rebuilt when the settings change
+        if self.driver.eye_tracking != self.eye_tracking:      # switched on the page
+            self.driver.eye_tracking = self.eye_tracking
+        frame = FrameInput(self.frames_rendered, camera=inputs["cam"],
+                           cut=bool(inputs["cut"] or inputs["reset"]), gaze=inputs["gaze"],
+                           seed=self.seed, spp=self.spp)
         try:
-            img = np.asarray(mi.render(self.scene, integrator=integ, spp=self.spp,
-                                       seed=self.seed))
+            out = self.driver.step(frame)
         except Exception:
             if rebuild is not None:     # the new settings do not render: back to the old
                 from ..render import make_integrator
                 self._given, self.spp = self._previous
                 self.integ = make_integrator(self.scene, dict(self._given))
             raise
-        stats = integ.stats
-        return img, stats, (time.perf_counter() - t0) * 1e3
+        return out.image, out.stats, out.time_ms
 
     def _compose(self, img, inputs: dict, stats: dict, frame_ms: float):
         """The 8-bit image shown: the frame with its overlays, and the split view's panel
