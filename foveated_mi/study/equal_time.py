@@ -31,6 +31,7 @@ from typing import Any
 
 from ..validate import ParameterError
 from .aggregate import Margin, aggregate, margin
+from .budget_rows import budget_of
 
 __all__ = ["Verdict", "equal_time_verdicts", "verdict_lines", "verdict_sentence", "speedup",
            "speedup_over_seeds", "envelope_over_seeds", "Speedup", "TARGETS", "comparable",
@@ -505,7 +506,8 @@ def family_of(row: dict) -> str | None:
     """The family a study row (or cell) belongs to on an envelope: its method for a uniform
     one (``uniform``, ``uniform+oidn@0.5``, ``uniform+history+oidn``...), ``flat <preset>``
     for a foveated row whose ``sampling_law`` is ``flat`` (the same rays spread evenly), None
-    for any other foveated row.
+    for any other foveated row and for a uniform row held at a frame budget
+    (:mod:`foveated_mi.study.budget_rows`).
 
     Parameters
     ----------
@@ -518,6 +520,8 @@ def family_of(row: dict) -> str | None:
         Its family's name.
     """
     m = row.get("method", "")
+    if budget_of(row) is not None:     # held at a frame budget: compared at it, not on a curve
+        return None
     if m.startswith("uniform"):
         return m
     o = _options(row)

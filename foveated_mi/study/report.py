@@ -28,6 +28,13 @@ Then it writes, to ``--results`` (default: the ``--out`` folder):
   cell already does. Per seed, then mean ± standard deviation over seeds; ``†`` marks a
   ratio read from a baseline cell whose timing passes spread by more than 15 % of their
   median (:attr:`foveated_mi.study.equal_time.Speedup.noisy`);
+* with ``[motion] frame_ms`` (or ``--frame-ms 150 300``), an **At equal time** section per
+  scene and budget: each row held at the budget (the foveated rows' integrator picks each
+  frame's rays and spp, the uniform rows' dynamic resolution each frame's render scale and
+  spp), its quality, its frame times' mean and 95th percentile against the budget and what
+  it held, and per foveated row a verdict: its quality minus the best uniform row's at that
+  budget, that row named, a tie within the seeds' spread
+  (:mod:`foveated_mi.study.budget_rows`);
 * ``vr.json``: the same, machine-readable;
 * ``vr_eccentricity.png``: per configuration, PSNR (left) and temporal instability (right)
   against eccentricity in degrees (5-degree rings, all frames of seed 0 under the headset);
@@ -47,6 +54,7 @@ after the first, on this machine, comparable within one run only.
 
     foveated-mi study report configs/studies/vr.toml [--size 1152 648] [--frames 54]
         [--seeds 0 1 2] [--scenes voxel-city staircase] [--out out/vr] [--results DIR]
+        [--frame-ms 150 300]
 
 ``--headset quest3 [--eye-width W]`` puts a headset's eye on the study (its frustum, eye
 buffer and photometry: ``foveated-mi headsets``); with a stereo study
@@ -130,6 +138,8 @@ def overridden(data: dict, a) -> dict:
         viewer["gaze_latency_ms"] = a.latency_ms
     if flag("noise_deg") is not None:
         viewer["gaze_noise_deg"] = a.noise_deg
+    if flag("frame_ms"):        # the budgets rows are held at, compared at equal time
+        d["motion"]["frame_ms"] = list(a.frame_ms)
     if a.scenes:
         keep = [s for s in d["scenes"] if _scene_name(s) in a.scenes]
         if not keep:
@@ -146,15 +156,20 @@ def _scene_name(s: dict) -> str:
 
 
 def label(row: dict) -> str:
+    """A row's (or cell's) name in the tables; a row held at a frame budget says it."""
+    from foveated_mi.study.budget_rows import budget_of, held_label
+    held = budget_of(row) is not None
     if row["method"] == "foveated":
         config = json.loads(row["config"])
         opts = config.get("options", {})
         # The options set besides the preset tell two rows of one preset apart, and so does
         # a row rendered at the lens centre whatever the eye does.
-        rest = "".join(f", {k} {v}" for k, v in sorted(opts.items()) if k != "preset")
+        rest = "".join(f", {k} {v}" for k, v in sorted(opts.items())
+                       if k not in ("preset", "frame_ms"))
         fixed = ", fixed foveation" if config.get("eye_tracking") is False else ""
-        return f"{opts.get('preset', 'auto')} {row['spp']:.0f} spp{rest}{fixed}"
-    return f"{row['method']} {row['spp']:.0f} spp"
+        name = f"{opts.get('preset', 'auto')} {row['spp']:.0f} spp{rest}{fixed}"
+        return held_label(row, name) if held else name
+    return held_label(row, "") if held else f"{row['method']} {row['spp']:.0f} spp"
 
 
 def speedups(rows: list[dict], column: str) -> list[dict]:
@@ -252,6 +267,7 @@ def flicker_against_envelope(rows: list[dict], column: str) -> list[str]:
     has nothing to be held to."""
     from foveated_mi.metrics import FLICKER_RINGS_DEG, flicker_ring_columns
     from foveated_mi.study.aggregate import aggregate, margin
+    from foveated_mi.study.budget_rows import budget_of
     rings = list(zip(FLICKER_RINGS_DEG, FLICKER_RINGS_DEG[1:]))
     cols = ["flicker_periphery", *flicker_ring_columns()]
 
@@ -264,7 +280,7 @@ def flicker_against_envelope(rows: list[dict], column: str) -> list[str]:
     for scene in sorted({r["scene"] for r in rows}):
         cells = aggregate([r for r in rows if r["scene"] == scene])
         uniform = [c for c in cells if c["method"] != "foveated" and finite(c.get(column))
-                   and finite(c.get("time_ms"))]
+                   and finite(c.get("time_ms")) and budget_of(c) is None]
         for c in sorted((c for c in cells if c["method"] == "foveated"), key=label):
             q = c.get(column)
             above = [u for u in uniform if finite(q) and u[column] >= q]
@@ -506,6 +522,9 @@ def build_parser(prog: str = "foveated-mi study report") -> argparse.ArgumentPar
                     help="a stereo study's left eye alone (two eyes against one)")
     ap.add_argument("--latency-ms", type=float, default=None, dest="latency_ms",
                     help="the eye tracker's latency (viewer.gaze_latency_ms)")
+    ap.add_argument("--frame-ms", type=float, nargs="+", default=None, dest="frame_ms",
+                    metavar="MS", help="frame budgets in ms (motion.frame_ms): rows held at "
+                    "each, compared at equal time")
     ap.add_argument("--timing-passes", type=int, default=0, dest="timing_passes",
                     help="render each row's sequence this many times more, unscored, seed by "
                     "seed in alternating order, and give it the median of their times "
@@ -523,7 +542,8 @@ def command_line(a) -> str:
         f" --{k} {' '.join(map(str, v)) if isinstance(v, list) else v}"
         for k, v in (("size", a.size), ("frames", a.frames), ("seeds", a.seeds),
                      ("scenes", a.scenes), ("headset", a.headset), ("eye-width", a.eye_width),
-                     ("latency-ms", a.latency_ms), ("noise-deg", a.noise_deg)) if v)
+                     ("latency-ms", a.latency_ms), ("noise-deg", a.noise_deg),
+                     ("frame-ms", getattr(a, "frame_ms", None))) if v)
     return cmd + (" --stereo" if a.stereo else "") + (" --one-eye" if a.one_eye else "") + \
         (f" --reuse {a.reuse}" if a.reuse else "") + \
         (f" --first-eye {a.first_eye}" if a.first_eye else "") + \
@@ -596,6 +616,7 @@ def tables(rows: list[dict], conditions: dict, report: dict, viewer: dict) -> li
     if stereo:
         lines += eyes_section(rows, viewer)
     eyes = EYE_COLUMNS if stereo else []
+    lines += equal_time_section(rows, conditions, report)
     lines += ["## Every cell", "", *cells_table(rows, list(conditions.values()) + eyes), "",
               "## Temporal instability", "",
               "Flicker of each cell (display values; the root mean square over frames and "
@@ -608,6 +629,18 @@ def tables(rows: list[dict], conditions: dict, report: dict, viewer: dict) -> li
                   f"envelope of the uniform rows (the cheapest that reaches its `{column}`; "
                   "`≤`: it flickers no more, `>`: more, `≈`: within the seeds' spread):", "",
                   *flicker_against_envelope(rows, column), ""]
+    return lines
+
+
+def equal_time_section(rows: list[dict], conditions: dict, report: dict) -> list[str]:
+    """The rows held at a frame budget compared at equal time, in the headset condition's
+    column (:func:`foveated_mi.study.budget_rows.budget_section`); none without them."""
+    from foveated_mi.study.budget_rows import budget_section, budget_verdicts
+    column = conditions.get("headset") or next(iter(conditions.values()))
+    lines = budget_section(rows, column)
+    if lines:
+        report["equal_time"] = {"column": column,
+                                "verdicts": budget_verdicts(rows, column)}
     return lines
 
 

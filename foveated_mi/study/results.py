@@ -26,6 +26,7 @@ import os
 from typing import Any, Iterable
 
 from ..metrics import COMPARE_KEYS, FLICKER_KEYS
+from .budget_rows import BUDGET_KEYS
 
 __all__ = ["columns", "ResultsFile", "read_rows", "format_value", "parse_value",
            "NUMERIC_COLUMNS", "OPTIONAL_COLUMNS", "STEREO_KEYS",
@@ -82,7 +83,7 @@ NUMERIC_COLUMNS = frozenset(("seed", "scale", "theta", "sigma_p", "spp", "frame"
                              "ray_fraction", "samples", "time_ms", *COMPARE_KEYS, "jod", "jod_video",
                              "jod_monitor", "jod_video_monitor", *FLICKER_KEYS, *STEREO_KEYS,
                              "history_hit_rate", "width", "height", "repeats",
-                             "time_ms_min", "time_ms_max", "time_spread"))
+                             "time_ms_min", "time_ms_max", "time_spread", *BUDGET_KEYS))
 
 
 #: A sequence row's frame times after the first besides their median (``time_ms``), and
@@ -94,9 +95,10 @@ SEQUENCE_TIME_KEYS = ("time_mean_ms", "time_max_ms", "time_ms_min", "time_ms_max
 LIST_COLUMNS = frozenset(("time_ms_passes",))
 
 #: Columns only some rows carry (a sequence row's flicker and frame times, a stereo row's
-#: eyes, a dynamic-resolution row's scale): a file gains them from the first row that brings
-#: them (:meth:`ResultsFile.append`).
-OPTIONAL_COLUMNS = frozenset((*FLICKER_KEYS, *STEREO_KEYS, *SEQUENCE_TIME_KEYS, *SCALE_KEYS))
+#: eyes, a dynamic-resolution row's scale, a row held at a frame budget's): a file gains them
+#: from the first row that brings them (:meth:`ResultsFile.append`).
+OPTIONAL_COLUMNS = frozenset((*FLICKER_KEYS, *STEREO_KEYS, *SEQUENCE_TIME_KEYS, *SCALE_KEYS,
+                              *BUDGET_KEYS))
 
 
 def format_value(v: Any) -> str:

@@ -70,6 +70,8 @@ Layout (every key optional except ``scenes``)::
     frames = 45                 #   frames per sequence (>= 2), shown at fps
     fps = 90
     passes = 3                  #   timing passes (>= 1) after the scored one, round-robin
+    frame_ms = [150.0, 300.0]   #   frame budgets (ms; one or a list): each adds rows held at
+                                #   it, compared at equal time (see below)
     [motion.camera]             #   the camera path (the sequence format of configs/*.toml;
     interpolation = "linear"    #   absent: each scene's own camera, still); each scene's own
     [[motion.camera.keyframes]] #   camera (or the study's camera) fills the keys a keyframe
@@ -106,6 +108,16 @@ real renderer does: frame ``k`` uses the seed ``sample_tea_32(seed, k)`` (the ro
 frame 0), the seeds the foveated integrator's history frames use. With ``[uniform]
 frozen_noise = true`` every frame uses the row's seed, so under a still camera its frames
 repeat and its flicker is 0.
+
+With ``[motion] frame_ms`` (or a list of budgets) each budget ``b`` adds rows, the study's
+other rows staying as they are: every foveated configuration again with ``frame_ms = b``
+(its integrator picks each frame's ray budget and spp to hold it, whatever the row sets: a
+configuration without the ``vr`` preset's foveal buffer is refused), and a uniform row per
+``[uniform] denoise`` value (default ``[false]``) held at ``b`` by dynamic resolution
+(:class:`foveated_mi.uniform_budget.UniformFrameBudget`; method ``uniform+budget`` or
+``uniform+oidn+budget``, new samples each frame). Their rows carry the budget and what was
+held (:data:`foveated_mi.study.budget_rows.BUDGET_KEYS`); ``foveated-mi study report``
+compares them at each budget. A study of two eyes holds no budget yet.
 
     [foveated.defaults]         # options shared by the grid and the list
     atrous_iterations = 0
@@ -156,6 +168,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import os
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -258,6 +271,7 @@ class StudySpec:
     perceptual: dict = field(default_factory=lambda: dict(DEFAULT_PERCEPTUAL))
     description: str = ""
     headset: str | None = None        # [viewer] headset: it sets each scene's frustum and film
+    budgets: tuple[float, ...] = ()   # [motion] frame_ms: the frame budgets rows are held at
 
     def with_size(self, size: tuple[int, int] | None) -> "StudySpec":
         """The same study with every scene's film size replaced (None: unchanged). Under a
@@ -356,15 +370,15 @@ def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
     metrics, perceptual = _metrics(ctx, data.get("metrics", {}))
     metrics.update(_viewer(ctx, data.get("viewer"), metrics.pop("fovea_deg", None),
                            perceptual))
-    foveated = _acuity_ppd(_foveated(ctx, data.get("foveated", {})), headset, scenes)
-    uniform = _uniform(ctx, data.get("uniform", {}), foveated)
+    foveated, uniform, budgets = _configurations(ctx, data, headset, scenes)
     if not foveated and not uniform:
         raise ctx.error("foveated", None, "at least one configuration ([foveated.grid], "
                         "[[foveated.configs]] or [uniform])")
     return StudySpec(name=name, source=source, scenes=tuple(scenes), foveated=tuple(foveated),
                      uniform=tuple(uniform), seed=seeds[0], seeds=seeds, repeats=repeats,
                      warmup=warmup, passes=passes, metric=metric, metrics=metrics,
-                     perceptual=perceptual, description=description, headset=headset)
+                     perceptual=perceptual, description=description, headset=headset,
+                     budgets=tuple(budgets))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -569,7 +583,7 @@ def _motion(ctx: TableContext, table: Any, scenes: list, base_dir: str,
     (:func:`_gaze_view`)."""
     from ..config import camera_path, gaze_path
     table = dict(ctx.table("motion", table))
-    ctx.known("motion", table, ("frames", "fps", "camera", "gaze", "passes"))
+    ctx.known("motion", table, ("frames", "fps", "camera", "gaze", "passes", "frame_ms"))
     frames = ctx.integer("motion.frames", table.get("frames", 16), 2, 100000)
     fps = table.get("fps", 90.0)
     from ..validate import check_range
@@ -917,7 +931,9 @@ def _frames(ctx: TableContext, key: str, value: Any) -> list[int]:
     return sorted(set(frames))
 
 
-def _foveated(ctx: TableContext, table: Any) -> list[dict]:
+def _foveated(ctx: TableContext, table: Any, budgets: list[float] = ()) -> list[dict]:
+    """The foveated configurations (grid, then list), each again held at each of
+    ``budgets`` (:func:`_held`), each once."""
     table = dict(ctx.table("foveated", table))
     ctx.known("foveated", table, ("defaults", "grid", "configs"))
     shared = dict(ctx.table("foveated.defaults", table.get("defaults", {})))
@@ -926,7 +942,7 @@ def _foveated(ctx: TableContext, table: Any) -> list[dict]:
         if isinstance(v, list) and k != "frames":
             raise ctx.error(f"foveated.defaults.{k}", v, "one value (lists go in "
                             "[foveated.grid])")
-    out = []
+    out, keys = [], []
     if "grid" in table:
         grid = dict(ctx.table("foveated.grid", table["grid"]))
         _check_keys(ctx, "foveated.grid", grid)
@@ -947,6 +963,7 @@ def _foveated(ctx: TableContext, table: Any) -> list[dict]:
             where = {**{s: f"foveated.defaults.{s}" for s in shared},
                      **{k: f"foveated.grid.{k}" for k in keys}}
             out.append(_check_options(ctx, "foveated.grid", opts, where))
+            keys.append("foveated.grid")
     if "configs" in table:
         configs = table["configs"]
         if not isinstance(configs, list):
@@ -958,18 +975,78 @@ def _foveated(ctx: TableContext, table: Any) -> list[dict]:
             where = {**{s: f"foveated.defaults.{s}" for s in shared},
                      **{k: f"foveated.configs[{i}].{k}" for k in c}}
             out.append(_check_options(ctx, f"foveated.configs[{i}]", opts, where))
+            keys.append(f"foveated.configs[{i}]")
     if shared and not out:
         raise ctx.error("foveated.defaults", shared, "a [foveated.grid] or [[foveated.configs]] "
                         "to apply to")
+    out += [_held(ctx, c, key, b) for b in budgets for c, key in zip(out, keys)]
     # identical configurations (grid and list overlapping) run once
     seen, unique = set(), []
     for c in out:
         key = json.dumps([c["options"], c["spp"], c["eye_tracking"]], sort_keys=True)
-        if key in seen:
-            continue
-        seen.add(key)
-        unique.append(c)
+        if key not in seen:
+            seen.add(key)
+            unique.append(c)
     return unique
+
+
+def _configurations(ctx: TableContext, data: dict, headset: str | None, scenes: list
+                    ) -> tuple[list[dict], list[dict], list[float]]:
+    """The foveated and uniform configurations, each held at ``[motion] frame_ms`` too, and
+    the budgets. The uniform history rows follow the foveated configurations held at none."""
+    budgets = _budgets(ctx, data.get("motion"), data.get("viewer"))
+    foveated = _acuity_ppd(_foveated(ctx, data.get("foveated", {}), budgets), headset, scenes)
+    uniform = _uniform(ctx, data.get("uniform", {}), [c for c in foveated
+                                                      if not c["options"]["frame_ms"]])
+    return foveated, uniform + _held_uniform(ctx, data.get("uniform", {}), budgets), budgets
+
+
+def _budgets(ctx: TableContext, motion: Any, viewer: Any) -> list[float]:
+    """``[motion] frame_ms``: the frame budgets in ms (a number or a list; each finite and
+    > 0, each once), [] without it. A study of two eyes holds none yet."""
+    if not isinstance(motion, dict) or "frame_ms" not in motion:
+        return []
+    value = motion["frame_ms"]
+    allowed = "a frame time in ms, finite, > 0 and <= 1e6, or a non-empty list of them"
+    values = value if isinstance(value, list) else [value]
+    if not values:
+        raise ctx.error("motion.frame_ms", value, allowed)
+    out = []
+    for i, v in enumerate(values):
+        key = f"motion.frame_ms[{i}]" if isinstance(value, list) else "motion.frame_ms"
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or \
+                not (math.isfinite(v) and 0.0 < v <= 1e6):
+            raise ctx.error(key, v, allowed)
+        out.append(float(v))
+    if isinstance(viewer, dict) and viewer.get("stereo") is True:
+        raise ctx.error("motion.frame_ms", value, "no budget with viewer.stereo = true (a "
+                        "study of one eye holds frame budgets)")
+    return list(dict.fromkeys(out))
+
+
+def _held(ctx: TableContext, c: dict, key: str, budget: float) -> dict:
+    """Configuration ``c`` (the TOML table ``key`` it comes from) held at ``budget`` ms: its
+    options with ``frame_ms`` (``fps`` dropped); refused without a foveal buffer."""
+    full = c["options"]
+    if (full["formation"], full["foveal_space"]) != ("foveal", "buffer"):
+        raise ctx.error(key, c["given"], f"preset = \"vr\" to hold motion.frame_ms = "
+                        f"{budget:g} (a foveal buffer; this row has formation = "
+                        f"{full['formation']!r}, foveal_space = {full['foveal_space']!r})")
+    given = {k: v for k, v in c["given"].items() if k != "fps"}
+    return _check_options(ctx, key, {**given, "frame_ms": budget, "spp": c["spp"],
+                                     "frames": c["frames"], "eye_tracking": c["eye_tracking"]},
+                          {})
+
+
+def _held_uniform(ctx: TableContext, table: Any, budgets: list[float]) -> list[dict]:
+    """The uniform rows held at each of ``budgets`` by dynamic resolution, one per
+    ``[uniform] denoise`` value (default ``[false]``)."""
+    if not budgets:
+        return []
+    table = table if isinstance(table, dict) else {}
+    dens = _bools(ctx, "uniform.denoise", table.get("denoise", [False]))
+    return [{"spp": 1, "denoise": d, "history": False, "frame_ms": b}
+            for b in budgets for d in dens]
 
 
 def _bools(ctx: TableContext, key: str, value: Any) -> list[bool]:

@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from ..paths import lens_centre
+from .budget_rows import HeldUniformView, budget_columns, held_of
 from .scoring import (UNIFORM_MODE, _camera_path, _flicker, _median, _mode, _quality,
                       _sequence_summary, _spread_ms, _viewing, frame_seed, rendered_gazes)
 
@@ -239,6 +240,9 @@ def _uniform_tasks(base: dict, u: dict, scene, seeds, uident: dict, hashed: dict
         method = f"{method}@{u['scale']:g}"
         opts["scale"] = config["scale"] = u["scale"]
         config["method"] = method
+    if u.get("frame_ms"):            # held at a frame budget by dynamic resolution
+        method = config["method"] = f"{method}+budget"
+        opts["frame_ms"] = config["frame_ms"] = u["frame_ms"]
     frozen = u.get("frozen_noise", False)
     # New noise each frame changes a sequence's rows (a new id); a frozen sequence
     # or a still view's single frame keeps the id it had before the option.
@@ -408,6 +412,7 @@ def _sequence_row(scene, task: dict, reference: np.ndarray, keep: bool = False):
     render, integ = _sequence_renderer(scene, task, rendered[0])
     times, rays, shown, quality, eccs = _sequence_frames(scene, task, refs, render, rendered)
     row = _sequence_summary(task, n, times, rays)
+    row.update(budget_columns(task, times, getattr(render, "held", [])))
     if getattr(render, "samples", None):       # as traced, frame by frame
         row["samples"] = float(np.mean(render.samples))
     modes = getattr(render, "modes", None)      # the row's time: the frames after the first
@@ -455,20 +460,26 @@ def _sequence_renderer(scene, task: dict, gaze):
             image, stats, _ = view.render(g, None, seed, spp)
             render_foveated.modes.append(stats["trace_mode"])
             render_foveated.samples.append(stats["lanes_active"])
+            render_foveated.held.append(held_of(stats))
             return image, stats["timings_ms"]["total"], stats["ray_fraction"]
         render_foveated.modes = []          # each frame's trace_mode
         render_foveated.samples = []        # and samples traced (a still view's settle)
+        render_foveated.held = []           # and what it held of a frame budget
         return render_foveated, integ
     from ..baselines import traced_fraction
-    view = UniformView(scene, denoise=bool(task["options"]["denoise"]),
-                       scale=task["options"].get("scale", 1.0))
+    den = bool(task["options"]["denoise"])
+    budget = task["options"].get("frame_ms")
+    view = HeldUniformView(scene, budget, denoise=den) if budget else \
+        UniformView(scene, denoise=den, scale=task["options"].get("scale", 1.0))
 
     def render_baseline(g):
         k = len(render_baseline.upscale)    # the sequence's frame, from 0
         image, stats, _ = view.render(g, None, frame_seed(task, k), spp)
         render_baseline.upscale.append(stats.get("upscale_ms"))
+        render_baseline.held.append(held_of(stats))
         return image, stats["time_ms"], traced_fraction(image, stats)
     render_baseline.upscale = []        # each frame's upscale time (dynamic resolution)
+    render_baseline.held = []           # and what it held of a frame budget
     return render_baseline, None
 
 
@@ -579,7 +590,8 @@ def _sequence_pass(scene, task: dict) -> dict:
     rendered = rendered_gazes(scene, task)
     render, _ = _sequence_renderer(scene, task, rendered[0])
     times = [frame.result[1] for frame in _path_frames(scene, task, render, rendered)]
-    out = {"time_ms": _median(times[1:]), **_spread_ms(times[1:])}
+    out = {"time_ms": _median(times[1:]), **_spread_ms(times[1:]),
+           **budget_columns(task, times, getattr(render, "held", []))}
     modes = getattr(render, "modes", None)
     out["trace_mode"] = _mode(modes[1:] or modes) if modes else UNIFORM_MODE
     if task["kind"] == "uniform" and task["options"].get("scale", 1.0) != 1.0:
