@@ -9,7 +9,8 @@ import textwrap
 import pytest
 
 from foveated_mi.study import parse_study, read_rows, run_study
-from foveated_mi.study.budget_rows import BUDGET_KEYS, budget_section, budget_verdicts
+from foveated_mi.study.budget_report import budget_section, budget_verdicts
+from foveated_mi.study.budget_rows import BUDGET_KEYS
 from foveated_mi.validate import ParameterError
 
 #: A head moving and a saccade, the vr preset and uniform rows, held at 200 ms too.

@@ -10,7 +10,7 @@ its launch; nothing film-sized.
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import drjit as dr
 import mitsuba as mi
@@ -29,8 +29,6 @@ from .scene_state import SceneState
 from .settings import PlanSettings
 from .space import BufferSpace
 
-if TYPE_CHECKING:
-    from .plan import Planner
 
 
 @dataclasses.dataclass(eq=False)
@@ -54,7 +52,7 @@ class Samples:
     cells: dict = dataclasses.field(default_factory=dict)
 
 
-def plan_buffer(planner: Planner, scene, sensor, seed: int, spp: int, settings: PlanSettings,
+def plan_buffer(planner, scene, sensor, seed: int, spp: int, settings: PlanSettings,
                 gaze_at: tuple[float, float], timer: StageTimer, state: SceneState,
                 width: int, height: int) -> FramePlan:
     """The plan of a foveal buffer that keeps nothing on the film (module docstring);
@@ -120,7 +118,7 @@ def _layout(ss, sensor, width: int, height: int):
                                 "flat" if ss.law == "flat" else "polar")
 
 
-def _settled(planner: Planner, spp: int, still: bool, settings: PlanSettings,
+def _settled(planner, spp: int, still: bool, settings: PlanSettings,
              turns: int) -> tuple[bool, bool]:
     """Whether a still view's cells, and its disc, have settled (``foveal_still_spp``):
     the cells once their history holds its cap at ``spp`` (each cell traced once in
@@ -134,7 +132,7 @@ def _settled(planner: Planner, spp: int, still: bool, settings: PlanSettings,
             0 < rate < own and n * own >= cap)
 
 
-def _turn_key(planner: Planner, settled: tuple[bool, bool], ls, turns: int) -> tuple:
+def _turn_key(planner, settled: tuple[bool, bool], ls, turns: int) -> tuple:
     """The frame's samples traced, as a key of their cache: the interleave's turn (of
     ``turns``) and, once a still view's cells have settled to one sample in a period of
     ``foveal_still_spp``, that period's turn (advanced once every interleave cycle, so
@@ -191,7 +189,7 @@ def _traced_of(sm: Samples, lay, key: tuple, borrowing: bool, ls, n_pixels: int)
     return sm.traced[key]
 
 
-def _borrow(planner: Planner, scene, sm: Samples, partner: History, lay, hs, reproj,
+def _borrow(planner, scene, sm: Samples, partner: History, lay, hs, reproj,
             history, width: int, height: int):
     """The frame's map and history with the other eye's samples that stand for these
     (:func:`~.eye_reuse.borrow`); which they are is kept with the samples."""
@@ -202,7 +200,7 @@ def _borrow(planner: Planner, scene, sm: Samples, partner: History, lay, hs, rep
     return _eye_reuse.borrow(reproj, history, sm.other, partner)
 
 
-def _samples(planner: Planner, scene, sensor, lay, gaze: mi.Point2f, gaze_key: tuple,
+def _samples(planner, scene, sensor, lay, gaze: mi.Point2f, gaze_key: tuple,
              partner: History | None, settings: PlanSettings, state: SceneState,
              width: int, height: int) -> tuple[Samples, bool]:
     """The samples' pixels and G-buffer, made again unless the camera, the scene, the

@@ -7,7 +7,6 @@ G-buffer's cache, the frame count, whether the camera moved).
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
 
 import drjit as dr
 import mitsuba as mi
@@ -23,11 +22,9 @@ from .scene_state import SceneState
 from .settings import PlanSettings
 from .space import FilmSpace
 
-if TYPE_CHECKING:
-    from .plan import Planner
 
 
-def plan_film(planner: Planner, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int,
+def plan_film(planner, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int,
               settings: PlanSettings, gaze: tuple[float, float], timer: StageTimer,
               state: SceneState, width: int, height: int) -> FramePlan:
     """The plan of a frame on the film's pixels.
@@ -79,7 +76,7 @@ def plan_film(planner: Planner, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
                      moving=planner._camera_moved)
 
 
-def _emission_edges(planner: Planner, gb: GBuffer, sensor: mi.Sensor, width: int,
+def _emission_edges(planner, gb: GBuffer, sensor: mi.Sensor, width: int,
                     height: int) -> mi.Bool:
     """:func:`foveated_mi.frame.gbuffer.emission_edges` of ``gb``, kept with the planner while
     the G-buffer is reused (a still camera)."""

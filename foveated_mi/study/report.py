@@ -81,6 +81,8 @@ import time
 
 import numpy as np
 
+from foveated_mi.study.labels import label, pm as _pm  # noqa: F401  (label: as before)
+
 #: Viewing condition -> its video JOD column.
 CONDITIONS = {"headset": "jod_video", "monitor": "jod_video_monitor"}
 #: The uniform families at full resolution whose 1-spp rows the pictures show. The tables
@@ -88,15 +90,6 @@ CONDITIONS = {"headset": "jod_video", "monitor": "jod_video_monitor"}
 #: (:func:`foveated_mi.study.equal_time.envelope_families`).
 FAMILIES = ("uniform", "uniform+oidn", "uniform+history", "uniform+history+oidn")
 RING_DEG = 5.0
-
-
-def _pm(r: dict, col: str, fmt: str = ".2f") -> str:
-    """A study cell's ``col`` as "mean ± standard deviation" ("-" where it is missing)."""
-    v = r.get(col)
-    if v is None or (isinstance(v, float) and math.isnan(v)):
-        return "-"
-    sd = r.get(f"{col}_sd", math.nan)
-    return format(v, fmt) + (f" ± {format(sd, fmt)}" if not math.isnan(sd) else "")
 
 
 def film_size(data: dict) -> str:
@@ -153,23 +146,6 @@ def overridden(data: dict, a) -> dict:
 def _scene_name(s: dict) -> str:
     name = s["scene"]
     return os.path.basename(os.path.dirname(name)) if name.endswith("scene.xml") else name
-
-
-def label(row: dict) -> str:
-    """A row's (or cell's) name in the tables; a row held at a frame budget says it."""
-    from foveated_mi.study.budget_rows import budget_of, held_label
-    held = budget_of(row) is not None
-    if row["method"] == "foveated":
-        config = json.loads(row["config"])
-        opts = config.get("options", {})
-        # The options set besides the preset tell two rows of one preset apart, and so does
-        # a row rendered at the lens centre whatever the eye does.
-        rest = "".join(f", {k} {v}" for k, v in sorted(opts.items())
-                       if k not in ("preset", "frame_ms"))
-        fixed = ", fixed foveation" if config.get("eye_tracking") is False else ""
-        name = f"{opts.get('preset', 'auto')} {row['spp']:.0f} spp{rest}{fixed}"
-        return held_label(row, name) if held else name
-    return held_label(row, "") if held else f"{row['method']} {row['spp']:.0f} spp"
 
 
 def speedups(rows: list[dict], column: str) -> list[dict]:
@@ -634,8 +610,8 @@ def tables(rows: list[dict], conditions: dict, report: dict, viewer: dict) -> li
 
 def equal_time_section(rows: list[dict], conditions: dict, report: dict) -> list[str]:
     """The rows held at a frame budget compared at equal time, in the headset condition's
-    column (:func:`foveated_mi.study.budget_rows.budget_section`); none without them."""
-    from foveated_mi.study.budget_rows import budget_section, budget_verdicts
+    column (:func:`foveated_mi.study.budget_report.budget_section`); none without them."""
+    from foveated_mi.study.budget_report import budget_section, budget_verdicts
     column = conditions.get("headset") or next(iter(conditions.values()))
     lines = budget_section(rows, column)
     if lines:
