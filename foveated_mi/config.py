@@ -11,6 +11,10 @@ Layout (every key optional except ``scene``)::
     seed = 0
     eye_tracking = true           # false: fixed foveation, rendered at the lens centre (the
                                   # camera's axis) whatever the [gaze] path does
+    [viewer]
+    gaze_latency_ms = 0.0         # the eye tracker's delay: each frame renders the gaze of
+                                  # that long ago (a whole number of frames: that frame's);
+                                  # the stats keep the eye's as eye_gaze
     [scene_params]                # built-in scene parameters, e.g. size = 128 (voxel-city),
     size = 128                    # or an XML file's <default> parameters
     [integrator]                  # the nested integrator (default: path, max_depth 6)
@@ -62,6 +66,7 @@ from typing import Any
 from .paths import (BinocularGazeCSV, CameraPath, FixedGaze, GazeCSV, GazeKeyframes,
                     GazePath, Saccades)
 from .options import OPTIONS_HELP, SCHEMA, validate_options
+from .tracker import EyeTracker
 from .validate import ParameterError, TableContext
 
 if sys.version_info >= (3, 11):
@@ -83,7 +88,7 @@ FOVEATED_KEYS: dict[str, tuple[type, ...]] = {
 
 _TOP_KEYS = ("scene", "description", "frames", "fps", "size", "spp", "seed", "scene_params",
              "integrator", "foveated", "camera", "gaze", "poses", "output", "stereo",
-             "eye_tracking")
+             "eye_tracking", "viewer")
 
 
 @dataclass(frozen=True)
@@ -119,6 +124,8 @@ class SequenceConfig:
     #: False: fixed foveation, every frame rendered at the lens centre (the gaze path is
     #: where the eye looks, written to the stats)
     eye_tracking: bool = True
+    #: ``[viewer] gaze_latency_ms``: the eye tracker the rendered gaze comes through
+    tracker: EyeTracker = field(default_factory=EyeTracker)
 
     @property
     def width(self) -> int:
@@ -239,7 +246,26 @@ def parse_config(data: dict, *, base_dir: str = ".", source: str = "<config>",
                           scene_params=scene_params, integrator=integrator, foveated=foveated,
                           camera=camera, gaze=gaze, output=output, description=description,
                           source=source, poses=poses, stereo=_stereo(ctx, data.get("stereo")),
-                          eye_tracking=eye_tracking)
+                          eye_tracking=eye_tracking,
+                          tracker=_tracker(ctx, data, poses is not None, eye_tracking))
+
+
+def _tracker(ctx: TableContext, data: dict, poses: bool, eye_tracking: bool) -> EyeTracker:
+    """The ``[viewer]`` table's eye tracker (``gaze_latency_ms``, default 0); a latency needs
+    a gaze path (not ``[poses]``, whose gazes are the rendered ones) and eye tracking."""
+    if "viewer" not in data:
+        return EyeTracker()
+    table = ctx.table("viewer", data["viewer"])
+    ctx.known("viewer", table, ("gaze_latency_ms",))
+    try:
+        tracker = EyeTracker(latency_ms=table.get("gaze_latency_ms", 0.0))
+    except ParameterError as e:
+        raise ctx.error("viewer.gaze_latency_ms", e.value, e.allowed) from None
+    if tracker.latency_ms > 0.0 and (poses or not eye_tracking):
+        raise ctx.error("viewer.gaze_latency_ms", tracker.latency_ms, "0 with " + (
+            "[poses] (its gazes are the ones rendered)" if poses else
+            "eye_tracking = false (fixed foveation has no eye tracker)"))
+    return tracker
 
 
 def _stereo(ctx: TableContext, table: Any) -> dict | None:

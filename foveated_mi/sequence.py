@@ -8,8 +8,9 @@ writes ``frame_NNNN.exr`` / ``.png`` atomically and appends one JSON line to
 ``stats.jsonl``. A camera cut in the config resets the history, so the frame after a cut is
 exactly a fresh first frame. A config with ``[poses]`` (a walk-through the live view
 recorded) gives every frame's camera, gaze and cut instead of paths. Each stats line holds
-the frame's gaze (the rendered one; with ``eye_tracking = false``, fixed foveation, the lens
-centre, and the path's as ``eye_gaze``) and, where the config moves the camera, its camera.
+the frame's gaze (the rendered one: with ``[viewer] gaze_latency_ms``, the eye tracker's, that
+late; with ``eye_tracking = false``, fixed foveation, the lens centre; in both cases the
+path's as ``eye_gaze``) and, where the config moves the camera, its camera.
 At the end (or on Ctrl-C, with the frames done so far) it writes
 ``sequence.mp4`` or ``sequence.gif``.
 """
@@ -123,26 +124,31 @@ def _driver(cfg: SequenceConfig, scene, fr, compare_full: bool):
 
 def frame_input(cfg: SequenceConfig, i: int):
     """Frame ``i``'s inputs (:class:`foveated_mi.frames.FrameInput`): the config's camera,
-    cut and gaze (each eye's of a binocular gaze path), its seed and spp."""
+    cut and gaze (each eye's of a binocular gaze path) as the eye tracker reports them
+    (:meth:`foveated_mi.tracker.EyeTracker.frame_time`: ``[viewer] gaze_latency_ms`` late),
+    its seed and spp."""
     from .frames import FrameInput
     from .paths import BinocularGazeCSV
-    eye_gazes = cfg.gaze.eyes_at(cfg.time(i)) \
-        if cfg.stereo is not None and cfg.poses is None \
-        and isinstance(cfg.gaze, BinocularGazeCSV) else None
-    return FrameInput(i, camera=cfg.camera_at(i), cut=cfg.cut_before(i), gaze=cfg.gaze_at(i),
+    if cfg.poses is not None:       # a walk-through's gazes are the ones it rendered
+        return FrameInput(i, camera=cfg.camera_at(i), cut=cfg.cut_before(i),
+                          gaze=cfg.gaze_at(i), seed=cfg.seed, spp=cfg.spp)
+    t = cfg.tracker.frame_time(i, cfg.fps)
+    eye_gazes = cfg.gaze.eyes_at(t) \
+        if cfg.stereo is not None and isinstance(cfg.gaze, BinocularGazeCSV) else None
+    return FrameInput(i, camera=cfg.camera_at(i), cut=cfg.cut_before(i), gaze=cfg.gaze.at(t),
                       eye_gazes=eye_gazes, seed=cfg.seed, spp=cfg.spp)
 
 
 def _frame_out(cfg: SequenceConfig, frame, fr, out_dir: str, video: list) -> dict[str, Any]:
     """Frame ``frame``'s files (and its video frame appended to ``video``); returns its
-    stats: the gaze rendered (the lens centre under fixed foveation, the eye's then as
-    ``eye_gaze``)."""
+    stats: the gaze rendered (the lens centre under fixed foveation, the tracker's under a
+    latency; the eye's then as ``eye_gaze``)."""
     from .io import encode_srgb8
     res, i = frame.result, frame.input.index
     stats = {"frame": i, "time_s": cfg.time(i), "gaze": list(fr.integrator.gaze),
              **{k: v for k, v in res.stats.items() if k not in ("frame", "gaze")}}
-    if not cfg.eye_tracking:
-        stats["eye_gaze"] = list(map(float, frame.input.gaze))
+    if not cfg.eye_tracking or cfg.tracker.latency_ms > 0.0:
+        stats["eye_gaze"] = list(map(float, cfg.gaze_at(i)))
     if frame.input.camera is not None:
         stats["camera"] = frame.input.camera
     stats["wall_ms"] = frame.time_ms
@@ -201,6 +207,8 @@ def _eyes_out(cfg: SequenceConfig, frame, fr, out_dir: str, video: list) -> dict
              **{eye: {"rays": e["rays"], "ray_fraction": e["ray_fraction"],
                       "history_hit_rate": e.get("history_hit_rate"),
                       "timings_ms": e["timings_ms"]} for eye, e in eyes.items()}}
+    if cfg.tracker.latency_ms > 0.0:           # the head's gaze, not late
+        stats["eye_gaze"] = list(map(float, cfg.gaze_at(i)))
     if both_eyes.fixation is not None:
         stats.update(fixation=list(map(float, both_eyes.fixation)), hit=bool(both_eyes.hit))
     if frame.input.camera is not None:

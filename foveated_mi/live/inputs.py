@@ -15,6 +15,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..tracker import EyeTracker
 from ..validate import ParameterError
 from .protocol import OVERLAYS, SOURCES, SPLITS
 
@@ -189,7 +190,7 @@ class InputMailbox:
         self.pending: dict | None = None        # settings to apply before the next frame
         self.overlays: tuple[str, ...] = ()
         self.split = "off"
-        self.latency_ms = 0.0
+        self.tracker = EyeTracker()             # its latency: the page's
         self.prev_cam: dict | None = None       # the camera of the last frame
         self.last_gaze: tuple = self.gaze.latest
         self._seen_version = -1
@@ -197,6 +198,11 @@ class InputMailbox:
             from ..paths import GazeCSV
             self.source = ("csv", GazeCSV(gaze_csv, relative=True, name="--gaze-csv"),
                            self.clock())
+
+    @property
+    def latency_ms(self) -> float:
+        """The eye tracker's latency (:attr:`tracker`), in milliseconds."""
+        return self.tracker.latency_ms
 
     def changed(self) -> None:
         """Count a change (the caller holds :attr:`cond`) and wake the loop."""
@@ -248,7 +254,7 @@ class InputMailbox:
                     raise ParameterError("split", split, "one of " + ", ".join(SPLITS))
                 self.split = split
             if latency_ms is not None:
-                self.latency_ms = float(latency_ms)
+                self.tracker = EyeTracker(latency_ms=latency_ms)
             self.changed()
 
     def set_source(self, source: str, path) -> None:
@@ -261,7 +267,7 @@ class InputMailbox:
         if self.lock_at is not None:
             return self.lock_at
         name, path, t0 = self.source
-        t = now - self.latency_ms * 1e-3
+        t = self.tracker.reported_at(now)
         if name == "mouse":
             return self.gaze.at(t)
         s = max(t - t0, 0.0)

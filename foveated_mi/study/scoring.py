@@ -108,21 +108,14 @@ def rendered_gazes(scene, task: dict) -> list:
         from ..paths import lens_centre
         return [list(lens_centre(scene.sensors()[0]))] * len(motion["gazes"])
     gazes = motion.get("rendered_gazes", motion["gazes"])
-    sigma = motion.get("gaze_noise_deg", 0.0)
-    if sigma <= 0.0:
+    if motion.get("gaze_noise_deg", 0.0) <= 0.0:
         return gazes
+    from ..tracker import EyeTracker
     from ..viewer import pixels_per_degree
     sensor = scene.sensors()[0]
-    w, h = task["scene"]["width"], task["scene"]["height"]
-    rng = np.random.default_rng([int(task["seed"]), 0x6A5E])
-    out, ppd = [], {}
-    for g in gazes:
-        key = tuple(g)
-        if key not in ppd:                      # a fixation holds one gaze for many frames
-            ppd[key] = pixels_per_degree(sensor, key)
-        dx, dy = rng.normal(0.0, sigma * ppd[key], 2)
-        out.append([min(max(g[0] + dx / w, 0.0), 1.0), min(max(g[1] + dy / h, 0.0), 1.0)])
-    return out
+    return EyeTracker(noise_deg=motion["gaze_noise_deg"]).jittered(
+        gazes, lambda g: pixels_per_degree(sensor, g),
+        (task["scene"]["width"], task["scene"]["height"]), task["seed"])
 
 
 def frame_seed(task: dict, k: int) -> int:

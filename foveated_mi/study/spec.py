@@ -174,6 +174,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from ..config import read_toml
+from ..tracker import EyeTracker
 from ..validate import TableContext
 from ..metrics import COMPARE_KEYS
 from ..validate import ParameterError
@@ -531,7 +532,7 @@ def _scene_camera(ctx: TableContext, key: str, keys: dict, source: str) -> dict:
     return path.at(0.0)
 
 
-def _tracker(ctx: TableContext, table: Any) -> tuple[float, float]:
+def _tracker(ctx: TableContext, table: Any) -> EyeTracker:
     """``[viewer] gaze_latency_ms`` and ``gaze_noise_deg``: the eye tracker's delay from eye to
     photon and its jitter (a Gaussian's standard deviation in degrees); 0 and 0 without them.
 
@@ -544,36 +545,19 @@ def _tracker(ctx: TableContext, table: Any) -> tuple[float, float]:
 
     Returns
     -------
-    tracker : tuple of float
-        ``(latency_ms, noise_deg)``.
+    tracker : foveated_mi.tracker.EyeTracker
+        The eye tracker.
     """
     if not isinstance(table, dict):
-        return 0.0, 0.0
-    from ..validate import check_range
+        return EyeTracker()
     try:
-        return (check_range("viewer.gaze_latency_ms", table.get("gaze_latency_ms", 0.0), 0.0,
-                            1000.0),
-                check_range("viewer.gaze_noise_deg", table.get("gaze_noise_deg", 0.0), 0.0,
-                            10.0))
+        return EyeTracker(table.get("gaze_latency_ms", 0.0), table.get("gaze_noise_deg", 0.0))
     except ParameterError as e:
-        raise ctx.rename(e) from None
-
-
-def _delayed(path, gazes: list, fps: float, latency_ms: float) -> list:
-    """The gaze each frame is rendered with, ``latency_ms`` late: a whole number of frames
-    takes that earlier frame's gaze exactly; otherwise the path at the earlier time (the
-    first gaze before the path starts)."""
-    shift = latency_ms * fps / 1000.0
-    if abs(shift - round(shift)) < 1e-9:
-        return [gazes[max(k - round(shift), 0)] for k in range(len(gazes))]
-    if path is None:                          # a still gaze: late or not, the same
-        return list(gazes)
-    return [list(map(float, path.at(max(k / fps - latency_ms / 1000.0, 0.0))))
-            for k in range(len(gazes))]
+        raise ctx.error(f"viewer.gaze_{e.name}", e.value, e.allowed) from None
 
 
 def _motion(ctx: TableContext, table: Any, scenes: list, base_dir: str,
-            tracker: tuple[float, float] = (0.0, 0.0), view=None) -> list:
+            tracker: EyeTracker = EyeTracker(), view=None) -> list:
     """The scenes with their ``motion``: the ``[motion]`` paths sampled at each frame (plain
     values a worker can take; the camera path is completed by each scene's own camera). With
     an eye tracker's latency (:func:`_tracker`), ``rendered_gazes`` are the gazes the renderer
@@ -607,10 +591,11 @@ def _motion(ctx: TableContext, table: Any, scenes: list, base_dir: str,
         gazes = [list(map(float, gaze.at(k / fps))) for k in range(frames)] if gaze else \
             [list(scene.gaze)] * frames
         motion = {"fps": fps, "cameras": camera, "gazes": gazes}
-        if tracker[0] > 0.0:
-            motion["rendered_gazes"] = _delayed(gaze, gazes, fps, tracker[0])
-        if tracker[1] > 0.0:
-            motion["gaze_noise_deg"] = tracker[1]
+        if tracker.latency_ms > 0.0:
+            at = None if gaze is None else (lambda t: list(map(float, gaze.at(t))))
+            motion["rendered_gazes"] = tracker.frames(gazes, at, fps)
+        if tracker.noise_deg > 0.0:
+            motion["gaze_noise_deg"] = tracker.noise_deg
         out.append(replace(scene, motion={**motion, **_eye_gazes(ctx, gaze, frames, fps,
                                                                    tracker)}))
     return out
@@ -671,24 +656,20 @@ def _gaze_view(ctx: TableContext, viewer: Any):
 
 
 def _eye_gazes(ctx: TableContext, gaze, frames: int, fps: float,
-               tracker: tuple[float, float]) -> dict:
+               tracker: EyeTracker) -> dict:
     """A binocular gaze path's ``eye_gazes`` (each frame's ``[left, right]``) and, late by
     the tracker's latency, ``rendered_eye_gazes``; nothing for any other gaze path."""
     from ..paths import BinocularGazeCSV
     if not isinstance(gaze, BinocularGazeCSV):
         return {}
-    if tracker[1] > 0.0:
-        raise ctx.error("viewer.gaze_noise_deg", tracker[1], "0 with a binocular gaze path "
-                        "(its samples are each eye's own: add the tracker's noise to them)")
+    if tracker.noise_deg > 0.0:
+        raise ctx.error("viewer.gaze_noise_deg", tracker.noise_deg, "0 with a binocular gaze "
+                        "path (its samples are each eye's own: add the tracker's noise to them)")
     eyes = [[list(g) for g in gaze.eyes_at(k / fps)] for k in range(frames)]
     out = {"eye_gazes": eyes}
-    if tracker[0] > 0.0:
-        shift = tracker[0] * fps / 1000.0
-        out["rendered_eye_gazes"] = (
-            [eyes[max(k - round(shift), 0)] for k in range(frames)]
-            if abs(shift - round(shift)) < 1e-9 else
-            [[list(g) for g in gaze.eyes_at(max(k / fps - tracker[0] / 1000.0, 0.0))]
-             for k in range(frames)])
+    if tracker.latency_ms > 0.0:
+        out["rendered_eye_gazes"] = tracker.frames(
+            eyes, lambda t: [list(g) for g in gaze.eyes_at(t)], fps)
     return out
 
 
