@@ -28,6 +28,7 @@ import json
 import math
 from typing import Any
 
+from .. import tracker as _tracker
 from ..validate import ParameterError, check_bool, check_int, check_range
 
 __all__ = ["parse", "MESSAGE_TYPES", "OVERLAYS", "SPLITS", "SOURCES", "SETTINGS",
@@ -43,7 +44,7 @@ SOURCES = ("mouse", "saccades", "csv")
 SETTINGS = ("preset", "ray_budget", "spp", "denoiser", "fps")
 MAX_CSV_BYTES = 1 << 20
 MAX_MESSAGE_BYTES = MAX_CSV_BYTES + 4096
-LATENCY_MAX_MS = 1000.0
+LATENCY_MAX_MS = _tracker.LATENCY_MAX_MS     # the eye tracker's range
 SPP_MAX = 64
 
 
