@@ -42,6 +42,13 @@ being reached is barred for a hold that doubles on each repeat, so the choice ca
 into A-B-A-B. The first frame on the other ladder (the head starts or stops turning) takes
 its highest rung predicted within the budget. A cut (the integrator's ``reset()``), a change
 of options or of the film's size forgets the model.
+
+**Views rendered as one frame** (:meth:`FrameBudget.together`: a headset's two eyes,
+:class:`foveated_mi.stereo.Stereo`). The budget is the whole frame's, both eyes together. One
+controller holds it: the rung is chosen at the first view's start and every view of the frame
+renders at it (their quality matches), and the controller observes once, after the last view
+ends, the views' times, samples and cells summed. A second eye that reuses the first eye's
+samples traces fewer, so its saving shows in the frame's fit and lets the pair climb.
 """
 from __future__ import annotations
 
@@ -57,7 +64,7 @@ import numpy as np
 
 from .configure import frame_settings
 from .options import validate_options
-from .validate import check_int, check_range
+from .validate import ParameterError, check_int, check_range
 
 #: Frames the cost model is fitted over.
 WINDOW = 16
@@ -352,11 +359,23 @@ class Choice:
     spp: int
     stats: dict[str, Any]
     start: float = field(default=0.0)
+    frame: _Frame | None = None       #: the frame of views it is part of (None: alone)
+
+
+@dataclass
+class _Frame:
+    """A frame of views under way (:meth:`FrameBudget.together`): its views in the order
+    rendered, the first one's choice, and each view's time and observation so far."""
+    views: tuple[int, ...]
+    choice: Choice
+    ms: list[float] = field(default_factory=list)
+    obs: list[Observation] = field(default_factory=list)
 
 
 class FrameBudget:
-    """The integrator's side: a :class:`Controller` per view, the rungs' options validated
-    and their settings compiled once each (per change of the options), the frame timed."""
+    """The integrator's side: a :class:`Controller` per view (or per frame of views rendered
+    together, :meth:`together`), the rungs' options validated and their settings compiled once
+    each (per change of the options), the frame timed."""
 
     def __init__(self):
         self.clock: Callable[[], float] = time.perf_counter   #: seconds; a test may replace it
@@ -366,21 +385,56 @@ class FrameBudget:
         self._views: dict[int, list] = {}   # view -> [controller, camera state, film size]
         self._cache: dict[Rung, tuple[dict, Any]] = {}
         self._current: dict[int, Choice] = {}
+        self._frames: dict[int, tuple[int, ...]] = {}   # view -> the views of its frame
+        self._open: dict[int, _Frame] = {}    # first view -> its frame under way
 
     def configure(self, budget_ms: float, given: dict[str, Any], gradients: bool) -> None:
         """A change of the options (``given``: the user's, validated with ``gradients``): the
-        rungs compile anew and every model is forgotten; ``budget_ms`` 0 turns it off."""
+        rungs compile anew and every model is forgotten; ``budget_ms`` 0 turns it off. Views
+        rendered together (:meth:`together`) stay so."""
         self.budget_ms, self._given, self._gradients = float(budget_ms), dict(given), gradients
-        self._views, self._cache, self._current = {}, {}, {}
+        self._views, self._cache, self._current, self._open = {}, {}, {}, {}
 
-    def reset(self) -> None:
-        """A cut: every view's model is forgotten (its rung stays)."""
-        for v in self._views.values():
-            v[0].reset()
+    def together(self, views) -> None:
+        """Views rendered one after another as one frame (a headset's eyes), in that order:
+        the budget is the frame's, all of them render at the rung chosen at the first one's
+        start, and one controller observes the frame once the last one ends, their times,
+        samples and cells summed (module docstring). A view rendered out of turn holds the
+        budget alone.
+
+        Parameters
+        ----------
+        views : sequence of int
+            Two or more different view indices, in the order rendered.
+        """
+        views = tuple(views)
+        if len(views) < 2 or len(set(views)) != len(views) or \
+                not all(isinstance(v, int) and not isinstance(v, bool) and v >= 0
+                        for v in views):
+            raise ParameterError("views", views, "two or more different view indices >= 0")
+        for v in views:
+            self._ungroup(v)
+        self._frames.update({v: views for v in views})
+
+    def _ungroup(self, view: int) -> None:
+        old = self._frames.pop(view, None)
+        for v in old or ():
+            self._frames.pop(v, None)
+        if old:
+            self._open.pop(old[0], None)
+
+    def reset(self, views=None) -> None:
+        """A cut: the models of ``views`` (every view when None) are forgotten (their rungs
+        stay); a frame of views is forgotten through any of them."""
+        keys = self._views if views is None else {self._frames.get(v, (v,))[0] for v in views}
+        for key in keys:
+            if key in self._views:
+                self._views[key][0].reset()
 
     def controller(self, view: int) -> Controller | None:
-        """View ``view``'s controller (None before its first budgeted frame)."""
-        v = self._views.get(view)
+        """View ``view``'s controller, its frame's where it is rendered with others (None
+        before its first budgeted frame)."""
+        v = self._views.get(self._frames.get(view, (view,))[0])
         return None if v is None else v[0]
 
     def _rung(self, rung: Rung) -> tuple[dict, Any]:
@@ -404,6 +458,18 @@ class FrameBudget:
         """
         if self.budget_ms <= 0:
             return None
+        views = self._frames.get(view)
+        choice = self._follow(view, views) if views and view != views[0] else None
+        if choice is None:
+            choice = self._lead(view, state, size, views if views and view == views[0] else None)
+        self._current[view] = choice
+        dr.sync_thread()                  # the work queued before the frame is not its own
+        choice.start = self.clock()
+        return choice
+
+    def _lead(self, view: int, state, size: tuple[int, int], views) -> Choice:
+        """A step of ``view``'s controller: the rung of its frame (of ``views`` when it is the
+        first of a frame of views)."""
         v = self._views.setdefault(view, [Controller(self.budget_ms), None, size])
         if v[2] != size:
             v[0].reset()
@@ -417,10 +483,18 @@ class FrameBudget:
                  "ray_budget": rung.ray_budget, "spp": rung.spp,
                  "foveal_disc_spp": rung.disc_spp, "foveal_still_spp": rung.still_spp}
         choice = Choice(view, rung, options, settings, rung.spp, stats)
-        self._current[view] = choice
-        dr.sync_thread()                  # the work queued before the frame is not its own
-        choice.start = self.clock()
+        if views is not None:             # the frame's stats, shared by its views
+            stats.update(views=list(views), view_ms=[None] * len(views))
+            choice.frame = self._open[view] = _Frame(views, choice)
         return choice
+
+    def _follow(self, view: int, views: tuple[int, ...]) -> Choice | None:
+        """``view``'s share of the frame under way, at its rung; None when it is not its turn."""
+        f = self._open.get(views[0])
+        if f is None or views[len(f.ms)] != view:
+            return None
+        c = f.choice
+        return Choice(view, c.rung, c.options, c.settings, c.spp, c.stats, frame=f)
 
     def current(self, view: int) -> Choice | None:
         """View ``view``'s last configuration (a gradient pass reuses it; no step), or None."""
@@ -441,9 +515,31 @@ class FrameBudget:
         dr.eval(image)
         dr.sync_thread()
         ms = (self.clock() - choice.start) * 1e3
-        choice.stats["measured_ms"] = ms
+        if choice.frame is None:
+            choice.stats["measured_ms"] = ms
         s = stats()
         obs = Observation(s["lanes_active"], s.get("reprojected", s["rays"]), s["rays"],
                           s.get("disc_rays", 0), choice.rung)
-        self._views[choice.view][0].observe(ms, obs)
+        if choice.frame is None:
+            self._views[choice.view][0].observe(ms, obs)
+        else:
+            self._frame_part(choice.frame, ms, obs)
         return image
+
+    def _frame_part(self, f: _Frame, ms: float, obs: Observation) -> None:
+        """A view of frame ``f`` ended: its time kept; the last one's tells the controller the
+        frame's, summed."""
+        if self._open.get(f.views[0]) is not f:
+            return                        # a frame the first view has since started again
+        stats = f.choice.stats
+        stats["view_ms"][len(f.ms)] = ms
+        f.ms.append(ms)
+        f.obs.append(obs)
+        if len(f.ms) < len(f.views):
+            return
+        del self._open[f.views[0]]
+        total = sum(f.ms)
+        stats["measured_ms"] = total
+        summed = Observation(*(sum(getattr(o, k) for o in f.obs)
+                               for k in ("samples", "cells", "rays", "disc")), f.choice.rung)
+        self._views[f.views[0]][0].observe(total, summed)

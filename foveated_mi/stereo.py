@@ -16,7 +16,9 @@ own film (:func:`eye_gaze`), so the two foveae fall on the same surface.
 :class:`Stereo` renders both eyes of one head pose with one call. Each eye is a view of the
 integrator of its own (:class:`foveated_mi.frame.view.Views`): its own gaze, plan and history,
 as two integrators would keep them (unless the second reuses the first one's samples,
-below). A cut resets both histories (:meth:`Stereo.cut`).
+below). A cut resets both histories (:meth:`Stereo.cut`). Under a frame budget (``frame_ms``)
+the two eyes are one frame: they share the budget and render at one configuration
+(:meth:`foveated_mi.budget.FrameBudget.together`).
 
 **Reuse between the eyes** (``reuse=True``, the default; a formation on the foveal buffer's
 samples, as the ``vr`` preset's). The first eye renders its frame as it would alone. The
@@ -487,15 +489,20 @@ class Stereo:
         second.partner = self.views[self.first].planner if reuse else None
         second.partner_disc = reuse is True
         self.views[self.first].planner.partner = None
+        # One frame to a frame budget (frame_ms): both eyes at one rung, their time summed.
+        self._budget = integrator._budget.value
+        self._budget.together(tuple(self.views[eye].index for eye in self.order))
 
     def head_pose(self) -> mi.ScalarTransform4f:
         """The head's to-world transform, as the scene's sensor has it now."""
         return self.eyes.head_pose()
 
     def cut(self) -> None:
-        """A camera cut: both eyes' histories start again."""
+        """A camera cut: both eyes' histories start again, and the frame budget's model of
+        the pair."""
         for view in self.views.values():
             view.reset()
+        self._budget.reset([view.index for view in self.views.values()])
 
     def render(self, gaze=(0.5, 0.5), *, seed: int = 0, spp: int = 0,
                eye_gazes=None) -> StereoFrame:
