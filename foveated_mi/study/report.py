@@ -62,7 +62,9 @@ buffer and photometry: ``foveated-mi headsets``); with a stereo study
 and the headset condition judges the worse eye (``jod_video_min``); the second eye reuses the
 first eye's samples (``--reuse periphery``: its disc traced; ``--reuse none``: each eye
 traces all of its own; ``--first-eye right``: the right eye goes first); ``--one-eye`` runs its left eye alone, for two eyes against one. ``--latency-ms`` and ``--noise-deg`` set the eye
-tracker (``[viewer] gaze_latency_ms``, ``gaze_noise_deg``).
+tracker (``[viewer] gaze_latency_ms``, ``gaze_noise_deg``). ``--frozen-noise`` makes the
+uniform rows without history repeat their seed every frame (``[uniform] frozen_noise``), to
+measure what a renderer's moving noise costs against frozen noise.
 
 Any study file of the same shape runs (``configs/studies/vr_10ppd.toml``: ``vr.toml``'s
 1152x648 trimmed to what a 2-core CPU renders in about an hour).
@@ -131,6 +133,8 @@ def overridden(data: dict, a) -> dict:
         viewer["gaze_latency_ms"] = a.latency_ms
     if flag("noise_deg") is not None:
         viewer["gaze_noise_deg"] = a.noise_deg
+    if flag("frozen_noise"):    # uniform rows without history repeat their seed
+        d.setdefault("uniform", {})["frozen_noise"] = True
     if flag("frame_ms"):        # the budgets rows are held at, compared at equal time
         d["motion"]["frame_ms"] = list(a.frame_ms)
     if a.scenes:
@@ -501,6 +505,9 @@ def build_parser(prog: str = "foveated-mi study report") -> argparse.ArgumentPar
     ap.add_argument("--frame-ms", type=float, nargs="+", default=None, dest="frame_ms",
                     metavar="MS", help="frame budgets in ms (motion.frame_ms): rows held at "
                     "each, compared at equal time")
+    ap.add_argument("--frozen-noise", action="store_true", dest="frozen_noise",
+                    help="uniform rows without history render every frame with the row's "
+                    "seed (uniform.frozen_noise: the noise stands still)")
     ap.add_argument("--timing-passes", type=int, default=0, dest="timing_passes",
                     help="render each row's sequence this many times more, unscored, seed by "
                     "seed in alternating order, and give it the median of their times "
@@ -521,6 +528,7 @@ def command_line(a) -> str:
                      ("latency-ms", a.latency_ms), ("noise-deg", a.noise_deg),
                      ("frame-ms", getattr(a, "frame_ms", None))) if v)
     return cmd + (" --stereo" if a.stereo else "") + (" --one-eye" if a.one_eye else "") + \
+        (" --frozen-noise" if getattr(a, "frozen_noise", False) else "") + \
         (f" --reuse {a.reuse}" if a.reuse else "") + \
         (f" --first-eye {a.first_eye}" if a.first_eye else "") + \
         (f" --timing-passes {a.timing_passes}" if a.timing_passes else "") + \
