@@ -34,10 +34,13 @@ among the ``vr`` rows of its file:
 ``tests/test_frame_budget.py`` reads each rung's row back from its file, and checks the
 order and the front.
 
-**Hysteresis** (:class:`Controller`). A rung up only when the model predicts the next one
-below ``(1 - margin)`` of the budget for ``patience`` frames in a row; a rung down at once when
-the prediction of the current one, or the last frame measured, exceeds the budget; never more
-than one rung a frame on a ladder. A rung left downwards within ``2 * patience`` frames of
+**Hysteresis** (:class:`Controller`). A view's first measured frame (its kernels compiled)
+and its first after a cut place it at once: up to its highest rung predicted below
+``(1 - margin)`` of the budget, so that it does not climb a rung at a time from the cheapest.
+From then on, a rung up only when the model predicts the next one below ``(1 - margin)`` of
+the budget for ``patience`` frames in a row; a rung down at once when the prediction of the
+current one, or the last frame measured, exceeds the budget; never more than one rung a frame
+on a ladder. A rung left downwards within ``2 * patience`` frames of
 being reached is barred for a hold that doubles on each repeat, so the choice cannot settle
 into A-B-A-B. The first frame on the other ladder (the head starts or stops turning) takes
 its highest rung predicted within the budget. A cut (the integrator's ``reset()``), a change
@@ -275,6 +278,7 @@ class Controller:
         self._reached: dict[str, int] = {}            # ladder -> frame its rung was reached
         self._barred: dict[str, tuple[int, int]] = {}  # ladder -> (rung, until frame)
         self._hold = 2 * self.patience
+        self._place = False                           # the next step may climb several rungs
 
     def reset(self) -> None:
         """Forget the cost model (a cut, a change of options or film size); the rungs stay."""
@@ -303,6 +307,12 @@ class Controller:
             i, self._up = (fits[-1] if fits else 0), 0
         elif self._last is not None:
             i = self._step(name, i, top)
+            if self._place:               # the first measured frame: placed, not climbed
+                under = [j for j in range(i + 1, top + 1)
+                         if self.predict(name, j) < (1.0 - self.margin) * self.budget_ms]
+                if under:
+                    i, self._up, self._reached[name] = under[-1], 0, self.frame
+        self._place = False
         self.index[name], self.ladder = i, name
         self.frame += 1
         return name, i, self.predict(name, i)
@@ -335,6 +345,8 @@ class Controller:
         warm = seen <= self.warmup
         if warm and self._last is not None:
             return                        # compiling and recording: not a frame's time
+        # The first frame that is a frame's time since the view began or was cut: a place.
+        self._place = not warm and (self._provisional or self._last is None)
         if self._provisional:             # the first frame compiled: a stand-in until now
             self.model.reset()
         self._provisional = warm

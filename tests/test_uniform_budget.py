@@ -104,7 +104,7 @@ def test_it_converges_to_the_budget_and_holds_it(monkeypatch, fixed, budget, see
     floor = min(0.85 * budget, max(below)) * math.exp(-3 * 0.02)
     assert np.percentile(held, 95) <= 1.10 * budget, (held, budget)
     assert held.mean() >= floor, (held.mean(), floor, true)
-    assert np.all(np.abs(np.diff(rungs)) <= 1)
+    assert np.all(np.abs(np.diff(rungs[1:])) <= 1)     # placed after its first frame
     assert not _abab(rungs)
 
 
@@ -114,7 +114,7 @@ def test_the_scale_rises_when_frames_get_cheaper_and_falls_when_dearer(monkeypat
                                schedule=lambda k: 2.0 if k < 20 or k >= 40 else 0.5)
     assert scales[19] < 1.0 and max(scales[20:40]) > max(scales[:20])
     assert scales[-1] < max(scales[20:40])
-    assert np.all(np.abs(np.diff(rungs)) <= 1)
+    assert np.all(np.abs(np.diff(rungs[1:])) <= 1)     # placed after its first frame
 
 
 def test_a_first_frame_that_compiled_does_not_hold_the_scale_down(monkeypatch):
@@ -134,8 +134,9 @@ def test_a_first_frame_that_compiled_does_not_hold_the_scale_down(monkeypatch):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         stats = [ub.render(FakeScene(), seed=k)[1] for k in range(30)]
-    # 7.7 ms at the cheapest rung: its third frame is the first warmed one, and predicted so
-    assert stats[3]["predicted_ms"] == pytest.approx(cost(ub.ladder[0].traced(SIZE)[0]))
+    # Its third frame is the first warmed one: the view is placed from its time (7.7 ms at the
+    # cheapest rung), where the compiled frame's 40x would have kept it at the cheapest.
+    assert stats[3]["predicted_ms"] < 18.0 and stats[3]["scale"] > stats[0]["scale"]
     assert max(s["scale"] for s in stats) >= 0.6
 
 
