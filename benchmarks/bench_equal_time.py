@@ -43,7 +43,7 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 from common import parser, setup, write_json  # noqa: E402
-from common import pm as _pm  # noqa: E402
+from foveated_mi.study.labels import pm as _pm  # noqa: E402
 
 STUDY = os.path.join(HERE, "..", "configs", "studies", "equal_time.toml")
 RESULTS = os.path.join(HERE, "..", "docs", "results")

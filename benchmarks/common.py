@@ -23,16 +23,6 @@ def timed(fn, *args, **kw):
     return out, (time.perf_counter() - t0) * 1e3
 
 
-def pm(r: dict, col: str, fmt: str = ".2f") -> str:
-    """A study cell's ``col`` as "mean ± standard deviation" ("-" where it is missing)."""
-    import math
-    v = r.get(col)
-    if v is None or (isinstance(v, float) and math.isnan(v)):
-        return "-"
-    sd = r.get(f"{col}_sd", math.nan)
-    return format(v, fmt) + (f" ± {format(sd, fmt)}" if not math.isnan(sd) else "")
-
-
 def median(xs):
     return statistics.median(xs) if xs else float("nan")
 
