@@ -1,10 +1,25 @@
 """Long run: a small moving-gaze sequence for many frames.
 
     python benchmarks/long_run.py --frames 500 --size 64 64
+    python benchmarks/long_run.py --frames 400 --size 64 64 --frame-budget
 
 Checks, and reports: resident memory at frame 500 within 5 % of frame 50; no kernel compiled
 after warm-up (Dr.Jit kernel history); every frame's stats finite. Exit status 1 if a check
 fails. ``tests/test_long_run.py`` (marked ``slow``) runs it.
+
+``--frame-budget``: a budget whose choice moves. The ``vr`` preset holds ``frame_ms`` at
+``--budget`` times its own frame at the preset's defaults (measured first, unbudgeted), while
+the head turns for ``--phase`` frames and stands still for the next (both ladders, and the
+settling of a still view) and the eye saccades. A rung's first frames compile and
+record (:data:`foveated_mi.budget.WARMUP`); the kernel check counts the kernels compiled at a
+frame whose ladder, rung and spp (a still view settles to fewer) rendered more than that many
+times before and that recorded no configuration of the replayed passes for the first time (a
+state first met late compiles legitimately); stats finite. Reported, not checked: resident
+memory at half the frames and at the end (the replayed passes keep their most recent
+configurations, :data:`foveated_mi.frame.formation.RECORDINGS`, and record the others again:
+at 576x324 memory grows with each recording made); the frames at each rung; the recordings
+made and held; the frame time against the budget (its 95th percentile and mean over each
+phase's frames after its first ten).
 """
 from __future__ import annotations
 
@@ -16,6 +31,9 @@ import drjit as dr
 import mitsuba as mi
 
 from common import parser, setup, write_json
+
+#: The saccades' fixations (normalised on the film).
+GAZES = [[0.3, 0.4], [0.7, 0.6], [0.5, 0.2]]
 
 
 def rss_mib() -> float:
@@ -40,9 +58,21 @@ def main(argv=None) -> int:
     p.add_argument("--frames", type=int, default=500)
     p.add_argument("--size", type=int, nargs=2, default=(64, 64))
     p.add_argument("--warmup", type=int, default=3)
-    p.add_argument("--probe", type=int, default=50, help="frame of the first memory probe")
+    p.add_argument("--probe", type=int, default=None, help="frame of the first memory probe "
+                   "(default 50; with --frame-budget half the frames: the rungs' recordings "
+                   "are made in the first cycles)")
+    p.add_argument("--frame-budget", action="store_true", dest="frame_budget",
+                   help="the vr preset holding a moving frame budget (module docstring)")
+    p.add_argument("--phase", type=int, default=25,
+                   help="with --frame-budget: frames the head turns, then stands still")
+    p.add_argument("--budget", type=float, default=1.5,
+                   help="with --frame-budget: frame_ms as a multiple of the preset's frame")
     a = p.parse_args(argv)
     setup(a)
+    if a.probe is None:
+        a.probe = a.frames // 2 if a.frame_budget else 50
+    if a.frame_budget:
+        return budget_run(a)
     from foveated_mi.integrators.foveated import FoveatedIntegrator
     from foveated_mi.paths import Saccades
     from foveated_mi.scenes import load_scene
@@ -52,17 +82,13 @@ def main(argv=None) -> int:
                        integrator={"type": "path", "max_depth": 3})
     integ = FoveatedIntegrator(preset="paper", nested=scene.integrator(), theta=0.1,
                                sigma_p=0.8, timing=True)
-    gaze = Saccades(targets=[[0.3, 0.4], [0.7, 0.6], [0.5, 0.2]], dwell=0.2, duration=0.05)
+    gaze = Saccades(targets=GAZES, dwell=0.2, duration=0.05)
     rss, compiled, bad = {}, 0, []
     for i in range(a.frames):
         integ.gaze = gaze.at(i / 30.0)
-        with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
-            dr.kernel_history_clear()
-            dr.eval(mi.render(scene, integrator=integ, seed=0))
-            dr.sync_thread()
-            hist = dr.kernel_history([dr.KernelType.JIT])
+        n = compiled_kernels(lambda: mi.render(scene, integrator=integ, seed=0))
         if i >= a.warmup:
-            compiled += sum(1 for h in hist if not h.get("cache_hit", True))
+            compiled += n
         s = integ.stats
         if not finite(s):
             bad.append(i)
@@ -73,11 +99,109 @@ def main(argv=None) -> int:
     result = {"frames": a.frames, "size": [W, H], "rss_mib": rss, "rss_growth": growth,
               "kernels_compiled_after_warmup": compiled, "nonfinite_stats_frames": bad,
               "variant": mi.variant()}
+    return report(a, result, abs(growth) <= 0.05 and compiled == 0 and not bad)
+
+
+def report(a, result: dict, ok: bool) -> int:
     print(json.dumps(result, indent=2))
-    ok = abs(growth) <= 0.05 and compiled == 0 and not bad
     print("long run:", "all checks met" if ok else "CHECK FAILED")
     write_json(a.out, result)
     return 0 if ok else 1
+
+
+def compiled_kernels(render) -> int:
+    """Kernels compiled (not found in the cache) while ``render()`` ran and was forced."""
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+        dr.kernel_history_clear()
+        dr.eval(render())
+        dr.sync_thread()
+        hist = dr.kernel_history([dr.KernelType.JIT])
+    return sum(1 for h in hist if not h.get("cache_hit", True))
+
+
+def turned(camera: dict, degrees: float) -> dict:
+    """``camera`` turned by ``degrees`` about the vertical through its origin."""
+    import numpy as np
+    o, t = np.asarray(camera["origin"]), np.asarray(camera["target"])
+    c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
+    d = t - o
+    return {**camera, "target": list(o + [c * d[0] + s * d[2], d[1], -s * d[0] + c * d[2]])}
+
+
+def recorded(integ) -> tuple[int, int]:
+    """``(recordings made, configurations held)`` of the replayed passes (the formation and
+    the trace together): more made than held is a configuration recorded again."""
+    f, t = integ._frozen._frozen, integ._frozen_trace._frozen
+    return f.n_recordings + t.n_recordings, f.n_cached_recordings + t.n_cached_recordings
+
+
+def budget_run(a) -> int:
+    """The ``--frame-budget`` run (module docstring)."""
+    import numpy as np
+    from foveated_mi.budget import WARMUP
+    from foveated_mi.scenes import apply_camera, camera_of
+
+    scene, integ, gaze, base = budget_setup(a)
+    integ.set_options(frame_ms=a.budget * base)
+    home, yaw, seen, late, bad, probes, held = camera_of(scene), 0.0, {}, [], [], {}, []
+    for i in range(a.frames):
+        phase = i // a.phase
+        if phase % 2 == 0:                # the head turns 30 deg/s at 90 Hz
+            yaw += 30.0 / 90.0
+            apply_camera(scene, turned(home, yaw))
+        integ.gaze = gaze.at(i / 90.0)
+        configs = recorded(integ)[1]
+        n = compiled_kernels(lambda: mi.render(scene, integrator=integ, seed=i))
+        b = integ.stats["frame_budget"]
+        key = (b["ladder"], b["rung"], integ.stats["spp"])   # spp: a still view settles
+        if i % a.phase >= 10:             # held: each phase's frames after its first ten
+            held.append(b["measured_ms"] / b["budget_ms"])
+        # Kernels compile legitimately at a rung's first frames and where a configuration is
+        # recorded for the first time (a state of the rung not met before).
+        if n and seen.get(key, 0) > WARMUP and recorded(integ)[1] == configs:
+            late.append([i, *key, n])
+        seen[key] = seen.get(key, 0) + 1
+        if not finite(integ.stats):
+            bad.append(i)
+        if i + 1 in (a.probe, a.frames):
+            dr.flush_malloc_cache()        # what is held, not what the allocator keeps
+            probes[i + 1] = {"rss_mib": rss_mib(), "recordings": recorded(integ)}
+    first, last = probes.get(a.probe), probes.get(a.frames)
+    growth = (last["rss_mib"] - first["rss_mib"]) / first["rss_mib"] if first else 0.0
+    again = [p["recordings"][0] - p["recordings"][1] for p in (first, last) if p]
+    result = {"frames": a.frames, "size": list(a.size), "base_ms": base, "phase": a.phase,
+              "budget_ms": a.budget * base,
+              "frames_at": {f"{k[0]} rung {k[1]}, {k[2]} spp": v
+                            for k, v in sorted(seen.items())},
+              "kernels_compiled_at_warm_states": sum(x[-1] for x in late), "compiled_at": late,
+              "held": {"p95": float(np.percentile(held, 95)), "mean": float(np.mean(held)),
+                       "frames": len(held)},
+              "probes": probes, "rss_growth": growth, "recorded_again": again,
+              "nonfinite_stats_frames": bad, "variant": mi.variant()}
+    ok = not late and not bad     # memory is reported: a budget's rungs are recorded anew
+    return report(a, result, ok)
+
+
+def budget_setup(a):
+    """The scene, the ``vr`` integrator, the saccades and its frame's median time (ms) at the
+    preset's defaults, unbudgeted."""
+    import statistics
+    import time
+    from foveated_mi.integrators.foveated import FoveatedIntegrator
+    from foveated_mi.paths import Saccades
+    from foveated_mi.scenes import load_scene
+
+    W, H = a.size
+    scene = load_scene("voxel-city", width=W, height=H, spp=1, size=24,
+                       integrator={"type": "path", "max_depth": 3})
+    integ = FoveatedIntegrator(preset="vr", nested=scene.integrator())
+    times = []
+    for i in range(8):
+        t0 = time.perf_counter()
+        compiled_kernels(lambda: mi.render(scene, integrator=integ, seed=i))
+        times.append((time.perf_counter() - t0) * 1e3)
+    gaze = Saccades(targets=GAZES, dwell=0.2, duration=0.05)
+    return scene, integ, gaze, statistics.median(times[3:])
 
 
 if __name__ == "__main__":
