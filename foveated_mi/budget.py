@@ -34,6 +34,14 @@ among the ``vr`` rows of its file:
 ``tests/test_frame_budget.py`` reads each rung's row back from its file, and checks the
 order and the front.
 
+The denoiser: every rung runs the preset's SVGF in the buffer and on the disc. OIDN on the
+disc (``foveal_disc_denoiser = "oidn"``) is no rung: on a still head at 8.4 ppd it bought
+0.05-0.10 video JOD for 20-23 ms a frame on the CPU (``vr_still_disc_oidn``,
+``vr_disc_oidn_turning``; docs/results.md, "The disc through a network"), where the still
+ladder's next rung buys 0.09 for 32 ms (8 spp from 30 to 40 % of the rays): no more per
+millisecond, measured on other rows, so the ladder keeps to rays and samples until a study
+measures both on the same rows.
+
 **Hysteresis** (:class:`Controller`). A view's first measured frame (its kernels compiled)
 and its first after a cut place it at once: up to its highest rung predicted below
 ``(1 - margin)`` of the budget, so that it does not climb a rung at a time from the cheapest.
