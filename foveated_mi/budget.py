@@ -38,9 +38,9 @@ The denoiser: every rung runs the preset's SVGF in the buffer and on the disc. O
 disc (``foveal_disc_denoiser = "oidn"``) is no rung: on a still head at 8.4 ppd it bought
 0.05-0.10 video JOD for 20-23 ms a frame on the CPU (``vr_still_disc_oidn``,
 ``vr_disc_oidn_turning``; docs/results.md, "The disc through a network"), where the still
-ladder's next rung buys 0.09 for 32 ms (8 spp from 30 to 40 % of the rays): no more per
-millisecond, measured on other rows, so the ladder keeps to rays and samples until a study
-measures both on the same rows.
+ladder's next rung buys 0.09 for 32 ms (8 spp from 30 to 40 % of the rays): 0.002-0.005
+against 0.003 JOD a millisecond, measured on other rows, a difference within their spread;
+the ladder keeps to rays and samples until a study measures both on the same rows.
 
 **Hysteresis** (:class:`Controller`). A view's first measured frame (its kernels compiled)
 and its first after a cut place it at once: up to its highest rung predicted below
