@@ -580,3 +580,13 @@ def test_tracker_noise_has_the_deviation_it_asks_for_in_degrees(tmp_path):
     assert abs(deg.std(axis=0) - 0.5).max() < 0.05, deg.std(axis=0)
     assert np.array_equal(out, np.array(rendered_gazes(scene, task)))      # seeded
     assert rendered_gazes(scene, dict(task, motion={"gazes": [g] * 3})) == [g] * 3
+
+
+def test_saccades_that_never_start_within_the_sequence_get_a_note(tmp_path):
+    # dwell 0.03 s + 0.02 s of saccade at 90 Hz: the first saccade starts at frame 2.7.
+    short = TRACKED.format(viewer="").replace("dwell = 0.03", "dwell = 0.3")
+    held = load_study(write(tmp_path, short))
+    assert len(held.notes) == 1 and "hold one fixation" in held.notes[0]
+    assert "\n" not in held.notes[0] and "ms at 90 Hz" in held.notes[0]
+    moving, _ = _motion(tmp_path)
+    assert moving.notes == ()

@@ -228,7 +228,7 @@ def _notes(spec: StudySpec) -> tuple[list[str], bool, bool]:
     sequences are timed, whether OIDN and the JOD column are available."""
     from .. import perceptual
     from ..denoise import INSTALL_HINT, oidn_available
-    notes = []
+    notes = list(spec.notes)
     for s in spec.scenes:
         if s.missing:
             notes.append(f"note: scene {s.label!r} skipped: optional XML file {s.name} "

@@ -273,6 +273,7 @@ class StudySpec:
     description: str = ""
     headset: str | None = None        # [viewer] headset: it sets each scene's frustum and film
     budgets: tuple[float, ...] = ()   # [motion] frame_ms: the frame budgets rows are held at
+    notes: tuple[str, ...] = ()       # what the runner says before it starts (one line each)
 
     def with_size(self, size: tuple[int, int] | None) -> "StudySpec":
         """The same study with every scene's film size replaced (None: unchanged). Under a
@@ -379,7 +380,26 @@ def parse_study(data: dict, *, base_dir: str = ".", source: str = "<study>",
                      uniform=tuple(uniform), seed=seeds[0], seeds=seeds, repeats=repeats,
                      warmup=warmup, passes=passes, metric=metric, metrics=metrics,
                      perceptual=perceptual, description=description, headset=headset,
-                     budgets=tuple(budgets))
+                     budgets=tuple(budgets), notes=_one_fixation(data.get("motion"), scenes))
+
+
+def _one_fixation(table: Any, scenes: list) -> tuple[str, ...]:
+    """A note for each scene whose saccades never start within the sequence: its frames
+    hold one fixation (a study of the eye's moves that measures none)."""
+    gaze = table.get("gaze") if isinstance(table, dict) else None
+    if not isinstance(gaze, dict) or gaze.get("type") != "saccades":
+        return ()
+    out = []
+    for s in scenes:
+        if s.motion is None or s.missing:
+            continue
+        gazes, fps = s.motion["gazes"], s.motion["fps"]
+        if all(g == gazes[0] for g in gazes):
+            out.append(f"note: scene {s.label!r}: its {len(gazes)} frames "
+                       f"({1e3 * len(gazes) / fps:.0f} ms at {fps:g} Hz) hold one fixation: "
+                       "the first saccade comes after them (more frames, or a shorter "
+                       "motion.gaze.dwell, to measure one)")
+    return tuple(out)
 
 
 # ---------------------------------------------------------------------------------------------
