@@ -29,6 +29,7 @@ import sys
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from common import parser, setup, write_json
 
@@ -121,7 +122,6 @@ def compiled_kernels(render) -> int:
 
 def turned(camera: dict, degrees: float) -> dict:
     """``camera`` turned by ``degrees`` about the vertical through its origin."""
-    import numpy as np
     o, t = np.asarray(camera["origin"]), np.asarray(camera["target"])
     c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
     d = t - o
@@ -137,7 +137,6 @@ def recorded(integ) -> tuple[int, int]:
 
 def budget_run(a) -> int:
     """The ``--frame-budget`` run (module docstring)."""
-    import numpy as np
     from foveated_mi.budget import WARMUP
     from foveated_mi.scenes import apply_camera, camera_of
 

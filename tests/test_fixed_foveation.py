@@ -358,3 +358,15 @@ def test_two_eyes_fixed_at_their_lens_centres_and_uniform_eyes_with_new_noise(mo
         assert e[1] == pytest.approx(right, abs=POS_TOL)
     frames = [s[1] for s in shown["uniform"]]              # the left eye's frames
     assert all(not np.array_equal(frames[0], f) for f in frames[1:])
+
+
+def test_the_report_flag_freezes_the_uniform_rows_noise():
+    from foveated_mi.study.report import build_parser, command_line, overridden
+    a = build_parser().parse_args(["s.toml", "--frozen-noise"])
+    d = overridden({"motion": {"frames": 4}, "scenes": [], "uniform": {"spp": 1}}, a)
+    assert d["uniform"] == {"spp": 1, "frozen_noise": True}
+    assert command_line(a).endswith(" --frozen-noise")
+    plain = build_parser().parse_args(["s.toml"])
+    assert "frozen_noise" not in overridden({"motion": {}, "scenes": [], "uniform": {}},
+                                            plain)["uniform"]
+    assert "--frozen-noise" not in command_line(plain)
