@@ -34,6 +34,15 @@ among the ``vr`` rows of its file:
 ``tests/test_frame_budget.py`` reads each rung's row back from its file, and checks the
 order and the front.
 
+Past the front, where a budget buys more than its top rung (a smaller film, a faster
+machine: at 576x324 the moving ladder's top costs half of twice uniform + history's frame),
+each ladder goes on toward uniform density, unmeasured but ordered by construction as the
+uniform ladder is: its top rung's spp at 45, 60 and 80 % of the rays, then 4 spp at 80 %
+(moving), and 8 spp at 65 and 80 % (still). Each traces every ray of the rung before and more,
+so each costs more, and none is a worse image of the same pipeline; at 80 % the log-polar
+buffer's cells are within a pixel nearly everywhere (``ray_budget``'s help), which is what
+"toward uniform density" means for it.
+
 The denoiser: every rung runs the preset's SVGF in the buffer and on the disc. OIDN on the
 disc (``foveal_disc_denoiser = "oidn"``) is no rung: on a still head at 8.4 ppd it bought
 0.05-0.10 video JOD for 20-23 ms a frame on the CPU (``vr_still_disc_oidn``,
@@ -48,7 +57,9 @@ and its first after a cut place it at once: up to its highest rung predicted bel
 From then on, a rung up only when the model predicts the next one below ``(1 - margin)`` of
 the budget for ``patience`` frames in a row; a rung down at once when the prediction of the
 current one, or the last frame measured, exceeds the budget; never more than one rung a frame
-on a ladder. A rung left downwards within ``2 * patience`` frames of
+on a ladder, and no step until a frame has been measured since the last (a rung's warm-up
+frames are not measured: stepping on the rung before's time again would slide down the ladder
+a rung a frame). A rung left downwards within ``2 * patience`` frames of
 being reached is barred for a hold that doubles on each repeat, so the choice cannot settle
 into A-B-A-B. The first frame on the other ladder (the head starts or stops turning) takes
 its highest rung predicted within the budget. A cut (the integrator's ``reset()``), a change
@@ -87,13 +98,14 @@ WARMUP = 2
 
 @dataclass(frozen=True)
 class Rung:
-    """One configuration of the ``vr`` preset and the study row it comes from."""
+    """One configuration of the ``vr`` preset and the study row it comes from (``source``
+    None: a rung beyond the measured front, :data:`LADDERS`)."""
     spp: int
     ray_budget: float
-    source: str                #: the folder under docs/results/ holding its row
-    row: str                   #: the row's configuration, as its vr.md names it
-    time_ms: float             #: its median frame time there
-    jod: float                 #: its video JOD there (headset)
+    source: str | None         #: the folder under docs/results/ holding its row
+    row: str = ""              #: the row's configuration, as its vr.md names it
+    time_ms: float = math.nan  #: its median frame time there
+    jod: float = math.nan      #: its video JOD there (headset)
     disc_spp: int = 2          #: ``foveal_disc_spp`` (the preset's, as the study ran)
     still_spp: float = 0.125   #: ``foveal_still_spp`` (likewise)
 
@@ -120,8 +132,15 @@ _STILL = _MOVING[:3] + (
     Rung(8, 0.4, "vr_still_settle", "vr 8 spp, ray_budget 0.4", 135, 8.94),
     Rung(8, 0.5, "vr_still_settle", "vr 8 spp, ray_budget 0.5", 161, 8.97),
 )
+#: Past the measured front, toward uniform density: the top rung's spp at more of the rays,
+#: up to the polar buffer's densest (about 0.85 of the film: ``ray_budget``'s help), then
+#: more samples there. Each traces a superset of the rung before (module docstring).
+_MOVING_BEYOND = (Rung(2, 0.45, None), Rung(2, 0.6, None), Rung(2, 0.8, None),
+                  Rung(4, 0.8, None))
+_STILL_BEYOND = (Rung(8, 0.65, None), Rung(8, 0.8, None))
 #: Ladder name -> its rungs, cheapest first (module docstring).
-LADDERS: dict[str, tuple[Rung, ...]] = {"moving": _MOVING, "still": _STILL}
+LADDERS: dict[str, tuple[Rung, ...]] = {"moving": _MOVING + _MOVING_BEYOND,
+                                        "still": _STILL + _STILL_BEYOND}
 
 
 @dataclass(frozen=True)
@@ -287,6 +306,7 @@ class Controller:
         self._barred: dict[str, tuple[int, int]] = {}  # ladder -> (rung, until frame)
         self._hold = 2 * self.patience
         self._place = False                           # the next step may climb several rungs
+        self._fresh = False                           # a frame observed since the last step
 
     def reset(self) -> None:
         """Forget the cost model (a cut, a change of options or film size); the rungs stay."""
@@ -313,14 +333,17 @@ class Controller:
             # Placed on the other ladder: its highest rung predicted within the budget.
             fits = [j for j in range(top + 1) if self.predict(name, j) <= self.budget_ms]
             i, self._up = (fits[-1] if fits else 0), 0
-        elif self._last is not None:
+        elif self._last is not None and self._fresh:
+            # A step only on a frame measured since the last: while a rung warms up (its
+            # frames left out) the last measurement is another rung's, and stepping on it
+            # again would cascade down the ladder a rung a frame.
             i = self._step(name, i, top)
             if self._place:               # the first measured frame: placed, not climbed
                 under = [j for j in range(i + 1, top + 1)
                          if self.predict(name, j) < (1.0 - self.margin) * self.budget_ms]
                 if under:
                     i, self._up, self._reached[name] = under[-1], 0, self.frame
-        self._place = False
+        self._place = self._fresh = False
         self.index[name], self.ladder = i, name
         self.frame += 1
         return name, i, self.predict(name, i)
@@ -359,7 +382,7 @@ class Controller:
             self.model.reset()
         self._provisional = warm
         self.model.add(obs.samples, obs.cells, ms)
-        self._last, self._last_ms = obs, float(ms)
+        self._last, self._last_ms, self._fresh = obs, float(ms), True
         cheapest = self.predict(self.ladder, 0)
         if self.model.frames >= 2 and cheapest > self.budget_ms and not self.cheapest_warned:
             self.cheapest_warned = True

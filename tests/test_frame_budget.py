@@ -43,7 +43,12 @@ def ladder_faults(ladders) -> list[str]:
     """What is wrong with ``ladders`` against their study rows (empty: nothing)."""
     faults = []
     for name, ladder in ladders.items():
+        beyond = [r.source is None for r in ladder]
+        if beyond != sorted(beyond):
+            faults.append(f"{name}: a measured rung after one beyond the front")
         for r in ladder:
+            if r.source is None:          # beyond the front: checked by its order below
+                continue
             rows = _vr_rows(r.source)
             if rows.get(r.row) != (r.time_ms, r.jod):
                 faults.append(f"{name}: {r.row} reads {rows.get(r.row)} in {r.source}")
@@ -60,6 +65,12 @@ def ladder_faults(ladders) -> list[str]:
             measured_order = a.time_ms < b.time_ms and a.jod < b.jod
             # A rung of another study: no more rays and no more samples than the next.
             cheaper = a.spp <= b.spp and a.ray_budget <= b.ray_budget
+            if b.source is None:          # beyond the front: a superset of the rung before
+                if not (cheaper and (a.spp, a.ray_budget) != (b.spp, b.ray_budget)):
+                    faults.append(f"{name}: {a.label()} before {b.label()}")
+                continue
+            if a.source is None:              # a measured rung after it: said above
+                continue
             same_kind = ("still" in a.source) == ("still" in b.source)
             if not (measured_order if same_kind else cheaper):
                 faults.append(f"{name}: {a.label()} before {b.label()}")
@@ -78,6 +89,15 @@ def test_the_ladder_is_its_studies_pareto_front_in_order():
     dominated = dataclasses.replace(LADDERS["still"][3], row="vr 4 spp, ray_budget 0.5",
                                     spp=4, ray_budget=0.5, time_ms=158.0, jod=8.84)
     assert any("dominates" in f for f in ladder_faults({"still": (dominated,)}))
+    # Past the front: each rung a superset of the one before, and after every measured one.
+    from foveated_mi.budget import Rung
+    top = moving[-1]
+    assert top.source is None and top.ray_budget <= 0.85 and moving[0].source is not None
+    fewer = {"moving": moving + (Rung(top.spp, top.ray_budget - 0.1, None),)}
+    assert any("before" in f for f in ladder_faults(fewer))
+    measured = [r for r in moving if r.source is not None]
+    late = {"moving": (moving[0], Rung(2, 0.45, None), measured[-1])}
+    assert any("after one beyond" in f for f in ladder_faults(late))
 
 
 # -- the controller on a synthetic cost -------------------------------------------------------
@@ -155,6 +175,22 @@ def test_a_view_is_placed_at_its_rung_once_its_kernels_compiled(budget):
     ctl.index["moving"] = 0
     rungs, _, _ = _run(budget, 3, cost, ctl=ctl)
     assert rungs[-1] == settled, rungs
+
+
+@pytest.mark.parametrize("budget", [200.0, 260.0])
+def test_a_step_down_onto_a_rung_warming_up_waits_for_its_first_measured_frame(budget):
+    # Placed at once, the view skipped the rungs below; a slow frame then steps it down onto
+    # one of them, whose first WARMUP frames are not measured. The next step waits for a
+    # measured frame instead of stepping again on the slow frame's time.
+    cost = _cost()
+    rungs, _, ctl = _run(budget, 20, cost, ctl=Controller(budget, warmup=WARMUP))
+    settled = rungs[-1]
+    assert settled >= 2 and set(rungs[WARMUP + 1:]) == {settled}
+    name, i, _ = ctl.choose(True)
+    samples, cells, rays = _traced(ctl.ladders[name][i])
+    ctl.observe(3 * budget, Observation(samples, cells, rays, DISC, ctl.ladders[name][i]))
+    after, _, _ = _run(budget, WARMUP + 2, cost, ctl=ctl)
+    assert after[0] == settled - 1 and np.all(after[:WARMUP + 1] == settled - 1), after
 
 
 def test_the_controller_needs_no_oscillation_to_hold_a_budget_between_rungs():

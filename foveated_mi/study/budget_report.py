@@ -44,7 +44,8 @@ def budget_verdicts(rows: list[dict], column: str) -> list[dict]:
     verdicts : list of dict
         ``scene``, ``budget_ms``, ``configuration``, ``family`` (the best uniform row's
         label), ``delta``, ``spread`` (NaN with one seed), ``seeds``, ``tie``, ``word``
-        (``better``, ``worse`` or ``a tie``) and ``text`` (one sentence).
+        (``better``, ``worse`` or ``a tie``; with one seed, ``better`` or ``worse`` followed
+        by ", one seed (no spread to judge a tie by)") and ``text`` (one sentence).
     """
     from .aggregate import margin
     out = []
@@ -57,6 +58,8 @@ def budget_verdicts(rows: list[dict], column: str) -> list[dict]:
         for cell in (c for c in cells if c["method"] == "foveated" and _finite(c.get(column))):
             m = margin(cell, best, column)
             word = "a tie" if m.tie else ("better" if m.delta > 0 else "worse")
+            if not math.isfinite(m.spread):     # one seed: no spread to call a tie by
+                word += ", one seed (no spread to judge a tie by)"
             name, family = label(cell), label(best)
             out.append({"scene": scene, "budget_ms": b, "configuration": name,
                         "family": family, "delta": m.delta, "spread": m.spread,
