@@ -19,7 +19,9 @@ memory at half the frames and at the end (the replayed passes keep their most re
 configurations, :data:`foveated_mi.frame.formation.RECORDINGS`, and record the others again:
 at 576x324 memory grows with each recording made); the frames at each rung; the recordings
 made and held; the frame time against the budget (its 95th percentile and mean over each
-phase's frames after its first ten).
+phase's frames after its first ten); the transitions, each frame's time over the budget: the
+first moving frame after a settled still view, and the first frame after a cut (the
+integrator's ``reset()``, at the start of every other still phase).
 """
 from __future__ import annotations
 
@@ -143,11 +145,15 @@ def budget_run(a) -> int:
     scene, integ, gaze, base = budget_setup(a)
     integ.set_options(frame_ms=a.budget * base)
     home, yaw, seen, late, bad, probes, held = camera_of(scene), 0.0, {}, [], [], {}, []
+    moves, cuts = [], []                  # transitions: frame, its time over the budget
     for i in range(a.frames):
         phase = i // a.phase
         if phase % 2 == 0:                # the head turns 30 deg/s at 90 Hz
             yaw += 30.0 / 90.0
             apply_camera(scene, turned(home, yaw))
+        cut = i % a.phase == 0 and phase % 4 == 3      # every other still phase starts a cut
+        if cut:
+            integ.reset()
         integ.gaze = gaze.at(i / 90.0)
         configs = recorded(integ)[1]
         n = compiled_kernels(lambda: mi.render(scene, integrator=integ, seed=i))
@@ -155,6 +161,9 @@ def budget_run(a) -> int:
         key = (b["ladder"], b["rung"], integ.stats["spp"])   # spp: a still view settles
         if i % a.phase >= 10:             # held: each phase's frames after its first ten
             held.append(b["measured_ms"] / b["budget_ms"])
+        if i and i % a.phase == 0:        # the head starts turning after a settled still view
+            (cuts if cut else moves if phase % 2 == 0 else []).append(
+                [i, b["measured_ms"] / b["budget_ms"]])
         # Kernels compile legitimately at a rung's first frames and where a configuration is
         # recorded for the first time (a state of the rung not met before).
         if n and seen.get(key, 0) > WARMUP and recorded(integ)[1] == configs:
@@ -175,10 +184,16 @@ def budget_run(a) -> int:
               "kernels_compiled_at_warm_states": sum(x[-1] for x in late), "compiled_at": late,
               "held": {"p95": float(np.percentile(held, 95)), "mean": float(np.mean(held)),
                        "frames": len(held)},
+              "first_moving_frame": _worst(moves), "first_frame_after_cut": _worst(cuts),
               "probes": probes, "rss_growth": growth, "recorded_again": again,
               "nonfinite_stats_frames": bad, "variant": mi.variant()}
     ok = not late and not bad     # memory is reported: a budget's rungs are recorded anew
     return report(a, result, ok)
+
+
+def _worst(frames: list) -> dict:
+    """Transition frames ``[frame, time / budget]``: the worst ratio, and each."""
+    return {"max": max((r for _, r in frames), default=math.nan), "frames": frames}
 
 
 def budget_setup(a):

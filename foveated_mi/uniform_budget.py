@@ -42,10 +42,13 @@ from .budget import WARMUP, Controller, Observation
 from .validate import ParameterError, check_int, check_range
 
 __all__ = ["UniformRung", "uniform_ladder", "UniformFrameBudget", "render_uniform_budget",
-           "UNIFORM_SCALES"]
+           "UNIFORM_SCALES", "UNIFORM_SPP"]
 
 #: The render scales of :func:`uniform_ladder` (about 0.12 to 1 of the film's pixels).
 UNIFORM_SCALES = (0.35, 0.5, 0.6, 0.71, 0.85, 1.0)
+#: Its samples per pixel at the full film, after the scales: a budget above one sample of
+#: every pixel buys more of them, as ``vr``'s ladders go on past their front.
+UNIFORM_SPP = (1, 2, 3, 4)
 
 
 @dataclass(frozen=True)
@@ -76,7 +79,7 @@ def _increasing(name: str, values, what: str, check) -> tuple:
     return vals
 
 
-def uniform_ladder(scales: Sequence[float] = UNIFORM_SCALES, spp: Sequence[int] = (1, 2)
+def uniform_ladder(scales: Sequence[float] = UNIFORM_SCALES, spp: Sequence[int] = UNIFORM_SPP
                    ) -> tuple[UniformRung, ...]:
     """The uniform ladder (module docstring): ``scales`` at ``spp[0]``, then ``spp[1:]`` at
     the largest scale.

@@ -1,4 +1,4 @@
-"""Long-run checks (issue 5), marked slow: `make test-slow`."""
+"""Long-run checks, marked slow (`make test-slow`): memory, kernels and stats over many frames."""
 import os
 import subprocess
 import sys
