@@ -21,7 +21,9 @@ at 576x324 memory grows with each recording made); the frames at each rung; the 
 made and held; the frame time against the budget (its 95th percentile and mean over each
 phase's frames after its first ten); the transitions, each frame's time over the budget: the
 first moving frame after a settled still view, and the first frame after a cut (the
-integrator's ``reset()``, at the start of every other still phase).
+integrator's ``reset()``, at the start of every other still phase). The frame after the first
+memory probe is left out of the times: the probe empties Dr.Jit's allocator cache, and that
+frame allocates every buffer again.
 """
 from __future__ import annotations
 
@@ -159,9 +161,10 @@ def budget_run(a) -> int:
         n = compiled_kernels(lambda: mi.render(scene, integrator=integ, seed=i))
         b = integ.stats["frame_budget"]
         key = (b["ladder"], b["rung"], integ.stats["spp"])   # spp: a still view settles
-        if i % a.phase >= 10:             # held: each phase's frames after its first ten
+        probed = i == a.probe             # after the probe's flush: the allocator refills
+        if i % a.phase >= 10 and not probed:   # held: each phase's frames after its first ten
             held.append(b["measured_ms"] / b["budget_ms"])
-        if i and i % a.phase == 0:        # the head starts turning after a settled still view
+        if i and i % a.phase == 0 and not probed:   # the head starts turning, or a cut
             (cuts if cut else moves if phase % 2 == 0 else []).append(
                 [i, b["measured_ms"] / b["budget_ms"]])
         # Kernels compile legitimately at a rung's first frames and where a configuration is
