@@ -48,7 +48,12 @@ from .shading import ShadingBuffer
 from .space import space_of
 
 #: Recorded configurations kept by a :class:`FrozenFormation` (least recently used dropped).
-RECORDINGS = 8
+#: A frame budget visits a few dozen (a rung x moving or still x a still view settling: 27-45
+#: in 400 frames at 576x324); with fewer kept it records some of them again, a frame of many
+#: times the budget each time. What a recording holds is small: with the C library's mmap
+#: threshold fixed (``MALLOC_MMAP_THRESHOLD_=131072``) holding 27 grew resident memory by
+#: 15 MiB over 200 frames (docs/results.md, "Long runs and memory").
+RECORDINGS = 64
 
 
 class FormationInput(NamedTuple):
