@@ -13,7 +13,9 @@ minimum-norm one, which is the prior: the time split evenly between the three te
 rung with more samples or cells is predicted dearer in proportion to a third of the time per
 term. A coefficient held non-negative: where the full fit has a negative one, the subset of
 terms whose unique, non-negative fit has the smallest residual. The model predicts any rung's time from the samples and cells that rung would
-trace, scaled from the last frame's (:func:`estimate`).
+trace, scaled from the last frame's (:func:`estimate`). A settled still view's frames (fewer
+samples than the rung's, ``foveal_still_spp``) are left out of the fit: another rung starts
+its history afresh, so what the model must predict is a rung's full first frames.
 
 **Policy** (:data:`LADDERS`). Ordered configurations (rungs) of the ``vr`` preset, cheapest
 first, one ladder for a frame whose camera moved since the view's last and one for a still
@@ -145,12 +147,14 @@ LADDERS: dict[str, tuple[Rung, ...]] = {"moving": _MOVING + _MOVING_BEYOND,
 
 @dataclass(frozen=True)
 class Observation:
-    """What a frame traced: its samples, cells, rays and the disc's rays, at ``rung``."""
+    """What a frame traced: its samples, cells, rays and the disc's rays, at ``rung``;
+    ``settled``: a still view traced fewer samples than the rung's (``foveal_still_spp``)."""
     samples: float
     cells: float
     rays: float
     disc: float
     rung: Rung
+    settled: bool = False
 
 
 def _nominal(rung: Rung, rays: float, disc: float) -> float:
@@ -381,7 +385,12 @@ class Controller:
         if self._provisional:             # the first frame compiled: a stand-in until now
             self.model.reset()
         self._provisional = warm
-        self.model.add(obs.samples, obs.cells, ms)
+        # A settled frame's cost is not a rung's: another rung starts its history afresh and
+        # pays its first, full frames, which the model predicts; fitted on settled frames it
+        # would predict them at a fraction of their time. Such a frame still counts as
+        # measured (a step down when it is over the budget).
+        if not obs.settled or not self.model.frames:
+            self.model.add(obs.samples, obs.cells, ms)
         self._last, self._last_ms, self._fresh = obs, float(ms), True
         cheapest = self.predict(self.ladder, 0)
         if self.model.frames >= 2 and cheapest > self.budget_ms and not self.cheapest_warned:
@@ -562,7 +571,8 @@ class FrameBudget:
             choice.stats["measured_ms"] = ms
         s = stats()
         obs = Observation(s["lanes_active"], s.get("reprojected", s["rays"]), s["rays"],
-                          s.get("disc_rays", 0), choice.rung)
+                          s.get("disc_rays", 0), choice.rung,
+                          s.get("spp", choice.rung.spp) < choice.rung.spp)
         if choice.frame is None:
             self._views[choice.view][0].observe(ms, obs)
         else:
@@ -584,5 +594,6 @@ class FrameBudget:
         total = sum(f.ms)
         stats["measured_ms"] = total
         summed = Observation(*(sum(getattr(o, k) for o in f.obs)
-                               for k in ("samples", "cells", "rays", "disc")), f.choice.rung)
+                               for k in ("samples", "cells", "rays", "disc")), f.choice.rung,
+                             any(o.settled for o in f.obs))
         self._views[f.views[0]][0].observe(total, summed)

@@ -193,6 +193,33 @@ def test_a_step_down_onto_a_rung_warming_up_waits_for_its_first_measured_frame(b
     assert after[0] == settled - 1 and np.all(after[:WARMUP + 1] == settled - 1), after
 
 
+def test_a_settled_still_view_is_not_fitted_but_still_measured():
+    # A still view settles (foveal_still_spp): its frames trace an eighth of the rung's
+    # samples at less than half the time. Fitted, they would make the next rung look cheap;
+    # its first frames pay the full rate (a new rung's buffer starts its history afresh).
+    cost = _cost()
+    ctl = Controller(400.0, warmup=0)
+    rung = ctl.ladders["still"][2]
+    samples, cells, rays = _traced(rung)
+    for _ in range(4):
+        ctl.choose(False)
+        ctl.observe(cost(samples, cells), Observation(samples, cells, rays, DISC, rung))
+    ctl.index["still"] = 2
+    coef, ahead = ctl.model.coefficients, ctl.predict("still", 3)
+    for _ in range(4):
+        ctl.choose(False)
+        ctl.observe(0.4 * cost(samples, cells),
+                    Observation(samples / 8, cells, rays, DISC, rung, settled=True))
+    assert ctl.model.coefficients == coef and ctl.predict("still", 3) == ahead
+    # ... but a settled frame over the budget is measured: the next step goes down.
+    ctl.index["still"] = 2
+    ctl.choose(False)
+    ctl.observe(2.0 * ctl.budget_ms, Observation(samples / 8, cells, rays, DISC, rung,
+                                                 settled=True))
+    _, i, _ = ctl.choose(False)
+    assert i == 1
+
+
 def test_the_controller_needs_no_oscillation_to_hold_a_budget_between_rungs():
     # A budget just above a rung's cost with noise that crosses it: the hysteresis holds,
     # never A-B-A-B.
