@@ -13,9 +13,11 @@ minimum-norm one, which is the prior: the time split evenly between the three te
 rung with more samples or cells is predicted dearer in proportion to a third of the time per
 term. A coefficient held non-negative: where the full fit has a negative one, the subset of
 terms whose unique, non-negative fit has the smallest residual. The model predicts any rung's time from the samples and cells that rung would
-trace, scaled from the last frame's (:func:`estimate`). A settled still view's frames (fewer
-samples than the rung's, ``foveal_still_spp``) are left out of the fit: another rung starts
-its history afresh, so what the model must predict is a rung's full first frames.
+trace, scaled from the last frame's (:func:`estimate`); where that frame is a settled still
+view's (fewer samples than the rung's, ``foveal_still_spp``: a fraction of its rays in turn),
+from the rung's last full frame, since another rung starts its history afresh and pays its
+full first frames. Scaled from a settled frame, the staircase's next still rung was predicted
+at 185-212 ms and took 700-1100 ms.
 
 **Policy** (:data:`LADDERS`). Ordered configurations (rungs) of the ``vr`` preset, cheapest
 first, one ladder for a frame whose camera moved since the view's last and one for a still
@@ -148,7 +150,8 @@ LADDERS: dict[str, tuple[Rung, ...]] = {"moving": _MOVING + _MOVING_BEYOND,
 @dataclass(frozen=True)
 class Observation:
     """What a frame traced: its samples, cells, rays and the disc's rays, at ``rung``;
-    ``settled``: a still view traced fewer samples than the rung's (``foveal_still_spp``)."""
+    ``settled``: a still view traced fewer samples than the rung's (``foveal_still_spp``), so
+    that another rung is not scaled from it (:meth:`Controller.predict`)."""
     samples: float
     cells: float
     rays: float
@@ -303,6 +306,7 @@ class Controller:
 
     def _reset_state(self) -> None:
         self._last: Observation | None = None
+        self._full: dict[Any, Observation] = {}       # rung -> its last frame not settled
         self._last_ms: float | None = None
         self._provisional = False                     # the model holds a warm-up frame only
         self._up = 0
@@ -321,7 +325,12 @@ class Controller:
         """The model's time for rung ``index`` of ``ladder`` (None before a frame)."""
         if self._last is None:
             return None
-        return self.model.predict(*self.estimate(self._last, self.ladders[ladder][index]))
+        rung = self.ladders[ladder][index]
+        # Another rung from the current one's last full frame: a settled frame traces a
+        # fraction of the rung's rays, and the other rung would start at its full rate.
+        base = self._last if rung == self._last.rung else \
+            self._full.get(self._last.rung, self._last)
+        return self.model.predict(*self.estimate(base, rung))
 
     def choose(self, moving: bool) -> tuple[str, int, float | None]:
         """The next frame's ladder, rung and predicted time (ms; None before a frame).
@@ -385,12 +394,9 @@ class Controller:
         if self._provisional:             # the first frame compiled: a stand-in until now
             self.model.reset()
         self._provisional = warm
-        # A settled frame's cost is not a rung's: another rung starts its history afresh and
-        # pays its first, full frames, which the model predicts; fitted on settled frames it
-        # would predict them at a fraction of their time. Such a frame still counts as
-        # measured (a step down when it is over the budget).
-        if not obs.settled or not self.model.frames:
-            self.model.add(obs.samples, obs.cells, ms)
+        self.model.add(obs.samples, obs.cells, ms)
+        if not obs.settled:               # what another rung is scaled from (predict)
+            self._full[obs.rung] = obs
         self._last, self._last_ms, self._fresh = obs, float(ms), True
         cheapest = self.predict(self.ladder, 0)
         if self.model.frames >= 2 and cheapest > self.budget_ms and not self.cheapest_warned:

@@ -193,29 +193,34 @@ def test_a_step_down_onto_a_rung_warming_up_waits_for_its_first_measured_frame(b
     assert after[0] == settled - 1 and np.all(after[:WARMUP + 1] == settled - 1), after
 
 
-def test_a_settled_still_view_is_not_fitted_but_still_measured():
-    # A still view settles (foveal_still_spp): its frames trace an eighth of the rung's
-    # samples at less than half the time. Fitted, they would make the next rung look cheap;
-    # its first frames pay the full rate (a new rung's buffer starts its history afresh).
+def test_another_rung_is_scaled_from_the_last_full_frame_not_a_settled_one():
+    # A settled still view (foveal_still_spp) traces an eighth of the rung's samples: half
+    # the spp, a quarter of the rays in turn. Another rung starts its history afresh and pays
+    # its full first frames, so it is estimated from the rung's last full frame; scaled from
+    # the settled one, it would look a quarter of its price.
     cost = _cost()
     ctl = Controller(400.0, warmup=0)
-    rung = ctl.ladders["still"][2]
+    rung, up = ctl.ladders["still"][2], ctl.ladders["still"][3]
     samples, cells, rays = _traced(rung)
+    full = Observation(samples, cells, rays, DISC, rung)
     for _ in range(4):
         ctl.choose(False)
-        ctl.observe(cost(samples, cells), Observation(samples, cells, rays, DISC, rung))
-    ctl.index["still"] = 2
-    coef, ahead = ctl.model.coefficients, ctl.predict("still", 3)
+        ctl.observe(cost(samples, cells), full)
+    settled = Observation(samples / 8, cells, rays / 4, DISC, rung, settled=True)
     for _ in range(4):
+        ctl.index["still"] = 2
         ctl.choose(False)
-        ctl.observe(0.4 * cost(samples, cells),
-                    Observation(samples / 8, cells, rays, DISC, rung, settled=True))
-    assert ctl.model.coefficients == coef and ctl.predict("still", 3) == ahead
-    # ... but a settled frame over the budget is measured: the next step goes down.
+        ctl.observe(0.4 * cost(samples, cells), settled)
+    # The settled frames are fitted (the model learns what a frame costs now), and the rung
+    # above is read from the full frame's samples and cells.
+    assert ctl.model.frames == 8
+    assert ctl.predict("still", 3) == ctl.model.predict(*estimate(full, up))
+    assert ctl.predict("still", 3) > 2 * ctl.model.predict(*estimate(settled, up))
+    assert ctl.predict("still", 2) == ctl.model.predict(settled.samples, settled.cells)
+    # A settled frame over the budget is measured: the next step goes down.
     ctl.index["still"] = 2
     ctl.choose(False)
-    ctl.observe(2.0 * ctl.budget_ms, Observation(samples / 8, cells, rays, DISC, rung,
-                                                 settled=True))
+    ctl.observe(2.0 * ctl.budget_ms, settled)
     _, i, _ = ctl.choose(False)
     assert i == 1
 
@@ -309,10 +314,13 @@ def test_on_a_scene_the_choice_rises_when_frames_get_cheaper_and_falls_when_dear
     integ._budget.value.clock = clock
     clock.factor = 2.0
     seen = []
-    for k in range(36):
+    # A still view settles by frame 12: the controller sees only settled frames until the
+    # next rung, whose full first frames it predicts from the rung's last full frame and a
+    # model that learns the cheaper cost as the dearer frames leave its window (16 frames).
+    for k in range(44):
         if k == 12:
             clock.factor = 0.5       # the frames get cheaper: the choice rises
-        if k == 24:
+        if k == 32:
             clock.factor = 2.0       # dearer: it falls
         mi.render(scene, integrator=integ, seed=k)
         s = integ.stats
@@ -322,8 +330,8 @@ def test_on_a_scene_the_choice_rises_when_frames_get_cheaper_and_falls_when_dear
         assert s["ray_budget"] == b["ray_budget"] and 1 <= s["spp"] <= b["spp"]
         assert s["rays"] > 0
         seen.append(b["rung"])
-    assert max(seen[12:24]) > max(seen[:12])
-    assert seen[-1] < max(seen[12:24])
+    assert max(seen[12:32]) > max(seen[:12])
+    assert seen[-1] < max(seen[12:32])
     assert np.all(np.abs(np.diff(seen)) <= 1)
 
 
