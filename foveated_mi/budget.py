@@ -576,9 +576,12 @@ class FrameBudget:
         if choice.frame is None:
             choice.stats["measured_ms"] = ms
         s = stats()
+        # Settled: the plan's spp, or its cells' where they settled below the disc's rate,
+        # under the rung's (foveal_still_spp).
+        full = choice.rung.spp
         obs = Observation(s["lanes_active"], s.get("reprojected", s["rays"]), s["rays"],
                           s.get("disc_rays", 0), choice.rung,
-                          s.get("spp", choice.rung.spp) < choice.rung.spp)
+                          min(s.get("spp", full), s.get("cell_spp", full)) < full)
         if choice.frame is None:
             self._views[choice.view][0].observe(ms, obs)
         else:

@@ -330,6 +330,9 @@ def test_on_a_scene_the_choice_rises_when_frames_get_cheaper_and_falls_when_dear
         assert s["ray_budget"] == b["ray_budget"] and 1 <= s["spp"] <= b["spp"]
         assert s["rays"] > 0
         seen.append(b["rung"])
+        if k == 11:                  # settled: the cells below the rung's spp, flagged so
+            last = integ._budget.value.controller(0)._last
+            assert last.settled and min(s["spp"], s.get("cell_spp", s["spp"])) < b["spp"]
     assert max(seen[12:32]) > max(seen[:12])
     assert seen[-1] < max(seen[12:32])
     assert np.all(np.abs(np.diff(seen)) <= 1)
