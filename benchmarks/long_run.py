@@ -14,8 +14,8 @@ settling of a still view) and the eye saccades. A rung's first frames compile an
 record (:data:`foveated_mi.budget.WARMUP`); the kernel check counts the kernels compiled at a
 frame whose ladder, rung and spp (a still view settles to fewer) rendered more than that many
 times before and that recorded no configuration of the replayed passes for the first time (a
-state first met late compiles legitimately); no configuration recorded twice; stats finite. Reported, not checked: resident
-memory at half the frames and at the end (the replayed passes keep their most recent
+state first met late compiles legitimately); no configuration recorded twice; stats finite.
+Reported, not checked: resident memory at half the frames and at the end (the replayed passes keep their most recent
 configurations, :data:`foveated_mi.frame.formation.RECORDINGS`, and record the others again;
 the C library's heap grows between the probes unless its mmap threshold is fixed:
 ``MALLOC_MMAP_THRESHOLD_=131072``); the frames at each rung; the recordings
@@ -165,9 +165,9 @@ def budget_run(a) -> int:
         probed = i == a.probe             # after the probe's flush: the allocator refills
         if i % a.phase >= 10 and not probed:   # held: each phase's frames after its first ten
             held.append(b["measured_ms"] / b["budget_ms"])
-        if i and i % a.phase == 0 and not probed:   # the head starts turning, or a cut
-            (cuts if cut else moves if phase % 2 == 0 else []).append(
-                [i, b["measured_ms"] / b["budget_ms"]])
+        if i and i % a.phase == 0 and not probed and (cut or phase % 2 == 0):
+            # a cut, or the head starting to turn after a settled still view
+            (cuts if cut else moves).append([i, b["measured_ms"] / b["budget_ms"]])
         # Kernels compile legitimately at a rung's first frames and where a configuration is
         # recorded for the first time (a state of the rung not met before).
         if n and seen.get(key, 0) > WARMUP and recorded(integ)[1] == configs:
