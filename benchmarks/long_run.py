@@ -15,9 +15,8 @@ record (:data:`foveated_mi.budget.WARMUP`); the kernel check counts the kernels 
 frame whose ladder, rung and spp (a still view settles to fewer) rendered more than that many
 times before and that recorded no configuration of the replayed passes for the first time (a
 state first met late compiles legitimately); no configuration recorded twice; stats finite.
-Reported, not checked: resident memory at half the frames and at the end (the replayed passes keep their most recent
-configurations, :data:`foveated_mi.frame.formation.RECORDINGS`, and record the others again;
-the C library's heap grows between the probes unless its mmap threshold is fixed:
+Reported, not checked: resident memory at half the frames and at the end (the C library's
+heap grows between the probes unless its mmap threshold is fixed:
 ``MALLOC_MMAP_THRESHOLD_=131072``); the frames at each rung; the recordings
 made and held; the frame time against the budget (its 95th percentile and mean over each
 phase's frames after its first ten); the transitions, each frame's time over the budget: the

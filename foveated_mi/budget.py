@@ -16,8 +16,7 @@ terms whose unique, non-negative fit has the smallest residual. The model predic
 trace, scaled from the last frame's (:func:`estimate`); where that frame is a settled still
 view's (fewer samples than the rung's, ``foveal_still_spp``: a fraction of its rays in turn),
 from the rung's last full frame, since another rung starts its history afresh and pays its
-full first frames. Scaled from a settled frame, the staircase's next still rung was predicted
-at 185-212 ms and took 700-1100 ms.
+full first frames (scaled from a settled frame, the next rung looked a fraction of its price).
 
 **Policy** (:data:`LADDERS`). Ordered configurations (rungs) of the ``vr`` preset, cheapest
 first, one ladder for a frame whose camera moved since the view's last and one for a still
